@@ -1,0 +1,137 @@
+"""NN_f and NN_G, the sigmoidal MLPs that estimate f and G of the error model, eqs. (8)-(27).
+
+The weight vector follows (16)-(18)::
+
+    z = [v_f, v_G]
+    v_f = [w_1, w_2, w_3, s_f1, ..., s_fLf]            w_j (L_f,), s_fi (n_f,)
+    v_G = [w_11, w_12, w_21, w_22, w_31, w_32, s_G1, ..., s_GLG]   w_jn (L_G,), s_Gi (n_G,)
+
+so alpha = 3 L_f + L_f n_f + 6 L_G + L_G n_G (171 for L_f = 18, L_G = 1, n_f = 6, n_G = 3).
+Inputs (8)-(9) carry a constant bias input: x_f = [c e, v_r, omega_r, 1], x_G = [c e1, c e2, 1],
+where c is an input scale on the errors (1 in the paper). All functions accept leading batch
+dimensions (``...``) on z and the inputs, so one call serves one run, a batch of runs or a set
+of sigma points.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from mlpfac.exceptions import ConfigError
+
+N_F = 6  # inputs of NN_f: e1, e2, e3, v_r, omega_r, bias
+N_G = 3  # inputs of NN_G: e1, e2, bias
+
+
+@dataclass(frozen=True)
+class Networks:
+    """Sizes and input conventions of NN_f and NN_G.
+
+    ``error_scale`` multiplies the error inputs so they are O(1) like v_r and omega_r;
+    ``residual`` makes NN_f estimate the increment f - e instead of f (then f_hat = e + NN_f).
+    """
+
+    L_f: int = 18
+    L_G: int = 1
+    error_scale: float = 1.0
+    residual: bool = False
+
+    def __post_init__(self) -> None:
+        if self.L_f < 1 or self.L_G < 1:
+            raise ConfigError("networks", f"L_f and L_G must be at least 1 (got {self.L_f}, {self.L_G})")
+        if not self.error_scale > 0:
+            raise ConfigError("networks", f"error_scale must be positive (got {self.error_scale})")
+
+    @property
+    def alpha(self) -> int:
+        """Total number of weights."""
+        return 3 * self.L_f + self.L_f * N_F + 6 * self.L_G + self.L_G * N_G
+
+    def split(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Views of z as W_f (..., 3, L_f), S_f (..., L_f, n_f), W_G (..., 3, 2, L_G), S_G (..., L_G, n_G)."""
+        Lf, LG = self.L_f, self.L_G
+        b = z.shape[:-1]
+        i1 = 3 * Lf
+        i2 = i1 + Lf * N_F
+        i3 = i2 + 6 * LG
+        return (
+            z[..., :i1].reshape(*b, 3, Lf),
+            z[..., i1:i2].reshape(*b, Lf, N_F),
+            z[..., i2:i3].reshape(*b, 3, 2, LG),
+            z[..., i3:].reshape(*b, LG, N_G),
+        )
+
+    def inputs(self, e: np.ndarray, v_r, omega_r) -> tuple[np.ndarray, np.ndarray]:
+        """Eqs. (8)-(9): x_f (..., 6) and x_G (..., 3) from e (..., 3) and the reference velocities."""
+        c = self.error_scale
+        ce = c * np.asarray(e, dtype=float)
+        one = np.ones(ce.shape[:-1])
+        x_f = np.concatenate([ce, np.stack([np.broadcast_to(v_r, one.shape), np.broadcast_to(omega_r, one.shape), one], -1)], -1)
+        x_G = np.stack([ce[..., 0], ce[..., 1], one], -1)
+        return x_f, x_G
+
+    def forward(self, z: np.ndarray, x_f: np.ndarray, x_G: np.ndarray, e: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Eqs. (10)-(15): f_hat (..., 3) and G_hat (..., 3, 2). ``e`` is used only when ``residual``."""
+        W_f, S_f, W_G, S_G = self.split(z)
+        phi_f = _sigmoid(np.einsum("...im,...m->...i", S_f, x_f))  # (..., L_f)
+        phi_G = _sigmoid(np.einsum("...im,...m->...i", S_G, x_G))  # (..., L_G)
+        f = np.einsum("...ji,...i->...j", W_f, phi_f)
+        if self.residual:
+            f = f + e
+        G = np.einsum("...jni,...i->...jn", W_G, phi_G)
+        return f, G
+
+    def h(self, z: np.ndarray, x_f: np.ndarray, x_G: np.ndarray, e: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """Eq. (26): h = f_hat + G_hat u, (..., 3)."""
+        f, G = self.forward(z, x_f, x_G, e)
+        return f + np.einsum("...jn,...n->...j", G, u)
+
+    def h_and_jacobian(
+        self, z: np.ndarray, x_f: np.ndarray, x_G: np.ndarray, e: np.ndarray, u: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """h (..., 3) and its Jacobian nabla_h = [nabla_f, nabla_Gamma] (..., 3, alpha), eqs. (19)-(24), (27)."""
+        W_f, S_f, W_G, S_G = self.split(z)
+        Lf, LG = self.L_f, self.L_G
+        b = z.shape[:-1]
+        phi_f = _sigmoid(np.einsum("...im,...m->...i", S_f, x_f))  # (..., L_f)
+        phi_G = _sigmoid(np.einsum("...im,...m->...i", S_G, x_G))  # (..., L_G)
+        f = np.einsum("...ji,...i->...j", W_f, phi_f)
+        if self.residual:
+            f = f + e
+        Gu = np.einsum("...jni,...i,...n->...j", W_G, phi_G, u)
+
+        H = np.zeros((*b, 3, self.alpha))
+        eye3 = np.eye(3)
+        # (21): d f_j / d w_j = phi_f
+        H[..., :, : 3 * Lf] = (eye3[:, :, None] * phi_f[..., None, None, :]).reshape(*b, 3, 3 * Lf)
+        # (22): d f_j / d s_fi = w_{j,i} phi_fi (1 - phi_fi) x_f
+        dphi_f = phi_f * (1.0 - phi_f)
+        H[..., :, 3 * Lf : 3 * Lf + Lf * N_F] = (
+            (W_f * dphi_f[..., None, :])[..., :, :, None] * x_f[..., None, None, :]
+        ).reshape(*b, 3, Lf * N_F)
+        i2 = 3 * Lf + Lf * N_F
+        # (23): d (G u)_j / d w_jn = phi_G u_n  (gamma_v, gamma_omega)
+        gamma = u[..., None, :, None] * phi_G[..., None, None, :]  # (..., 1, 2, L_G)
+        H[..., :, i2 : i2 + 6 * LG] = (eye3[:, :, None, None] * gamma[..., None, :, :]).reshape(*b, 3, 6 * LG)
+        # (24): d (G u)_j / d s_Gi = sigma_{j,i} phi_Gi (1 - phi_Gi) x_G,  sigma_{j,i} = sum_n w_{jn,i} u_n
+        sigma = np.einsum("...jni,...n->...ji", W_G, u)
+        dphi_G = phi_G * (1.0 - phi_G)
+        H[..., :, i2 + 6 * LG :] = ((sigma * dphi_G[..., None, :])[..., :, :, None] * x_G[..., None, None, :]).reshape(
+            *b, 3, LG * N_G
+        )
+        return f + Gu, H
+
+    def labels(self) -> list[str]:
+        """A name for each weight, ``network/layer/name_index``, in the order of z."""
+        out = [f"NN_f/output/w{j + 1}_{i}" for j in range(3) for i in range(self.L_f)]
+        out += [f"NN_f/hidden/s{i + 1}_{m}" for i in range(self.L_f) for m in range(N_F)]
+        out += [f"NN_G/output/w{j + 1}{n + 1}_{i}" for j in range(3) for n in range(2) for i in range(self.L_G)]
+        out += [f"NN_G/hidden/s{i + 1}_{m}" for i in range(self.L_G) for m in range(N_G)]
+        return out
+
+
+def _sigmoid(a: np.ndarray) -> np.ndarray:
+    """Eqs. (10)-(11), written so that large |a| neither overflows nor loses precision."""
+    return 0.5 * (1.0 + np.tanh(0.5 * a))

@@ -1,0 +1,84 @@
+"""The plant interface shared by the kinematic model (7) and the MuJoCo robot.
+
+One control step of the closed loop (see :mod:`mlpfac.runner`)::
+
+    q_meas = plant.measure()             # pose (x, y, theta) the controller sees
+    u = controller.step(e(q_meas, r_k), r_k)
+    plant.step(u)                        # hold u = (v, omega) for one control period
+
+Events change the plant mid-run without telling the controller.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Protocol
+
+import numpy as np
+
+EVENT_KINDS = (
+    "payload",  # chassis mass (and inertia) scaled or added: params mass_kg | mass_scale, body
+    "friction",  # floor/wheel sliding friction set: params mu
+    "wheel_radius",  # real wheel radius scaled while the IK keeps the nominal one: params scale
+    "actuator",  # actuator weakened: params kv_scale and/or force_scale
+    "control_period",  # the plant holds each command factor * T: params factor
+    "sensor_delay",  # the measured pose is n control steps old: params steps
+)
+
+
+@dataclass(frozen=True)
+class Event:
+    """A change of the plant at ``time`` seconds (controller clock), unknown to the controller."""
+
+    time: float
+    kind: str
+    params: dict[str, float | int | str] = field(default_factory=dict)
+
+    def describe(self) -> str:
+        args = ", ".join(f"{k}={v}" for k, v in sorted(self.params.items()))
+        return f"{self.kind}({args}) at {self.time:g} s"
+
+
+class Plant(Protocol):
+    """What the closed loop needs from a plant. Poses are (x, y, theta) of the axle midpoint."""
+
+    T: float
+    """Nominal control period in seconds (what the controller believes)."""
+
+    supported_events: frozenset[str]
+
+    def reset(self, q0: np.ndarray, rng: np.random.Generator) -> None:
+        """Start a run at pose ``q0``; ``rng`` drives measurement noise."""
+
+    def measure(self) -> np.ndarray:
+        """Pose seen by the controller: (3,), with noise and delay applied."""
+
+    def true_pose(self) -> np.ndarray:
+        """Pose of the simulated robot now: (3,), heading continuous (not wrapped)."""
+
+    def step(self, u: np.ndarray) -> None:
+        """Apply u = (v, omega) for one control period."""
+
+    def apply(self, event: Event) -> str:
+        """Apply an event now; return a one-line description of what changed (old -> new)."""
+
+    def check_event(self, event: Event, where: str) -> None:
+        """Raise ConfigError(where, ...) if this plant cannot apply ``event`` (unknown kind/param/body)."""
+
+    def telemetry(self) -> dict[str, np.ndarray | float]:
+        """Per-step values for the record and the log, same keys and shapes every step.
+
+        Keys used across the project (a plant provides what it knows):
+        ``u_meas`` (2,) measured (v, omega); ``wheel_cmd`` (2,) and ``wheel_meas`` (2,) left/right
+        wheel speeds in rad/s; ``h_true`` (3,) the true h1, h2, h5 (kinematic plant only).
+        """
+
+    def diverged(self) -> str | None:
+        """A reason string if the simulation left its valid range (flipped, airborne, non-finite)."""
+
+    def geometry(self) -> list[dict]:
+        """Static shapes of the robot for the 3D view, relative to the measured frame.
+
+        Each: {"name", "type" ("box"|"cylinder"|"sphere"), "size" (MuJoCo convention),
+        "pos" (3,), "quat" (w, x, y, z), "rgba" (4,)}.
+        """

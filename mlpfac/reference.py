@@ -1,0 +1,126 @@
+"""Reference trajectories: (x_r, y_r, theta_r, v_r, omega_r) at time t, eq. (1) and (37).
+
+Each reference is a smooth planar curve p(t) = (x_r(t), y_r(t)) given with its first and second
+derivatives in closed form, so v_r = |p'| and omega_r = (x' y'' - y' x'') / |p'|^2 are analytic.
+theta_r = atan2(y', x') (the printed ``arctan(y_r / dx_r)`` of (37) is a typo) is unwrapped
+along the sampled times, so it is continuous over a run.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from mlpfac.exceptions import ConfigError
+
+
+@dataclass(frozen=True)
+class Eight:
+    """Figure of eight (37): x_r = ax cos(wx t), y_r = ay sin(wy t)."""
+
+    ax: float = 2.0
+    ay: float = 2.0
+    wx: float = 0.25
+    wy: float = 0.5
+
+    def derivatives(self, t: np.ndarray) -> tuple[np.ndarray, ...]:
+        cx, sx = np.cos(self.wx * t), np.sin(self.wx * t)
+        cy, sy = np.cos(self.wy * t), np.sin(self.wy * t)
+        return (
+            self.ax * cx,
+            self.ay * sy,
+            -self.ax * self.wx * sx,
+            self.ay * self.wy * cy,
+            -self.ax * self.wx**2 * cx,
+            -self.ay * self.wy**2 * sy,
+        )
+
+
+@dataclass(frozen=True)
+class Circle:
+    """Circle of radius ``radius`` about (cx, cy), travelled counter-clockwise at rate ``rate`` rad/s."""
+
+    radius: float = 1.5
+    rate: float = 0.5
+    cx: float = 0.0
+    cy: float = 0.0
+
+    def derivatives(self, t: np.ndarray) -> tuple[np.ndarray, ...]:
+        c, s = np.cos(self.rate * t), np.sin(self.rate * t)
+        r, w = self.radius, self.rate
+        return (self.cx + r * c, self.cy + r * s, -r * w * s, r * w * c, -r * w * w * c, -r * w * w * s)
+
+
+@dataclass(frozen=True)
+class Line:
+    """Straight line from (x0, y0) along ``heading`` at constant ``speed``."""
+
+    speed: float = 0.5
+    heading: float = 0.0
+    x0: float = 0.0
+    y0: float = 0.0
+
+    def derivatives(self, t: np.ndarray) -> tuple[np.ndarray, ...]:
+        dx, dy = self.speed * np.cos(self.heading), self.speed * np.sin(self.heading)
+        zero = np.zeros_like(t)
+        return (self.x0 + dx * t, self.y0 + dy * t, dx + zero, dy + zero, zero, zero)
+
+
+@dataclass(frozen=True)
+class Lemniscate:
+    """Lemniscate of Bernoulli with half-width ``a``, phase s = rate t:
+    x = a cos s / (1 + sin^2 s), y = a sin s cos s / (1 + sin^2 s)."""
+
+    a: float = 2.0
+    rate: float = 0.3
+
+    def derivatives(self, t: np.ndarray) -> tuple[np.ndarray, ...]:
+        s, w, a = self.rate * t, self.rate, self.a
+        sn, cs = np.sin(s), np.cos(s)
+        d = 1.0 + sn**2
+        x = a * cs / d
+        y = a * sn * cs / d
+        # d/ds of x and y, then chain rule with ds/dt = w.
+        s2 = sn * sn
+        xs = a * sn * (s2 - 3.0) / d**2  # dx/ds
+        ys = -a * (3.0 * s2 - 1.0) / d**2  # dy/ds
+        xss = -a * cs * (s2 * s2 - 12.0 * s2 + 3.0) / d**3
+        yss = -a * (14.0 * np.sin(2.0 * s) + 3.0 * np.sin(4.0 * s)) / (4.0 * d**3)
+        return x, y, w * xs, w * ys, w * w * xss, w * w * yss
+
+
+REFERENCES = {"eight": Eight, "circle": Circle, "line": Line, "lemniscate": Lemniscate}
+
+
+def sample(curve: Eight | Circle | Line | Lemniscate, t: np.ndarray) -> np.ndarray:
+    """Reference samples at times ``t``: (N, 5) rows (x_r, y_r, theta_r, v_r, omega_r).
+
+    theta_r is unwrapped along ``t`` (continuous as long as it turns less than pi between samples).
+    """
+    t = np.asarray(t, dtype=float)
+    x, y, dx, dy, ddx, ddy = curve.derivatives(t)
+    speed2 = dx * dx + dy * dy
+    theta = np.unwrap(np.arctan2(dy, dx))
+    v = np.sqrt(speed2)
+    omega = (dx * ddy - dy * ddx) / speed2
+    return np.stack([x, y, theta, v, omega], axis=-1)
+
+
+def make_reference(kind: str, params: dict, where: str = "[reference]"):
+    """Build a reference curve from its scenario table (``kind`` plus the curve's parameters)."""
+    cls = REFERENCES.get(kind)
+    if cls is None:
+        raise ConfigError(where, f"unknown reference kind {kind!r}; choose one of {', '.join(REFERENCES)}")
+    fields = cls.__dataclass_fields__
+    for key in params:
+        if key not in fields:
+            raise ConfigError(f"{where} {key}", f"not a parameter of {kind!r} (it takes {', '.join(fields)})")
+    try:
+        curve = cls(**{k: float(v) for k, v in params.items()})
+    except (TypeError, ValueError) as err:
+        raise ConfigError(where, f"bad parameter value: {err}") from None
+    ok = sample(curve, np.linspace(0.0, 60.0, 601))
+    if not np.all(ok[:, 3] > 1e-6):
+        raise ConfigError(where, "the reference speed v_r must stay above zero (the gains divide by T v_r)")
+    return curve
