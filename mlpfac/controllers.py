@@ -161,4 +161,8 @@ class Kanayama:
         return {}
 
 
-CONTROLLERS = ("adaptive", "corradini", "kanayama")
+# Named variants of the adaptive controller: AdaptiveConfig fields (and Networks fields under
+# "networks") that override the scenario's [controller.adaptive] table. "adaptive" is the table as is.
+VARIANTS: dict[str, dict] = {"adaptive": {}}
+
+CONTROLLERS = (*VARIANTS, "corradini", "kanayama")

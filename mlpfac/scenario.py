@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from mlpfac.controllers import CONTROLLERS, Adaptive, AdaptiveConfig, Corradini, Kanayama, KanayamaGains
+from mlpfac.controllers import CONTROLLERS, VARIANTS, Adaptive, AdaptiveConfig, Corradini, Kanayama, KanayamaGains
 from mlpfac.exceptions import ConfigError
 from mlpfac.law import Law
 from mlpfac.networks import Networks
@@ -71,8 +71,12 @@ class Scenario:
         return parse(table, self.source)
 
     def make_controller(self):
-        if self.controller == "adaptive":
-            return Adaptive(self.law, self.adaptive)
+        if self.controller in VARIANTS:
+            over = dict(VARIANTS[self.controller])
+            nets = dataclasses.replace(self.adaptive.networks, **over.pop("networks", {}))
+            ctrl = Adaptive(self.law, dataclasses.replace(self.adaptive, networks=nets, **over))
+            ctrl.name = self.controller
+            return ctrl
         if self.controller == "corradini":
             return Corradini(self.law)
         return Kanayama(self.law, self.kanayama)
