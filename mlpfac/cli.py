@@ -1,0 +1,158 @@
+"""The command line: mlpfac run / list / compare / sweep / view.
+
+Arguments are parsed before any heavy import; bad input prints one line and exits with code 2.
+Exit codes of ``run``: 0 ok, 1 the run diverged, 2 bad input, 130 interrupted.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+EXIT_BAD_INPUT = 2
+EXIT_INTERRUPTED = 130
+
+
+class Parser(argparse.ArgumentParser):
+    """argparse, but a usage error is one line (and exit code 2)."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        sys.stderr.write(f"{self.prog}: error: {message}\n")
+        sys.exit(EXIT_BAD_INPUT)
+
+
+def _sink_args(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group("rerun logging (default: save run.rrd in --out)")
+    x = g.add_mutually_exclusive_group()
+    x.add_argument("--save", metavar="FILE.rrd", type=Path, help="save the recording to this file")
+    x.add_argument("--spawn", action="store_true", help="open a rerun viewer and stream to it")
+    x.add_argument("--connect", metavar="URL", help="stream to a running viewer, e.g. rerun+http://127.0.0.1:9876/proxy")
+    x.add_argument("--serve", action="store_true", help="serve a web viewer on 127.0.0.1")
+    x.add_argument("--no-log", action="store_true", help="no recording")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = Parser(prog="mlpfac", description=__doc__.splitlines()[0])
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=Parser)
+
+    p = sub.add_parser("run", help="run one scenario", description="Run one scenario and write metrics.json, config.toml, figure1.png and run.rrd.")
+    p.add_argument("scenario", help="a shipped scenario name (see `mlpfac list`) or a path to a .toml file")
+    p.add_argument("--controller", help="override the scenario's controller (adaptive, corradini, kanayama, ...)")
+    p.add_argument("--seed", type=int, help="override the scenario's seed")
+    p.add_argument("--duration", type=float, help="override the duration in seconds")
+    p.add_argument("--out", type=Path, help="output folder (default runs/SCENARIO-CONTROLLER-sSEED)")
+    p.add_argument("--baseline", default="corradini", help="controller for panel (h) of the figure, or 'none'")
+    p.add_argument("--no-plot", action="store_true", help="skip figure1.png")
+    _sink_args(p)
+
+    sub.add_parser("list", help="list the shipped scenarios and controllers")
+
+    from mlpfac import sweep
+
+    sweep.add_compare_arguments(sub.add_parser("compare", help="controllers x scenarios x seeds -> a per-phase table"))
+    sweep.add_sweep_arguments(sub.add_parser("sweep", help="Monte Carlo sweep -> mean, median, 95 % CI per phase"))
+
+    p = sub.add_parser("view", help="open saved runs in one rerun viewer")
+    p.add_argument("runs", nargs="+", type=Path, help="run folders (each with a run.rrd)")
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    from mlpfac.exceptions import MlpfacError
+
+    try:
+        if args.command == "run":
+            return cmd_run(args)
+        if args.command == "list":
+            return cmd_list()
+        if args.command == "view":
+            from mlpfac import log
+
+            log.view(args.runs)
+            return 0
+        from mlpfac import sweep
+
+        return sweep.run_compare_cli(args) if args.command == "compare" else sweep.run_sweep_cli(args)
+    except MlpfacError as err:
+        print(f"mlpfac: error: {err}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except KeyboardInterrupt:
+        print("mlpfac: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+
+
+def cmd_list() -> int:
+    from mlpfac.controllers import CONTROLLERS
+    from mlpfac.scenario import load, scenario_names
+
+    names = scenario_names()
+    width = max(map(len, names), default=0)
+    for name in names:
+        scn = load(name)
+        print(f"{name:<{width}}  {scn.plant_kind:<9}  {scn.description}")
+    print(f"\ncontrollers: {', '.join(CONTROLLERS)}")
+    return 0
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    from mlpfac.exceptions import ConfigError
+    from mlpfac.outputs import write_run
+    from mlpfac.runner import run
+    from mlpfac.scenario import load
+
+    scn = load(args.scenario).with_overrides(args.controller, args.seed, args.duration)
+    baseline = None
+    if args.baseline != "none" and not args.no_plot:
+        baseline = scn.with_overrides(controller=args.baseline)
+    out = args.out or Path("runs") / f"{scn.name}-{scn.controller}-s{scn.seed}"
+    out.mkdir(parents=True, exist_ok=True)
+
+    sink, sink_error = None, None
+    if not args.no_log:
+        from mlpfac import log
+
+        try:
+            sink = log.make_sink(
+                save=None if (args.spawn or args.connect or args.serve) else (args.save or out / "run.rrd"),
+                spawn=args.spawn,
+                connect=args.connect,
+                serve=args.serve,
+                recording_name=f"{scn.name} / {scn.controller} / seed {scn.seed}",
+                recording_id=f"{scn.name}-{scn.controller}-{scn.seed}",
+            )
+        except ConfigError as err:
+            sink_error = err  # the run goes on without a recording; the error is reported at the end
+
+    rec = run(scn, sink=sink)
+    m = write_run(out, scn, rec)
+    if baseline is not None and rec.status != "interrupted":
+        from mlpfac.plots import figure1
+
+        figure1(rec, run(baseline), out / "figure1.png")
+    _print_summary(m, out)
+    if sink_error is not None:
+        print(f"mlpfac: error: {sink_error} (no recording; metrics.json was written)", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    return {"ok": 0, "diverged": 1}.get(rec.status, EXIT_INTERRUPTED)
+
+
+def _fmt(x: float | None, scale: float = 1.0, unit: str = "") -> str:
+    return "-" if x is None else f"{x * scale:.2f}{unit}"
+
+
+def _print_summary(m: dict, out: Path) -> None:
+    print(f"{m['scenario']} / {m['controller']} / seed {m['seed']}: {m['status']}" + (f" ({m['reason']})" if m["reason"] else ""))
+    for ev in m["events"]:
+        print(f"  event at {ev['time']:g} s: {ev['text']}")
+    print(f"  position RMS {_fmt(m['rms_position_error_m'], 1e3, ' mm')}, max {_fmt(m['max_position_error_m'], 1e3, ' mm')}, heading RMS {_fmt(m['rms_heading_error_rad'], 1e3, ' mrad')}")
+    for name, ph in m["phases"].items():
+        print(f"  {name:>6} [{ph['start_s']:g}, {ph['end_s']:g}) s: position RMS {_fmt(ph['rms_position_error_m'], 1e3, ' mm')}, heading RMS {_fmt(ph['rms_heading_error_rad'], 1e3, ' mrad')}")
+    if m["max_abs_weight"] is not None:
+        print(f"  max |weight| {m['max_abs_weight']:.3g}, final mean diag P {m['mean_diag_P_final']:.3g}")
+    print(f"  {m['sim_time_s']:.1f} s simulated in {m['wall_time_s']:.2f} s wall -> {out}")
+
+
+if __name__ == "__main__":
+    sys.exit(main())
