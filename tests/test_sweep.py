@@ -1,0 +1,269 @@
+"""The sweep / compare engine: seeds, validation before any run, resume, pool, Dask, batched, tables."""
+
+import argparse
+import copy
+import json
+import subprocess
+import sys
+import textwrap
+
+import pytest
+
+from mlpfac import sweep
+from mlpfac.exceptions import ConfigError
+from mlpfac.scenario import load, to_toml
+
+DUR = 3.0  # seconds per run (2 s of warm-up excluded): the table is what is tested, not the controller
+
+
+def plan(seeds="0-3", controllers="adaptive,corradini", scenarios=("paper",)):
+    return sweep.plan(list(scenarios), sweep.parse_controllers(controllers), sweep.parse_seeds(seeds), DUR)
+
+
+def table(jobs, oc):
+    return sweep.aggregate(jobs, oc.metrics)
+
+
+def strip(metrics: dict) -> dict:
+    return {k: v for k, v in metrics.items() if k != "wall_time_s"}
+
+
+def cli_args(out, *extra, command="sweep"):
+    p = argparse.ArgumentParser()
+    (sweep.add_sweep_arguments if command == "sweep" else sweep.add_compare_arguments)(p)
+    return p.parse_args([*extra, "--out", str(out)])
+
+
+@pytest.mark.parametrize(
+    ("text", "seeds"),
+    [
+        ("0-4", [0, 1, 2, 3, 4]),
+        ("3", [3]),
+        ("0,2,5", [0, 2, 5]),
+        ("0-4,10", [0, 1, 2, 3, 4, 10]),
+        (" 2-3, 1 ", [1, 2, 3]),
+    ],
+)
+def test_parse_seeds(text, seeds):
+    assert sweep.parse_seeds(text) == seeds
+
+
+@pytest.mark.parametrize("text", ["5-2", "a", "1-", "-3", "", "1,,2"])
+def test_bad_seeds(text):
+    with pytest.raises(ConfigError, match="--seeds"):
+        sweep.parse_seeds(text)
+
+
+@pytest.mark.parametrize(
+    ("argv", "match"),
+    [
+        (["paper", "--seeds", "5-2"], "empty range"),
+        (["no-such-scenario", "--seeds", "0"], "no such scenario"),
+        (["paper", "--controllers", "adaptive,pid"], "unknown controller"),
+        (["paper", "--duration", "-1"], "--duration"),
+        (["paper", "--workers", "0"], "--workers"),
+        (["paper", "--scheduler", "tcp://127.0.0.1:1", "--scheduler-timeout", "1"], "cannot reach a Dask scheduler"),
+    ],
+)
+def test_bad_input_fails_before_any_run(tmp_path, argv, match):
+    out = tmp_path / "out"
+    with pytest.raises(ConfigError, match=match) as err:
+        sweep.run_sweep_cli(cli_args(out, *argv))
+    assert "\n" not in str(err.value)
+    assert not out.exists()  # nothing created, not even the results folder
+
+
+def test_cli_exit_code_and_one_line(tmp_path, capsys):
+    from mlpfac.cli import main
+
+    assert main(["sweep", "paper", "--seeds", "5-2", "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--seeds" in err
+
+
+def test_sweep_layout_tables_and_resume(tmp_path):
+    jobs = plan()
+    out = tmp_path / "a"
+    oc = sweep.execute(jobs, out)
+    assert oc.ran == len(jobs) == 8 and not oc.errors and not oc.interrupted
+    run_dir = out / "paper" / "corradini" / "seed-0003"
+    m = json.loads((run_dir / "metrics.json").read_text())
+    assert (m["controller"], m["seed"], m["sim_time_s"]) == ("corradini", 3, DUR)
+    assert "seed = 3" in (run_dir / "config.toml").read_text()
+    rows = table(jobs, oc)
+    assert [(r["controller"], r["phase"]) for r in rows] == [
+        ("adaptive", "before"),
+        ("corradini", "before"),
+    ]  # event at 12.5 s > 2 s
+    assert (
+        rows[1]["bounded"] == 4
+        and rows[1]["pos_rms_m_ci_lo"] <= rows[1]["pos_rms_m_mean"] <= rows[1]["pos_rms_m_ci_hi"]
+    )
+
+    # resume after losing two runs: only those run again, the table is the same
+    for seed in (1, 2):
+        (out / "paper" / "adaptive" / f"seed-{seed:04d}" / "metrics.json").unlink()
+    ran = []
+    oc2 = sweep.execute(jobs, out, on_result=lambda r: ran.append(r["key"]))
+    assert sorted(ran) == [("paper", "adaptive", 1), ("paper", "adaptive", 2)] and oc2.skipped == 6
+    assert table(jobs, oc2) == rows
+
+    # a folder of another configuration (another duration) is run again, not reused
+    jobs3 = sweep.plan(["paper"], ["corradini"], [3], 1.0)
+    oc3 = sweep.execute(jobs3, out)
+    assert oc3.ran == 1 and json.loads((run_dir / "metrics.json").read_text())["sim_time_s"] == 1.0
+
+    paths = sweep.write_tables(out, "sweep", rows, sweep.SWEEP_COLUMNS, {})
+    assert [p.name for p in paths] == ["sweep.csv", "sweep.md", "sweep.json"]
+    assert paths[0].read_text().count("\n") == 1 + len(rows)
+
+
+def test_interrupted_sweep_resumes_to_the_same_table(tmp_path):
+    jobs = plan(seeds="0-2")
+    full = sweep.execute(jobs, tmp_path / "full")
+    out = tmp_path / "cut"
+    count = []
+
+    def interrupt_after_three(res):
+        count.append(res)
+        if len(count) == 3:
+            raise KeyboardInterrupt
+
+    oc = sweep.execute(jobs, out, on_result=interrupt_after_three)
+    assert oc.interrupted and len(oc.metrics) == 3
+    folders = [p for p in out.glob("*/*/seed-*")]
+    assert all((p / "metrics.json").exists() for p in folders)  # only whole runs were left
+    oc2 = sweep.execute(jobs, out)
+    assert oc2.skipped == 3 and oc2.ran == 3
+    assert table(jobs, oc2) == table(jobs, full)
+
+
+def test_ctrl_c_of_the_command_line(tmp_path):
+    """SIGINT to `mlpfac sweep` with two workers: exit code 130, no traceback, how to resume, whole runs only."""
+    import signal
+    import time
+
+    out = tmp_path / "o"
+    cmd = [
+        sys.executable,
+        "-m",
+        "mlpfac.cli",
+        "sweep",
+        "paper",
+        "--seeds",
+        "0-200",
+        "--duration",
+        "1",
+        "--workers",
+        "2",
+        "--out",
+        str(out),
+    ]
+    p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 60
+    while not list(out.glob("*/*/seed-*/metrics.json")) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    p.send_signal(signal.SIGINT)
+    _, err = p.communicate(timeout=60)
+    assert p.returncode == 130, err
+    assert "Traceback" not in err and "Resume with the same command" in err
+    for d in out.glob("*/*/seed-*"):
+        assert (d / "metrics.json").exists()
+
+
+def test_pool_and_batched_give_the_serial_table(tmp_path):
+    jobs = plan()
+    serial = sweep.execute(jobs, tmp_path / "serial")
+    pool = sweep.execute(jobs, tmp_path / "pool", workers=2)
+    batched = sweep.execute(jobs, tmp_path / "batched", workers=2, batched=True, batch_size=3)
+    for oc in (pool, batched):
+        assert table(jobs, oc) == table(jobs, serial)
+        assert {k: strip(m) for k, m in oc.metrics.items()} == {k: strip(m) for k, m in serial.metrics.items()}
+
+
+def test_local_sweep_does_not_import_dask(tmp_path):
+    code = textwrap.dedent(f"""
+        import sys
+        from mlpfac.cli import main
+        out = {str(tmp_path)!r}
+        assert main(["sweep", "paper", "--seeds", "0-1", "--duration", "0.5", "--workers", "2", "--out", out]) == 0
+        print(sorted(m for m in sys.modules if m.split(".")[0] in ("dask", "distributed")))
+    """)
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.strip().splitlines()[-1] == "[]"
+
+
+def test_dask_cluster_gives_the_local_table(tmp_path):
+    distributed = pytest.importorskip("distributed")
+    jobs = plan(seeds="0-2")
+    local = sweep.execute(jobs, tmp_path / "local")
+    with distributed.LocalCluster(
+        host="127.0.0.1", n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None
+    ) as cluster:
+        client = sweep.connect(cluster.scheduler_address, timeout=30)
+        try:
+            remote = sweep.execute(jobs, tmp_path / "dask", client=client)
+            # the command-line path on the same cluster (connects by address, closes its client)
+            args = cli_args(
+                tmp_path / "cli",
+                "paper",
+                "--seeds",
+                "0-2",
+                "--controllers",
+                "adaptive,corradini",
+                "--duration",
+                str(DUR),
+                "--scheduler",
+                cluster.scheduler_address,
+            )
+            assert sweep.run_sweep_cli(args) == 0
+        finally:
+            client.close()
+    assert table(jobs, remote) == table(jobs, local)
+    assert {k: strip(m) for k, m in remote.metrics.items()} == {k: strip(m) for k, m in local.metrics.items()}
+    assert (tmp_path / "cli" / "sweep.md").read_text() == (lambda p: p.read_text())(
+        sweep.write_tables(tmp_path / "local", "sweep", table(jobs, local), sweep.SWEEP_COLUMNS, {})[1]
+    )
+
+
+def test_compare_table(tmp_path, capsys):
+    args = cli_args(tmp_path, "paper", "--seeds", "1-2", "--duration", "13", "--workers", "2", command="compare")
+    assert args.controllers == "adaptive,corradini,kanayama"
+    assert sweep.run_compare_cli(args) == 0
+    md = (tmp_path / "compare.md").read_text()
+    assert "| paper | kanayama | after |" in md and "bounded 2/2" in md
+    assert (tmp_path / "compare.csv").exists() and "max error [mm]" in capsys.readouterr().out
+
+
+def test_worst_seed_is_the_first_to_diverge(tmp_path):
+    from test_batch import FIRST_TUNING
+
+    t = copy.deepcopy(load("paper").table)
+    t["controller"]["adaptive"] = dict(FIRST_TUNING)  # seed 0 diverges at 5.91 s
+    (tmp_path / "first.toml").write_text(to_toml(t))
+    jobs = sweep.plan([str(tmp_path / "first.toml")], ["adaptive"], [0, 1], 6.5)
+    rows = table(jobs, sweep.execute(jobs, tmp_path / "out"))
+    assert rows[0]["worst_seed"] == 0 and rows[0]["worst_status"] == "diverged" and rows[0]["bounded"] == 1
+    assert rows[0]["pos_rms_m_ci_lo"] is None  # one bounded run: no interval
+
+
+def test_run_that_raises_is_reported_and_rerun(tmp_path, monkeypatch):
+    jobs = plan(seeds="0", controllers="corradini")
+    broken = {"on": True}
+    import mlpfac.runner
+
+    real = mlpfac.runner.run
+
+    def run(scn, sink=None, on_step=None):
+        if broken["on"]:
+            raise RuntimeError("boom")
+        return real(scn, sink, on_step)
+
+    monkeypatch.setattr(mlpfac.runner, "run", run)
+    oc = sweep.execute(jobs, tmp_path)
+    assert list(oc.errors) == [jobs[0].key] and not oc.metrics
+    assert "boom" in (jobs[0].folder(tmp_path) / "error.txt").read_text()
+    broken["on"] = False
+    oc = sweep.execute(jobs, tmp_path)
+    assert oc.ran == 1 and not oc.errors and not (jobs[0].folder(tmp_path) / "error.txt").exists()
