@@ -109,11 +109,15 @@ def _stats(rec: RunRecord, lo: int, hi: int) -> dict:
 
 
 def phase_bounds(rec: RunRecord) -> dict[str, tuple[int, int]]:
-    """Step ranges of the phases: "before" the first event (after the warm-up) and "after" it."""
+    """Step ranges of the phases: "before" the first event (after the warm-up) and "after" it.
+
+    A scenario without events has only "before": the whole run after the warm-up.
+    """
     N = len(rec.t)
     w = min(int(round(rec.warmup_s / rec.T)), N)
-    split = int(round(rec.split_s / rec.T)) if rec.split_s is not None else N
-    split = min(max(split, w), N)
+    if rec.split_s is None:
+        return {"before": (w, N)}
+    split = min(max(int(round(rec.split_s / rec.T)), w), N)
     return {"before": (w, split), "after": (split, N)}
 
 

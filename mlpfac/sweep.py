@@ -480,7 +480,7 @@ def aggregate(jobs: list[Job], metrics: dict[tuple, dict]) -> list[dict]:
         n = len(ms)
         ok = [m for m in ms if m["status"] == "ok"]
         diverged = sorted((m for m in ms if m["status"] != "ok"), key=lambda m: (m["steps"], m["seed"]))
-        has_after = any(m["phases"]["after"]["end_s"] > m["phases"]["after"]["start_s"] for m in ms)
+        has_after = any("after" in m["phases"] and m["phases"]["after"]["end_s"] > m["phases"]["after"]["start_s"] for m in ms)
         for phase in PHASES if has_after else PHASES[:1]:
             ph = [m["phases"][phase] for m in ok]
             pos = [p["rms_position_error_m"] for p in ph if p["rms_position_error_m"] is not None]

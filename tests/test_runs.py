@@ -58,3 +58,8 @@ def test_phases_exclude_the_warmup_and_split_at_the_event():
     assert m["phases"]["before"]["start_s"] == 2.0 and m["phases"]["before"]["end_s"] == 12.5
     assert m["phases"]["after"]["start_s"] == 12.5 and m["phases"]["after"]["end_s"] == 25.0
     assert m["max_abs_weight"] is None
+
+
+def test_a_scenario_without_events_has_one_phase():
+    m = metrics(run(parse({"duration": 3.0, "controller": {"name": "kanayama"}})))
+    assert list(m["phases"]) == ["before"] and m["phases"]["before"]["end_s"] == 3.0
