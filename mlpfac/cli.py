@@ -27,7 +27,9 @@ def _sink_args(p: argparse.ArgumentParser) -> None:
     x = g.add_mutually_exclusive_group()
     x.add_argument("--save", metavar="FILE.rrd", type=Path, help="save the recording to this file")
     x.add_argument("--spawn", action="store_true", help="open a rerun viewer and stream to it")
-    x.add_argument("--connect", metavar="URL", help="stream to a running viewer, e.g. rerun+http://127.0.0.1:9876/proxy")
+    x.add_argument(
+        "--connect", metavar="URL", help="stream to a running viewer, e.g. rerun+http://127.0.0.1:9876/proxy"
+    )
     x.add_argument("--serve", action="store_true", help="serve a web viewer on 127.0.0.1")
     x.add_argument("--no-log", action="store_true", help="no recording")
 
@@ -36,7 +38,11 @@ def build_parser() -> argparse.ArgumentParser:
     parser = Parser(prog="mlpfac", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True, parser_class=Parser)
 
-    p = sub.add_parser("run", help="run one scenario", description="Run one scenario and write metrics.json, config.toml, figure1.png and run.rrd.")
+    p = sub.add_parser(
+        "run",
+        help="run one scenario",
+        description="Run one scenario and write metrics.json, config.toml, figure1.png and run.rrd.",
+    )
     p.add_argument("scenario", help="a shipped scenario name (see `mlpfac list`) or a path to a .toml file")
     p.add_argument("--controller", help="override the scenario's controller (adaptive, corradini, kanayama, ...)")
     p.add_argument("--seed", type=int, help="override the scenario's seed")
@@ -125,6 +131,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         except ConfigError as err:
             sink_error = err  # the run goes on without a recording; the error is reported at the end
 
+    if sink is not None and args.serve:
+        print(f"web viewer: {sink.viewer_url}")
     rec = run(scn, sink=sink)
     m = write_run(out, scn, rec)
     if baseline is not None and rec.status != "interrupted":
@@ -135,6 +143,9 @@ def cmd_run(args: argparse.Namespace) -> int:
     if sink_error is not None:
         print(f"mlpfac: error: {sink_error} (no recording; metrics.json was written)", file=sys.stderr)
         return EXIT_BAD_INPUT
+    if sink is not None and args.serve:
+        print("serving the recording; Ctrl-C stops the web viewer")
+        sink.wait()
     return {"ok": 0, "diverged": 1}.get(rec.status, EXIT_INTERRUPTED)
 
 
@@ -143,12 +154,19 @@ def _fmt(x: float | None, scale: float = 1.0, unit: str = "") -> str:
 
 
 def _print_summary(m: dict, out: Path) -> None:
-    print(f"{m['scenario']} / {m['controller']} / seed {m['seed']}: {m['status']}" + (f" ({m['reason']})" if m["reason"] else ""))
+    print(
+        f"{m['scenario']} / {m['controller']} / seed {m['seed']}: {m['status']}"
+        + (f" ({m['reason']})" if m["reason"] else "")
+    )
     for ev in m["events"]:
         print(f"  event at {ev['time']:g} s: {ev['text']}")
-    print(f"  position RMS {_fmt(m['rms_position_error_m'], 1e3, ' mm')}, max {_fmt(m['max_position_error_m'], 1e3, ' mm')}, heading RMS {_fmt(m['rms_heading_error_rad'], 1e3, ' mrad')}")
+    print(
+        f"  position RMS {_fmt(m['rms_position_error_m'], 1e3, ' mm')}, max {_fmt(m['max_position_error_m'], 1e3, ' mm')}, heading RMS {_fmt(m['rms_heading_error_rad'], 1e3, ' mrad')}"
+    )
     for name, ph in m["phases"].items():
-        print(f"  {name:>6} [{ph['start_s']:g}, {ph['end_s']:g}) s: position RMS {_fmt(ph['rms_position_error_m'], 1e3, ' mm')}, heading RMS {_fmt(ph['rms_heading_error_rad'], 1e3, ' mrad')}")
+        print(
+            f"  {name:>6} [{ph['start_s']:g}, {ph['end_s']:g}) s: position RMS {_fmt(ph['rms_position_error_m'], 1e3, ' mm')}, heading RMS {_fmt(ph['rms_heading_error_rad'], 1e3, ' mrad')}"
+        )
     if m["max_abs_weight"] is not None:
         print(f"  max |weight| {m['max_abs_weight']:.3g}, final mean diag P {m['mean_diag_P_final']:.3g}")
     print(f"  {m['sim_time_s']:.1f} s simulated in {m['wall_time_s']:.2f} s wall -> {out}")

@@ -1,4 +1,7 @@
-"""A run's folder: metrics.json, config.toml (the scenario as resolved), written atomically."""
+"""A run's folder: metrics.json, config.toml (the scenario as resolved), written atomically.
+
+Only the standard library at import time: the sweep's parent process imports this module too.
+"""
 
 from __future__ import annotations
 
@@ -7,26 +10,32 @@ import os
 import tempfile
 from pathlib import Path
 
-from mlpfac.record import RunRecord
-from mlpfac.runner import metrics
-from mlpfac.scenario import Scenario, to_toml
 
-
-def write_atomic(path: Path, text: str) -> None:
-    """Write ``text`` to ``path`` through a temporary file and a rename: readers never see half a file."""
+def write_atomic(path: Path, data: str | bytes) -> None:
+    """Write through a temporary file in the same folder and a rename: readers never see half a file."""
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
     try:
-        with os.fdopen(fd, "w") as fh:
-            fh.write(text)
+        os.fchmod(fd, 0o666 & ~_umask())  # mkstemp makes 0600; give the file the usual mode
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(data.encode() if isinstance(data, str) else data)
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
 
 
-def write_run(out: Path, scn: Scenario, rec: RunRecord) -> dict:
+def _umask() -> int:
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+def write_run(out: Path, scn, rec) -> dict:
     """config.toml, then metrics.json (last: its presence means the run folder is whole). Returns the metrics."""
+    from mlpfac.runner import metrics
+    from mlpfac.scenario import to_toml
+
     m = metrics(rec)
     write_atomic(out / "config.toml", to_toml(scn.table))
     write_atomic(out / "metrics.json", json.dumps(m, indent=2) + "\n")

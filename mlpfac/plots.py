@@ -39,7 +39,9 @@ def figure1(rec: RunRecord, baseline: RunRecord | None, path: Path) -> None:
         ax[3].plot(t, rec.u[:n, 1], lw=0.8, label="omega [rad/s]")
         ax[3].legend(fontsize=7)
         ax[3].set(title="(d) commands (no weights: non-adaptive)", xlabel="t [s]")
-    for i, (lo, hi, tag) in enumerate([(0, n, "(e) reference (—) and actual (o) paths"), (0, min(n, int(round(3.0 / rec.T))), "(f) initial phase")]):
+    for i, (lo, hi, tag) in enumerate(
+        [(0, n, "(e) reference (—) and actual (o) paths"), (0, min(n, int(round(3.0 / rec.T))), "(f) initial phase")]
+    ):
         a = ax[4 + i]
         a.plot(rec.ref[lo:hi, 0], rec.ref[lo:hi, 1], "k-", lw=1.0)
         step = max(1, (hi - lo) // 300)

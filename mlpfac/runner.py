@@ -97,7 +97,13 @@ def _diverged(rec: RunRecord, k: int, limit_m: float) -> str | None:
 def _stats(rec: RunRecord, lo: int, hi: int) -> dict:
     e = rec.e_true[lo:hi]
     if len(e) == 0:
-        return {"start_s": lo * rec.T, "end_s": hi * rec.T, "rms_position_error_m": None, "max_position_error_m": None, "rms_heading_error_rad": None}
+        return {
+            "start_s": lo * rec.T,
+            "end_s": hi * rec.T,
+            "rms_position_error_m": None,
+            "max_position_error_m": None,
+            "rms_heading_error_rad": None,
+        }
     pos = np.hypot(e[:, 0], e[:, 1])
     return {
         "start_s": lo * rec.T,
@@ -124,7 +130,15 @@ def phase_bounds(rec: RunRecord) -> dict[str, tuple[int, int]]:
 def metrics(rec: RunRecord) -> dict:
     """The run's figures: whole-run and per-phase position/heading RMS, weights, P, timing, status."""
     n = rec.n
-    out = {"status": rec.status, "reason": rec.reason, "scenario": rec.scenario, "controller": rec.controller, "seed": rec.seed, "T": rec.T, "steps": n}
+    out = {
+        "status": rec.status,
+        "reason": rec.reason,
+        "scenario": rec.scenario,
+        "controller": rec.controller,
+        "seed": rec.seed,
+        "T": rec.T,
+        "steps": n,
+    }
     whole = _stats(rec, 0, n)
     out.update({k: whole[k] for k in ("rms_position_error_m", "max_position_error_m", "rms_heading_error_rad")})
     phases = {}

@@ -26,7 +26,20 @@ from mlpfac.reference import make_reference
 ROOT = Path(__file__).resolve().parent.parent
 SIMS = ROOT / "sims"
 
-TOP_KEYS = {"name", "description", "duration", "T", "seed", "warmup", "divergence_m", "reference", "initial", "plant", "controller", "events"}
+TOP_KEYS = {
+    "name",
+    "description",
+    "duration",
+    "T",
+    "seed",
+    "warmup",
+    "divergence_m",
+    "reference",
+    "initial",
+    "plant",
+    "controller",
+    "events",
+}
 CONTROLLER_KEYS = {"name", "lambdas", "v_max", "omega_max", "adaptive", "kanayama"}
 NETWORK_KEYS = {f.name for f in dataclasses.fields(Networks)}
 ADAPTIVE_KEYS = {f.name for f in dataclasses.fields(AdaptiveConfig)} - {"networks"} | NETWORK_KEYS
@@ -59,7 +72,9 @@ class Scenario:
     def steps(self) -> int:
         return int(round(self.duration / self.T))
 
-    def with_overrides(self, controller: str | None = None, seed: int | None = None, duration: float | None = None) -> Scenario:
+    def with_overrides(
+        self, controller: str | None = None, seed: int | None = None, duration: float | None = None
+    ) -> Scenario:
         """The same scenario with the command line's --controller, --seed, --duration applied."""
         table = copy.deepcopy(self.table)
         if controller is not None:

@@ -48,6 +48,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from mlpfac.exceptions import ConfigError
+from mlpfac.outputs import write_atomic
 
 EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
 PHASES = ("before", "after")
@@ -235,25 +236,6 @@ def _ignore_sigint() -> None:
 
 # --------------------------------------------------------------------------------------------
 # Results folders
-
-
-def write_atomic(path: Path, data: str | bytes) -> None:
-    """Write through a temporary file in the same folder and a rename: readers never see half a file."""
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
-    try:
-        os.fchmod(fd, 0o666 & ~_umask())  # mkstemp makes 0600; give the file the usual mode
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data.encode() if isinstance(data, str) else data)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
-def _umask() -> int:
-    mask = os.umask(0o022)
-    os.umask(mask)
-    return mask
 
 
 def write_result(out: Path, job: Job, result: dict) -> None:
@@ -480,7 +462,9 @@ def aggregate(jobs: list[Job], metrics: dict[tuple, dict]) -> list[dict]:
         n = len(ms)
         ok = [m for m in ms if m["status"] == "ok"]
         diverged = sorted((m for m in ms if m["status"] != "ok"), key=lambda m: (m["steps"], m["seed"]))
-        has_after = any("after" in m["phases"] and m["phases"]["after"]["end_s"] > m["phases"]["after"]["start_s"] for m in ms)
+        has_after = any(
+            "after" in m["phases"] and m["phases"]["after"]["end_s"] > m["phases"]["after"]["start_s"] for m in ms
+        )
         for phase in PHASES if has_after else PHASES[:1]:
             ph = [m["phases"][phase] for m in ok]
             pos = [p["rms_position_error_m"] for p in ph if p["rms_position_error_m"] is not None]

@@ -13,8 +13,20 @@ def test_run_writes_metrics_config_and_figure(tmp_path, capsys):
     out = tmp_path / "run"
     assert main(["run", "paper", "--duration", "1", "--seed", "3", "--out", str(out), "--no-log"]) == 0
     m = json.loads((out / "metrics.json").read_text())
-    for key in ("status", "controller", "seed", "rms_position_error_m", "max_position_error_m", "rms_heading_error_rad",
-                "phases", "excluded_s", "max_abs_weight", "mean_diag_P_final", "sim_time_s", "wall_time_s"):
+    for key in (
+        "status",
+        "controller",
+        "seed",
+        "rms_position_error_m",
+        "max_position_error_m",
+        "rms_heading_error_rad",
+        "phases",
+        "excluded_s",
+        "max_abs_weight",
+        "mean_diag_P_final",
+        "sim_time_s",
+        "wall_time_s",
+    ):
         assert key in m
     assert m["seed"] == 3 and m["controller"] == "adaptive" and m["status"] == "ok"
     assert "seed = 3" in (out / "config.toml").read_text()
@@ -34,14 +46,14 @@ def test_config_toml_reproduces_the_run(tmp_path):
 BAD_FILES = {
     "eigenvalue": ("[controller]\nlambdas = [0.8, 1.1, 0.8]\n", "lambdas"),
     "period": ("T = 0.0\n", "T"),
-    "noise": ("[plant]\nkind = \"kinematic\"\nnoise_cov = -1e-6\n", "noise_cov"),
+    "noise": ('[plant]\nkind = "kinematic"\nnoise_cov = -1e-6\n', "noise_cov"),
     "ekf_R": ("[controller.adaptive]\nR = -1.0\n", "R"),
     "unknown_key": ("durations = 3\n", "durations"),
-    "unknown_controller": ("[controller]\nname = \"pid\"\n", "pid"),
+    "unknown_controller": ('[controller]\nname = "pid"\n', "pid"),
     "toml": ("duration = = 3\n", "not valid TOML"),
-    "event_time": ("[[events]]\ntime = -1.0\nkind = \"control_period\"\nfactor = 1.5\n", "time"),
-    "event_kind": ("[[events]]\ntime = 1.0\nkind = \"teleport\"\n", "teleport"),
-    "reference": ("[reference]\nkind = \"spiral\"\n", "spiral"),
+    "event_time": ('[[events]]\ntime = -1.0\nkind = "control_period"\nfactor = 1.5\n', "time"),
+    "event_kind": ('[[events]]\ntime = 1.0\nkind = "teleport"\n', "teleport"),
+    "reference": ('[reference]\nkind = "spiral"\n', "spiral"),
 }
 
 
@@ -65,7 +77,9 @@ def test_bad_scenario_file_is_one_line_and_exit_2(tmp_path, capsys, case):
     ],
 )
 def test_bad_command_line_is_one_line_and_exit_2(tmp_path, argv, needle):
-    proc = subprocess.run([sys.executable, "-m", "mlpfac.cli", *argv, "--no-log", "--out", str(tmp_path)], capture_output=True, text=True)
+    proc = subprocess.run(
+        [sys.executable, "-m", "mlpfac.cli", *argv, "--no-log", "--out", str(tmp_path)], capture_output=True, text=True
+    )
     assert proc.returncode == 2
     assert len(proc.stderr.strip().splitlines()) == 1 and needle in proc.stderr and "Traceback" not in proc.stderr
 

@@ -43,7 +43,12 @@ def test_corradini_with_true_functions_and_no_noise_is_exact():
 
 
 def test_a_diverging_run_keeps_its_record():
-    table = {"duration": 2.0, "divergence_m": 0.05, "initial": {"error": [0.0, 0.0, 0.0]}, "controller": {"name": "adaptive", "adaptive": {"P0": 5.0, "R": 1e-6, "weight_std": 1.0}}}
+    table = {
+        "duration": 2.0,
+        "divergence_m": 0.05,
+        "initial": {"error": [0.0, 0.0, 0.0]},
+        "controller": {"name": "adaptive", "adaptive": {"P0": 5.0, "R": 1e-6, "weight_std": 1.0}},
+    }
     rec = run(parse(table))
     m = metrics(rec)
     assert m["status"] == "diverged" and "position error" in m["reason"]

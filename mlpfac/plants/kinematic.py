@@ -63,7 +63,10 @@ class KinematicPlant:
 
     def check_event(self, event: Event, where: str) -> None:
         if event.kind not in self.supported_events:
-            raise ConfigError(where, f"the kinematic plant cannot apply a {event.kind!r} event (it supports {', '.join(sorted(self.supported_events))})")
+            raise ConfigError(
+                where,
+                f"the kinematic plant cannot apply a {event.kind!r} event (it supports {', '.join(sorted(self.supported_events))})",
+            )
         check_timing_event(event, where)
 
     def apply(self, event: Event) -> str:
@@ -83,7 +86,14 @@ class KinematicPlant:
 
     def geometry(self) -> list[dict]:
         return [
-            {"name": "chassis", "type": "box", "size": [0.15, 0.1, 0.04], "pos": [0.05, 0.0, 0.06], "quat": [1, 0, 0, 0], "rgba": [0.3, 0.5, 0.8, 1]},
+            {
+                "name": "chassis",
+                "type": "box",
+                "size": [0.15, 0.1, 0.04],
+                "pos": [0.05, 0.0, 0.06],
+                "quat": [1, 0, 0, 0],
+                "rgba": [0.3, 0.5, 0.8, 1],
+            },
         ]
 
 

@@ -1,0 +1,194 @@
+"""Shared by the logging tests (test_log.py, test_viewer_browser.py): a deterministic synthetic run
+record, logging it the way the runner does, and reading an .rrd back."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import pytest
+
+from mlpfac.error_model import h_true, tracking_error
+from mlpfac.networks import Networks
+from mlpfac.record import RunRecord
+from mlpfac.reference import Eight, sample
+
+GEOMETRY = [
+    {
+        "name": "chassis",
+        "type": "box",
+        "size": [0.15, 0.1, 0.04],
+        "pos": [0.05, 0.0, 0.09],
+        "quat": [1, 0, 0, 0],
+        "rgba": [0.3, 0.5, 0.8, 1],
+    },
+    {
+        "name": "left wheel",
+        "type": "cylinder",
+        "size": [0.05, 0.015],
+        "pos": [0.0, 0.16, 0.05],
+        "quat": [0.7071068, 0.7071068, 0, 0],
+        "rgba": [0.1, 0.1, 0.1, 1],
+    },
+    {
+        "name": "right wheel",
+        "type": "cylinder",
+        "size": [0.05, 0.015],
+        "pos": [0.0, -0.16, 0.05],
+        "quat": [0.7071068, 0.7071068, 0, 0],
+        "rgba": [0.1, 0.1, 0.1, 1],
+    },
+    {
+        "name": "caster",
+        "type": "sphere",
+        "size": [0.02],
+        "pos": [0.17, 0.0, 0.02],
+        "quat": [1, 0, 0, 0],
+        "rgba": [0.6, 0.6, 0.6, 1],
+    },
+]
+
+
+def synthetic_record(N: int = 2500, n: int | None = None, seed: int = 3, status: str = "ok") -> RunRecord:
+    """A realistic-looking adaptive run on the figure of eight (37), filled without simulating.
+
+    The robot starts 0.3 m off and converges; at 12.5 s (the T -> 1.5 T event) it is knocked off
+    again. 171 weights drift as random walks, trace(P) decays, the wheels follow (v, omega).
+    Only the first ``n`` rows are filled (default N); the rest stay NaN, as in a diverged run.
+    """
+    n = N if n is None else n
+    T = 0.01
+    rng = np.random.default_rng(seed)
+    rec = RunRecord.allocate("synthetic", "adaptive", seed, T, N)
+    t = rec.t
+    ref = sample(Eight(), t)  # (N, 5)
+    rec.ref[:] = ref
+    bump = 0.3 * np.exp(-t / 1.5) + 0.15 * np.exp(-(t - 12.5) / 1.0) * (t >= 12.5)
+    normal = np.c_[-np.sin(ref[:, 2]), np.cos(ref[:, 2])]
+    pose = np.c_[ref[:, :2] + bump[:, None] * normal, ref[:, 2] + 0.5 * bump * np.cos(3 * t)]
+    e_true = np.array([tracking_error(q, r) for q, r in zip(pose, ref, strict=True)])
+    e = e_true + rng.normal(0.0, 1e-3, (N, 3))
+    u = np.c_[ref[:, 3] + 2.0 * e_true[:, 0], ref[:, 4] + 3.0 * e_true[:, 1] + 2.0 * np.sin(e_true[:, 2])]
+    u_meas = u + rng.normal(0.0, 5e-3, (N, 2))
+    r_wheel, half_track = 0.05, 0.16
+    wheel_cmd = np.c_[u[:, 0] - half_track * u[:, 1], u[:, 0] + half_track * u[:, 1]] / r_wheel
+    alpha = Networks().alpha
+    z = np.cumsum(rng.normal(0.0, 0.02, (N, alpha)), axis=0) + rng.normal(0.0, 0.5, alpha)
+    trace_P = 5.0 * alpha / (1.0 + t)
+    h = np.array([h_true(ei, r[3], r[4], T) for ei, r in zip(e_true, ref, strict=True)])
+    rows = slice(0, n)
+    rec.pose[rows], rec.pose_meas[rows] = pose[rows], pose[rows] + rng.normal(0, 1e-3, (N, 3))[rows]
+    rec.e[rows], rec.e_true[rows], rec.u[rows] = e[rows], e_true[rows], u[rows]
+    plant = {
+        "u_meas": u_meas,
+        "wheel_cmd": wheel_cmd,
+        "wheel_meas": wheel_cmd + rng.normal(0.0, 0.05, (N, 2)),
+        "h_true": h,
+    }
+    ctrl = {
+        "z": z,
+        "trace_P": trace_P,
+        "mean_diag_P": trace_P / alpha,
+        "innovation": rng.normal(0.0, 1e-3, (N, 3)) * (1 + 5 * np.exp(-t))[:, None],
+        "h_hat": h + 0.01 * np.exp(-t / 3)[:, None] * np.cos(np.arange(3) + t[:, None]),
+    }
+    for store, values in ((rec.plant, plant), (rec.ctrl, ctrl)):
+        for key, arr in values.items():
+            store[key] = np.full(arr.shape, np.nan)
+            store[key][rows] = arr[rows]
+    rec.labels = {"z": Networks().labels(), "h_hat": ["h1", "h2", "h5"]}
+    rec.events = [
+        {
+            "time": 12.5,
+            "kind": "control_period",
+            "params": {"factor": 1.5},
+            "text": "control period T_p 0.01 -> 0.015 s",
+        },
+        {"time": 20.0, "kind": "sensor_delay", "params": {"steps": 2}, "text": "sensor delay 0 -> 2 steps"},
+    ]
+    rec.events = [ev for ev in rec.events if ev["time"] < n * T]
+    rec.n, rec.status = n, status
+    rec.reason = "" if status == "ok" else f"position error beyond 5 m at t = {(n - 1) * T:.2f} s"
+    return rec
+
+
+def log_record(rec: RunRecord, path, flush_every: int = 250, geometry: list[dict] = GEOMETRY) -> None:
+    """Log ``rec`` to ``path`` the way the runner does: begin, flush every 250 steps, end."""
+    from mlpfac import log
+
+    name, rid = f"{rec.scenario} / {rec.controller} / seed {rec.seed}", f"{rec.scenario}-{rec.controller}-{rec.seed}"
+    sink = log.make_sink(save=path, recording_name=name, recording_id=rid)
+    sink.begin(rec, geometry=geometry, ref_path=rec.ref)
+    for k in range(flush_every, rec.n + 1, flush_every):
+        sink.flush(rec, upto=k)
+    sink.end(rec)
+
+
+@dataclass
+class Column:
+    """One component of one entity over time, rows sorted by step."""
+
+    times: dict[str, np.ndarray]  # timeline -> (rows,) int64 (sim_time in ns)
+    values: object  # pyarrow list array, one entry per row
+
+
+@dataclass
+class Entity:
+    static: dict[str, object] = field(default_factory=dict)  # component -> pyarrow array (last write)
+    temporal: dict[str, Column] = field(default_factory=dict)
+
+
+def read_rrd(path) -> dict[str, Entity]:
+    """Every entity of the file's recording: static components and time-sorted temporal columns."""
+    import pyarrow as pa
+    from rerun.chunk import RrdReader
+
+    parts: dict[str, dict[str, list]] = {}
+    out: dict[str, Entity] = {}
+    for chunk in RrdReader(path).store().stream().to_chunks():
+        ent = out.setdefault(chunk.entity_path, Entity())
+        rb = chunk.to_record_batch()
+        names = [f.name for f in rb.schema if f.metadata and f.metadata.get(b"rerun:kind") == b"data"]
+        timelines = [f.name for f in rb.schema if f.metadata and f.metadata.get(b"rerun:kind") == b"index"]
+        for name in names:
+            if chunk.is_static:
+                ent.static[name] = rb.column(name)
+            else:
+                times = {tl: rb.column(tl).cast(pa.int64()).to_numpy() for tl in timelines}
+                parts.setdefault(chunk.entity_path, {}).setdefault(name, []).append((times, rb.column(name)))
+    for path_, comps in parts.items():
+        for name, pieces in comps.items():
+            times = {tl: np.concatenate([p[0][tl] for p in pieces]) for tl in pieces[0][0]}
+            values = pa.concat_arrays([p[1] for p in pieces])
+            order = np.argsort(times.get("step", times.get("sim_time")), kind="stable")
+            out[path_].temporal[name] = Column({tl: v[order] for tl, v in times.items()}, values.take(pa.array(order)))
+    return out
+
+
+@pytest.fixture(scope="session")
+def record() -> RunRecord:
+    """The synthetic 2500-step, 171-weight record (read-only: tests must not change it)."""
+    return synthetic_record()
+
+
+@pytest.fixture
+def make_record():
+    """``synthetic_record(N=2500, n=None, seed=3, status="ok")``."""
+    return synthetic_record
+
+
+@pytest.fixture
+def save_rrd():
+    """``log_record(record, path, flush_every=250, geometry=GEOMETRY)``: log as the runner does."""
+    return log_record
+
+
+@pytest.fixture
+def rrd_contents():
+    """``read_rrd(path) -> {entity path: Entity}``."""
+    return read_rrd
+
+
+@pytest.fixture
+def robot_geometry() -> list[dict]:
+    return GEOMETRY

@@ -1,0 +1,324 @@
+"""The rerun log: what a saved .rrd holds, read back, against the record it came from.
+
+Scalars are stored as float64 and compared exactly; rerun stores positions, strips, arrows and
+transforms as float32, so those are compared to float32.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.compute as pc
+import pytest
+
+from mlpfac import log
+from mlpfac.exceptions import ConfigError
+
+POSE_ENTITIES = ("/world/robot", "/world/reference_now", "/top/plane/robot", "/top/plane/reference_now")
+
+
+def per_row(values: pa.Array) -> np.ndarray:
+    """A list array with exactly one instance per row, as numpy: (rows,) or (rows, width)."""
+    assert pc.all(pc.equal(pc.list_value_length(values), 1)).as_py(), "a row holds other than one instance"
+    flat = values.flatten()
+    if pa.types.is_fixed_size_list(flat.type):
+        return flat.flatten().to_numpy(zero_copy_only=False).reshape(len(values), flat.type.list_size)
+    return flat.to_numpy(zero_copy_only=False)
+
+
+def expected_series(rec) -> dict[str, np.ndarray]:
+    """Every per-step scalar entity and the record's own values for it, written out by hand."""
+    n, p, c = rec.n, rec.plant, rec.ctrl
+    out = {f"/errors/e{j + 1}": rec.e_true[:n, j] for j in range(3)}
+    out["/errors/position"] = np.hypot(rec.e_true[:n, 0], rec.e_true[:n, 1])
+    for j, q in enumerate(("v", "omega")):
+        out[f"/controls/{q}/cmd"] = rec.u[:n, j]
+        out[f"/controls/{q}/meas"] = p["u_meas"][:n, j]
+        out[f"/controls/{q}/ref"] = rec.ref[:n, 3 + j]
+    for j, side in enumerate(("left", "right")):
+        out[f"/wheels/{side}/cmd"] = p["wheel_cmd"][:n, j]
+        out[f"/wheels/{side}/meas"] = p["wheel_meas"][:n, j]
+    for i, label in enumerate(rec.labels["z"]):
+        out[f"/weights/{label}"] = c["z"][:n, i]
+    out["/ekf/trace_P"] = c["trace_P"][:n]
+    out["/ekf/mean_diag_P"] = c["mean_diag_P"][:n]
+    for j in range(3):
+        out[f"/ekf/innovation/e{j + 1}"] = c["innovation"][:n, j]
+    for j, h in enumerate(("h1", "h2", "h5")):
+        out[f"/h/{h}/estimate"] = c["h_hat"][:n, j]
+        out[f"/h/{h}/true"] = p["h_true"][:n, j]
+    return out
+
+
+def pose_rows(n: int, stride: int) -> np.ndarray:
+    """Steps that carry a pose-rate entity: every ``stride``-th, and the last one."""
+    return np.union1d(np.arange(0, n, stride), [n - 1])
+
+
+def check_contents(rec, ents, geometry) -> None:
+    n = rec.n
+    steps = np.arange(n)
+    series = expected_series(rec)
+    assert len([p for p in series if p.startswith("/weights/")]) == rec.ctrl["z"].shape[1] == 171
+    for path, want in series.items():
+        col = ents[path].temporal["Scalars:scalars"]
+        np.testing.assert_array_equal(col.times["step"], steps, err_msg=path)
+        np.testing.assert_array_equal(col.times["sim_time"], np.round(rec.t[:n] * 1e9).astype(np.int64), err_msg=path)
+        np.testing.assert_array_equal(per_row(col.values), want, err_msg=path)
+    assert {p for p in ents if p.startswith("/weights/")} == {p for p in series if p.startswith("/weights/")}
+    assert per_row(ents["/errors/e1"].static["SeriesLines:names"]).tolist() == ["e1"]
+
+    # Pose-rate entities: every 5th step and the last, float32.
+    rows = pose_rows(n, log.POSE_STRIDE)
+    f32 = np.float32
+    for path in POSE_ENTITIES:
+        for col in ents[path].temporal.values():
+            np.testing.assert_array_equal(col.times["step"], rows, err_msg=path)
+    pose, ref = rec.pose[rows], rec.ref[rows]
+    robot = ents["/world/robot"].temporal
+    np.testing.assert_array_equal(per_row(robot["Transform3D:translation"].values)[:, :2], pose[:, :2].astype(f32))
+    quat = per_row(robot["Transform3D:quaternion"].values)  # (x, y, z, w) about z
+    heading_diff = np.angle(np.exp(1j * (2 * np.arctan2(quat[:, 2], quat[:, 3]) - pose[:, 2])))
+    np.testing.assert_allclose(heading_diff, 0.0, atol=1e-6)
+    np.testing.assert_array_equal(
+        per_row(ents["/top/plane/robot"].temporal["Arrows2D:origins"].values), pose[:, :2].astype(f32)
+    )
+    np.testing.assert_array_equal(
+        per_row(ents["/world/reference_now"].temporal["Arrows3D:origins"].values)[:, :2], ref[:, :2].astype(f32)
+    )
+    np.testing.assert_array_equal(
+        per_row(ents["/top/plane/reference_now"].temporal["Points2D:positions"].values), ref[:, :2].astype(f32)
+    )
+
+    # The driven path: a growing strip every 25th step and at the last; the last one is the whole path.
+    path_rows = pose_rows(n, log.PATH_STRIDE)
+    for ent, dims in (("/world/path", 3), ("/top/plane/path", 2)):
+        col = ents[ent].temporal[f"LineStrips{dims}D:strips"]
+        np.testing.assert_array_equal(col.times["step"], path_rows, err_msg=ent)
+        strips = col.values.to_pylist()
+        assert all(len(row) == 1 for row in strips)
+        last = np.array(strips[-1][0])[:, :2]
+        want = np.vstack([rec.pose[: n : log.PATH_POINT_STRIDE, :2], rec.pose[n - 1, :2]])
+        want = want if (n - 1) % log.PATH_POINT_STRIDE else want[:-1]
+        np.testing.assert_array_equal(last, want.astype(f32), err_msg=ent)
+
+    # Static scene: reference path, floor, robot shapes, view coordinates, top-view mirror.
+    ref_xy = rec.ref[:, :2].astype(f32)
+    for ent, comp in (
+        ("/world/reference_path", "LineStrips3D:strips"),
+        ("/top/plane/reference_path", "LineStrips2D:strips"),
+    ):
+        strip = np.array(ents[ent].static[comp].to_pylist()[0][0])
+        np.testing.assert_array_equal(strip[:, :2], ref_xy, err_msg=ent)
+    assert "Boxes3D:half_sizes" in ents["/world/floor"].static
+    assert "ViewCoordinates:xyz" in ents["/world"].static
+    assert ents["/top/plane"].static["Transform3D:scale"].to_pylist() == [[[1.0, -1.0, 1.0]]]
+    chassis, wheel, caster = (ents[f"/world/robot/{g}"].static for g in ("chassis", "left_wheel", "caster"))
+    np.testing.assert_allclose(chassis["Boxes3D:half_sizes"].to_pylist()[0][0], geometry[0]["size"], rtol=1e-6)
+    np.testing.assert_allclose(chassis["Boxes3D:centers"].to_pylist()[0][0], geometry[0]["pos"], rtol=1e-6)
+    assert wheel["Cylinders3D:lengths"].to_pylist()[0][0] == pytest.approx(2 * geometry[1]["size"][1])
+    assert wheel["Cylinders3D:radii"].to_pylist()[0][0] == pytest.approx(geometry[1]["size"][0])
+    assert caster["Ellipsoids3D:half_sizes"].to_pylist()[0][0] == pytest.approx([geometry[3]["size"][0]] * 3)
+
+    # Events at their step, with their text; the status at the last step.
+    if rec.events:
+        ev = ents["/events"].temporal["TextLog:text"]
+        assert ev.values.to_pylist() == [[e["text"]] for e in rec.events]
+        np.testing.assert_array_equal(ev.times["step"], [round(e["time"] / rec.T) for e in rec.events])
+    else:
+        assert "/events" not in ents
+    status = ents["/status"].temporal
+    assert status["TextLog:text"].values.to_pylist()[0][0].startswith(rec.status)
+    assert status["TextLog:text"].times["step"].tolist() == [n - 1]
+    assert status["TextLog:level"].values.to_pylist() == [[log.STATUS_LEVEL[rec.status]]]
+
+
+def test_saved_file_holds_every_entity_equal_to_the_record(record, tmp_path, save_rrd, rrd_contents, robot_geometry):
+    from rerun.chunk import RrdReader
+
+    path = tmp_path / "run.rrd"
+    save_rrd(record, path)
+    ents = rrd_contents(path)
+    check_contents(record, ents, robot_geometry)
+    assert ents["/__properties"].static["RecordingInfo:name"].to_pylist() == [["synthetic / adaptive / seed 3"]]
+    assert ents["/__properties/run"].static["seed"].to_pylist() == [[3]]
+    reader = RrdReader(path)
+    (rec_store,) = reader.recordings()
+    assert (rec_store.application_id, rec_store.recording_id) == ("mlpfac", "synthetic-adaptive-3")
+    assert len(reader.blueprints()) == 1  # the default layout travels with the file
+    # Nothing but sim_time and step: no wall clock, no log tick.
+    assert {tl for e in ents.values() for c in e.temporal.values() for tl in c.times} == {"sim_time", "step"}
+
+
+def test_diverged_record_logs_only_its_rows(make_record, tmp_path, save_rrd, rrd_contents, robot_geometry):
+    rec = make_record(n=1503, status="diverged")  # after the 12.5 s event, before the 20 s one
+    path = tmp_path / "run.rrd"
+    save_rrd(rec, path)
+    ents = rrd_contents(path)
+    check_contents(rec, ents, robot_geometry)  # n rows everywhere, last pose row 1502, one event
+    assert len(rec.events) == 1
+    text = ents["/status"].temporal["TextLog:text"].values.to_pylist()[0][0]
+    assert text.startswith("diverged: position error beyond 5 m") and "1503 steps" in text
+
+
+def test_same_record_gives_the_same_contents(record, tmp_path, save_rrd, rrd_contents):
+    """Decoded contents are identical, whatever the flush pattern. The bytes are not: rerun stamps
+    chunk and row ids from the clock, and there is no switch for that in 0.41."""
+    a, b = tmp_path / "a.rrd", tmp_path / "b.rrd"
+    save_rrd(record, a, flush_every=250)
+    save_rrd(record, b, flush_every=1000)
+    ea, eb = rrd_contents(a), rrd_contents(b)
+    assert ea.keys() == eb.keys()
+    for path in ea:
+        assert ea[path].static.keys() == eb[path].static.keys(), path
+        for comp, arr in ea[path].static.items():
+            assert arr.equals(eb[path].static[comp]), (path, comp)
+        assert ea[path].temporal.keys() == eb[path].temporal.keys(), path
+        for comp, col in ea[path].temporal.items():
+            other = eb[path].temporal[comp]
+            assert col.times.keys() == other.times.keys()
+            for tl in col.times:
+                np.testing.assert_array_equal(col.times[tl], other.times[tl])
+            assert col.values.equals(other.values), (path, comp)
+
+
+def test_non_finite_last_pose_is_left_out_of_the_pictures(make_record, tmp_path, save_rrd, rrd_contents):
+    rec = make_record(n=1001, status="diverged")
+    rec.pose[1000] = np.nan  # the runner records the step that diverged
+    rec.e_true[1000] = np.inf
+    save_rrd(rec, tmp_path / "run.rrd")
+    ents = rrd_contents(tmp_path / "run.rrd")
+    assert ents["/world/robot"].temporal["Transform3D:translation"].times["step"][-1] == 995
+    assert ents["/world/path"].temporal["LineStrips3D:strips"].times["step"][-1] == 1000  # up to 995, no NaN
+    last_strip = np.array(ents["/world/path"].temporal["LineStrips3D:strips"].values.to_pylist()[-1][0])
+    assert np.isfinite(last_strip).all() and len(last_strip) == 1000 // log.PATH_POINT_STRIDE
+    e1 = per_row(ents["/errors/e1"].temporal["Scalars:scalars"].values)
+    assert len(e1) == 1001 and np.isinf(e1[-1])
+
+
+def test_run_stopped_at_the_first_step(make_record, tmp_path, save_rrd, rrd_contents, robot_geometry):
+    rec = make_record(n=1, status="diverged")
+    path = tmp_path / "run.rrd"
+    save_rrd(rec, path)
+    check_contents(rec, rrd_contents(path), robot_geometry)
+
+
+def test_end_twice_and_flush_past_n(make_record, tmp_path, rrd_contents):
+    rec = make_record(n=300, status="interrupted")
+    sink = log.make_sink(save=tmp_path / "run.rrd")
+    sink.begin(rec)
+    sink.flush(rec, upto=2500)  # beyond n: only what the record holds
+    sink.end(rec)
+    sink.end(rec)
+    ents = rrd_contents(tmp_path / "run.rrd")
+    assert len(ents["/errors/e1"].temporal["Scalars:scalars"].values) == 300
+    assert ents["/status"].temporal["TextLog:level"].values.to_pylist() == [["WARN"]]
+
+
+def test_a_real_run_through_the_runner(tmp_path, rrd_contents):
+    from mlpfac.runner import run
+    from mlpfac.scenario import load
+
+    scn = load("paper").with_overrides(duration=3.0)
+    rec = run(scn, sink=log.make_sink(save=tmp_path / "run.rrd", recording_id="real"))
+    ents = rrd_contents(tmp_path / "run.rrd")
+    assert rec.n > 0
+    for path in ("/errors/e1", "/controls/v/cmd", "/ekf/trace_P", "/h/h1/true"):
+        col = ents[path].temporal["Scalars:scalars"]
+        np.testing.assert_array_equal(col.times["step"], np.arange(rec.n), err_msg=path)
+    weights = [p for p in ents if p.startswith("/weights/")]
+    assert len(weights) == rec.ctrl["z"].shape[1]
+    assert "/weights/NN_f/output/w1_0" in weights
+
+
+def test_robot_rests_on_the_floor(make_record, tmp_path, save_rrd, rrd_contents):
+    """Shapes given relative to a frame at axle height (as the MuJoCo plant does) are lifted."""
+    wheel = {"type": "cylinder", "size": [0.05, 0.0125], "quat": [0.7071068, -0.7071068, 0, 0]}
+    geometry = [
+        {"name": "chassis", "type": "box", "size": [0.15, 0.1, 0.04], "pos": [-0.05, 0.0, 0.03]},
+        {"name": "caster", "type": "sphere", "size": [0.02], "pos": [-0.17, 0.0, -0.03]},
+        {"name": "left_wheel", "pos": [0.0, 0.14, 0.0], **wheel},
+        {"name": "right_wheel", "pos": [0.0, -0.14, 0.0], **wheel},
+    ]
+    save_rrd(make_record(N=50), tmp_path / "run.rrd", geometry=geometry)
+    ents = rrd_contents(tmp_path / "run.rrd")
+    z = {g: ents[f"/world/robot/{g}"].static for g in ("chassis", "caster", "left_wheel")}
+    assert z["left_wheel"]["Cylinders3D:centers"].to_pylist()[0][0][2] == pytest.approx(0.05, abs=1e-6)
+    assert z["caster"]["Ellipsoids3D:centers"].to_pylist()[0][0][2] == pytest.approx(0.02, abs=1e-6)
+    assert z["chassis"]["Boxes3D:centers"].to_pylist()[0][0][2] == pytest.approx(0.08, abs=1e-6)
+
+
+def test_series_names_fall_back_to_indices(make_record):
+    rec = make_record(N=20)
+    rec.labels = {}
+    paths = [s.path for s in log.plan_series(rec)]
+    assert "weights/w0" in paths and "weights/w170" in paths
+    assert "h/h1/estimate" in paths and "ekf/innovation/e3" in paths
+    rec.plant["slip"] = np.zeros((20, 2))  # telemetry the log does not know still gets logged
+    assert {"plant/slip/0", "plant/slip/1"} <= {s.path for s in log.plan_series(rec)}
+
+
+def test_no_output_asked_gives_no_sink():
+    assert log.make_sink() is None
+
+
+def test_unwritable_save_path(tmp_path):
+    blocker = tmp_path / "a_file"
+    blocker.write_text("")
+    for bad in (blocker / "run.rrd", tmp_path):  # under a file; a folder
+        with pytest.raises(ConfigError) as err:
+            log.make_sink(save=bad)
+        assert err.value.where == str(bad) and "\n" not in str(err.value)
+
+
+def test_unreachable_viewer(tmp_path):
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]  # bound, not listening: nobody answers
+        with pytest.raises(ConfigError, match="no rerun viewer is listening"):
+            log.make_sink(connect=f"rerun+http://127.0.0.1:{port}/proxy")
+    with pytest.raises(ConfigError, match="rerun\\+http://127.0.0.1:9876/proxy"):
+        log.make_sink(connect="http://127.0.0.1:9876")
+
+
+def test_no_display_for_spawn_or_view(tmp_path, monkeypatch):
+    for var in ("DISPLAY", "WAYLAND_DISPLAY"):
+        monkeypatch.delenv(var, raising=False)
+    monkeypatch.setattr(log, "SPAWN_PORT", _closed_port())
+    with pytest.raises(ConfigError, match="no display"):
+        log.make_sink(spawn=True)
+    (tmp_path / "run.rrd").write_bytes(b"")
+    with pytest.raises(ConfigError, match="no display"):
+        log.view([tmp_path])
+
+
+def test_view_needs_a_run_in_each_folder(tmp_path):
+    (tmp_path / "good").mkdir()
+    (tmp_path / "good" / "run.rrd").write_bytes(b"")
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(ConfigError) as err:
+        log.view([tmp_path / "good", tmp_path / "empty"])
+    assert err.value.where == str(tmp_path / "empty")
+    assert err.value.what == "no run.rrd in this folder"
+
+
+def test_runs_without_logging_do_not_import_rerun():
+    code = "import sys, mlpfac.runner, mlpfac.cli, mlpfac.scenario; print('rerun' in sys.modules)"
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=Path(__file__).parents[1]
+    )
+    assert out.stdout.strip() == "False"
+
+
+def _closed_port() -> int:
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
