@@ -487,6 +487,8 @@ def aggregate(jobs: list[Job], metrics: dict[tuple, dict]) -> list[dict]:
                 }
             row["max_err_m_median"] = _median(mx)
             row["max_err_m_max"] = max(mx) if mx else None
+            weights = [m["max_abs_weight"] for m in ms if m.get("max_abs_weight") is not None]
+            row["max_abs_weight"] = max(weights) if weights else None  # over every run, diverged ones too
             row["worst_seed"] = worst["seed"] if worst else None
             row["worst_status"] = worst["status"] if worst else None
             rows.append(row)
@@ -512,6 +514,7 @@ SWEEP_COLUMNS: list[tuple[str, Callable[[dict], str]]] = [
     ("heading RMS mean [mrad]", lambda r: _f(r["heading_rms_rad_mean"], 1e3)),
     ("heading RMS median [mrad]", lambda r: _f(r["heading_rms_rad_median"], 1e3)),
     ("heading RMS 95% CI [mrad]", lambda r: _ci(r["heading_rms_rad_ci_lo"], r["heading_rms_rad_ci_hi"], 1e3)),
+    ("max abs weight", lambda r: _f(r["max_abs_weight"], 1.0, 3) if r["max_abs_weight"] is not None else "-"),
     (
         "worst seed",
         lambda r: (
@@ -536,7 +539,7 @@ CSV_FIELDS = [
     "scenario", "controller", "phase", "runs", "bounded", "bounded_share",
     "pos_rms_m_mean", "pos_rms_m_median", "pos_rms_m_ci_lo", "pos_rms_m_ci_hi",
     "heading_rms_rad_mean", "heading_rms_rad_median", "heading_rms_rad_ci_lo", "heading_rms_rad_ci_hi",
-    "max_err_m_median", "max_err_m_max", "worst_seed", "worst_status",
+    "max_err_m_median", "max_err_m_max", "max_abs_weight", "worst_seed", "worst_status",
 ]  # fmt: skip
 
 
