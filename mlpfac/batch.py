@@ -34,7 +34,7 @@ from collections import deque
 import numpy as np
 
 from mlpfac.controllers import Adaptive, Corradini, Kanayama
-from mlpfac.error_model import pose_from_error, tracking_error
+from mlpfac.error_model import tracking_error
 from mlpfac.estimators import EKF, covariance
 from mlpfac.record import RunRecord
 from mlpfac.reference import sample
@@ -206,9 +206,9 @@ class BatchKinematic:
         self.T, self.ref = scn.T, ref
         self.N = scn.steps
 
-    def reset(self, q0: np.ndarray, rngs: list[np.random.Generator]) -> None:
+    def reset(self, q0: np.ndarray, rngs: list[np.random.Generator], u0: np.ndarray | None = None) -> None:
         B, L = len(rngs), self.one.L
-        self.one.reset(q0, None)  # holds T_p and the delay line's length for events; never stepped
+        self.one.reset(q0, None, u0)  # holds T_p and the delay line's length for events; never stepped
         self.k, self.T_p = 0, self.T
         self.e = np.tile(tracking_error(q0, self.ref[0]), (B, 1))
         # each seed's noise, drawn as one run draws it (3 normals per step; one call for all steps
@@ -272,9 +272,9 @@ class PlantList:
         self.plants = [s.make_plant(ref) for s in scns]
         self.live = list(range(len(scns)))
 
-    def reset(self, q0: np.ndarray, rngs: list[np.random.Generator]) -> None:
+    def reset(self, q0: np.ndarray, rngs: list[np.random.Generator], u0: np.ndarray | None = None) -> None:
         for p, rng in zip(self.plants, rngs, strict=True):
-            p.reset(q0, rng)
+            p.reset(q0, rng, u0)
 
     def _each(self, name: str) -> np.ndarray:
         return np.stack([getattr(self.plants[i], name)() for i in self.live])
@@ -334,7 +334,8 @@ def run_batch(scns: list[Scenario], plant_list: bool = False) -> list[RunRecord]
     plant = BatchKinematic(base, ref) if base.plant_kind == "kinematic" and not plant_list else PlantList(scns, ref)
     gens = [seeded_generators(s.seed) for s in scns]
     bctrl.reset(T, [c for c, _ in gens])
-    plant.reset(pose_from_error(np.array(base.initial_error), ref[0]), [p for _, p in gens])
+    q0, u0 = base.initial_state(ref)
+    plant.reset(q0, [p for _, p in gens], u0)
 
     nan = np.full
     pose, pose_meas, e_all, e_true, u_all = (nan((B, N, d), np.nan) for d in (3, 3, 3, 3, 2))

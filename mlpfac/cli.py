@@ -57,7 +57,7 @@ def build_parser() -> argparse.ArgumentParser:
     from mlpfac import sweep
 
     sweep.add_compare_arguments(sub.add_parser("compare", help="controllers x scenarios x seeds -> a per-phase table"))
-    sweep.add_sweep_arguments(sub.add_parser("sweep", help="Monte Carlo sweep -> mean, median, 95 % CI per phase"))
+    sweep.add_sweep_arguments(sub.add_parser("sweep", help="Monte Carlo sweep -> mean, median, 95 %% CI per phase"))
 
     p = sub.add_parser("view", help="open saved runs in one rerun viewer")
     p.add_argument("runs", nargs="+", type=Path, help="run folders (each with a run.rrd)")

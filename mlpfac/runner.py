@@ -7,7 +7,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from mlpfac.error_model import pose_from_error, tracking_error
+from mlpfac.error_model import tracking_error
 from mlpfac.record import RunRecord
 from mlpfac.reference import sample
 from mlpfac.scenario import Scenario
@@ -33,7 +33,8 @@ def run(scn: Scenario, sink=None, on_step: Callable[[int], None] | None = None) 
     ctrl = scn.make_controller()
     c_rng, p_rng = seeded_generators(scn.seed)
     ctrl.reset(T, c_rng)
-    plant.reset(pose_from_error(np.array(scn.initial_error), ref[0]), p_rng)
+    q0, u0 = scn.initial_state(ref)
+    plant.reset(q0, p_rng, u0)
 
     rec = RunRecord.allocate(scn.name, ctrl.name, scn.seed, T, N)
     rec.warmup_s = scn.warmup

@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from mlpfac.controllers import CONTROLLERS, VARIANTS, Adaptive, AdaptiveConfig, Corradini, Kanayama, KanayamaGains
+from mlpfac.error_model import pose_from_error
 from mlpfac.exceptions import ConfigError
 from mlpfac.law import Law
 from mlpfac.networks import Networks
@@ -58,6 +59,7 @@ class Scenario:
     warmup: float  # seconds of learning excluded from the phase metrics
     divergence_m: float  # position error beyond which a run counts as diverged
     initial_error: tuple[float, float, float]
+    start_moving: bool  # the robot starts with the reference's (v_r, omega_r), not at rest
     reference: Any
     plant_kind: str
     plant_config: Any
@@ -84,6 +86,11 @@ class Scenario:
         if duration is not None:
             table["duration"] = duration
         return parse(table, self.source)
+
+    def initial_state(self, ref: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+        """The initial pose (the reference's at t = 0, offset by the initial error) and velocity."""
+        q0 = pose_from_error(np.array(self.initial_error), ref[0])
+        return q0, (ref[0, 3:5].copy() if self.start_moving else None)
 
     def make_controller(self):
         if self.controller in VARIANTS:
@@ -177,7 +184,10 @@ def parse(table: dict, source: str = "<scenario>") -> Scenario:
     reference = make_reference(kind, ref_table, f"{source} [reference]")
 
     initial = table.get("initial", {})
-    _check_keys(initial, {"error"}, f"{source} [initial]")
+    _check_keys(initial, {"error", "moving"}, f"{source} [initial]")
+    moving = initial.get("moving", True)
+    if not isinstance(moving, bool):
+        raise ConfigError(f"{source} [initial] moving", f"expected true or false, got {moving!r}")
     e0 = initial.get("error", [0.0, 0.0, 0.0])
     if len(e0) != 3:
         raise ConfigError(f"{source} [initial] error", "expected three values (e1, e2, e3)")
@@ -237,6 +247,7 @@ def parse(table: dict, source: str = "<scenario>") -> Scenario:
         warmup=_number(table, "warmup", 2.0, source, positive=False),
         divergence_m=_number(table, "divergence_m", 5.0, source),
         initial_error=tuple(float(x) for x in e0),
+        start_moving=moving,
         reference=reference,
         plant_kind=plant_kind,
         plant_config=plant_config,

@@ -47,8 +47,8 @@ class Plant(Protocol):
 
     supported_events: frozenset[str]
 
-    def reset(self, q0: np.ndarray, rng: np.random.Generator) -> None:
-        """Start a run at pose ``q0``; ``rng`` drives measurement noise."""
+    def reset(self, q0: np.ndarray, rng: np.random.Generator, u0: np.ndarray | None = None) -> None:
+        """Start a run at pose ``q0``, moving at ``u0`` = (v, omega) (None: at rest); ``rng`` drives noise."""
 
     def measure(self) -> np.ndarray:
         """Pose seen by the controller: (3,), with noise and delay applied."""

@@ -36,7 +36,8 @@ class KinematicPlant:
         w, V = np.linalg.eigh(R)
         self.L = V * np.sqrt(np.maximum(w, 0.0)) if np.any(w > 0) else None  # L L' = R
 
-    def reset(self, q0: np.ndarray, rng: np.random.Generator) -> None:
+    def reset(self, q0: np.ndarray, rng: np.random.Generator, u0: np.ndarray | None = None) -> None:
+        """``u0`` is ignored: the error model (7) has no velocity state."""
         self.rng = rng
         self.k = 0
         self.T_p = self.T
