@@ -30,11 +30,13 @@ CHOICES = [
 ]
 
 
-def one(args: tuple[int, int]) -> tuple[str, float | None, float]:
-    i, seed = args
+def one(args: tuple[int, int, float | None]) -> tuple[str, float | None, float]:
+    i, seed, duration = args
     _, ctrl, adaptive = CHOICES[i]
     table = copy.deepcopy(load("paper").table)
     table["seed"] = seed
+    if duration is not None:
+        table["duration"] = duration
     for k, v in ctrl.items():
         if v is None:
             table["controller"].pop(k, None)
@@ -49,6 +51,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=50)
     ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--duration", type=float, help="shorter runs, for a quick check (default: the scenario's 25 s)")
     args = ap.parse_args()
     print(
         f"| choice (seeds 0-{args.seeds - 1}) | bounded | median RMS after change | worst bounded RMS after | max abs weight |"
@@ -56,8 +59,8 @@ def main() -> None:
     print("|---|---|---|---|---|")
     with ProcessPoolExecutor(args.workers) as pool:
         for i, (label, _, _) in enumerate(CHOICES):
-            res = list(pool.map(one, [(i, s) for s in range(args.seeds)]))
-            after = [r[1] for r in res if r[0] == "ok"]
+            res = list(pool.map(one, [(i, s, args.duration) for s in range(args.seeds)]))
+            after = [r[1] for r in res if r[0] == "ok" and r[1] is not None]
             med = f"{1e3 * np.median(after):.1f} mm" if after else "-"
             worst = f"{1e3 * max(after):.1f} mm" if after else "-"
             print(f"| {label} | {len(after)}/{len(res)} | {med} | {worst} | {max(r[2] for r in res):.3g} |", flush=True)
