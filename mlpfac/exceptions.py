@@ -14,3 +14,6 @@ class ConfigError(MlpfacError, ValueError):
         super().__init__(f"{where}: {what}" if where else what)
         self.where = where
         self.what = what
+
+    def __reduce__(self):  # picklable, so an error raised in a worker process reaches the parent
+        return (type(self), (self.where, self.what))

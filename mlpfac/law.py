@@ -8,6 +8,9 @@ so eigenvalues lambda_2, lambda_3 need
     k1 = 1 - lambda_1,   k3 = 2 - lambda_2 - lambda_3,   k2 = (1 - lambda_2)(1 - lambda_3) / (T v_r).
 
 (36) as printed swaps k2 and k3; this is the corrected assignment (k2 is recomputed every step).
+
+:meth:`Law.cautious_control` generalises (35) to uncertain estimates (a cautious law, Fabri and
+Kadirkamanathan 2001) and to learned input gains; certainty equivalence is its zero-variance case.
 """
 
 from __future__ import annotations
@@ -19,6 +22,7 @@ import numpy as np
 from mlpfac.exceptions import ConfigError
 
 V_R_MIN = 1e-3  # m/s: k2 divides by T v_r; the references keep v_r far above this
+GAIN_RANGE = (0.25, 4.0)  # learned input gains b_v, b_omega are kept within these multiples of T
 
 
 @dataclass(frozen=True)
@@ -58,6 +62,66 @@ class Law:
         if self.omega_max is not None:
             omega = np.clip(omega, -self.omega_max, self.omega_max)
         v = (k1 * e[..., 0] + h[..., 0] * omega + h[..., 1]) / T
+        if self.v_max is not None:
+            v = np.clip(v, -self.v_max, self.v_max)
+        return np.stack([v, omega], axis=-1)
+
+    def cautious_control(
+        self,
+        e: np.ndarray,
+        theta: np.ndarray,
+        Sigma: np.ndarray | None,
+        v_r,
+        T: float,
+        weight: float = 1.0,
+    ) -> np.ndarray:
+        """The cautious law: (v, omega) minimising the expected one-step cost given uncertain estimates.
+
+        ``theta`` = (h1, h2, h5, b_v, b_omega) (..., 5) are the means of the estimated quantities: h1, h2, h5
+        of (34) and the input gains b_v = -G_11 (v -> e1) and b_omega = -G_32 (omega -> e3), which (35)
+        takes to be exactly T. ``Sigma`` (..., 5, 5) is their covariance (to first order J P_k J', J the
+        Jacobian of theta w.r.t. z); ``weight`` c >= 0 scales it (c = 1: the expected cost; c = 0 or
+        Sigma = None: certainty equivalence).
+
+        Derivation. By (4)-(6) and (34), with the targets of (35), t1 = (1 - k1) e1 and
+        t3 = (1 - k3) e3 - k2 e2, the one-step residuals are
+
+            r1 = e1_{k+1} - t1 = n0 + h1 omega - b_v v,     n0 = k1 e1 + h2
+            r3 = e3_{k+1} - t3 = m - b_omega omega,         m  = k2 e2 + k3 e3 + h5
+
+        (G_21 = G_31 = 0 as in (6)). Minimise J = E[r1^2] + E[r3^2] (1 m of e1 weighs as 1 rad of e3),
+        with E[x y] = x_bar y_bar + c Cov(x, y). For fixed omega, dJ/dv = 0 gives
+
+            v = (B0 + B1 omega) / E[b_v^2],     B0 = E[b_v n0],  B1 = E[b_v h1]
+
+        and then J(omega) = E[r3^2] + A0 + 2 A1 omega + A2 omega^2 - (B0 + B1 omega)^2 / E[b_v^2] with
+        A1 = E[n0 h1], A2 = E[h1^2]; dJ/domega = 0 gives
+
+            omega = (E[b_omega m] - A1 + B0 B1 / E[b_v^2]) / (E[b_omega^2] + A2 - B1^2 / E[b_v^2]).
+
+        With c = 0 the correction terms cancel exactly (A1 = B0 B1 / E[b_v^2], A2 = B1^2 / E[b_v^2]) and
+        omega = m / b_omega, v = (n0 + h1 omega) / b_v: the CE law (35) with gains b (equal to it when
+        b = T). With c > 0 the classic cautious result appears: each input is divided by
+        mean^2 + variance of its gain, and omega is further shrunk by c Var(h1) (an unsure G_12 makes
+        omega leak into e1) and shifted by c Cov(h1, h2). As in :meth:`control`, omega is limited
+        first and v is computed with the omega actually sent.
+        """
+        k1, k2, k3 = self.gains(T, v_r)
+        h1, h2, h5, bv, bw = (theta[..., i] for i in range(5))
+        n0 = k1 * e[..., 0] + h2
+        m = k2 * e[..., 1] + k3 * e[..., 2] + h5
+        C = np.zeros((*np.shape(theta)[:-1], 5, 5)) if Sigma is None or weight == 0.0 else weight * np.asarray(Sigma)
+        Ebv2 = bv * bv + C[..., 3, 3]
+        B0 = bv * n0 + C[..., 3, 1]
+        B1 = bv * h1 + C[..., 3, 0]
+        A1 = n0 * h1 + C[..., 1, 0]
+        A2 = h1 * h1 + C[..., 0, 0]
+        num = bw * m + C[..., 4, 2] - A1 + B0 * B1 / Ebv2
+        den = bw * bw + C[..., 4, 4] + A2 - B1 * B1 / Ebv2
+        omega = num / den
+        if self.omega_max is not None:
+            omega = np.clip(omega, -self.omega_max, self.omega_max)
+        v = (B0 + B1 * omega) / Ebv2
         if self.v_max is not None:
             v = np.clip(v, -self.v_max, self.v_max)
         return np.stack([v, omega], axis=-1)

@@ -68,7 +68,9 @@ class Networks:
         c = self.error_scale
         ce = c * np.asarray(e, dtype=float)
         one = np.ones(ce.shape[:-1])
-        x_f = np.concatenate([ce, np.stack([np.broadcast_to(v_r, one.shape), np.broadcast_to(omega_r, one.shape), one], -1)], -1)
+        x_f = np.concatenate(
+            [ce, np.stack([np.broadcast_to(v_r, one.shape), np.broadcast_to(omega_r, one.shape), one], -1)], -1
+        )
         x_G = np.stack([ce[..., 0], ce[..., 1], one], -1)
         return x_f, x_G
 
@@ -122,6 +124,48 @@ class Networks:
             *b, 3, LG * N_G
         )
         return f + Gu, H
+
+    def jacobians(
+        self, z: np.ndarray, x_f: np.ndarray, x_G: np.ndarray, e: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """f_hat (..., 3), G_hat (..., 3, 2) and their Jacobians df/dz (..., 3, alpha), dG/dz (..., 3, 2, alpha).
+
+        The same blocks as (19)-(24) without the input u: (21)-(22) for f; for G_jn, d G_jn / d w_jn = phi_G
+        and d G_jn / d s_Gi = w_jn,i phi_Gi (1 - phi_Gi) x_G. Used by the cautious law, which needs the
+        uncertainty of h1 = G_12, h2 = f_1 - e1, h5 = f_3 - e3 and of the input gains G_11, G_32.
+        """
+        W_f, S_f, W_G, S_G = self.split(z)
+        Lf, LG = self.L_f, self.L_G
+        b = z.shape[:-1]
+        phi_f = _sigmoid(np.einsum("...im,...m->...i", S_f, x_f))  # (..., L_f)
+        phi_G = _sigmoid(np.einsum("...im,...m->...i", S_G, x_G))  # (..., L_G)
+        f = np.einsum("...ji,...i->...j", W_f, phi_f)
+        if self.residual:
+            f = f + e
+        G = np.einsum("...jni,...i->...jn", W_G, phi_G)
+        i2 = 3 * Lf + Lf * N_F
+        df = np.zeros((*b, 3, self.alpha))
+        df[..., :, : 3 * Lf] = (np.eye(3)[:, :, None] * phi_f[..., None, None, :]).reshape(*b, 3, 3 * Lf)  # (21)
+        dphi_f = phi_f * (1.0 - phi_f)
+        df[..., :, 3 * Lf : i2] = ((W_f * dphi_f[..., None, :])[..., :, :, None] * x_f[..., None, None, :]).reshape(
+            *b, 3, Lf * N_F
+        )  # (22)
+        dG = np.zeros((*b, 3, 2, self.alpha))
+        eye6 = np.eye(6).reshape(3, 2, 3, 2)
+        dG[..., i2 : i2 + 6 * LG] = (eye6[..., None] * phi_G[..., None, None, None, None, :]).reshape(*b, 3, 2, 6 * LG)
+        dphi_G = phi_G * (1.0 - phi_G)
+        dG[..., i2 + 6 * LG :] = (
+            (W_G * dphi_G[..., None, None, :])[..., None] * x_G[..., None, None, None, :]
+        ).reshape(*b, 3, 2, LG * N_G)
+        return f, G, df, dG
+
+    def output_mask(self) -> np.ndarray:
+        """True for the output-layer weights w_j (14) and w_jn (15), False for the hidden s_fi, s_Gi. (alpha,)"""
+        m = np.zeros(self.alpha, dtype=bool)
+        i2 = 3 * self.L_f + self.L_f * N_F
+        m[: 3 * self.L_f] = True
+        m[i2 : i2 + 6 * self.L_G] = True
+        return m
 
     def labels(self) -> list[str]:
         """A name for each weight, ``network/layer/name_index``, in the order of z."""

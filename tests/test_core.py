@@ -138,3 +138,10 @@ def test_figure_of_eight_speed_range():
 def test_law_rejects_eigenvalues_outside_the_unit_circle():
     with pytest.raises(ConfigError, match="unit circle"):
         Law((0.8, 1.2, 0.8))
+
+
+def test_config_error_survives_a_process_boundary():
+    import pickle
+
+    err = pickle.loads(pickle.dumps(ConfigError("sims/x.toml [plant] model", "file not found")))
+    assert str(err) == "sims/x.toml [plant] model: file not found" and err.where == "sims/x.toml [plant] model"
