@@ -37,7 +37,22 @@ def covariance(value: float | list | np.ndarray, n: int, name: str) -> np.ndarra
     return a
 
 
-class EKF:
+class _WeightFilter:
+    """What the EKF and the UKF share: the weights z, R, and the knobs that keep adaptation alive."""
+
+    def __init__(
+        self, z0: np.ndarray, R: np.ndarray, Q: np.ndarray | None, forgetting: float, P_max: float | None
+    ) -> None:
+        if not 0.0 < forgetting <= 1.0:
+            raise ConfigError("forgetting", f"must be in (0, 1], got {forgetting}")
+        self.z = np.array(z0, dtype=float)
+        self.R = np.asarray(R, dtype=float)
+        self.Q = None if Q is None or not np.any(Q) else np.asarray(Q, dtype=float)
+        self.forgetting = forgetting
+        self.P_max = P_max
+
+
+class EKF(_WeightFilter):
     """Extended Kalman filter over the network weights, eqs. (29)-(32).
 
     ``forgetting`` in (0, 1] divides P by itself after each update (exponential forgetting; 1 is
@@ -55,14 +70,8 @@ class EKF:
         forgetting: float = 1.0,
         P_max: float | None = None,
     ) -> None:
-        if not 0.0 < forgetting <= 1.0:
-            raise ConfigError("forgetting", f"must be in (0, 1], got {forgetting}")
-        self.z = np.array(z0, dtype=float)
+        super().__init__(z0, R, Q, forgetting, P_max)
         self.P = np.array(np.broadcast_to(P0, (*self.z.shape, self.z.shape[-1])), dtype=float)
-        self.R = np.asarray(R, dtype=float)
-        self.Q = None if Q is None or not np.any(Q) else np.asarray(Q, dtype=float)
-        self.forgetting = forgetting
-        self.P_max = P_max
 
     def update(self, y: np.ndarray, jac: Jacobian, h_of: Callable | None = None) -> np.ndarray:
         """One step of (29)-(32) with measurement y = e_k; returns the innovation i_k (32).
@@ -100,7 +109,7 @@ class EKF:
         return J @ self.P @ np.swapaxes(J, -1, -2)
 
 
-class UKF:
+class UKF(_WeightFilter):
     """Unscented Kalman filter over the weights, square-root form; same model (28) as :class:`EKF`.
 
     The state model is the identity, so the prediction is trivial (P += Q, or forgetting) and only the
@@ -141,16 +150,10 @@ class UKF:
         beta: float = 2.0,
         kappa: float = 0.0,
     ) -> None:
-        if not 0.0 < forgetting <= 1.0:
-            raise ConfigError("forgetting", f"must be in (0, 1], got {forgetting}")
-        self.z = np.array(z0, dtype=float)
+        super().__init__(z0, R, Q, forgetting, P_max)
         n = self.z.shape[-1]
         P0 = np.array(np.broadcast_to(P0, (*self.z.shape, n)), dtype=float)
         self.S = np.linalg.cholesky(P0)  # (..., n, n), P = S S'
-        self.R = np.asarray(R, dtype=float)
-        self.Q = None if Q is None or not np.any(Q) else np.asarray(Q, dtype=float)
-        self.forgetting = forgetting
-        self.P_max = P_max
         lam = alpha**2 * (n + kappa) - n
         if not n + lam > 0:
             raise ConfigError("ukf_alpha", f"need alpha^2 (n + kappa) > 0, got alpha = {alpha}, kappa = {kappa}")

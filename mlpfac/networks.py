@@ -76,14 +76,18 @@ class Networks:
 
     def forward(self, z: np.ndarray, x_f: np.ndarray, x_G: np.ndarray, e: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Eqs. (10)-(15): f_hat (..., 3) and G_hat (..., 3, 2). ``e`` is used only when ``residual``."""
+        W_f, W_G, phi_f, phi_G, f = self._head(z, x_f, x_G, e)
+        return f, np.einsum("...jni,...i->...jn", W_G, phi_G)
+
+    def _head(self, z: np.ndarray, x_f: np.ndarray, x_G: np.ndarray, e: np.ndarray) -> tuple[np.ndarray, ...]:
+        """The hidden layers (10)-(11) and f_hat (14): W_f, W_G, phi_f (..., L_f), phi_G (..., L_G), f_hat (..., 3)."""
         W_f, S_f, W_G, S_G = self.split(z)
-        phi_f = _sigmoid(np.einsum("...im,...m->...i", S_f, x_f))  # (..., L_f)
-        phi_G = _sigmoid(np.einsum("...im,...m->...i", S_G, x_G))  # (..., L_G)
+        phi_f = _sigmoid(np.einsum("...im,...m->...i", S_f, x_f))
+        phi_G = _sigmoid(np.einsum("...im,...m->...i", S_G, x_G))
         f = np.einsum("...ji,...i->...j", W_f, phi_f)
         if self.residual:
             f = f + e
-        G = np.einsum("...jni,...i->...jn", W_G, phi_G)
-        return f, G
+        return W_f, W_G, phi_f, phi_G, f
 
     def h(self, z: np.ndarray, x_f: np.ndarray, x_G: np.ndarray, e: np.ndarray, u: np.ndarray) -> np.ndarray:
         """Eq. (26): h = f_hat + G_hat u, (..., 3)."""
@@ -94,14 +98,9 @@ class Networks:
         self, z: np.ndarray, x_f: np.ndarray, x_G: np.ndarray, e: np.ndarray, u: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]:
         """h (..., 3) and its Jacobian nabla_h = [nabla_f, nabla_Gamma] (..., 3, alpha), eqs. (19)-(24), (27)."""
-        W_f, S_f, W_G, S_G = self.split(z)
+        W_f, W_G, phi_f, phi_G, f = self._head(z, x_f, x_G, e)
         Lf, LG = self.L_f, self.L_G
         b = z.shape[:-1]
-        phi_f = _sigmoid(np.einsum("...im,...m->...i", S_f, x_f))  # (..., L_f)
-        phi_G = _sigmoid(np.einsum("...im,...m->...i", S_G, x_G))  # (..., L_G)
-        f = np.einsum("...ji,...i->...j", W_f, phi_f)
-        if self.residual:
-            f = f + e
         Gu = np.einsum("...jni,...i,...n->...j", W_G, phi_G, u)
 
         H = np.zeros((*b, 3, self.alpha))
@@ -134,14 +133,9 @@ class Networks:
         and d G_jn / d s_Gi = w_jn,i phi_Gi (1 - phi_Gi) x_G. Used by the cautious law, which needs the
         uncertainty of h1 = G_12, h2 = f_1 - e1, h5 = f_3 - e3 and of the input gains G_11, G_32.
         """
-        W_f, S_f, W_G, S_G = self.split(z)
+        W_f, W_G, phi_f, phi_G, f = self._head(z, x_f, x_G, e)
         Lf, LG = self.L_f, self.L_G
         b = z.shape[:-1]
-        phi_f = _sigmoid(np.einsum("...im,...m->...i", S_f, x_f))  # (..., L_f)
-        phi_G = _sigmoid(np.einsum("...im,...m->...i", S_G, x_G))  # (..., L_G)
-        f = np.einsum("...ji,...i->...j", W_f, phi_f)
-        if self.residual:
-            f = f + e
         G = np.einsum("...jni,...i->...jn", W_G, phi_G)
         i2 = 3 * Lf + Lf * N_F
         df = np.zeros((*b, 3, self.alpha))
