@@ -57,6 +57,10 @@ class Law:
         omega is computed first since v uses it; the v law uses the omega actually sent (after the
         limit), so that e1 still decays as lambda_1 when only omega saturates.
         """
+        if np.ndim(e) == 1:  # one run: the same arithmetic on Python floats, without array overhead
+            return self._control_one(
+                float(e[0]), float(e[1]), float(e[2]), float(h[0]), float(h[1]), float(h[2]), float(v_r), T
+            )
         k1, k2, k3 = self.gains(T, v_r)
         omega = (h[..., 2] + k2 * e[..., 1] + k3 * e[..., 2]) / T
         if self.omega_max is not None:
@@ -65,6 +69,20 @@ class Law:
         if self.v_max is not None:
             v = np.clip(v, -self.v_max, self.v_max)
         return np.stack([v, omega], axis=-1)
+
+    def _control_one(
+        self, e1: float, e2: float, e3: float, h1: float, h2: float, h5: float, v_r: float, T: float
+    ) -> np.ndarray:
+        """:meth:`control` for one run, operation for operation (so a batch of runs gives the same bits)."""
+        l1, l2, l3 = self.lambdas
+        k2 = (1.0 - l2) * (1.0 - l3) / (T * max(v_r, V_R_MIN))
+        omega = (h5 + k2 * e2 + (2.0 - l2 - l3) * e3) / T
+        if self.omega_max is not None:
+            omega = min(max(omega, -self.omega_max), self.omega_max)
+        v = ((1.0 - l1) * e1 + h1 * omega + h2) / T
+        if self.v_max is not None:
+            v = min(max(v, -self.v_max), self.v_max)
+        return np.array([v, omega])
 
     def cautious_control(
         self,

@@ -66,6 +66,9 @@ class Networks:
     def inputs(self, e: np.ndarray, v_r, omega_r) -> tuple[np.ndarray, np.ndarray]:
         """Eqs. (8)-(9): x_f (..., 6) and x_G (..., 3) from e (..., 3) and the reference velocities."""
         c = self.error_scale
+        if np.ndim(e) == 1:  # one run: build the two short vectors directly
+            ce1, ce2 = c * e[0], c * e[1]
+            return np.array([ce1, ce2, c * e[2], v_r, omega_r, 1.0]), np.array([ce1, ce2, 1.0])
         ce = c * np.asarray(e, dtype=float)
         one = np.ones(ce.shape[:-1])
         x_f = np.concatenate(

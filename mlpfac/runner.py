@@ -84,10 +84,10 @@ def run(scn: Scenario, sink=None, on_step: Callable[[int], None] | None = None) 
 
 
 def _diverged(rec: RunRecord, k: int, limit_m: float) -> str | None:
-    if not (np.all(np.isfinite(rec.pose[k])) and np.all(np.isfinite(rec.u[k]))):
+    if not (np.isfinite(rec.pose[k]).all() and np.isfinite(rec.u[k]).all()):
         return "non-finite pose or command"
     z = rec.ctrl.get("z")
-    if z is not None and not np.all(np.isfinite(z[k])):
+    if z is not None and not np.isfinite(z[k]).all():
         return "non-finite network weights"
     err = float(np.hypot(rec.e_true[k, 0], rec.e_true[k, 1]))
     if err > limit_m:
