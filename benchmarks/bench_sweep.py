@@ -7,7 +7,8 @@ the minimum per side kept), because the machine is shared and absolute times are
 target is printed as missed. Not a test.
 
 1. adaptive controller step vs the bare EKF update of the same size (alpha = 171): the floor is
-   ``EKF.update`` with h and H precomputed (the Joseph-form covariance update, gain, weights).
+   ``EKF.update`` with h and H precomputed (the Joseph-form covariance update, gain, weights);
+   and the ``adaptive-best`` variant's step vs the paper's EKF scheme's (target <= 3).
 2. closed-loop MuJoCo run vs bare physics substeps + bare EKF updates for the same step count
    (skipped while the MuJoCo plant or sims/eight-nominal.toml is missing).
 3. sweep throughput with 2 workers vs 1; batched vs one-at-a-time for 64 seeds on one core.
@@ -93,6 +94,24 @@ def bench_controller(steps: int, repeat: int) -> None:
         "<= 1.5",
         ratio <= 1.5,
         f"({step_us:.0f} us vs {ekf_us:.0f} us per step)",
+    )
+
+    # the best adaptive variant against the paper's EKF scheme, on the same inputs
+    best = scn.with_overrides(controller="adaptive-best").make_controller()
+
+    def best_loop():
+        best.reset(scn.T, seeded_generators(1)[0])
+        for k in range(steps):
+            best.step(es[k], refs[k])
+
+    t = side_by_side({"ctrl": controller_loop, "best": best_loop}, repeat)
+    ratio = t["best"] / t["ctrl"]
+    report(
+        "adaptive-best step / adaptive (EKF) step",
+        ratio,
+        "<= 3",
+        ratio <= 3.0,
+        f"({t['best'] / steps * 1e6:.0f} us vs {t['ctrl'] / steps * 1e6:.0f} us per step)",
     )
 
 

@@ -82,23 +82,59 @@ class EKF(_WeightFilter):
         """
         h, H = jac(self.z)
         P = self.P
-        PHt = P @ np.swapaxes(H, -1, -2)  # (..., alpha, 3)
+        Ht = np.swapaxes(H, -1, -2)
+        PHt = P @ Ht  # (..., alpha, 3)
         S = H @ PHt + self.R  # (..., 3, 3) innovation covariance
         K = np.swapaxes(np.linalg.solve(S, np.swapaxes(PHt, -1, -2)), -1, -2)  # (31), solve not inv
+        Kt = np.swapaxes(K, -1, -2)
         i = y - h  # (32)
         self.z = self.z + np.einsum("...ak,...k->...a", K, i)  # (30)
-        A = P - K @ np.swapaxes(PHt, -1, -2)  # (I - K H) P: (29)
-        P = A - (A @ np.swapaxes(H, -1, -2)) @ np.swapaxes(K, -1, -2) + K @ self.R @ np.swapaxes(K, -1, -2)
-        P = 0.5 * (P + np.swapaxes(P, -1, -2))
+        # The (alpha, alpha) work goes into preallocated buffers: a fresh 234 kB array per operation
+        # would cost more in page faults than the arithmetic. Same operations, same bits.
+        A, T1, new = self._work(P)
+        np.subtract(P, np.matmul(K, np.swapaxes(PHt, -1, -2), out=T1), out=A)  # (I - K H) P: (29)
+        np.subtract(A, np.matmul(A @ Ht, Kt, out=T1), out=new)
+        np.add(new, np.matmul(K @ self.R, Kt, out=T1), out=new)  # + K R K'
+        np.multiply(0.5, np.add(new, np.swapaxes(new, -1, -2), out=A), out=A)  # symmetric
+        P = A
         if self.forgetting < 1.0:
-            P = P / self.forgetting
+            np.divide(P, self.forgetting, out=P)
         if self.Q is not None:
-            P = P + self.Q
+            np.add(P, self.Q, out=P)
         if self.P_max is not None:
             peak = np.max(np.diagonal(P, axis1=-2, axis2=-1), axis=-1)
-            P = P * np.minimum(1.0, self.P_max / peak)[..., None, None]
-        self.P = P
+            np.multiply(P, np.minimum(1.0, self.P_max / peak)[..., None, None], out=P)
+        self._spare = self._P if self._P_owned else None  # the old P is reused only if it is ours
+        self._P, self._P_owned = P, True
+        self._buf = (new, T1)
         return i
+
+    @property
+    def P(self) -> np.ndarray:
+        """P_k (..., alpha, alpha). Read it before the next update: the filter reuses its storage."""
+        return self._P
+
+    @P.setter
+    def P(self, value: np.ndarray) -> None:
+        self._P, self._P_owned = value, False
+
+    def __copy__(self) -> EKF:
+        """A shallow copy with work buffers of its own (two filters must never share them)."""
+        new = object.__new__(type(self))
+        new.__dict__.update(self.__dict__)
+        new._buf = new._spare = None
+        new._P_owned = False
+        return new
+
+    def _work(self, P: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Three (..., alpha, alpha) buffers shaped like P, none of them P itself."""
+        spare = getattr(self, "_spare", None)
+        buf = getattr(self, "_buf", None)
+        if buf is None or buf[0].shape != P.shape:
+            buf, spare = (np.empty_like(P), np.empty_like(P)), None
+        if spare is None or spare.shape != P.shape:
+            spare = np.empty_like(P)
+        return spare, buf[1], buf[0]
 
     def diag_P(self) -> np.ndarray:
         """diag P_k (..., alpha)."""

@@ -145,3 +145,38 @@ def test_config_error_survives_a_process_boundary():
 
     err = pickle.loads(pickle.dumps(ConfigError("sims/x.toml [plant] model", "file not found")))
     assert str(err) == "sims/x.toml [plant] model: file not found" and err.where == "sims/x.toml [plant] model"
+
+
+def _plain_ekf_update(z, P, y, h, H, R, Q, forgetting, P_max):
+    """The Joseph-form update written plainly, one new array per operation: the reference."""
+    PHt = P @ H.T
+    K = np.linalg.solve(H @ PHt + R, PHt.T).T
+    z = z + np.einsum("ak,k->a", K, y - h)
+    A = P - K @ PHt.T
+    P = A - (A @ H.T) @ K.T + K @ R @ K.T
+    P = 0.5 * (P + P.T)
+    P = P / forgetting
+    P = P + Q
+    return z, P * min(1.0, P_max / np.max(np.diag(P)))
+
+
+def test_buffered_ekf_update_equals_the_plain_formula_to_the_last_bit():
+    import copy
+
+    rng = np.random.default_rng(5)
+    n, R, Q = 20, np.diag([1e-3, 2e-3, 1e-3]), 1e-6 * np.eye(20)
+    ekf = EKF(np.zeros(n), np.eye(n), R, Q=Q, forgetting=0.999, P_max=2.0)
+    z, P = np.zeros(n), np.eye(n)
+    twin = None
+    for k in range(60):
+        H, y = rng.normal(size=(3, n)), rng.normal(size=3)
+        h = 0.1 * H @ ekf.z
+        ekf.update(y, lambda zz, H=H, h=h: (h, H))
+        z, P = _plain_ekf_update(z, P, y, h, H, R, Q, 0.999, 2.0)
+        np.testing.assert_array_equal(ekf.z, z)
+        np.testing.assert_array_equal(ekf.P, P)
+        if k == 30:  # a copy goes on with buffers of its own
+            twin, P_at_copy = copy.copy(ekf), ekf.P.copy()
+            twin.update(y, lambda zz, H=H, h=h: (h, H))
+            twin_P = twin.P.copy()
+    assert not np.array_equal(twin_P, P_at_copy) and np.array_equal(twin.P, twin_P)
