@@ -88,3 +88,24 @@ def test_list_shows_every_scenario(capsys):
     assert main(["list"]) == 0
     out = capsys.readouterr().out
     assert "paper " in out and "paper-faithful" in out and "controllers:" in out
+
+
+@pytest.mark.parametrize(
+    "sink,needle",
+    [
+        (["--save", "/proc/no-such-dir/run.rrd"], "cannot write"),
+        (["--connect", "rerun+http://127.0.0.1:1/proxy"], "no rerun viewer"),
+    ],
+)
+def test_a_recording_that_cannot_be_made_still_writes_metrics(tmp_path, capsys, sink, needle):
+    out = tmp_path / "run"
+    assert main(["run", "paper", "--duration", "0.3", "--out", str(out), "--no-plot", *sink]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and needle in err
+    assert json.loads((out / "metrics.json").read_text())["status"] == "ok"
+
+
+def test_view_of_a_folder_without_a_run(tmp_path, capsys):
+    assert main(["view", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "no run.rrd" in err
