@@ -88,3 +88,16 @@ def test_batch_needs_one_scenario():
     a = load("paper").with_overrides(seed=1, duration=0.2)
     with pytest.raises(ValueError):
         run_batch([a, a.with_overrides(duration=0.3)])
+
+
+@pytest.mark.parametrize("controller", ["adaptive", "corradini"])
+def test_batch_equals_one_at_a_time_on_the_mujoco_robot(controller):
+    # the event moved early so that the batch applies it too
+    t = copy.deepcopy(load("eight-wheel-radius").table)
+    t["events"][0]["time"] = 0.5
+    scns = [
+        parse(t, "eight-wheel-radius").with_overrides(controller=controller, seed=s, duration=1.0) for s in range(3)
+    ]
+    for a, b in zip(run_batch(scns), [run(s) for s in scns], strict=True):
+        assert a.events and a.events[0]["text"] == b.events[0]["text"]
+        same_run(a, b)
