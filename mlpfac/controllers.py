@@ -34,7 +34,7 @@ class Controller(Protocol):
 class AdaptiveConfig:
     """The MLP-EKF scheme's choices; the paper fixes L_f, L_G and P0 only.
 
-    The defaults are the paper's scheme. The options of issue #6, each off by default:
+    The defaults are the paper's scheme. The options beyond the paper, each off by default:
 
     - ``estimator = "ukf"``: tune the weights with the square-root unscented filter
       (:class:`~mlpfac.estimators.UKF`, spread ``ukf_alpha``, ``ukf_beta``, ``ukf_kappa``) instead of (29)-(32).

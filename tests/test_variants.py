@@ -1,4 +1,4 @@
-"""The adaptive controller's options (issue #6): the defaults are the paper's scheme to the last bit,
+"""The adaptive controller's options beyond the paper: the defaults are the paper's scheme to the last bit,
 adaptation that does not switch off, the nominal prior, the named VARIANTS, scenario-file keys."""
 
 import dataclasses
