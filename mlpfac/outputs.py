@@ -31,12 +31,20 @@ def _umask() -> int:
     return mask
 
 
+def write_run_folder(out: Path, config: str, metrics: dict, rrd: bytes | None = None) -> None:
+    """config.toml, run.rrd (if given), then metrics.json: its presence means the folder is whole."""
+    (out / "metrics.json").unlink(missing_ok=True)  # a run being replaced is not whole meanwhile
+    write_atomic(out / "config.toml", config)
+    if rrd is not None:
+        write_atomic(out / "run.rrd", rrd)
+    write_atomic(out / "metrics.json", json.dumps(metrics, indent=2) + "\n")
+
+
 def write_run(out: Path, scn, rec) -> dict:
-    """config.toml, then metrics.json (last: its presence means the run folder is whole). Returns the metrics."""
+    """The folder of one run from the command line (run.rrd is written by its sink). Returns the metrics."""
     from mlpfac.runner import metrics
     from mlpfac.scenario import to_toml
 
     m = metrics(rec)
-    write_atomic(out / "config.toml", to_toml(scn.table))
-    write_atomic(out / "metrics.json", json.dumps(m, indent=2) + "\n")
+    write_run_folder(out, to_toml(scn.table), m)
     return m

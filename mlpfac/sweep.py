@@ -48,7 +48,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from mlpfac.exceptions import ConfigError
-from mlpfac.outputs import write_atomic
+from mlpfac.outputs import write_atomic, write_run_folder
 
 EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
 PHASES = ("before", "after")
@@ -242,15 +242,13 @@ def write_result(out: Path, job: Job, result: dict) -> None:
     """config.toml, run.rrd, then metrics.json (its presence means the folder is whole); or error.txt."""
     d = job.folder(out)
     d.mkdir(parents=True, exist_ok=True)
-    (d / "metrics.json").unlink(missing_ok=True)  # a stale run being replaced is not whole meanwhile
-    write_atomic(d / "config.toml", job.config)
     if result["error"] is not None:
+        (d / "metrics.json").unlink(missing_ok=True)  # a stale run being replaced is not whole
+        write_atomic(d / "config.toml", job.config)
         write_atomic(d / "error.txt", result["error"])
         return
     (d / "error.txt").unlink(missing_ok=True)
-    if result.get("rrd") is not None:
-        write_atomic(d / "run.rrd", result["rrd"])
-    write_atomic(d / "metrics.json", json.dumps(result["metrics"], indent=2) + "\n")
+    write_run_folder(d, job.config, result["metrics"], result.get("rrd"))
 
 
 def load_done(out: Path, job: Job) -> dict | None:
