@@ -124,37 +124,41 @@ class Adaptive:
         else:
             self.est = EKF(**common)
         self.ekf = self.est  # the name the telemetry and older callers use
-        self.prev: tuple | None = None  # (x_f, x_G, e, u, nominal prediction of e_k) of step k-1
+        self.prev: tuple | None = None  # step k-1: x_f, x_G, e, u, nominal prediction of e_k, z, hidden layers
         self.innovation = np.zeros(3)
         self.h_hat = np.zeros(3)
 
     def step(self, e: np.ndarray, r: np.ndarray) -> np.ndarray:
         nets, c, T = self.nets, self.config, self.T
         if self.prev is not None:  # tune the weights with the error this step revealed, (28)-(32)
-            x_f, x_G, e_prev, u_prev, e_nom = self.prev
+            x_f, x_G, e_prev, u_prev, e_nom, z_prev, head = self.prev
             y = e
             if c.prior:  # the networks model only what the nominal functions miss
                 y = e - e_nom
                 y[2] = wrap(y[2])
             if c.estimator == "ukf":
                 self.innovation = self.est.update(y, None, lambda Z: nets.h(Z, x_f, x_G, e_prev, u_prev))
-            else:
-                self.innovation = self.est.update(y, lambda z: nets.h_and_jacobian(z, x_f, x_G, e_prev, u_prev))
+            else:  # the hidden layers at z_k are last step's, unless something changed z since
+                self.innovation = self.est.update(
+                    y, lambda z: nets.h_and_jacobian(z, x_f, x_G, e_prev, u_prev, head if z is z_prev else None)
+                )
         x_f, x_G = nets.inputs(e, r[3], r[4])
+        z = self.est.z
+        head = nets.head(z, x_f, x_G, e)
         if self.plain:
-            f_hat, G_hat = nets.forward(self.est.z, x_f, x_G, e)
+            f_hat, G_hat = nets.forward(z, x_f, x_G, e, head)
             self.h_hat = np.array([G_hat[0, 1], f_hat[0] - e[0], f_hat[2] - e[2]])  # (34)
             u = self.law.control(e, self.h_hat, r[3], T)
         else:
-            u = self._control(e, r, x_f, x_G)
+            u = self._control(e, r, x_f, x_G, head)
         e_nom = f_true(e, r[3], r[4], T) + G_true(e, T) @ u if c.prior else None
-        self.prev = (x_f, x_G, e, u, e_nom)
+        self.prev = (x_f, x_G, e, u, e_nom, z, head)
         return u
 
-    def _control(self, e: np.ndarray, r: np.ndarray, x_f: np.ndarray, x_G: np.ndarray) -> np.ndarray:
+    def _control(self, e: np.ndarray, r: np.ndarray, x_f: np.ndarray, x_G: np.ndarray, head: tuple) -> np.ndarray:
         """(35) through (34) with the options: nominal prior, learned input gains, cautious law."""
         c, T = self.config, self.T
-        f, G, df, dG = self.nets.jacobians(self.est.z, x_f, x_G, e)
+        f, G, df, dG = self.nets.jacobians(self.est.z, x_f, x_G, e, head)
         if c.prior:
             f = f + f_true(e, r[3], r[4], T)
             G = G + G_true(e, T)
@@ -172,11 +176,11 @@ class Adaptive:
         return self.law.control(e, self.h_hat, r[3], T)
 
     def telemetry(self) -> dict[str, np.ndarray | float]:
-        d = self.est.diag_P()
+        trace = float(self.est.diag_P().sum())
         return {
             "z": self.est.z,
-            "trace_P": float(d.sum()),
-            "mean_diag_P": float(d.mean()),
+            "trace_P": trace,
+            "mean_diag_P": trace / self.nets.alpha,  # what np.mean computes, to the bit
             "innovation": self.innovation,
             "h_hat": self.h_hat,
         }

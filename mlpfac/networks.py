@@ -77,13 +77,23 @@ class Networks:
         x_G = np.stack([ce[..., 0], ce[..., 1], one], -1)
         return x_f, x_G
 
-    def forward(self, z: np.ndarray, x_f: np.ndarray, x_G: np.ndarray, e: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Eqs. (10)-(15): f_hat (..., 3) and G_hat (..., 3, 2). ``e`` is used only when ``residual``."""
-        W_f, W_G, phi_f, phi_G, f = self._head(z, x_f, x_G, e)
+    def forward(
+        self, z: np.ndarray, x_f: np.ndarray, x_G: np.ndarray, e: np.ndarray, head: tuple | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Eqs. (10)-(15): f_hat (..., 3) and G_hat (..., 3, 2). ``e`` is used only when ``residual``.
+
+        ``head``: the result of :meth:`head` for the same arguments, when the caller has it already.
+        """
+        W_f, W_G, phi_f, phi_G, f = head or self.head(z, x_f, x_G, e)
         return f, np.einsum("...jni,...i->...jn", W_G, phi_G)
 
-    def _head(self, z: np.ndarray, x_f: np.ndarray, x_G: np.ndarray, e: np.ndarray) -> tuple[np.ndarray, ...]:
-        """The hidden layers (10)-(11) and f_hat (14): W_f, W_G, phi_f (..., L_f), phi_G (..., L_G), f_hat (..., 3)."""
+    def head(self, z: np.ndarray, x_f: np.ndarray, x_G: np.ndarray, e: np.ndarray) -> tuple[np.ndarray, ...]:
+        """The hidden layers (10)-(11) and f_hat (14): W_f, W_G, phi_f (..., L_f), phi_G (..., L_G), f_hat (..., 3).
+
+        The part of the networks that :meth:`forward`, :meth:`h_and_jacobian` and :meth:`jacobians`
+        share; a controller that evaluates the networks at z_k for its law can pass the result to the
+        next step's :meth:`h_and_jacobian`, which needs them at the same z_k and inputs.
+        """
         W_f, S_f, W_G, S_G = self.split(z)
         phi_f = _sigmoid(np.einsum("...im,...m->...i", S_f, x_f))
         phi_G = _sigmoid(np.einsum("...im,...m->...i", S_G, x_G))
@@ -98,37 +108,52 @@ class Networks:
         return f + np.einsum("...jn,...n->...j", G, u)
 
     def h_and_jacobian(
-        self, z: np.ndarray, x_f: np.ndarray, x_G: np.ndarray, e: np.ndarray, u: np.ndarray
+        self,
+        z: np.ndarray,
+        x_f: np.ndarray,
+        x_G: np.ndarray,
+        e: np.ndarray,
+        u: np.ndarray,
+        head: tuple | None = None,
     ) -> tuple[np.ndarray, np.ndarray]:
-        """h (..., 3) and its Jacobian nabla_h = [nabla_f, nabla_Gamma] (..., 3, alpha), eqs. (19)-(24), (27)."""
-        W_f, W_G, phi_f, phi_G, f = self._head(z, x_f, x_G, e)
+        """h (..., 3) and its Jacobian nabla_h = [nabla_f, nabla_Gamma] (..., 3, alpha), eqs. (19)-(24), (27).
+
+        ``head``: the result of :meth:`head` for the same z and inputs, when the caller has it already.
+        """
+        W_f, W_G, phi_f, phi_G, f = head or self.head(z, x_f, x_G, e)
         Lf, LG = self.L_f, self.L_G
         b = z.shape[:-1]
         Gu = np.einsum("...jni,...i,...n->...j", W_G, phi_G, u)
-
+        i1, i2 = 3 * Lf, 3 * Lf + Lf * N_F
+        dphi_f = phi_f * (1.0 - phi_f)
+        gamma = u[..., :, None] * phi_G[..., None, :]  # (..., 2, L_G): d (G u)_j / d w_jn = phi_G u_n (23)
+        sigma = np.einsum("...jni,...n->...ji", W_G, u)  # sigma_{j,i} = sum_n w_{jn,i} u_n
+        dphi_G = phi_G * (1.0 - phi_G)
         H = np.zeros((*b, 3, self.alpha))
+        if not b:  # one run: the same products written block by block, without the broadcast temporaries
+            for j in range(3):
+                H[j, j * Lf : (j + 1) * Lf] = phi_f  # (21)
+                H[j, i2 + 2 * LG * j : i2 + 2 * LG * (j + 1)] = gamma.ravel()  # (23)
+            H[:, i1:i2] = ((W_f * dphi_f)[:, :, None] * x_f).reshape(3, Lf * N_F)  # (22)
+            H[:, i2 + 6 * LG :] = ((sigma * dphi_G)[:, :, None] * x_G).reshape(3, LG * N_G)  # (24)
+            return f + Gu, H
         eye3 = np.eye(3)
         # (21): d f_j / d w_j = phi_f
-        H[..., :, : 3 * Lf] = (eye3[:, :, None] * phi_f[..., None, None, :]).reshape(*b, 3, 3 * Lf)
+        H[..., :, :i1] = (eye3[:, :, None] * phi_f[..., None, None, :]).reshape(*b, 3, i1)
         # (22): d f_j / d s_fi = w_{j,i} phi_fi (1 - phi_fi) x_f
-        dphi_f = phi_f * (1.0 - phi_f)
-        H[..., :, 3 * Lf : 3 * Lf + Lf * N_F] = (
-            (W_f * dphi_f[..., None, :])[..., :, :, None] * x_f[..., None, None, :]
-        ).reshape(*b, 3, Lf * N_F)
-        i2 = 3 * Lf + Lf * N_F
+        H[..., :, i1:i2] = ((W_f * dphi_f[..., None, :])[..., :, :, None] * x_f[..., None, None, :]).reshape(
+            *b, 3, Lf * N_F
+        )
         # (23): d (G u)_j / d w_jn = phi_G u_n  (gamma_v, gamma_omega)
-        gamma = u[..., None, :, None] * phi_G[..., None, None, :]  # (..., 1, 2, L_G)
-        H[..., :, i2 : i2 + 6 * LG] = (eye3[:, :, None, None] * gamma[..., None, :, :]).reshape(*b, 3, 6 * LG)
-        # (24): d (G u)_j / d s_Gi = sigma_{j,i} phi_Gi (1 - phi_Gi) x_G,  sigma_{j,i} = sum_n w_{jn,i} u_n
-        sigma = np.einsum("...jni,...n->...ji", W_G, u)
-        dphi_G = phi_G * (1.0 - phi_G)
+        H[..., :, i2 : i2 + 6 * LG] = (eye3[:, :, None, None] * gamma[..., None, None, :, :]).reshape(*b, 3, 6 * LG)
+        # (24): d (G u)_j / d s_Gi = sigma_{j,i} phi_Gi (1 - phi_Gi) x_G
         H[..., :, i2 + 6 * LG :] = ((sigma * dphi_G[..., None, :])[..., :, :, None] * x_G[..., None, None, :]).reshape(
             *b, 3, LG * N_G
         )
         return f + Gu, H
 
     def jacobians(
-        self, z: np.ndarray, x_f: np.ndarray, x_G: np.ndarray, e: np.ndarray
+        self, z: np.ndarray, x_f: np.ndarray, x_G: np.ndarray, e: np.ndarray, head: tuple | None = None
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """f_hat (..., 3), G_hat (..., 3, 2) and their Jacobians df/dz (..., 3, alpha), dG/dz (..., 3, 2, alpha).
 
@@ -136,7 +161,7 @@ class Networks:
         and d G_jn / d s_Gi = w_jn,i phi_Gi (1 - phi_Gi) x_G. Used by the cautious law, which needs the
         uncertainty of h1 = G_12, h2 = f_1 - e1, h5 = f_3 - e3 and of the input gains G_11, G_32.
         """
-        W_f, W_G, phi_f, phi_G, f = self._head(z, x_f, x_G, e)
+        W_f, W_G, phi_f, phi_G, f = head or self.head(z, x_f, x_G, e)
         Lf, LG = self.L_f, self.L_G
         b = z.shape[:-1]
         G = np.einsum("...jni,...i->...jn", W_G, phi_G)
