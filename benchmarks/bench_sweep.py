@@ -10,8 +10,10 @@ target is printed as missed. Not a test.
    ``EKF.update`` with h and H precomputed (the Joseph-form covariance update, gain, weights);
    and the ``adaptive-best`` variant's step vs the paper's EKF scheme's (target <= 3).
 2. closed-loop MuJoCo run vs bare physics substeps + bare EKF updates for the same step count
-   (skipped while the MuJoCo plant or sims/eight-nominal.toml is missing).
-3. sweep throughput with 2 workers vs 1; batched vs one-at-a-time for 64 seeds on one core.
+   (skipped while the MuJoCo plant or sims/eight-nominal.toml is missing), and where the time goes:
+   the same run with the non-adaptive law and bare physics alone, side by side with the two.
+3. sweep throughput with 2 workers vs 1; batched vs one-at-a-time for 64 seeds on one core, with the
+   ceiling that one EKF update per seed puts on any batching: one run's step / the bare EKF update.
 4. peak memory of a 100-seed sweep: ``mlpfac sweep`` in a child process, the RSS of it and all its
    workers summed and sampled every 20 ms with psutil (plus getrusage maxrss of the largest one).
 """
@@ -40,6 +42,7 @@ from mlpfac.runner import run, seeded_generators  # noqa: E402
 from mlpfac.scenario import load  # noqa: E402
 
 RESULTS: list[tuple[str, str, bool | None]] = []
+FLOOR: dict[str, float] = {}  # measured floors that later sections compare with, in seconds per step
 
 
 def report(name: str, value: float, target: str, met: bool | None, detail: str = "") -> None:
@@ -87,6 +90,7 @@ def bench_controller(steps: int, repeat: int) -> None:
 
     t = side_by_side({"ctrl": controller_loop, "ekf": ekf_loop}, repeat)
     step_us, ekf_us = t["ctrl"] / steps * 1e6, t["ekf"] / steps * 1e6
+    FLOOR["ekf"] = t["ekf"] / steps
     ratio = step_us / ekf_us
     report(
         "controller step / bare EKF update",
@@ -153,7 +157,15 @@ def bench_mujoco(repeat: int) -> None:
     def closed_loop():
         rec["r"] = run(scn)
 
-    t = side_by_side({"loop": closed_loop, "floor": floor}, repeat)
+    corradini = scn.with_overrides(controller="corradini")
+
+    def physics():
+        mujoco.mj_resetData(m, d)
+        for _ in range(N * n_sub):
+            mujoco.mj_step(m, d)
+
+    loops = {"loop": closed_loop, "floor": floor, "corradini": lambda: run(corradini), "physics": physics}
+    t = side_by_side(loops, repeat)
     ratio = t["loop"] / t["floor"]
     r = rec["r"]
     report(
@@ -164,6 +176,19 @@ def bench_mujoco(repeat: int) -> None:
         f"({t['loop']:.2f} s vs {t['floor']:.2f} s, {N} steps x {n_sub} substeps, status {r.status})",
     )
     report("real-time factor of the closed loop", r.sim_time_s / t["loop"], "-", None, "(simulated s per wall s)")
+    # Where the time goes, per step: the same run with the non-adaptive law (runner, plant glue,
+    # recording and a law of a few float operations) against bare physics gives the loop's own cost;
+    # what the adaptive run adds beyond that and the EKF update is the networks, Jacobian and law.
+    us = {k: v / N * 1e6 for k, v in t.items()}
+    ekf = us["floor"] - us["physics"]
+    glue = us["corradini"] - us["physics"]
+    nets = us["loop"] - us["corradini"] - ekf
+    print(
+        f"  per step: physics {us['physics']:.0f} us + EKF update {ekf:.0f} us (the floor); the loop adds "
+        f"runner, plant glue and recording {glue:.0f} us (a run with the non-adaptive law, minus physics) "
+        f"and networks + Jacobian + law {nets:.0f} us ({us['loop']:.0f} us in all)",
+        flush=True,
+    )
 
 
 def bench_sweep(seeds: int, duration: float, batch_seeds: int, batch_duration: float, repeat: int) -> None:
@@ -209,6 +234,18 @@ def bench_sweep(seeds: int, duration: float, batch_seeds: int, batch_duration: f
         for bs in (8, 16, 64):
             fns[str(bs)] = lambda scns=scns, bs=bs: [run_batch(scns[j : j + bs]) for j in range(0, len(scns), bs)]
         t = side_by_side(fns, max(1, repeat - 1))
+        if ctrl == "adaptive" and "ekf" in FLOOR:
+            # Each seed's covariance update is done per seed in a batch too (stacked, it is memory-bound
+            # and slower), so a batch step costs at least one bare EKF update per seed.
+            one = t["one"] / (batch_seeds * scns[0].steps)
+            report(
+                "ceiling: one-at-a-time step / bare EKF update",
+                one / FLOOR["ekf"],
+                "-",
+                None,
+                f"({one * 1e6:.0f} us vs {FLOOR['ekf'] * 1e6:.0f} us: no batching that keeps one EKF update "
+                "per seed can beat this ratio)",
+            )
         for bs in (8, 16, 64):
             ratio = t["one"] / t[str(bs)]
             report(

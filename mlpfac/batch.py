@@ -102,18 +102,20 @@ class BatchAdaptive:
     def step(self, e: np.ndarray, r: np.ndarray) -> np.ndarray:
         nets = self.nets
         if self.prev is not None:  # (28)-(32): nabla_h for all seeds at once, then the EKF per chunk
-            x_f, x_G, e_prev, u_prev = self.prev
-            h, H = nets.h_and_jacobian(self.z, x_f, x_G, e_prev, u_prev)
+            x_f, x_G, e_prev, u_prev, head = self.prev  # the hidden layers at z_k, from last step's law
+            h, H = nets.h_and_jacobian(self.z, x_f, x_G, e_prev, u_prev, head)
             i = 0
             for ekf in self.ekfs:
                 sl = slice(i, i + len(ekf.z))
                 ekf.update(e[sl], lambda z, sl=sl: (h[sl], H[sl]))
                 i = sl.stop
         x_f, x_G = nets.inputs(e, r[3], r[4])
-        f_hat, G_hat = nets.forward(self.z, x_f, x_G, e)
+        z = self.z
+        head = nets.head(z, x_f, x_G, e)
+        f_hat, G_hat = nets.forward(z, x_f, x_G, e, head)
         h_hat = np.stack([G_hat[:, 0, 1], f_hat[:, 0] - e[:, 0], f_hat[:, 2] - e[:, 2]], -1)  # (34)
         u = self.law.control(e, h_hat, r[3], self.T)
-        self.prev = (x_f, x_G, e, u)
+        self.prev = (x_f, x_G, e, u, head)
         return u
 
     def telemetry(self) -> dict[str, np.ndarray]:
@@ -131,7 +133,8 @@ class BatchAdaptive:
             ekfs.append(ekf)
         self.ekfs = ekfs
         if self.prev is not None:
-            self.prev = tuple(x[mask] for x in self.prev)
+            *arrays, head = self.prev
+            self.prev = (*(x[mask] for x in arrays), tuple(x[mask] for x in head))
 
 
 class BatchCorradini:
