@@ -87,13 +87,22 @@ class _Batch:
 
 @dataclass(frozen=True)
 class Series:
-    """One scalar time series: an entity path, where its values come from, and its style."""
+    """A scalar time series entity: an entity path, where its values come from, and its style.
+
+    ``name`` is one name for one line per step, or a tuple of names for several lines that share
+    the entity (``get`` then gives (rows, lines)): the network weights go one entity per layer,
+    since a chunk per weight made saving a run three times as slow and its file three times as big.
+    """
 
     path: str
     get: Getter
-    name: str
+    name: str | tuple[str, ...]
     color: tuple[int, int, int]
     width: float = 1.5
+
+    @property
+    def names(self) -> list[str]:
+        return list(self.name) if isinstance(self.name, tuple) else [self.name]
 
 
 # ----------------------------------------------------------------------------------------------
@@ -324,8 +333,11 @@ class RerunSink:
             self._update_series(record)
             idx = _index(record, np.arange(a, b))
             for s in self.series:  # one chunk per series; ComponentColumn skips Scalars.columns' checks (2x faster)
-                values = pa.array(np.ascontiguousarray(s.get(record, slice(a, b)), dtype=np.float64))
-                self.rec.send_columns(s.path, indexes=idx, columns=[rr.ComponentColumn(SCALARS, _Batch(values))])
+                values = np.ascontiguousarray(s.get(record, slice(a, b)), dtype=np.float64)
+                column = rr.ComponentColumn(SCALARS, _Batch(pa.array(values.ravel())))
+                if values.ndim == 2:  # several lines: each row holds one value per line
+                    column = column.partition(np.full(len(values), values.shape[1]))
+                self.rec.send_columns(s.path, indexes=idx, columns=[column])
             self._send_poses(record, _strided(a, b, POSE_STRIDE), _strided(a, b, PATH_STRIDE))
             self.sent = b
             self.last_send = time.monotonic()
@@ -388,7 +400,10 @@ class RerunSink:
         for s in self.series:
             if s.path not in self.styled:
                 self.styled.add(s.path)
-                self.rec.log(s.path, rr.SeriesLines(colors=[s.color], names=[s.name], widths=[s.width]), static=True)
+                k = len(s.names)
+                self.rec.log(
+                    s.path, rr.SeriesLines(colors=[s.color] * k, names=s.names, widths=[s.width] * k), static=True
+                )
 
     def _send_poses(self, record: RunRecord, rows: np.ndarray, path_rows: np.ndarray) -> None:
         """Robot, reference arrow and top-view markers at ``rows``; the driven path at ``path_rows``.
@@ -484,11 +499,16 @@ def plan_series(record: RunRecord) -> list[Series]:
             out.append(Series(f"wheels/{side}/cmd", _column("wheel_cmd", j, "plant"), f"{side} commanded", CMD_COLOR))
         if "wheel_meas" in plant:
             out.append(Series(f"wheels/{side}/meas", _column("wheel_meas", j, "plant"), f"{side} measured", MEAS_COLOR))
-    if "z" in ctrl:
-        for i, label in enumerate(_labels(labels, "z", ctrl["z"], "w")):
-            group = "/".join(label.split("/")[:2])
+    if "z" in ctrl:  # one entity per network layer, one line per weight
+        groups: dict[str, list[int]] = {}
+        names = _labels(labels, "z", ctrl["z"], "w")
+        for i, label in enumerate(names):
+            groups.setdefault(label.rpartition("/")[0], []).append(i)
+        for group, idx in groups.items():
+            path = f"weights/{group}" if group else "weights"
+            line_names = tuple(names[i].rpartition("/")[2] for i in idx)
             color = WEIGHT_COLORS.get(group, OTHER_COLOR)
-            out.append(Series(f"weights/{label}", _column("z", i, "ctrl"), label.split("/")[-1], color, 1.0))
+            out.append(Series(path, _columns("z", idx, "ctrl"), line_names, color, 1.0))
     for key, name in (("trace_P", "trace(P)"), ("mean_diag_P", "mean diag(P)")):
         if key in ctrl:
             out.append(Series(f"ekf/{key}", _column(key, None, "ctrl"), name, P_COLOR))
@@ -661,6 +681,16 @@ def _column(key: str, j: int | None, store: str = "record") -> Getter:
     def get(record: RunRecord, s: slice) -> np.ndarray:
         arr = (getattr(record, key) if store == "record" else getattr(record, store)[key])[s]
         return arr if j is None else arr.reshape(len(arr), -1)[:, j]
+
+    return get
+
+
+def _columns(key: str, idx: list[int], store: str) -> Getter:
+    """Components ``idx`` of a telemetry key, (rows, len(idx)); a view when they are contiguous."""
+    cols = slice(idx[0], idx[-1] + 1) if idx == list(range(idx[0], idx[-1] + 1)) else idx
+
+    def get(record: RunRecord, s: slice) -> np.ndarray:
+        return getattr(record, store)[key][s][:, cols]
 
     return get
 

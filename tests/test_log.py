@@ -18,16 +18,18 @@ import pytest
 from mlpfac import log
 from mlpfac.exceptions import ConfigError
 
+WEIGHT_LAYERS = {"NN_f/output": (0, 54), "NN_f/hidden": (54, 162), "NN_G/output": (162, 168), "NN_G/hidden": (168, 171)}
 POSE_ENTITIES = ("/world/robot", "/world/reference_now", "/top/plane/robot", "/top/plane/reference_now")
 
 
-def per_row(values: pa.Array) -> np.ndarray:
-    """A list array with exactly one instance per row, as numpy: (rows,) or (rows, width)."""
-    assert pc.all(pc.equal(pc.list_value_length(values), 1)).as_py(), "a row holds other than one instance"
+def per_row(values: pa.Array, instances: int = 1) -> np.ndarray:
+    """A list array with exactly ``instances`` per row, as numpy: (rows,), (rows, instances) or (rows, width)."""
+    assert pc.all(pc.equal(pc.list_value_length(values), instances)).as_py(), f"a row holds other than {instances}"
     flat = values.flatten()
     if pa.types.is_fixed_size_list(flat.type):
         return flat.flatten().to_numpy(zero_copy_only=False).reshape(len(values), flat.type.list_size)
-    return flat.to_numpy(zero_copy_only=False)
+    flat = flat.to_numpy(zero_copy_only=False)
+    return flat if instances == 1 else flat.reshape(len(values), instances)
 
 
 def expected_series(rec) -> dict[str, np.ndarray]:
@@ -42,8 +44,8 @@ def expected_series(rec) -> dict[str, np.ndarray]:
     for j, side in enumerate(("left", "right")):
         out[f"/wheels/{side}/cmd"] = p["wheel_cmd"][:n, j]
         out[f"/wheels/{side}/meas"] = p["wheel_meas"][:n, j]
-    for i, label in enumerate(rec.labels["z"]):
-        out[f"/weights/{label}"] = c["z"][:n, i]
+    for group, (lo, hi) in WEIGHT_LAYERS.items():  # one entity per layer, one line per weight
+        out[f"/weights/{group}"] = c["z"][:n, lo:hi]
     out["/ekf/trace_P"] = c["trace_P"][:n]
     out["/ekf/mean_diag_P"] = c["mean_diag_P"][:n]
     for j in range(3):
@@ -63,13 +65,16 @@ def check_contents(rec, ents, geometry) -> None:
     n = rec.n
     steps = np.arange(n)
     series = expected_series(rec)
-    assert len([p for p in series if p.startswith("/weights/")]) == rec.ctrl["z"].shape[1] == 171
+    assert sum(series[f"/weights/{g}"].shape[1] for g in WEIGHT_LAYERS) == rec.ctrl["z"].shape[1] == 171
     for path, want in series.items():
         col = ents[path].temporal["Scalars:scalars"]
         np.testing.assert_array_equal(col.times["step"], steps, err_msg=path)
         np.testing.assert_array_equal(col.times["sim_time"], np.round(rec.t[:n] * 1e9).astype(np.int64), err_msg=path)
-        np.testing.assert_array_equal(per_row(col.values), want, err_msg=path)
+        lines = 1 if want.ndim == 1 else want.shape[1]
+        np.testing.assert_array_equal(per_row(col.values, lines), want, err_msg=path)
     assert {p for p in ents if p.startswith("/weights/")} == {p for p in series if p.startswith("/weights/")}
+    names = [ents[f"/weights/{g}"].static["SeriesLines:names"].to_pylist()[0] for g in WEIGHT_LAYERS]
+    assert [f"NN_f/output/{x}" for x in names[0]] + [f"NN_f/hidden/{x}" for x in names[1]] == rec.labels["z"][:162]
     assert per_row(ents["/errors/e1"].static["SeriesLines:names"]).tolist() == ["e1"]
 
     # Pose-rate entities: every 5th step and the last, float32.
@@ -230,9 +235,10 @@ def test_a_real_run_through_the_runner(tmp_path, rrd_contents):
     for path in ("/errors/e1", "/controls/v/cmd", "/ekf/trace_P", "/h/h1/true"):
         col = ents[path].temporal["Scalars:scalars"]
         np.testing.assert_array_equal(col.times["step"], np.arange(rec.n), err_msg=path)
-    weights = [p for p in ents if p.startswith("/weights/")]
-    assert len(weights) == rec.ctrl["z"].shape[1]
-    assert "/weights/NN_f/output/w1_0" in weights
+    weights = sorted(p for p in ents if p.startswith("/weights/"))
+    assert weights == sorted(f"/weights/{g}" for g in WEIGHT_LAYERS)
+    col = ents["/weights/NN_f/output"].temporal["Scalars:scalars"]
+    np.testing.assert_array_equal(per_row(col.values, 54), rec.ctrl["z"][: rec.n, :54])
 
 
 def test_robot_rests_on_the_floor(make_record, tmp_path, save_rrd, rrd_contents):
@@ -255,8 +261,9 @@ def test_robot_rests_on_the_floor(make_record, tmp_path, save_rrd, rrd_contents)
 def test_series_names_fall_back_to_indices(make_record):
     rec = make_record(N=20)
     rec.labels = {}
-    paths = [s.path for s in log.plan_series(rec)]
-    assert "weights/w0" in paths and "weights/w170" in paths
+    series = {s.path: s for s in log.plan_series(rec)}
+    assert series["weights"].names == [f"w{i}" for i in range(171)]
+    paths = list(series)
     assert "h/h1/estimate" in paths and "ekf/innovation/e3" in paths
     rec.plant["slip"] = np.zeros((20, 2))  # telemetry the log does not know still gets logged
     assert {"plant/slip/0", "plant/slip/1"} <= {s.path for s in log.plan_series(rec)}
