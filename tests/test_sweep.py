@@ -3,9 +3,12 @@
 import argparse
 import copy
 import json
+import os
 import subprocess
 import sys
 import textwrap
+import threading
+import time
 
 import pytest
 
@@ -225,6 +228,46 @@ def test_dask_cluster_gives_the_local_table(tmp_path):
     assert (tmp_path / "cli" / "sweep.md").read_text() == (lambda p: p.read_text())(
         sweep.write_tables(tmp_path / "local", "sweep", table(jobs, local), sweep.SWEEP_COLUMNS, {})[1]
     )
+
+
+def test_a_lost_dask_worker_costs_only_its_runs(tmp_path):
+    """A worker process that dies mid-sweep: its runs go to another worker, the table is the local one."""
+    distributed = pytest.importorskip("distributed")
+    jobs = sweep.plan(["paper"], ["adaptive"], list(range(8)), 20.0)
+    local = sweep.execute(jobs, tmp_path / "local")
+    out = tmp_path / "dask"
+    lost: list = []
+
+    def kill_a_busy_worker(client) -> None:
+        deadline = time.monotonic() + 60
+        while not list(out.rglob("metrics.json")) and time.monotonic() < deadline:
+            time.sleep(0.01)
+        busy = [w for w, keys in client.processing().items() if keys]
+        if busy:  # its running task dies with it
+
+            async def die() -> None:
+                os._exit(1)
+
+            lost.append((busy[0], len(list(out.rglob("metrics.json"))), client.processing()[busy[0]]))
+            client.run(die, workers=[busy[0]], wait=False)
+
+    with distributed.LocalCluster(
+        host="127.0.0.1", n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None
+    ) as cluster:
+        client = sweep.connect(cluster.scheduler_address, timeout=30)
+        killer = threading.Thread(target=kill_a_busy_worker, args=(client,))
+        try:
+            killer.start()
+            remote = sweep.execute(jobs, out, client=client)
+            killer.join()
+            workers_after = set(client.scheduler_info()["workers"])
+        finally:
+            killer.join()
+            client.close()
+    dead, done_at_kill, running = lost[0]  # IndexError: no worker was busy, the test proved nothing
+    assert done_at_kill < len(jobs) and running and dead not in workers_after
+    assert table(jobs, remote) == table(jobs, local)
+    assert {k: strip(m) for k, m in remote.metrics.items()} == {k: strip(m) for k, m in local.metrics.items()}
 
 
 def test_compare_table(tmp_path, capsys):
