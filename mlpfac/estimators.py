@@ -90,8 +90,8 @@ class EKF(_WeightFilter):
         i = y - h  # (32)
         self.z = self.z + np.einsum("...ak,...k->...a", K, i)  # (30)
         # The (alpha, alpha) work happens in place in P and one buffer B: a fresh 234 kB array per
-        # operation would cost more in page faults than the arithmetic, and two arrays stay in the
-        # CPU's L2 cache where five would not. Same operations, same bits as the plain formula.
+        # operation would cost more in page faults than the arithmetic, and two such arrays leave
+        # room in a 1 MB L2 cache where four would fill it. Same operations, same bits as the plain formula.
         P, B = self._work()
         np.subtract(P, np.matmul(K, np.swapaxes(PHt, -1, -2), out=B), out=P)  # A = (I - K H) P: (29)
         np.subtract(P, np.matmul(P @ Ht, Kt, out=B), out=B)  # A - A H' K'
