@@ -87,15 +87,15 @@ def run(scn: Scenario, sink=None, on_step: Callable[[int], None] | None = None) 
 def _diverged(rec: RunRecord, k: int, limit_m: float) -> str | None:
     pose, u, e = rec.pose[k], rec.u[k], rec.e_true[k]
     z = rec.ctrl.get("z")
+    err = float(np.hypot(e[0], e[1]))  # np.hypot, as the batched path's test
     # the common case in a few float operations: every test below fails on a NaN or an infinity
-    fine = math.hypot(e[0], e[1]) <= limit_m and math.isfinite(pose[0] + pose[1] + pose[2] + u[0] + u[1])
+    fine = err <= limit_m and math.isfinite(pose[0] + pose[1] + pose[2] + u[0] + u[1])
     if fine and (z is None or math.isfinite(np.dot(z[k], z[k]))):
         return None
     if not (np.isfinite(pose).all() and np.isfinite(u).all()):
         return "non-finite pose or command"
     if z is not None and not np.isfinite(z[k]).all():
         return "non-finite network weights"
-    err = float(np.hypot(e[0], e[1]))
     if err > limit_m:
         return f"position error {err:.3g} m beyond {limit_m:g} m"
     return None
