@@ -11,15 +11,16 @@ from mlpfac.scenario import load, parse
 
 ARRAYS = ("pose", "pose_meas", "e", "e_true", "u", "ref")
 
-# The paper scenario with the project's first tuning, kept here so the test does not depend on the
-# shipped file's tuning: with it, seed 0 diverges at 5.91 s and seeds 1-3 stay bounded.
-FIRST_TUNING = {"L_f": 18, "L_G": 1, "error_scale": 20.0, "P0": 1.0, "R": 1e-4, "weight_std": 0.1}
+# The paper scenario with a tight divergence limit: seed 0's start-up transient peaks at 0.101 m
+# (step 11), seeds 1-3 stay below 0.07 m, so seed 0 diverges early and the others run on. (A
+# divergence of the EKF itself would do as well, but when it comes depends on the last bits of a
+# long run, which another CPU or BLAS may change.)
+DIVERGENCE_M = 0.08
 
 
-def first_tuning(controller: str, seed: int, duration: float):
-    t = copy.deepcopy(load("paper").table)
-    t["controller"]["adaptive"] = dict(FIRST_TUNING)
-    return parse(t, "first-tuning").with_overrides(controller=controller, seed=seed, duration=duration)
+def tight(controller: str, seed: int, duration: float):
+    t = load("paper").table | {"divergence_m": DIVERGENCE_M}
+    return parse(t, "tight").with_overrides(controller=controller, seed=seed, duration=duration)
 
 
 def same_run(a, b) -> None:
@@ -35,8 +36,8 @@ def same_run(a, b) -> None:
 
 @pytest.mark.parametrize("controller", ["adaptive", "corradini", "kanayama"])
 def test_batch_equals_one_at_a_time(controller):
-    # seed 0 diverges at 5.91 s with the adaptive law: the batch must drop it there and go on
-    scns = [first_tuning(controller, s, 6.5) for s in range(4)]
+    # seed 0 diverges with the adaptive law: the batch must drop it there and go on
+    scns = [tight(controller, s, 3.0) for s in range(4)]
     recs = run_batch(scns)
     singles = [run(s) for s in scns]
     if controller == "adaptive":
