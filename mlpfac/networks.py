@@ -124,28 +124,13 @@ class Networks:
         Lf, LG = self.L_f, self.L_G
         b = z.shape[:-1]
         Gu = np.einsum("...jni,...i,...n->...j", W_G, phi_G, u)
-        i1, i2 = 3 * Lf, 3 * Lf + Lf * N_F
-        dphi_f = phi_f * (1.0 - phi_f)
+        i2 = 3 * Lf + Lf * N_F
         gamma = u[..., :, None] * phi_G[..., None, :]  # (..., 2, L_G): d (G u)_j / d w_jn = phi_G u_n (23)
         sigma = np.einsum("...jni,...n->...ji", W_G, u)  # sigma_{j,i} = sum_n w_{jn,i} u_n
         dphi_G = phi_G * (1.0 - phi_G)
-        H = np.zeros((*b, 3, self.alpha))
-        if not b:  # one run: the same products written block by block, without the broadcast temporaries
-            for j in range(3):
-                H[j, j * Lf : (j + 1) * Lf] = phi_f  # (21)
-                H[j, i2 + 2 * LG * j : i2 + 2 * LG * (j + 1)] = gamma.ravel()  # (23)
-            H[:, i1:i2] = ((W_f * dphi_f)[:, :, None] * x_f).reshape(3, Lf * N_F)  # (22)
-            H[:, i2 + 6 * LG :] = ((sigma * dphi_G)[:, :, None] * x_G).reshape(3, LG * N_G)  # (24)
-            return f + Gu, H
-        eye3 = np.eye(3)
-        # (21): d f_j / d w_j = phi_f
-        H[..., :, :i1] = (eye3[:, :, None] * phi_f[..., None, None, :]).reshape(*b, 3, i1)
-        # (22): d f_j / d s_fi = w_{j,i} phi_fi (1 - phi_fi) x_f
-        H[..., :, i1:i2] = ((W_f * dphi_f[..., None, :])[..., :, :, None] * x_f[..., None, None, :]).reshape(
-            *b, 3, Lf * N_F
-        )
-        # (23): d (G u)_j / d w_jn = phi_G u_n  (gamma_v, gamma_omega)
-        H[..., :, i2 : i2 + 6 * LG] = (eye3[:, :, None, None] * gamma[..., None, None, :, :]).reshape(*b, 3, 6 * LG)
+        H = self._nabla_f(W_f, phi_f, x_f, b)  # (21)-(22), zero beyond
+        for j in range(3):  # (23), diagonal in j: written where it is not zero
+            H[..., j, i2 + 2 * LG * j : i2 + 2 * LG * (j + 1)] = gamma.reshape(*b, 2 * LG)
         # (24): d (G u)_j / d s_Gi = sigma_{j,i} phi_Gi (1 - phi_Gi) x_G
         H[..., :, i2 + 6 * LG :] = ((sigma * dphi_G[..., None, :])[..., :, :, None] * x_G[..., None, None, :]).reshape(
             *b, 3, LG * N_G
@@ -166,12 +151,7 @@ class Networks:
         b = z.shape[:-1]
         G = np.einsum("...jni,...i->...jn", W_G, phi_G)
         i2 = 3 * Lf + Lf * N_F
-        df = np.zeros((*b, 3, self.alpha))
-        df[..., :, : 3 * Lf] = (np.eye(3)[:, :, None] * phi_f[..., None, None, :]).reshape(*b, 3, 3 * Lf)  # (21)
-        dphi_f = phi_f * (1.0 - phi_f)
-        df[..., :, 3 * Lf : i2] = ((W_f * dphi_f[..., None, :])[..., :, :, None] * x_f[..., None, None, :]).reshape(
-            *b, 3, Lf * N_F
-        )  # (22)
+        df = self._nabla_f(W_f, phi_f, x_f, b)  # (21)-(22)
         dG = np.zeros((*b, 3, 2, self.alpha))
         eye6 = np.eye(6).reshape(3, 2, 3, 2)
         dG[..., i2 : i2 + 6 * LG] = (eye6[..., None] * phi_G[..., None, None, None, None, :]).reshape(*b, 3, 2, 6 * LG)
@@ -180,6 +160,19 @@ class Networks:
             (W_G * dphi_G[..., None, None, :])[..., None] * x_G[..., None, None, None, :]
         ).reshape(*b, 3, 2, LG * N_G)
         return f, G, df, dG
+
+    def _nabla_f(self, W_f: np.ndarray, phi_f: np.ndarray, x_f: np.ndarray, b: tuple) -> np.ndarray:
+        """(..., 3, alpha): d f_j / dz, the blocks (21)-(22), and zeros for the weights of NN_G."""
+        Lf = self.L_f
+        out = np.zeros((*b, 3, self.alpha))
+        for j in range(3):  # (21): d f_j / d w_j = phi_f, diagonal in j
+            out[..., j, j * Lf : (j + 1) * Lf] = phi_f
+        # (22): d f_j / d s_fi = w_{j,i} phi_fi (1 - phi_fi) x_f
+        dphi_f = phi_f * (1.0 - phi_f)
+        out[..., :, 3 * Lf : 3 * Lf + Lf * N_F] = (
+            (W_f * dphi_f[..., None, :])[..., :, :, None] * x_f[..., None, None, :]
+        ).reshape(*b, 3, Lf * N_F)
+        return out
 
     def output_mask(self) -> np.ndarray:
         """True for the output-layer weights w_j (14) and w_jn (15), False for the hidden s_fi, s_Gi. (alpha,)"""
