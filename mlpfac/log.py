@@ -508,7 +508,7 @@ def plan_series(record: RunRecord) -> list[Series]:
             path = f"weights/{group}" if group else "weights"
             line_names = tuple(names[i].rpartition("/")[2] for i in idx)
             color = WEIGHT_COLORS.get(group, OTHER_COLOR)
-            out.append(Series(path, _columns("z", idx, "ctrl"), line_names, color, 1.0))
+            out.append(Series(path, _column("z", idx, "ctrl"), line_names, color, 1.0))
     for key, name in (("trace_P", "trace(P)"), ("mean_diag_P", "mean diag(P)")):
         if key in ctrl:
             out.append(Series(f"ekf/{key}", _column(key, None, "ctrl"), name, P_COLOR))
@@ -675,22 +675,13 @@ def _lowest_point(g: dict) -> float:
     return float(g.get("pos", [0.0, 0.0, 0.0])[2]) - extent
 
 
-def _column(key: str, j: int | None, store: str = "record") -> Getter:
-    """Values of component j (of the flattened trailing axes) of a record array or telemetry key."""
+def _column(key: str, j: int | list[int] | None, store: str = "record") -> Getter:
+    """Values of component j (of the flattened trailing axes) of a record array or telemetry key;
+    (rows, len(j)) for a list of components, the whole array for None."""
 
     def get(record: RunRecord, s: slice) -> np.ndarray:
         arr = (getattr(record, key) if store == "record" else getattr(record, store)[key])[s]
         return arr if j is None else arr.reshape(len(arr), -1)[:, j]
-
-    return get
-
-
-def _columns(key: str, idx: list[int], store: str) -> Getter:
-    """Components ``idx`` of a telemetry key, (rows, len(idx)); a view when they are contiguous."""
-    cols = slice(idx[0], idx[-1] + 1) if idx == list(range(idx[0], idx[-1] + 1)) else idx
-
-    def get(record: RunRecord, s: slice) -> np.ndarray:
-        return getattr(record, store)[key][s][:, cols]
 
     return get
 
