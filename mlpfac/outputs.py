@@ -7,7 +7,11 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import tempfile
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 
@@ -31,13 +35,32 @@ def _umask() -> int:
     return mask
 
 
+@contextmanager
+def sigint_deferred() -> Iterator[None]:
+    """Hold a Ctrl-C (SIGINT) back until the block has run, then deliver it: a folder being written
+    is finished, not left with its config and without its metrics. Only in the main thread, the
+    one Python delivers signals to; elsewhere the block runs as it is."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    held: list[int] = []
+    previous = signal.signal(signal.SIGINT, lambda signum, frame: held.append(signum))
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+        if held and callable(previous):
+            previous(signal.SIGINT, None)  # the default handler raises KeyboardInterrupt here
+
+
 def write_run_folder(out: Path, config: str, metrics: dict, rrd: bytes | None = None) -> None:
     """config.toml, run.rrd (if given), then metrics.json: its presence means the folder is whole."""
-    (out / "metrics.json").unlink(missing_ok=True)  # a run being replaced is not whole meanwhile
-    write_atomic(out / "config.toml", config)
-    if rrd is not None:
-        write_atomic(out / "run.rrd", rrd)
-    write_atomic(out / "metrics.json", json.dumps(metrics, indent=2) + "\n")
+    with sigint_deferred():
+        (out / "metrics.json").unlink(missing_ok=True)  # a run being replaced is not whole meanwhile
+        write_atomic(out / "config.toml", config)
+        if rrd is not None:
+            write_atomic(out / "run.rrd", rrd)
+        write_atomic(out / "metrics.json", json.dumps(metrics, indent=2) + "\n")
 
 
 def write_run(out: Path, scn, rec) -> dict:

@@ -48,7 +48,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from mlpfac.exceptions import ConfigError
-from mlpfac.outputs import write_atomic, write_run_folder
+from mlpfac.outputs import sigint_deferred, write_atomic, write_run_folder
 
 EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
 PHASES = ("before", "after")
@@ -241,14 +241,15 @@ def _ignore_sigint() -> None:
 def write_result(out: Path, job: Job, result: dict) -> None:
     """config.toml, run.rrd, then metrics.json (its presence means the folder is whole); or error.txt."""
     d = job.folder(out)
-    d.mkdir(parents=True, exist_ok=True)
-    if result["error"] is not None:
-        (d / "metrics.json").unlink(missing_ok=True)  # a stale run being replaced is not whole
-        write_atomic(d / "config.toml", job.config)
-        write_atomic(d / "error.txt", result["error"])
-        return
-    (d / "error.txt").unlink(missing_ok=True)
-    write_run_folder(d, job.config, result["metrics"], result.get("rrd"))
+    with sigint_deferred():  # a Ctrl-C now waits for the folder to be whole
+        d.mkdir(parents=True, exist_ok=True)
+        if result["error"] is not None:
+            (d / "metrics.json").unlink(missing_ok=True)  # a stale run being replaced is not whole
+            write_atomic(d / "config.toml", job.config)
+            write_atomic(d / "error.txt", result["error"])
+            return
+        (d / "error.txt").unlink(missing_ok=True)
+        write_run_folder(d, job.config, result["metrics"], result.get("rrd"))
 
 
 def load_done(out: Path, job: Job) -> dict | None:

@@ -173,6 +173,21 @@ def test_ctrl_c_of_the_command_line(tmp_path):
         assert (d / "metrics.json").exists()
 
 
+def test_ctrl_c_while_a_folder_is_written_waits_for_the_folder(tmp_path):
+    """The race the test above can hit: SIGINT between a run's config.toml and its metrics.json."""
+    import signal
+
+    from mlpfac.outputs import sigint_deferred
+
+    written = []
+    with pytest.raises(KeyboardInterrupt), sigint_deferred():
+        os.kill(os.getpid(), signal.SIGINT)
+        time.sleep(0.05)  # the signal has arrived: without the deferral, KeyboardInterrupt is raised here
+        written.append("metrics.json")
+    assert written == ["metrics.json"]
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
 def test_pool_and_batched_give_the_serial_table(tmp_path):
     jobs = plan()
     serial = sweep.execute(jobs, tmp_path / "serial")
