@@ -11,7 +11,8 @@ import sys
 from pathlib import Path
 
 EXIT_BAD_INPUT = 2
-EXIT_INTERRUPTED = 130
+EXIT_INTERRUPTED = 130  # Ctrl-C (SIGINT)
+EXIT_TERMINATED = 143  # SIGTERM: handled like Ctrl-C
 
 
 class Parser(argparse.ArgumentParser):
@@ -67,6 +68,9 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     from mlpfac.exceptions import MlpfacError
+    from mlpfac.outputs import Terminated, handle_sigterm
+
+    handle_sigterm()
 
     try:
         if args.command == "run":
@@ -84,9 +88,9 @@ def main(argv: list[str] | None = None) -> int:
     except MlpfacError as err:
         print(f"mlpfac: error: {err}", file=sys.stderr)
         return EXIT_BAD_INPUT
-    except KeyboardInterrupt:
-        print("mlpfac: interrupted", file=sys.stderr)
-        return EXIT_INTERRUPTED
+    except KeyboardInterrupt as err:
+        print("mlpfac: terminated" if isinstance(err, Terminated) else "mlpfac: interrupted", file=sys.stderr)
+        return EXIT_TERMINATED if isinstance(err, Terminated) else EXIT_INTERRUPTED
 
 
 def cmd_list() -> int:

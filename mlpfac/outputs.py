@@ -35,22 +35,76 @@ def _umask() -> int:
     return mask
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised where Python delivers signals: handled like Ctrl-C, but the exit code is 143."""
+
+
+def _raise_terminated(signum: int, frame) -> None:
+    raise Terminated()
+
+
+def handle_sigterm() -> None:
+    """Make SIGTERM raise :class:`Terminated` (a KeyboardInterrupt) in the main thread, as SIGINT does."""
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGTERM, _raise_terminated)
+
+
 @contextmanager
 def sigint_deferred() -> Iterator[None]:
-    """Hold a Ctrl-C (SIGINT) back until the block has run, then deliver it: a folder being written
-    is finished, not left with its config and without its metrics. Only in the main thread, the
-    one Python delivers signals to; elsewhere the block runs as it is."""
+    """Hold a Ctrl-C (SIGINT) or a SIGTERM back until the block has run, then deliver it: a folder
+    being written is finished, not left with its config and without its metrics. Only in the main
+    thread, the one Python delivers signals to; elsewhere the block runs as it is."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
     held: list[int] = []
-    previous = signal.signal(signal.SIGINT, lambda signum, frame: held.append(signum))
+    previous = {s: signal.signal(s, lambda signum, frame: held.append(signum)) for s in (signal.SIGINT, signal.SIGTERM)}
     try:
         yield
     finally:
-        signal.signal(signal.SIGINT, previous)
-        if held and callable(previous):
-            previous(signal.SIGINT, None)  # the default handler raises KeyboardInterrupt here
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+        for s in dict.fromkeys(held):
+            handler = previous[s]
+            if callable(handler):
+                handler(s, None)  # the default SIGINT handler raises KeyboardInterrupt here
+            elif handler == signal.SIG_DFL:
+                signal.raise_signal(s)
+
+
+@contextmanager
+def folder_lock(target: Path, what: str = "--out") -> Iterator[None]:
+    """Hold an exclusive lock on ``target`` (a run or sweep folder, which need not exist yet) while
+    the block runs: a second mlpfac process writing into the same folder gets a ConfigError naming
+    ``what`` instead of mixing its results with this one's. The lock is ``.NAME.lock`` beside the
+    folder (flock, released by the kernel when the process dies, whatever kills it)."""
+    import fcntl
+
+    from mlpfac.exceptions import ConfigError
+
+    target = Path(target).absolute()
+    lock = target.parent / f".{target.name}.lock"
+    try:
+        target.parent.mkdir(parents=True, exist_ok=True)
+        fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o666 & ~_umask())
+    except OSError as err:
+        raise ConfigError(
+            f"{what} {target}", f"cannot create its lock file {lock.name} ({err.strerror or err})"
+        ) from None
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = os.pread(fd, 32, 0).decode(errors="replace").strip() or "?"
+            raise ConfigError(
+                f"{what} {target}",
+                f"another mlpfac process (pid {holder}) is writing into this folder; wait for it or choose another",
+            ) from None
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+        yield
+    finally:
+        os.close(fd)  # closing the descriptor releases the lock
 
 
 def write_run_folder(out: Path, config: str, metrics: dict, rrd: bytes | None = None) -> None:
