@@ -29,9 +29,9 @@ GAIN_RANGE = (0.25, 4.0)  # learned input gains b_v, b_omega are kept within the
 class Law:
     """Eigenvalues lambda_1..3 of the closed-loop error dynamics, and optional command limits."""
 
-    lambdas: tuple[float, float, float] = (0.8, 0.8, 0.8)
-    v_max: float | None = None  # |v| limit, m/s
-    omega_max: float | None = None  # |omega| limit, rad/s
+    lambdas: tuple[float, float, float] = (0.9, 0.9, 0.9)  # 0.8 chatters against wheel limits under pose noise
+    v_max: float | None = 2.0  # |v| limit, m/s (None, or inf in a scenario file: no limit)
+    omega_max: float | None = 5.0  # |omega| limit, rad/s
 
     def __post_init__(self) -> None:
         lam = tuple(float(x) for x in self.lambdas)

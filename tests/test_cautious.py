@@ -25,7 +25,9 @@ def random_covariance(rng, scale):
     return A @ A.T
 
 
-@pytest.mark.parametrize("law", [Law((0.8, 0.85, 0.9)), Law((0.7, 0.8, 0.8), v_max=0.8, omega_max=1.0)])
+@pytest.mark.parametrize(
+    "law", [Law((0.8, 0.85, 0.9), v_max=None, omega_max=None), Law((0.7, 0.8, 0.8), v_max=0.8, omega_max=1.0)]
+)
 def test_zero_covariance_is_the_certainty_equivalence_law(law):
     rng = np.random.default_rng(11)
     for _ in range(500):
@@ -53,7 +55,7 @@ def expected_cost(u, e, theta, Sigma, v_r, law):
 
 def test_cautious_law_minimises_the_expected_one_step_cost():
     """The closed form is the minimiser: zero gradient, and no nearby input does better."""
-    law, rng = Law((0.8, 0.85, 0.9)), np.random.default_rng(12)
+    law, rng = Law((0.8, 0.85, 0.9), v_max=None, omega_max=None), np.random.default_rng(12)
     for _ in range(50):
         e, h, v_r = random_case(rng)
         theta = np.r_[h, T * rng.uniform(0.7, 1.5), T * rng.uniform(0.7, 1.5)]
@@ -72,7 +74,7 @@ def test_cautious_law_minimises_the_expected_one_step_cost():
 
 def test_uncertain_gains_shrink_the_commands():
     """The classic cautious effect: more variance on the input gain (or on h1 for omega), a smaller input."""
-    law = Law((0.8, 0.8, 0.8))
+    law = Law((0.8, 0.8, 0.8), v_max=None, omega_max=None)
     e, v_r = np.array([0.05, 0.03, 0.1]), 0.8
     theta = np.array([T * 0.03, T * v_r, T * 0.2, T, T])
     last = np.inf

@@ -80,7 +80,7 @@ def closed_loop(e, law, v_r, omega_r, T):
 
 
 def test_e1_decays_exactly_as_lambda1():
-    law, T = Law((0.7, 0.8, 0.9)), 0.01
+    law, T = Law((0.7, 0.8, 0.9), v_max=None, omega_max=None), 0.01
     e = np.array([0.2, -0.1, 0.05])
     e1 = [e[0]]
     for k in range(50):
@@ -91,7 +91,7 @@ def test_e1_decays_exactly_as_lambda1():
 
 @pytest.mark.parametrize("lambdas", [(0.8, 0.8, 0.8), (0.5, 0.7, 0.95), (0.9, 0.3, 0.6)])
 def test_closed_loop_has_the_requested_eigenvalues(lambdas):
-    law, T, v_r, omega_r = Law(lambdas), 0.01, 0.9, 0.4
+    law, T, v_r, omega_r = Law(lambdas, v_max=None, omega_max=None), 0.01, 0.9, 0.4
     J = np.empty((3, 3))
     for i in range(3):
         d = np.zeros(3)

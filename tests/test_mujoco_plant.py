@@ -10,8 +10,8 @@ import mujoco
 import numpy as np
 import pytest
 
+from mlpfac.events import Event, parse_event
 from mlpfac.exceptions import ConfigError
-from mlpfac.plants.base import Event
 from mlpfac.plants.mujoco import MujocoConfig, MujocoPlant
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -466,7 +466,7 @@ def test_model_without_velocity_servo_or_freejoint(tmp_path):
         ("friction", {}, "needs 'mu'"),
         ("wheel_radius", {"scale": -1.5}, "scale.*positive"),
         ("actuator", {}, "kv_scale"),
-        ("actuator", {"kv_scale": "weak"}, "kv_scale.*positive"),
+        ("actuator", {"kv_scale": "weak"}, "kv_scale.*number"),
         ("control_period", {"factor": 1.3}, "factor.*whole number"),
         ("control_period", {"factor": -1.0}, "factor"),
         ("sensor_delay", {"steps": -1}, "steps"),
@@ -474,9 +474,11 @@ def test_model_without_velocity_servo_or_freejoint(tmp_path):
     ],
 )
 def test_bad_events_are_refused(kind, params, match):
+    """Parameters are checked when the scenario is parsed, what the robot can apply when it is built."""
     plant = make()
     with pytest.raises(ConfigError, match=match):
-        plant.check_event(Event(1.0, kind, params), "scenario.toml [[events]] #1")
+        where = "scenario.toml [[events]] #1"
+        plant.check_event(parse_event({"time": 1.0, "kind": kind, **params}, 25.0, where), where)
 
 
 def test_friction_event_needs_tyres_that_own_the_contact(tmp_path):
@@ -515,7 +517,7 @@ def test_scenario_builds_a_plant_and_its_events_pass(path):
     assert table["reference"]["kind"] == "eight"
     plant_table = dict(table["plant"])
     assert plant_table.pop("kind") == "mujoco"
-    plant_table["model"] = str(ROOT / plant_table["model"])
+    plant_table["model"] = str((path.parent / plant_table["model"]).resolve())
     cfg = MujocoConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in plant_table.items()})
     plant = MujocoPlant(cfg, table["T"])
     events = table.get("events", [])

@@ -1,6 +1,7 @@
 """Closed-loop runs on the kinematic plant: determinism, boundedness, divergence, metrics."""
 
 import json
+import math
 
 import numpy as np
 import pytest
@@ -36,7 +37,7 @@ def test_corradini_with_true_functions_and_no_noise_is_exact():
         "duration": 0.5,
         "plant": {"kind": "kinematic", "noise_cov": 0.0},
         "initial": {"error": [0.1, 0.0, 0.0]},
-        "controller": {"name": "corradini", "lambdas": [0.7, 0.8, 0.8]},
+        "controller": {"name": "corradini", "lambdas": [0.7, 0.8, 0.8], "v_max": math.inf, "omega_max": math.inf},
     }
     rec = run(parse(table))
     np.testing.assert_allclose(rec.e_true[:, 0], 0.1 * 0.7 ** np.arange(rec.n), rtol=1e-9, atol=1e-14)

@@ -3,12 +3,15 @@
 import copy
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from mlpfac.runner import metrics, run
-from mlpfac.scenario import ROOT, load, parse, scenario_names
+from mlpfac.scenario import load, parse, scenario_names
+
+ROOT = Path(__file__).resolve().parents[1]
 
 SCENARIOS = scenario_names()
 

@@ -59,8 +59,10 @@ def drive(ctrl, steps=300, seed=21):
 @pytest.mark.parametrize(
     "base",
     [
-        AdaptiveConfig(),
-        AdaptiveConfig(networks=Networks(error_scale=20.0), P0=1.0, R=1e-4, forgetting=0.999, P_max=2.0),
+        AdaptiveConfig(output_weight_std=None),  # the paper's draw: every weight ~ N(0, weight_std^2)
+        AdaptiveConfig(
+            networks=Networks(error_scale=20.0), P0=1.0, R=1e-4, forgetting=0.999, P_max=2.0, output_weight_std=None
+        ),
     ],
 )
 def test_default_options_are_the_paper_scheme_to_the_last_bit(base):

@@ -11,32 +11,11 @@ Events change the plant mid-run without telling the controller.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 from typing import Protocol
 
 import numpy as np
 
-EVENT_KINDS = (
-    "payload",  # chassis mass (and inertia) scaled or added: params mass_kg | mass_scale, body
-    "friction",  # floor/wheel sliding friction set: params mu
-    "wheel_radius",  # real wheel radius scaled while the IK keeps the nominal one: params scale
-    "actuator",  # actuator weakened: params kv_scale and/or force_scale
-    "control_period",  # the plant holds each command factor * T: params factor
-    "sensor_delay",  # the measured pose is n control steps old: params steps
-)
-
-
-@dataclass(frozen=True)
-class Event:
-    """A change of the plant at ``time`` seconds (controller clock), unknown to the controller."""
-
-    time: float
-    kind: str
-    params: dict[str, float | int | str] = field(default_factory=dict)
-
-    def describe(self) -> str:
-        args = ", ".join(f"{k}={v}" for k, v in sorted(self.params.items()))
-        return f"{self.kind}({args}) at {self.time:g} s"
+from mlpfac.events import Event
 
 
 class Plant(Protocol):

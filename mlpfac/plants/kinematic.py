@@ -14,13 +14,15 @@ import numpy as np
 
 from mlpfac.error_model import G_true, f_true, h_true, pose_from_error, tracking_error
 from mlpfac.estimators import covariance
+from mlpfac.events import Event
 from mlpfac.exceptions import ConfigError
-from mlpfac.plants.base import Event
 
 
 @dataclass(frozen=True)
 class KinematicConfig:
-    noise_cov: float | tuple[float, ...] = 1e-6  # covariance R of eps_k (scalar: R I_3)
+    noise_cov: float | tuple[float, ...] | tuple[tuple[float, ...], ...] = (
+        1e-6  # covariance of eps_k: scalar (R I_3), diagonal or 3x3
+    )
 
     def __post_init__(self) -> None:
         covariance(self.noise_cov, 3, "noise_cov")
@@ -68,7 +70,6 @@ class KinematicPlant:
                 where,
                 f"the kinematic plant cannot apply a {event.kind!r} event (it supports {', '.join(sorted(self.supported_events))})",
             )
-        check_timing_event(event, where)
 
     def apply(self, event: Event) -> str:
         if event.kind == "control_period":
@@ -96,15 +97,3 @@ class KinematicPlant:
                 "rgba": [0.3, 0.5, 0.8, 1],
             },
         ]
-
-
-def check_timing_event(event: Event, where: str) -> None:
-    """Parameters of the two events every plant supports: control_period and sensor_delay."""
-    if event.kind == "control_period":
-        factor = event.params.get("factor")
-        if not isinstance(factor, int | float) or not factor > 0:
-            raise ConfigError(f"{where} factor", f"control_period needs a positive 'factor', got {factor!r}")
-    elif event.kind == "sensor_delay":
-        steps = event.params.get("steps")
-        if not isinstance(steps, int) or steps < 0:
-            raise ConfigError(f"{where} steps", f"sensor_delay needs a whole number of 'steps' >= 0, got {steps!r}")

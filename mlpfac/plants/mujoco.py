@@ -22,30 +22,23 @@ derived quantity (site pose, ``cvel``, sensors) belongs to the current state.
 
 from __future__ import annotations
 
+import functools
+import hashlib
+import importlib.resources
 import math
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import mujoco
 import numpy as np
 
+from mlpfac.events import EVENT_KINDS, Event
 from mlpfac.exceptions import ConfigError
 from mlpfac.kinematics import body_velocity, wheel_speeds
-from mlpfac.plants.base import EVENT_KINDS, Event
-from mlpfac.plants.kinematic import check_timing_event
 
-ROOT = Path(__file__).resolve().parents[2]  # the repository: relative model paths start here
 SETTLE_S = 0.5  # seconds the robot settles on its wheels at construction (the rest pose)
 DIVERGENCE_WARNINGS = ("mjWARN_BADQPOS", "mjWARN_BADQVEL", "mjWARN_BADQACC")  # MuJoCo resets the data on these
-EVENT_PARAMS = {
-    "payload": ("mass_scale", "mass_kg", "body"),
-    "friction": ("mu",),
-    "wheel_radius": ("scale",),
-    "actuator": ("kv_scale", "force_scale"),
-    "control_period": ("factor",),
-    "sensor_delay": ("steps",),
-}
 SHAPES = {
     int(mujoco.mjtGeom.mjGEOM_BOX): "box",
     int(mujoco.mjtGeom.mjGEOM_CYLINDER): "cylinder",
@@ -62,11 +55,35 @@ def _positive(name: str, value, optional: bool = False) -> None:
         raise ConfigError(name, f"must be a positive number, got {value!r}")
 
 
+def shipped_model() -> str:
+    """The shipped robot's scene (models/scene.xml, installed as package data mlpfac.models)."""
+    return str(importlib.resources.files("mlpfac.models") / "scene.xml")
+
+
+@functools.lru_cache(maxsize=64)
+def _fingerprint(path: str, stamp: tuple[int, int]) -> str:
+    spec = mujoco.MjSpec.from_file(path)
+    model = spec.compile()
+    buf = np.empty(mujoco.mj_sizeModel(model), np.uint8)
+    mujoco.mj_saveModel(model, None, buf)
+    return hashlib.sha256(buf.tobytes()).hexdigest()
+
+
+def model_fingerprint(path: Path) -> str:
+    """sha256 of the compiled model (MuJoCo's binary MJB): what is simulated, included files and
+    meshes too. Cached per file and modification time within a process."""
+    st = path.stat()
+    try:
+        return _fingerprint(str(path), (st.st_mtime_ns, st.st_size))
+    except ValueError as err:
+        raise ConfigError(str(path), f"MuJoCo cannot load the model: {err}") from None
+
+
 @dataclass(frozen=True)
 class MujocoConfig:
     """The robot and its drive. Defaults are the shipped robot (models/README.md)."""
 
-    model: str = "models/scene.xml"  # MJCF file; a relative path is taken from the repository root
+    model: str = field(default_factory=shipped_model)  # MJCF file; a scenario file resolves it from its folder
     actuator: str = "velocity"  # "velocity": the model's velocity servos; "torque": torque motors + PI here
     left_actuator: str = "left_wheel"  # velocity servo (<velocity kv forcerange>) on the left wheel's hinge
     right_actuator: str = "right_wheel"
@@ -96,9 +113,8 @@ class MujocoConfig:
 
     @property
     def path(self) -> Path:
-        """The model file, relative paths resolved from the repository root."""
-        p = Path(self.model)
-        return p if p.is_absolute() else ROOT / p
+        """The model file (a scenario file's relative path was resolved from its folder when it was loaded)."""
+        return Path(self.model).absolute()
 
     def noise_std(self) -> np.ndarray | None:
         """(3,) standard deviations of the pose noise, or None when there is none."""
@@ -448,40 +464,34 @@ class MujocoPlant:
     def geometry(self) -> list[dict]:
         return self._geometry
 
+    def provenance(self) -> dict:
+        """What is simulated, for config.toml: the model file and the hash of the compiled model, and
+        the geometry, limits and timing read from it."""
+        m, (tl, tr) = self.model, self._torque_max
+        return {
+            "model": str(self.config.path),
+            "model_sha256": model_fingerprint(self.config.path),
+            "mujoco": mujoco.__version__,
+            "timestep_s": float(m.opt.timestep),
+            "substeps": self.n_substeps,
+            "wheel_radius_m": self.real_radius,
+            "track_m": self._real_track,
+            "ik_wheel_radius_m": float(self.ik_radius),
+            "ik_track_m": float(self.ik_track),
+            "torque_limit_Nm": [float(tl), float(tr)] if math.isfinite(tl + tr) else "none",
+            "mass_kg": float(m.body_subtreemass[self._root]),
+        }
+
     # --- events ----------------------------------------------------------------------------------
 
     def check_event(self, event: Event, where: str) -> None:
+        """What this robot needs to apply ``event`` (its parameters were checked when it was parsed)."""
         kind, params = event.kind, event.params
-        if kind not in EVENT_PARAMS:
-            raise ConfigError(where, f"unknown event kind {kind!r}; choose one of {', '.join(EVENT_PARAMS)}")
-        for key in params:
-            if key not in EVENT_PARAMS[kind]:
-                raise ConfigError(
-                    f"{where} {key}", f"not a parameter of a {kind!r} event (it takes {', '.join(EVENT_PARAMS[kind])})"
-                )
-        if kind in ("control_period", "sensor_delay"):
-            check_timing_event(event, where)
-            if kind == "control_period":
-                self._substeps(float(params["factor"]) * self.T, f"{where} factor")
-            return
-        if kind == "payload":
-            if ("mass_scale" in params) == ("mass_kg" in params):
-                raise ConfigError(
-                    where, "a payload event takes either 'mass_scale' or 'mass_kg' (not both, not neither)"
-                )
-            for key in ("mass_scale", "mass_kg"):
-                if key in params:
-                    _positive(f"{where} {key}", params[key])
+        if kind == "control_period":
+            self._substeps(float(params["factor"]) * self.T, f"{where} factor")
+        elif kind == "payload":
             self._payload_body(params, where)
-        elif kind == "actuator":
-            if not params:
-                raise ConfigError(where, "an actuator event needs 'kv_scale' and/or 'force_scale'")
-        elif len(params) != 1:
-            raise ConfigError(where, f"a {kind!r} event needs {EVENT_PARAMS[kind][0]!r}")
-        for key in ("mu", "scale", "kv_scale", "force_scale"):
-            if key in params:
-                _positive(f"{where} {key}", params[key])
-        if kind == "friction":
+        elif kind == "friction":
             m = self.model
             others = [g for g in range(m.ngeom) if m.body_rootid[m.geom_bodyid[g]] != self._root]
             floor = max((int(m.geom_priority[g]) for g in others), default=-1)

@@ -1,0 +1,1 @@
+"""The shipped robot (MJCF): package data read through importlib.resources; see README.md here."""
