@@ -22,7 +22,6 @@ derived quantity (site pose, ``cvel``, sensors) belongs to the current state.
 
 from __future__ import annotations
 
-import functools
 import hashlib
 import importlib.resources
 import math
@@ -60,23 +59,16 @@ def shipped_model() -> str:
     return str(importlib.resources.files("mlpfac.models") / "scene.xml")
 
 
-@functools.lru_cache(maxsize=64)
-def _fingerprint(path: str, stamp: tuple[int, int]) -> str:
-    spec = mujoco.MjSpec.from_file(path)
-    model = spec.compile()
+def model_fingerprint(path: Path) -> str:
+    """sha256 of the compiled model (MuJoCo's binary MJB): what is simulated, included files and
+    meshes too. Compiled afresh each time: a file that changed is never mistaken for the old one."""
+    try:
+        model = mujoco.MjSpec.from_file(str(path)).compile()
+    except ValueError as err:
+        raise ConfigError(str(path), f"MuJoCo cannot load the model: {err}") from None
     buf = np.empty(mujoco.mj_sizeModel(model), np.uint8)
     mujoco.mj_saveModel(model, None, buf)
     return hashlib.sha256(buf.tobytes()).hexdigest()
-
-
-def model_fingerprint(path: Path) -> str:
-    """sha256 of the compiled model (MuJoCo's binary MJB): what is simulated, included files and
-    meshes too. Cached per file and modification time within a process."""
-    st = path.stat()
-    try:
-        return _fingerprint(str(path), (st.st_mtime_ns, st.st_size))
-    except ValueError as err:
-        raise ConfigError(str(path), f"MuJoCo cannot load the model: {err}") from None
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,189 @@
+"""Every bad input we know of: one line on stderr naming the file, key or flag, exit code 2, no
+traceback, and nothing written. Add a row for each new case found."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from mlpfac.cli import main
+
+MINIMAL = 'duration = 0.5\n[plant]\nkind = "kinematic"\n'
+EVENT = '[[events]]\ntime = 0.2\nkind = "control_period"\nfactor = 1.5\n'
+ROBOT = '[plant]\nkind = "mujoco"\n'
+
+# name: (file content, text the message must hold). The file's path must appear in the message too.
+BAD_FILES: dict[str, tuple[str | bytes, str]] = {
+    "binary": (b"\x00\x01\x02\xff\xfe" * 10, "not a text file"),
+    "latin-1": ('name = "caf\xe9"\n'.encode("latin-1"), "not a text file"),
+    "not toml": ("duration = = 3\n", "not valid TOML"),
+    "unknown top key": ("durations = 3\n", "durations"),
+    "duration string": ('duration = "long"\n', "duration"),
+    "duration inf": ("duration = inf\n", "duration"),
+    "T zero": ("T = 0.0\n", "T"),
+    "T nan": ("T = nan\n", "T"),
+    "duration below T": ("duration = 0.001\n", "shorter than one control period"),
+    "duration huge": ("duration = 1e9\n", "GiB"),
+    "T tiny": ("T = 1e-12\n", "GiB"),
+    "seed negative": ("seed = -1\n", "seed"),
+    "seed float": ("seed = 1.5\n", "seed"),
+    "name with a slash": ('name = "../../etc"\n', "name"),
+    "name empty": ('name = ""\n', "name"),
+    "description table": ("[description]\nx = 1\n", "description"),
+    "reference a string": ('reference = "eight"\n', "reference"),
+    "reference kind": ('[reference]\nkind = "spiral"\n', "spiral"),
+    "reference bool param": ('[reference]\nkind = "eight"\na = true\n', "[reference] a"),
+    "initial error short": ("[initial]\nerror = [0.1]\n", "error"),
+    "initial error text": ('[initial]\nerror = ["a", 0.0, 0.0]\n', "error"),
+    "initial moving": ('[initial]\nmoving = "yes"\n', "moving"),
+    "plant a list": ("plant = [1, 2]\n", "plant"),
+    "plant kind": ('[plant]\nkind = "hovercraft"\n', "hovercraft"),
+    "noise negative": ('[plant]\nkind = "kinematic"\nnoise_cov = -1e-6\n', "noise_cov"),
+    "controller name": ('[controller]\nname = "pid"\n', "pid"),
+    "lambda outside": ("[controller]\nlambdas = [0.8, 1.1, 0.8]\n", "lambdas"),
+    "lambda text": ('[controller]\nlambdas = [0.8, "x", 0.8]\n', "lambdas"),
+    "v_max negative": ("[controller]\nv_max = -1.0\n", "v_max"),
+    "v_max nan": ("[controller]\nv_max = nan\n", "v_max"),
+    "L_f float": ("[controller.adaptive]\nL_f = 18.5\n", "L_f"),
+    "L_f zero": ("[controller.adaptive]\nL_f = 0\n", "L_f"),
+    "L_f huge": ("[controller.adaptive]\nL_f = 100000\n", "GiB"),
+    "P0 inf": ("[controller.adaptive]\nP0 = inf\n", "P0"),
+    "R negative": ("[controller.adaptive]\nR = -1.0\n", "R"),
+    "estimator": ('[controller.adaptive]\nestimator = "pf"\n', "estimator"),
+    "prior text": ('[controller.adaptive]\nprior = "yes"\n', "prior"),
+    "kanayama gain": ("[controller.kanayama]\nKx = -1.0\n", "Kx"),
+    "events not tables": ("events = [1, 2]\n", "events"),
+    "events a table": ("[events]\ntime = 1\n", "events"),
+    "event time negative": ('[[events]]\ntime = -1.0\nkind = "control_period"\nfactor = 1.5\n', "time"),
+    "event time inf": ('[[events]]\ntime = inf\nkind = "control_period"\nfactor = 1.5\n', "time"),
+    "event beyond the run": ('duration = 1.0\n[[events]]\ntime = 5.0\nkind = "control_period"\nfactor = 1.5\n', "never happen"),
+    "event kind": ('[[events]]\ntime = 1.0\nkind = "teleport"\n', "teleport"),
+    "event stray param on kinematic": (MINIMAL + EVENT + "colour = 1\n", "colour"),
+    "event factor negative": (MINIMAL + '[[events]]\ntime = 0.2\nkind = "control_period"\nfactor = -1.0\n', "factor"),
+    "event steps float": (MINIMAL + '[[events]]\ntime = 0.2\nkind = "sensor_delay"\nsteps = 1.5\n', "steps"),
+    "event missing param": (MINIMAL + '[[events]]\ntime = 0.2\nkind = "control_period"\n', "factor"),
+    "event not on kinematic": (MINIMAL + '[[events]]\ntime = 0.2\nkind = "friction"\nmu = 0.2\n', "kinematic plant cannot"),
+    "friction negative": (ROBOT + '[[events]]\ntime = 0.2\nkind = "friction"\nmu = -1.0\n', "mu"),
+    "payload body": (ROBOT + '[[events]]\ntime = 0.2\nkind = "payload"\nmass_scale = 2.0\nbody = "trailer"\n', "trailer"),
+    "control period not whole steps": (ROBOT + '[[events]]\ntime = 0.2\nkind = "control_period"\nfactor = 1.3\n', "whole number"),
+    "model missing": ('[plant]\nkind = "mujoco"\nmodel = "nope.xml"\n', "not found"),
+    "model not mjcf": ('[plant]\nkind = "mujoco"\nmodel = "scenario.toml"\n', "MuJoCo cannot load"),
+    "actuator name": ('[plant]\nkind = "mujoco"\nleft_actuator = "nosuch"\n', "[plant] left_actuator"),
+    "site name": ('[plant]\nkind = "mujoco"\nsite = "nosuch"\n', "[plant] site"),
+    "T not whole physics steps": ('T = 0.011\n[plant]\nkind = "mujoco"\n', "[plant] T"),
+    "pose noise negative": ('[plant]\nkind = "mujoco"\npose_noise_std = -0.001\n', "pose_noise_std"),
+    "provenance of another model": ('[plant]\nkind = "mujoco"\n[provenance]\nmodel_sha256 = "0"\n', "model_sha256"),
+    "provenance a string": ('provenance = "x"\n', "provenance"),
+}  # fmt: skip
+
+
+@pytest.mark.parametrize("case", sorted(BAD_FILES))
+def test_bad_scenario_file(tmp_path, capsys, case):
+    text, needle = BAD_FILES[case]
+    path = tmp_path / "scenario.toml"
+    path.write_bytes(text if isinstance(text, bytes) else text.encode())
+    out = tmp_path / "out"
+    assert main(["run", str(path), "--no-log", "--no-plot", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and err.startswith("mlpfac: error: "), err
+    assert needle in err and str(path) in err, err
+    assert not out.exists()
+
+
+# flags: (argv after "run", text the message must hold)
+BAD_FLAGS = {
+    "duration zero": (["paper", "--duration", "0"], "--duration"),
+    "duration tiny": (["paper", "--duration", "1e-9"], "--duration"),
+    "duration nan": (["paper", "--duration", "nan"], "--duration"),
+    "duration inf": (["paper", "--duration", "inf"], "--duration"),
+    "duration huge": (["paper", "--duration", "1e9"], "--duration"),
+    "seed negative": (["paper", "--seed", "-3"], "--seed"),
+    "controller": (["paper", "--controller", "pid"], "--controller"),
+    "baseline": (["paper", "--baseline", "nosuch"], "--baseline"),
+    "no such scenario": (["no-such-scenario"], "no such scenario"),
+    "scenario file missing": (["missing.toml"], "not found"),
+    "scenario is a folder": (["sims.toml"], "folder"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD_FLAGS))
+def test_bad_flag(tmp_path, capsys, monkeypatch, case):
+    argv, needle = BAD_FLAGS[case]
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "sims.toml").mkdir()
+    assert main(["run", *argv, "--no-log", "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and needle in err, err
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_bad_file_from_the_command_line_has_no_traceback(tmp_path):
+    path = tmp_path / "bad.toml"
+    path.write_bytes(b"\xff\xfe\x00binary")
+    proc = subprocess.run(
+        [sys.executable, "-m", "mlpfac.cli", "run", str(path), "--no-log"], capture_output=True, text=True
+    )
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr
+    assert proc.stderr.strip() == f"mlpfac: error: {path}: not a text file (TOML is UTF-8 text)"
+
+
+def test_a_minimal_mujoco_file_runs_bounded_on_the_default_robot(tmp_path):
+    """The tuned configuration is the built-in default: [plant] kind = "mujoco" alone tracks the eight."""
+    path = tmp_path / "minimal.toml"
+    path.write_text(ROBOT)
+    out = tmp_path / "out"
+    assert main(["run", str(path), "--duration", "6", "--no-log", "--no-plot", "--out", str(out)]) == 0
+    import json
+
+    m = json.loads((out / "metrics.json").read_text())
+    assert m["status"] == "ok" and m["phases"]["before"]["rms_position_error_m"] < 0.2
+
+
+def test_a_custom_robot_reruns_from_its_config_toml(tmp_path, monkeypatch):
+    """A relative model path is taken from the TOML's folder, whatever the working folder; config.toml
+    records the resolved path and the compiled model's hash and re-runs to the same metrics; a changed
+    model is refused, not silently simulated."""
+    import json
+    import shutil
+
+    from mlpfac.scenario import shipped_dir
+
+    robot = tmp_path / "robots"
+    shutil.copytree(shipped_dir().parent / "models", robot)
+    (robot / "diffdrive.xml").write_text((robot / "diffdrive.xml").read_text().replace('size="0.05"', 'size="0.06"', 1))
+    scen = tmp_path / "exp" / "mine.toml"
+    scen.parent.mkdir()
+    scen.write_text('duration = 1.0\n[plant]\nkind = "mujoco"\nmodel = "../robots/scene.xml"\npose_noise_std = 0.001\n')
+    monkeypatch.chdir(tmp_path / "robots")  # somewhere else: the path is the file's, not the shell's
+    first, again = tmp_path / "a", tmp_path / "b"
+    assert main(["run", "../exp/mine.toml", "--no-log", "--no-plot", "--out", str(first)]) == 0
+    config = (first / "config.toml").read_text()
+    assert f'model = "{robot / "scene.xml"}"' in config and "model_sha256" in config
+    assert main(["run", str(first / "config.toml"), "--no-log", "--no-plot", "--out", str(again)]) == 0
+    a, b = (json.loads((d / "metrics.json").read_text()) for d in (first, again))
+    for key in ("rms_position_error_m", "max_position_error_m", "rms_heading_error_rad", "max_abs_weight"):
+        assert a[key] == b[key]
+    (robot / "diffdrive.xml").write_text((robot / "diffdrive.xml").read_text().replace('size="0.06"', 'size="0.05"', 1))
+    assert main(["run", str(first / "config.toml"), "--no-log", "--no-plot", "--out", str(tmp_path / "c")]) == 2
+
+
+def test_config_toml_round_trips(tmp_path):
+    """What config.toml says is the table that was run: every shipped scenario, read back, is equal."""
+    import tomllib
+
+    from mlpfac.scenario import load, scenario_names, to_toml
+
+    for name in scenario_names():
+        table = load(name).table
+        assert tomllib.loads(to_toml(table)) == table, name
+
+
+def test_shipped_scenarios_resolve_inside_the_package():
+    from mlpfac.scenario import load, shipped_dir
+
+    scn = load("eight-nominal")
+    assert Path(scn.plant_config.model).is_file() and Path(scn.plant_config.model).parent.name == "models"
+    assert (shipped_dir() / "eight-nominal.toml").is_file()
