@@ -117,6 +117,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     that replaces it only when whole (see :class:`mlpfac.outputs.Stage`), under --out's lock."""
     from contextlib import nullcontext
 
+    from mlpfac.exceptions import ConfigError
     from mlpfac.outputs import Stage, check_run_folder, check_save_file, folder_lock, holds_finished_run
     from mlpfac.runner import build
     from mlpfac.scenario import load
@@ -127,8 +128,12 @@ def cmd_run(args: argparse.Namespace) -> int:
         baseline = scn.with_overrides(controller=args.baseline)
     out = args.out or Path("runs") / f"{scn.name}-{scn.controller}-s{scn.seed}"
     check_run_folder(out)
+    if args.save is not None and args.save.absolute() == (out / "run.rrd").absolute():
+        args.save = None  # where the recording goes anyway
     if args.save is not None:
         check_save_file(args.save)
+        if out.absolute() in args.save.absolute().parents:
+            raise ConfigError(f"--save {args.save}", f"is inside --out {out}, which a run replaces whole")
     built = build(scn)
     with (
         folder_lock(out, "--out"),

@@ -108,6 +108,7 @@ BAD_OUTPUTS = {
     "save_to_dev_full": (["--out", "{tmp}/run", "--save", "/dev/full"], "--save /dev/full: is not a regular file"),
     "save_in_proc": (["--out", "{tmp}/run", "--save", "/proc/mlpfac/run.rrd"], "--save /proc/mlpfac/run.rrd"),
     "save_under_a_file": (["--out", "{tmp}/run", "--save", "{tmp}/a_file/x.rrd"], "a_file is a file"),
+    "save_inside_out": (["--out", "{tmp}/run", "--save", "{tmp}/run/other.rrd"], "is inside --out"),
     "connect_nobody": (["--out", "{tmp}/run", "--connect", "rerun+http://127.0.0.1:1/proxy"], "no rerun viewer"),
     "connect_bad_url": (["--out", "{tmp}/run", "--connect", "http://127.0.0.1:9876"], "a viewer URL looks like"),
     "missing_actuator": (["sims/bad.toml", "--out", "{tmp}/run"], "no actuator named 'nosuch'"),
