@@ -16,7 +16,7 @@ import stat
 import tempfile
 import threading
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 from pathlib import Path
 
 
@@ -90,7 +90,7 @@ def folder_lock(target: Path, what: str = "--out") -> Iterator[None]:
     from mlpfac.exceptions import ConfigError
 
     where = f"{what} {target}"
-    target = Path(target).absolute()
+    target = Path(target).resolve()  # one folder, one lock, whatever name it is reached by
     lock = target.parent / f".{target.name}.lock"
     try:
         target.parent.mkdir(parents=True, exist_ok=True)
@@ -198,7 +198,7 @@ class Stage:
     Entering also removes ``.NAME.tmp-*`` left by a killed run: hold :func:`folder_lock` first."""
 
     def __init__(self, target: Path, what: str, folder: bool = True) -> None:
-        self.target = Path(target).absolute()
+        self.target = Path(target).resolve()  # a symlink's folder is replaced, not the link
         self.what = what
         self.folder = folder
         self.path: Path | None = None
@@ -232,8 +232,15 @@ class Stage:
             return str(path)
 
     def commit(self) -> None:
+        from mlpfac.exceptions import ConfigError
+
         with sigint_deferred():
-            _replace(self.path, self.target)
+            try:
+                _replace(self.path, self.target)
+            except OSError as err:
+                raise ConfigError(
+                    f"{self.what} {self.target}", f"cannot put the new version in place ({err.strerror or err})"
+                ) from None
             self.path = None
 
     def __exit__(self, *exc) -> None:
@@ -244,10 +251,12 @@ class Stage:
 
 
 def _remove(path: Path) -> None:
+    """Best effort: a temporary that cannot be removed now is removed by the next run."""
     if path.is_dir() and not path.is_symlink():
         shutil.rmtree(path, ignore_errors=True)
     else:
-        path.unlink(missing_ok=True)
+        with suppress(OSError):
+            path.unlink(missing_ok=True)
 
 
 def _replace(new: Path, target: Path) -> None:

@@ -254,3 +254,23 @@ def test_view_reports_a_viewer_that_does_not_start(tmp_path, monkeypatch, capsys
     assert main(["view", str(tmp_path / "run")]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and needle in err
+
+
+def test_spawn_without_a_working_display_is_one_line(tmp_path, monkeypatch, capsys):
+    from mlpfac import sinks
+
+    monkeypatch.setenv("DISPLAY", ":97")  # no X server there: the viewer exits at once
+    monkeypatch.setattr(sinks, "SPAWN_PORT", free_port())
+    out = tmp_path / "run"
+    assert main(["run", "paper", "--duration", "0.3", "--no-plot", "--out", str(out), "--spawn"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "--spawn: the rerun viewer exited at once" in err
+    assert not out.exists() and leftovers(tmp_path) == []
+
+
+def test_a_symlinked_out_replaces_the_folder_it_names(tmp_path):
+    real = tmp_path / "real"
+    earlier_run(real)
+    (tmp_path / "link").symlink_to(real)
+    assert main(["run", "paper", "--duration", "0.5", "--no-plot", "--out", str(tmp_path / "link")]) == 0
+    assert (tmp_path / "link").is_symlink() and json.loads((real / "metrics.json").read_text())["steps"] == 50
