@@ -115,10 +115,8 @@ def cmd_list() -> int:
 def cmd_run(args: argparse.Namespace) -> int:
     """Check everything, build the plant and the controller, then run into a folder beside --out
     that replaces it only when whole (see :class:`mlpfac.outputs.Stage`), under --out's lock."""
-    from contextlib import nullcontext
-
     from mlpfac.exceptions import ConfigError
-    from mlpfac.outputs import Stage, check_run_folder, check_save_file, folder_lock, holds_finished_run
+    from mlpfac.outputs import check_run_folder, check_save_file
     from mlpfac.runner import build
     from mlpfac.scenario import load
 
@@ -134,7 +132,15 @@ def cmd_run(args: argparse.Namespace) -> int:
         check_save_file(args.save)
         if out.absolute() in args.save.absolute().parents:
             raise ConfigError(f"--save {args.save}", f"is inside --out {out}, which a run replaces whole")
-    built = build(scn)
+    return _run_staged(args, scn, out, build(scn), baseline)
+
+
+def _run_staged(args: argparse.Namespace, scn, out: Path, built, baseline) -> int:
+    """Under the locks of --out (and --save): run into the stages, then put them in place."""
+    from contextlib import nullcontext
+
+    from mlpfac.outputs import Stage, folder_lock, holds_finished_run
+
     with (
         folder_lock(out, "--out"),
         folder_lock(args.save, "--save") if args.save else nullcontext(),
@@ -142,12 +148,13 @@ def cmd_run(args: argparse.Namespace) -> int:
         Stage(args.save, "--save", folder=False) if args.save else nullcontext() as saved,
     ):
         held = holds_finished_run(out), args.save is not None and holds_finished_run(args.save)
+        saving = not (args.no_log or args.spawn or args.connect or args.serve)
         rrd_path = saved.path if saved else folder.path / "run.rrd"
         rrd_shown = args.save if saved else out / "run.rrd"
-        sink = _open_sink(args, scn, None if (args.spawn or args.connect or args.serve) else (rrd_path, rrd_shown))
+        sink = _open_sink(args, scn, (rrd_path, rrd_shown) if saving else None)
         try:
             rec, m = _run_into(folder, out, scn, built, sink, baseline)
-            if sink is not None and not sink.serving:
+            if saving:
                 from mlpfac.sinks import check_recording
 
                 check_recording(rrd_path, rrd_shown)
@@ -155,11 +162,11 @@ def cmd_run(args: argparse.Namespace) -> int:
             if sink is not None:
                 sink.close()  # a web viewer started for --serve stops with the run
             raise
-        if rec.status == "interrupted" and any(held):
-            print(
-                f"mlpfac: {rec.reason}; {out} still holds its earlier run, the interrupted one was discarded",
-                file=sys.stderr,
-            )
+        if rec.status == "interrupted" and any(held):  # the stage is removed on leaving the block
+            if sink is not None:
+                sink.close()
+            kept = " and ".join(str(p) for p, h in zip((out, args.save), held, strict=True) if h)
+            print(f"mlpfac: {rec.reason}; {kept} kept the earlier run, this one was discarded", file=sys.stderr)
             return _interrupt_code(rec)
         if saved:
             saved.commit()

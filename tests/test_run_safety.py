@@ -274,3 +274,25 @@ def test_a_symlinked_out_replaces_the_folder_it_names(tmp_path):
     (tmp_path / "link").symlink_to(real)
     assert main(["run", "paper", "--duration", "0.5", "--no-plot", "--out", str(tmp_path / "link")]) == 0
     assert (tmp_path / "link").is_symlink() and json.loads((real / "metrics.json").read_text())["steps"] == 50
+
+
+def test_connect_streams_to_a_running_viewer_and_keeps_no_file(tmp_path):
+    from mlpfac.sinks import rerun_executable
+
+    port = free_port()
+    server = subprocess.Popen(
+        [rerun_executable(), "--serve-grpc", "--bind", "127.0.0.1", "--port", str(port)],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    try:
+        deadline = time.monotonic() + 20
+        while not listening_addresses(port) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        out = tmp_path / "run"
+        url = f"rerun+http://127.0.0.1:{port}/proxy"
+        assert main(["run", "paper", "--duration", "0.3", "--no-plot", "--out", str(out), "--connect", url]) == 0
+        assert sorted(files(out)) == ["config.toml", "metrics.json"]
+    finally:
+        server.terminate()
+        server.wait()
