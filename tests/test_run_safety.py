@@ -296,3 +296,22 @@ def test_connect_streams_to_a_running_viewer_and_keeps_no_file(tmp_path):
     finally:
         server.terminate()
         server.wait()
+
+
+@pytest.mark.parametrize("exchange", [True, False], ids=["renameat2", "rename-aside"])
+def test_a_stage_replaces_a_full_folder_whole(tmp_path, monkeypatch, exchange):
+    from mlpfac import outputs
+
+    if not exchange:
+        monkeypatch.setattr(outputs, "_exchange", lambda a, b: False)
+    target = tmp_path / "run"
+    target.mkdir()
+    (target / "metrics.json").write_text("old")
+    (target / "run.rrd").write_text("old")
+    with outputs.Stage(target, "--out") as stage:
+        (stage.path / "metrics.json").write_text("new")
+        stage.commit()
+    assert files(target) == {"metrics.json": b"new"} and leftovers(tmp_path) == []
+    with outputs.Stage(target, "--out") as stage:
+        (stage.path / "metrics.json").write_text("discarded")
+    assert files(target) == {"metrics.json": b"new"} and leftovers(tmp_path) == []
