@@ -1,7 +1,8 @@
 """The command line: mlpfac run / list / compare / sweep / view.
 
 Arguments are parsed before any heavy import; bad input prints one line and exits with code 2.
-Exit codes of ``run``: 0 ok, 1 the run diverged, 2 bad input, 130 interrupted.
+Exit codes of ``run``: 0 ok, 1 the run diverged, 2 bad input or a write that failed (nothing
+changed), 130 interrupted (Ctrl-C), 143 terminated (SIGTERM).
 """
 
 from __future__ import annotations
@@ -31,8 +32,12 @@ def _sink_args(p: argparse.ArgumentParser) -> None:
     x.add_argument(
         "--connect", metavar="URL", help="stream to a running viewer, e.g. rerun+http://127.0.0.1:9876/proxy"
     )
-    x.add_argument("--serve", action="store_true", help="serve a web viewer on 127.0.0.1")
+    x.add_argument("--serve", action="store_true", help="serve a web viewer on 127.0.0.1 (see --bind)")
     x.add_argument("--no-log", action="store_true", help="no recording")
+    g.add_argument("--bind", metavar="ADDRESS", default="127.0.0.1", help=BIND_HELP)
+
+
+BIND_HELP = "address the viewers started here listen on (default 127.0.0.1; 0.0.0.0 is every interface)"
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -62,6 +67,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("view", help="open saved runs in one rerun viewer")
     p.add_argument("runs", nargs="+", type=Path, help="run folders (each with a run.rrd)")
+    p.add_argument("--bind", metavar="ADDRESS", default="127.0.0.1", help=BIND_HELP)
     return parser
 
 
@@ -78,9 +84,9 @@ def main(argv: list[str] | None = None) -> int:
         if args.command == "list":
             return cmd_list()
         if args.command == "view":
-            from mlpfac import log
+            from mlpfac import sinks
 
-            log.view(args.runs)
+            sinks.view(args.runs, bind=args.bind)
             return 0
         from mlpfac import sweep
 
@@ -107,9 +113,11 @@ def cmd_list() -> int:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
+    """Check everything, build the plant and the controller, then run into a folder beside --out
+    that replaces it only when whole (see :class:`mlpfac.outputs.Stage`), under --out's lock."""
     from mlpfac.exceptions import ConfigError
-    from mlpfac.outputs import write_run
-    from mlpfac.runner import run
+    from mlpfac.outputs import check_run_folder, check_save_file
+    from mlpfac.runner import build
     from mlpfac.scenario import load
 
     scn = load(args.scenario).with_overrides(args.controller, args.seed, args.duration)
@@ -117,40 +125,117 @@ def cmd_run(args: argparse.Namespace) -> int:
     if args.baseline != "none" and not args.no_plot:
         baseline = scn.with_overrides(controller=args.baseline)
     out = args.out or Path("runs") / f"{scn.name}-{scn.controller}-s{scn.seed}"
-    out.mkdir(parents=True, exist_ok=True)
+    check_run_folder(out)
+    if args.save is not None and args.save.absolute() == (out / "run.rrd").absolute():
+        args.save = None  # where the recording goes anyway
+    if args.save is not None:
+        check_save_file(args.save)
+        if out.absolute() in args.save.absolute().parents:
+            raise ConfigError(f"--save {args.save}", f"is inside --out {out}, which a run replaces whole")
+    return _run_staged(args, scn, out, build(scn), baseline)
 
-    sink, sink_error = None, None
-    if not args.no_log:
-        from mlpfac import log
 
+def _run_staged(args: argparse.Namespace, scn, out: Path, built, baseline) -> int:
+    """Under the locks of --out (and --save): run into the stages, then put them in place."""
+    from contextlib import nullcontext
+
+    from mlpfac.outputs import Stage, folder_lock, holds_finished_run
+
+    with (
+        folder_lock(out, "--out"),
+        folder_lock(args.save, "--save") if args.save else nullcontext(),
+        Stage(out, "--out") as folder,
+        Stage(args.save, "--save", folder=False) if args.save else nullcontext() as saved,
+    ):
+        held = holds_finished_run(out), args.save is not None and holds_finished_run(args.save)
+        saving = not (args.no_log or args.spawn or args.connect or args.serve)
+        rrd_path = saved.path if saved else folder.path / "run.rrd"
+        rrd_shown = args.save if saved else out / "run.rrd"
+        sink = _open_sink(args, scn, (rrd_path, rrd_shown) if saving else None)
         try:
-            sink = log.make_sink(
-                save=None if (args.spawn or args.connect or args.serve) else (args.save or out / "run.rrd"),
-                spawn=args.spawn,
-                connect=args.connect,
-                serve=args.serve,
-                recording_name=f"{scn.name} / {scn.controller} / seed {scn.seed}",
-                recording_id=f"{scn.name}-{scn.controller}-{scn.seed}",
-            )
-        except ConfigError as err:
-            sink_error = err  # the run goes on without a recording; the error is reported at the end
+            rec, m = _run_into(folder, out, scn, built, sink, baseline)
+            if saving:
+                from mlpfac.sinks import check_recording
 
-    if sink is not None and args.serve:
-        print(f"web viewer: {sink.viewer_url}")
-    rec = run(scn, sink=sink)
-    m = write_run(out, scn, rec)
-    if baseline is not None and rec.status != "interrupted":
-        from mlpfac.plots import figure1
-
-        figure1(rec, run(baseline), out / "figure1.png")
+                check_recording(rrd_path, rrd_shown)
+        except BaseException:
+            if sink is not None:
+                sink.close()  # a web viewer started for --serve stops with the run
+            raise
+        if rec.status == "interrupted" and any(held):  # the stage is removed on leaving the block
+            if sink is not None:
+                sink.close()
+            kept = " and ".join(str(p) for p, h in zip((out, args.save), held, strict=True) if h)
+            print(f"mlpfac: {rec.reason}; {kept} kept the earlier run, this one was discarded", file=sys.stderr)
+            return _interrupt_code(rec)
+        if saved:
+            saved.commit()
+        folder.commit()
     _print_summary(m, out)
-    if sink_error is not None:
-        print(f"mlpfac: error: {sink_error} (no recording; metrics.json was written)", file=sys.stderr)
-        return EXIT_BAD_INPUT
-    if sink is not None and args.serve:
-        print("serving the recording; Ctrl-C stops the web viewer")
+    if sink is not None and sink.serving:
+        print("serving the recording; Ctrl-C stops the web viewer", flush=True)
         sink.wait()
-    return {"ok": 0, "diverged": 1}.get(rec.status, EXIT_INTERRUPTED)
+    return {"ok": 0, "diverged": 1}.get(rec.status) if rec.status != "interrupted" else _interrupt_code(rec)
+
+
+def _interrupt_code(rec) -> int:
+    return EXIT_TERMINATED if rec.reason.startswith("terminated") else EXIT_INTERRUPTED
+
+
+def _open_sink(args: argparse.Namespace, scn, save: tuple[Path, Path] | None):
+    """The sink the flags ask for; ``save``: (the file written, the name it will have)."""
+    if args.no_log:
+        return None
+    from mlpfac.exceptions import ConfigError
+
+    try:
+        return _make_sink(args, scn, save[0] if save else None)
+    except ConfigError as err:
+        if save is None or str(save[0]) not in err.where:
+            raise
+        raise ConfigError(err.where.replace(str(save[0]), str(save[1])), err.what) from None
+
+
+def _make_sink(args: argparse.Namespace, scn, save: Path | None):
+    from mlpfac import sinks
+
+    sink = sinks.make_sink(
+        save=save,
+        spawn=args.spawn,
+        connect=args.connect,
+        serve=args.serve,
+        recording_name=f"{scn.name} / {scn.controller} / seed {scn.seed}",
+        recording_id=f"{scn.name}-{scn.controller}-{scn.seed}",
+        bind=args.bind,
+    )
+    if sink is not None and args.serve:
+        print(f"web viewer: {sink.viewer_url}", flush=True)
+    return sink
+
+
+def _run_into(folder, out: Path, scn, built, sink, baseline) -> tuple:
+    """The run, then its folder (config.toml, metrics.json, figure1.png) in the stage. A write that
+    fails is a ConfigError naming the file where it would have gone."""
+    from mlpfac.exceptions import ConfigError
+    from mlpfac.outputs import Terminated, write_run
+    from mlpfac.runner import run
+
+    rec = run(scn, sink=sink, built=built)
+    writing = folder.path / "metrics.json"
+    try:
+        m = write_run(folder.path, scn, rec)
+        if baseline is not None and rec.status != "interrupted":
+            from mlpfac.plots import figure1
+
+            base = run(baseline)
+            if base.status == "interrupted":  # Ctrl-C while the figure's baseline ran
+                raise Terminated() if base.reason.startswith("terminated") else KeyboardInterrupt()
+            writing = folder.path / "figure1.png"
+            figure1(rec, base, writing)
+    except OSError as err:
+        name = folder.shown(err.filename or writing)
+        raise ConfigError(name, f"cannot write ({err.strerror or err}); nothing was changed in {out}") from None
+    return rec, m
 
 
 def _fmt(x: float | None, scale: float = 1.0, unit: str = "") -> str:

@@ -1,8 +1,8 @@
 """Logging a run to rerun: the robot in 3D, a top view, the tracking error, the commands, every
 network weight, the EKF's covariance, the plant events and the final status, with a default layout.
 
-This is the only module that imports rerun; import it lazily, so runs without logging do not pay
-rerun's import. The runner drives a sink like this::
+This module and :mod:`mlpfac.sinks` (which opens the sinks) are the only ones that import rerun;
+import them lazily, so runs without logging do not pay rerun's import. The runner drives a sink::
 
     sink = make_sink(save=run_dir / "run.rrd", recording_name=..., recording_id=...)  # None: no sink
     sink.begin(record, geometry=plant.geometry(), ref_path=record.ref)  # static scene
@@ -23,22 +23,19 @@ from __future__ import annotations
 
 import os
 import re
-import shutil
-import socket
-import subprocess
-import sys
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from pathlib import Path
-from urllib.parse import quote, urlsplit
 
 import numpy as np
 import pyarrow as pa
-import rerun as rr
+
+# rerun's file sink logs its own write errors (and keeps going); mlpfac reads the file back instead
+# (sinks.check_recording) and reports one line. An explicit RUST_LOG is left alone.
+os.environ.setdefault("RUST_LOG", "warn,re_log_encoding::rrd=off,re_sdk::recording_stream=off")
+import rerun as rr  # noqa: E402
 import rerun.blueprint as rrb
 
-from mlpfac.exceptions import ConfigError
 from mlpfac.record import RunRecord
 
 APPLICATION_ID = "mlpfac"
@@ -47,9 +44,6 @@ PATH_STRIDE = 25  # the driven path is re-sent every 25th step ...
 PATH_POINT_STRIDE = 5  # ... through every 5th pose
 BATCH_ROWS = 1000  # flush() sends once this many rows are pending ...
 BATCH_SECONDS = 1.0  # ... or this much wall time has passed since the last send
-SPAWN_PORT = 9876  # the native viewer's gRPC port, rerun's default
-SERVE_GRPC_PORT = 9876
-SERVE_WEB_PORT = 9090
 
 # Colours (RGB): the reference is orange, the robot's own path blue, e1/e2/e3 red/green/blue.
 REF_COLOR = (255, 160, 40)
@@ -106,129 +100,6 @@ class Series:
 
 
 # ----------------------------------------------------------------------------------------------
-# Opening a sink
-
-
-def make_sink(
-    save: Path | str | None = None,
-    spawn: bool = False,
-    connect: str | None = None,
-    serve: bool = False,
-    recording_name: str = "",
-    recording_id: str | None = None,
-) -> RerunSink | None:
-    """A sink for the outputs asked for, or None when none is. Bad outputs raise ConfigError now.
-
-    ``save``: write an .rrd file (the folder is created); ``spawn``: start (or reuse) a native
-    viewer on port 9876; ``connect``: stream to a running viewer at a ``rerun+http://.../proxy``
-    URL; ``serve``: host a web viewer on http://127.0.0.1:9090 (gRPC on 9876) while this process
-    lives -- see :meth:`RerunSink.wait`.
-    """
-    if save is None and not spawn and connect is None and not serve:
-        return None
-    # Check every output before anything starts, so a bad one costs nothing.
-    if connect is not None:
-        _check_reachable(connect)
-    if save is not None:
-        save = Path(save)
-        _check_writable(save)
-    if serve:
-        for port in (SERVE_GRPC_PORT, SERVE_WEB_PORT):
-            if _listening("127.0.0.1", port):
-                raise ConfigError("--serve", f"port {port} is in use; stop what listens there or use --save")
-    rec = rr.RecordingStream(APPLICATION_ID, recording_id=recording_id, send_properties=False)
-    rec.set_log_time_enabled(False)  # no wall clock in the data: same run, same contents
-    rec.set_log_tick_enabled(False)
-    sinks: list = [rr.FileSink(save)] if save is not None else []
-    urls = [connect] if connect is not None else []
-    if spawn:
-        urls.append(_spawn_viewer(rec, SPAWN_PORT))
-    sinks += [rr.GrpcSink(url) for url in dict.fromkeys(urls)]  # --spawn and --connect may name one viewer
-    viewer_url = None
-    if serve:
-        server = rr.GrpcServerSink(bind_ip="127.0.0.1", port=SERVE_GRPC_PORT)
-        sinks.append(server)
-        rr.serve_web_viewer(web_port=SERVE_WEB_PORT, open_browser=False, connect_to=server.uri)
-        viewer_url = f"http://127.0.0.1:{SERVE_WEB_PORT}/?url={quote(server.uri, safe='')}"
-    rec.set_sinks(*sinks)
-    return RerunSink(rec, recording_name=recording_name, serving=serve, viewer_url=viewer_url)
-
-
-def _check_writable(path: Path) -> None:
-    where = str(path)
-    if path.is_dir():
-        raise ConfigError(where, "is a folder; --save needs a file name such as run.rrd")
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        with open(path, "wb"):
-            pass
-    except OSError as err:
-        raise ConfigError(where, f"cannot write the recording here ({err.strerror or err})") from None
-
-
-def _check_reachable(url: str) -> None:
-    parts = urlsplit(url)
-    if parts.scheme not in ("rerun", "rerun+http", "rerun+https") or parts.path != "/proxy":
-        raise ConfigError(url, "a viewer URL looks like rerun+http://127.0.0.1:9876/proxy")
-    try:
-        host, port = parts.hostname or "127.0.0.1", parts.port or (443 if parts.scheme == "rerun+https" else 9876)
-    except ValueError as err:
-        raise ConfigError(url, f"bad viewer URL ({err})") from None
-    if not _listening(host, port):
-        raise ConfigError(url, "no rerun viewer is listening there; start one with `rerun` or use --save")
-
-
-def _listening(host: str, port: int, timeout: float = 1.0) -> bool:
-    try:
-        with socket.create_connection((host, port), timeout=timeout):
-            return True
-    except OSError:
-        return False
-
-
-def _check_display(where: str) -> None:
-    if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
-        raise ConfigError(
-            where,
-            "no display for the native viewer (DISPLAY and WAYLAND_DISPLAY are unset); "
-            "use --save and `rerun --serve-web FILE` to view it in a browser",
-        )
-
-
-def rerun_executable() -> str:
-    """The rerun viewer binary installed with rerun-sdk (not its Python wrapper), else `rerun` on PATH."""
-    try:
-        import rerun_cli
-
-        exe = Path(rerun_cli.__file__).with_name("rerun.exe" if sys.platform.startswith("win") else "rerun")
-        if exe.is_file():
-            return str(exe)
-    except ImportError:
-        pass
-    exe = shutil.which("rerun")
-    if exe is None:
-        raise ConfigError("rerun", "the rerun viewer is not installed (pip install rerun-sdk)")
-    return exe
-
-
-def _spawn_viewer(rec: rr.RecordingStream, port: int) -> str:
-    """Start a native viewer listening on ``port`` (or reuse the one there); its URL."""
-    url = f"rerun+http://127.0.0.1:{port}/proxy"
-    if _listening("127.0.0.1", port):
-        return url  # a viewer is already running there: reuse it, as rerun's own spawn does
-    _check_display("--spawn")
-    try:
-        # rr.spawn waits until the viewer listens; it needs the recording (without one it does nothing).
-        rr.spawn(port=port, connect=False, executable_path=rerun_executable(), recording=rec)
-    except RuntimeError as err:
-        raise ConfigError("--spawn", f"could not start the rerun viewer: {str(err).splitlines()[0]}") from None
-    time.sleep(0.5)  # a viewer that cannot open a window listens for a moment, then exits
-    if not _listening("127.0.0.1", port):
-        raise ConfigError("--spawn", "the rerun viewer started and exited; use --save and open the file instead")
-    return url
-
-
-# ----------------------------------------------------------------------------------------------
 # The sink
 
 
@@ -250,6 +121,7 @@ class RerunSink:
         self.ref_path: np.ndarray | None = None
         self.ended = False
         self.closed = False
+        self.server = None  # a viewer process started for this sink (--serve), stopped by close()
 
     # -- the three calls of the runner ---------------------------------------------------------
 
@@ -376,6 +248,9 @@ class RerunSink:
         if not self.closed:
             self.closed = True
             self.rec.disconnect()
+            if self.server is not None and self.server.poll() is None:
+                self.server.terminate()
+                self.server.wait()
 
     def wait(self) -> None:
         """When serving: keep the web viewer up until Ctrl-C, then close. Otherwise return at once."""
@@ -721,24 +596,10 @@ def _bounds(xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return xy.min(axis=0), xy.max(axis=0)
 
 
-# ----------------------------------------------------------------------------------------------
-# Viewing saved runs
+def __getattr__(name: str):
+    """Opening sinks and viewers lives in :mod:`mlpfac.sinks`; ``log.make_sink`` and friends still work."""
+    if name in ("make_sink", "view", "rerun_executable", "check_recording"):
+        from mlpfac import sinks
 
-
-def view(run_dirs: Sequence[Path | str]) -> subprocess.Popen:
-    """Open one native rerun viewer with the run.rrd of each folder; returns the viewer process.
-
-    The viewer runs on its own (it outlives this process). Raises ConfigError for a folder
-    without run.rrd, or when there is no display.
-    """
-    files = []
-    for d in run_dirs:
-        d = Path(d)
-        f = d if d.suffix == ".rrd" and d.is_file() else d / "run.rrd"
-        if not f.is_file():
-            raise ConfigError(str(d), "no run.rrd in this folder")
-        files.append(str(f))
-    if not files:
-        raise ConfigError("view", "name at least one run folder")
-    _check_display("view")
-    return subprocess.Popen([rerun_executable(), *files], start_new_session=True)
+        return getattr(sinks, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

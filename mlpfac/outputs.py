@@ -1,17 +1,22 @@
-"""A run's folder: metrics.json, config.toml (the scenario as resolved), written atomically.
+"""A run's folder: metrics.json, config.toml (the scenario as resolved), written atomically; and
+:class:`Stage`, which writes a whole run folder (or a recording) beside its target and renames it
+into place only when it is whole, so a run never replaces a finished run by half of one.
 
 Only the standard library at import time: the sweep's parent process imports this module too.
 """
 
 from __future__ import annotations
 
+import errno
 import json
 import os
+import shutil
 import signal
+import stat
 import tempfile
 import threading
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 from pathlib import Path
 
 
@@ -24,8 +29,10 @@ def write_atomic(path: Path, data: str | bytes) -> None:
         with os.fdopen(fd, "wb") as fh:
             fh.write(data.encode() if isinstance(data, str) else data)
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as err:
         Path(tmp).unlink(missing_ok=True)
+        if isinstance(err, OSError) and err.filename != str(path):  # name the file, not its temporary
+            raise OSError(err.errno, err.strerror, str(path)) from err
         raise
 
 
@@ -82,22 +89,21 @@ def folder_lock(target: Path, what: str = "--out") -> Iterator[None]:
 
     from mlpfac.exceptions import ConfigError
 
-    target = Path(target).absolute()
+    where = f"{what} {target}"
+    target = Path(target).resolve()  # one folder, one lock, whatever name it is reached by
     lock = target.parent / f".{target.name}.lock"
     try:
         target.parent.mkdir(parents=True, exist_ok=True)
         fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o666 & ~_umask())
     except OSError as err:
-        raise ConfigError(
-            f"{what} {target}", f"cannot create its lock file {lock.name} ({err.strerror or err})"
-        ) from None
+        raise ConfigError(where, f"cannot write here ({err.strerror or err})") from None
     try:
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
             holder = os.pread(fd, 32, 0).decode(errors="replace").strip() or "?"
             raise ConfigError(
-                f"{what} {target}",
+                where,
                 f"another mlpfac process (pid {holder}) is writing into this folder; wait for it or choose another",
             ) from None
         os.ftruncate(fd, 0)
@@ -125,3 +131,164 @@ def write_run(out: Path, scn, rec) -> dict:
     m = metrics(rec)
     write_run_folder(out, to_toml(scn.table), m)
     return m
+
+
+# ----------------------------------------------------------------------------------------------
+# A run folder (or file) written beside its target, then renamed into place
+
+RUN_FILES = ("config.toml", "metrics.json", "figure1.png", "run.rrd")
+
+
+def check_run_folder(out: Path, what: str = "--out") -> None:
+    """Before anything is written: ``out`` may be missing, or a folder holding nothing but a run's
+    files (it is replaced whole); a file, or a folder with other files in it, is refused."""
+    from mlpfac.exceptions import ConfigError
+
+    where = f"{what} {out}"
+    _check_ancestors(out, where)
+    if out.exists() and not out.is_dir():
+        raise ConfigError(where, "is a file; name a folder (it is created)")
+    if out.is_dir():
+        try:
+            names = os.listdir(out)
+        except OSError as err:
+            raise ConfigError(where, f"cannot read this folder ({err.strerror or err})") from None
+        other = sorted(n for n in names if n not in RUN_FILES and not n.startswith(tuple(f".{f}." for f in RUN_FILES)))
+        if other:
+            raise ConfigError(
+                where, f"holds {other[0]!r}, not a run's file; a run replaces its whole folder: choose another"
+            )
+
+
+def check_save_file(path: Path, what: str = "--save") -> None:
+    """Before anything is written: ``path`` may be missing or a regular file (it is replaced)."""
+    from mlpfac.exceptions import ConfigError
+
+    _check_ancestors(path, f"{what} {path}")
+    if path.is_dir():
+        raise ConfigError(f"{what} {path}", "is a folder; name a file such as run.rrd")
+    if path.exists() and not stat.S_ISREG(path.stat().st_mode):
+        raise ConfigError(f"{what} {path}", "is not a regular file (a device or a pipe); name a file such as run.rrd")
+
+
+def _check_ancestors(path: Path, where: str) -> None:
+    from mlpfac.exceptions import ConfigError
+
+    for up in Path(path).absolute().parents:
+        if up.exists():
+            if not up.is_dir():
+                raise ConfigError(where, f"{up} is a file, not a folder")
+            return
+
+
+def holds_finished_run(out: Path) -> bool:
+    """A folder whose metrics.json says the run ended (ok or diverged), or a file that exists."""
+    if not out.is_dir():
+        return out.exists()
+    try:
+        return json.loads((out / "metrics.json").read_text()).get("status") != "interrupted"
+    except (OSError, ValueError, AttributeError):
+        return False
+
+
+class Stage:
+    """The new version of ``target`` (a run folder, or with ``folder=False`` a file), written at
+    ``.NAME.tmp-XXXX`` beside it (same folder, so renames are atomic). :meth:`commit` puts it in
+    place; leaving the ``with`` block without a commit removes it, and the target is untouched.
+    Entering also removes ``.NAME.tmp-*`` left by a killed run: hold :func:`folder_lock` first."""
+
+    def __init__(self, target: Path, what: str, folder: bool = True) -> None:
+        self.target = Path(target).resolve()  # a symlink's folder is replaced, not the link
+        self.what = what
+        self.folder = folder
+        self.path: Path | None = None
+
+    def __enter__(self) -> Stage:
+        from mlpfac.exceptions import ConfigError
+
+        parent, prefix = self.target.parent, f".{self.target.name}.tmp-"
+        try:
+            parent.mkdir(parents=True, exist_ok=True)
+            for name in os.listdir(parent):
+                if name.startswith(prefix):
+                    _remove(parent / name)
+            if self.folder:
+                self.path = Path(tempfile.mkdtemp(dir=parent, prefix=prefix))
+                os.chmod(self.path, 0o777 & ~_umask())
+            else:
+                fd, tmp = tempfile.mkstemp(dir=parent, prefix=prefix)
+                os.fchmod(fd, 0o666 & ~_umask())
+                os.close(fd)
+                self.path = Path(tmp)
+        except OSError as err:
+            raise ConfigError(f"{self.what} {self.target}", f"cannot write here ({err.strerror or err})") from None
+        return self
+
+    def shown(self, path: str | Path) -> str:
+        """A path inside the stage, named as it will be once in place (for messages)."""
+        try:
+            return str(self.target / Path(path).relative_to(self.path)) if self.folder else str(self.target)
+        except ValueError:
+            return str(path)
+
+    def commit(self) -> None:
+        from mlpfac.exceptions import ConfigError
+
+        with sigint_deferred():
+            try:
+                _replace(self.path, self.target)
+            except OSError as err:
+                raise ConfigError(
+                    f"{self.what} {self.target}", f"cannot put the new version in place ({err.strerror or err})"
+                ) from None
+            self.path = None
+
+    def __exit__(self, *exc) -> None:
+        if self.path is not None:
+            with sigint_deferred():
+                _remove(self.path)
+                self.path = None
+
+
+def _remove(path: Path) -> None:
+    """Best effort: a temporary that cannot be removed now is removed by the next run."""
+    if path.is_dir() and not path.is_symlink():
+        shutil.rmtree(path, ignore_errors=True)
+    else:
+        with suppress(OSError):
+            path.unlink(missing_ok=True)
+
+
+def _replace(new: Path, target: Path) -> None:
+    """Rename ``new`` to ``target``. A folder that is not empty is exchanged with ``new`` in one
+    step where the system can (Linux renameat2), else renamed aside first; the old one is deleted."""
+    try:
+        os.replace(new, target)  # a file; or a folder onto a missing or empty one
+        return
+    except OSError as err:
+        if err.errno not in (errno.ENOTEMPTY, errno.EEXIST) or not new.is_dir():
+            raise
+    if _exchange(new, target):
+        _remove(new)  # now the old folder
+        return
+    old = new.with_name(f"{new.name}-old")  # still .NAME.tmp-*: removed by the next run if we die here
+    os.rename(target, old)
+    os.rename(new, target)
+    _remove(old)
+
+
+def _exchange(a: Path, b: Path) -> bool:
+    """Swap two paths atomically (renameat2 RENAME_EXCHANGE); False where not supported."""
+    import ctypes
+
+    try:
+        renameat2 = ctypes.CDLL(None, use_errno=True).renameat2
+    except (AttributeError, OSError):
+        return False
+    at_fdcwd, rename_exchange = -100, 2
+    if renameat2(at_fdcwd, os.fsencode(a), at_fdcwd, os.fsencode(b), rename_exchange) == 0:
+        return True
+    err = ctypes.get_errno()
+    if err in (errno.EINVAL, errno.ENOSYS, errno.ENOTSUP):
+        return False
+    raise OSError(err, os.strerror(err), str(b))

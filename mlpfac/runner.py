@@ -5,10 +5,12 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 
 from mlpfac.error_model import tracking_error
+from mlpfac.outputs import Terminated
 from mlpfac.record import RunRecord
 from mlpfac.reference import sample
 from mlpfac.scenario import Scenario
@@ -22,16 +24,34 @@ def seeded_generators(seed: int) -> tuple[np.random.Generator, np.random.Generat
     return np.random.default_rng(c), np.random.default_rng(p)
 
 
-def run(scn: Scenario, sink=None, on_step: Callable[[int], None] | None = None) -> RunRecord:
+@dataclass
+class Built:
+    """What a run needs before its first step: the reference, the plant and the controller."""
+
+    ref: np.ndarray
+    plant: object
+    ctrl: object
+
+
+def build(scn: Scenario) -> Built:
+    """Sample the reference, build the plant and the controller: what can fail (a bad model, a
+    missing actuator) fails here, before a run writes or sends anything."""
+    ref = sample(scn.reference, np.arange(scn.steps + 1) * scn.T)  # (N + 1, 5)
+    return Built(ref, scn.make_plant(ref), scn.make_controller())
+
+
+def run(
+    scn: Scenario, sink=None, on_step: Callable[[int], None] | None = None, built: Built | None = None
+) -> RunRecord:
     """Run ``scn`` once. Returns the record; status "diverged" or "interrupted" keeps what was recorded.
 
     ``sink`` (see :mod:`mlpfac.log`) receives the record every ``FLUSH_EVERY`` steps and at the end,
-    also after a divergence or Ctrl-C.
+    also after a divergence, a Ctrl-C or a SIGTERM (the reason says "interrupted" or "terminated").
+    ``built``: from :func:`build`, used once (the plant and the controller keep state).
     """
     N, T = scn.steps, scn.T
-    ref = sample(scn.reference, np.arange(N + 1) * T)  # (N + 1, 5)
-    plant = scn.make_plant(ref)
-    ctrl = scn.make_controller()
+    built = built or build(scn)
+    ref, plant, ctrl = built.ref, built.plant, built.ctrl
     c_rng, p_rng = seeded_generators(scn.seed)
     ctrl.reset(T, c_rng)
     q0, u0 = scn.initial_state(ref)
@@ -74,8 +94,9 @@ def run(scn: Scenario, sink=None, on_step: Callable[[int], None] | None = None) 
                 on_step(k)
             if sink is not None and (k + 1) % FLUSH_EVERY == 0:
                 sink.flush(rec, k + 1)
-    except KeyboardInterrupt:
-        rec.status, rec.reason = "interrupted", f"interrupted at t = {rec.n * T:.2f} s"
+    except KeyboardInterrupt as err:
+        how = "terminated by SIGTERM" if isinstance(err, Terminated) else "interrupted"
+        rec.status, rec.reason = "interrupted", f"{how} at t = {rec.n * T:.2f} s"
     finally:
         rec.wall_time_s = time.perf_counter() - wall0
         rec.sim_time_s = float(getattr(plant, "sim_time", rec.n * T))

@@ -90,19 +90,59 @@ def test_list_shows_every_scenario(capsys):
     assert "paper " in out and "paper-faithful" in out and "controllers:" in out
 
 
-@pytest.mark.parametrize(
-    "sink,needle",
-    [
-        (["--save", "/proc/no-such-dir/run.rrd"], "cannot write"),
-        (["--connect", "rerun+http://127.0.0.1:1/proxy"], "no rerun viewer"),
-    ],
-)
-def test_a_recording_that_cannot_be_made_still_writes_metrics(tmp_path, capsys, sink, needle):
-    out = tmp_path / "run"
-    assert main(["run", "paper", "--duration", "0.3", "--out", str(out), "--no-plot", *sink]) == 2
-    err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1 and needle in err
-    assert json.loads((out / "metrics.json").read_text())["status"] == "ok"
+EARLIER_RUN = {
+    "config.toml": b"seed = 0\n",
+    "metrics.json": b'{"status": "ok"}\n',
+    "run.rrd": bytes(range(256)) * 4,
+}
+
+# Output paths and sinks that cannot work: (flags, what the one line names), checked before the
+# first step. "{tmp}" is the test's folder; {tmp}/run holds an earlier run, {tmp}/a_file a file.
+BAD_OUTPUTS = {
+    "out_is_a_file": (["--out", "{tmp}/a_file"], "--out {tmp}/a_file: is a file"),
+    "out_under_a_file": (["--out", "{tmp}/a_file/run"], "a_file is a file"),
+    "out_in_proc": (["--out", "/proc/mlpfac-run"], "--out /proc/mlpfac-run: cannot write"),
+    "out_in_sys": (["--out", "/sys/mlpfac-run"], "--out /sys/mlpfac-run: cannot write"),
+    "out_holds_other_files": (["--out", "{tmp}"], "not a run's file"),
+    "save_onto_a_folder": (["--out", "{tmp}/run", "--save", "{tmp}/run"], "--save {tmp}/run: is a folder"),
+    "save_to_dev_full": (["--out", "{tmp}/run", "--save", "/dev/full"], "--save /dev/full: is not a regular file"),
+    "save_in_proc": (["--out", "{tmp}/run", "--save", "/proc/mlpfac/run.rrd"], "--save /proc/mlpfac/run.rrd"),
+    "save_under_a_file": (["--out", "{tmp}/run", "--save", "{tmp}/a_file/x.rrd"], "a_file is a file"),
+    "save_inside_out": (["--out", "{tmp}/run", "--save", "{tmp}/run/other.rrd"], "is inside --out"),
+    "connect_nobody": (["--out", "{tmp}/run", "--connect", "rerun+http://127.0.0.1:1/proxy"], "no rerun viewer"),
+    "connect_bad_url": (["--out", "{tmp}/run", "--connect", "http://127.0.0.1:9876"], "a viewer URL looks like"),
+    "missing_actuator": (["sims/bad.toml", "--out", "{tmp}/run"], "no actuator named 'nosuch'"),
+}
+
+
+def snapshot(root) -> dict:
+    """Every file under ``root`` and its bytes, but the lock files (``.NAME.lock``) a run leaves beside --out."""
+    return {p: p.read_bytes() for p in root.rglob("*") if p.is_file() and not p.name.endswith(".lock")}
+
+
+@pytest.mark.parametrize("case", sorted(BAD_OUTPUTS))
+def test_bad_output_is_one_line_exit_2_and_changes_nothing(tmp_path, case):
+    flags, needle = BAD_OUTPUTS[case]
+    (tmp_path / "run").mkdir()
+    for name, data in EARLIER_RUN.items():
+        (tmp_path / "run" / name).write_bytes(data)
+    (tmp_path / "a_file").write_text("not a folder\n")
+    (tmp_path / "sims").mkdir()
+    (tmp_path / "sims" / "bad.toml").write_text('[plant]\nkind = "mujoco"\nleft_actuator = "nosuch"\n')
+    before = snapshot(tmp_path)
+    argv = [f.replace("{tmp}", str(tmp_path)) for f in flags]
+    scenario = [] if argv[0].endswith(".toml") else ["paper"]
+    proc = subprocess.run(
+        [sys.executable, "-m", "mlpfac.cli", "run", *scenario, *argv, "--duration", "0.3", "--no-plot"],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+    )
+    assert proc.returncode == 2, proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and needle.replace("{tmp}", str(tmp_path)) in lines[0], proc.stderr
+    assert snapshot(tmp_path) == before
+    assert not [p for p in tmp_path.rglob(".*tmp-*")], "a temporary file was left"
 
 
 def test_view_of_a_folder_without_a_run(tmp_path, capsys):

@@ -15,7 +15,7 @@ import pyarrow as pa
 import pyarrow.compute as pc
 import pytest
 
-from mlpfac import log
+from mlpfac import log, sinks
 from mlpfac.exceptions import ConfigError
 
 WEIGHT_LAYERS = {"NN_f/output": (0, 54), "NN_f/hidden": (54, 162), "NN_G/output": (162, 168), "NN_G/hidden": (168, 171)}
@@ -297,12 +297,12 @@ def test_unreachable_viewer(tmp_path):
 def test_no_display_for_spawn_or_view(tmp_path, monkeypatch):
     for var in ("DISPLAY", "WAYLAND_DISPLAY"):
         monkeypatch.delenv(var, raising=False)
-    monkeypatch.setattr(log, "SPAWN_PORT", _closed_port())
+    monkeypatch.setattr(sinks, "SPAWN_PORT", _closed_port())
     with pytest.raises(ConfigError, match="no display"):
         log.make_sink(spawn=True)
     (tmp_path / "run.rrd").write_bytes(b"")
     with pytest.raises(ConfigError, match="no display"):
-        log.view([tmp_path])
+        sinks.view([tmp_path])
 
 
 def test_view_needs_a_run_in_each_folder(tmp_path):
@@ -310,13 +310,13 @@ def test_view_needs_a_run_in_each_folder(tmp_path):
     (tmp_path / "good" / "run.rrd").write_bytes(b"")
     (tmp_path / "empty").mkdir()
     with pytest.raises(ConfigError) as err:
-        log.view([tmp_path / "good", tmp_path / "empty"])
+        sinks.view([tmp_path / "good", tmp_path / "empty"])
     assert err.value.where == str(tmp_path / "empty")
     assert err.value.what == "no run.rrd in this folder"
 
 
 def test_runs_without_logging_do_not_import_rerun():
-    code = "import sys, mlpfac.runner, mlpfac.cli, mlpfac.scenario; print('rerun' in sys.modules)"
+    code = "import sys, mlpfac.runner, mlpfac.cli, mlpfac.scenario, mlpfac.outputs; print('rerun' in sys.modules)"
     out = subprocess.run(
         [sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=Path(__file__).parents[1]
     )
@@ -329,3 +329,19 @@ def _closed_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
+
+
+def test_recording_check_finds_a_file_cut_short(record, tmp_path, save_rrd):
+    path = tmp_path / "run.rrd"
+    save_rrd(record, path)
+    sinks.check_recording(path)  # whole: passes
+    data = path.read_bytes()
+    for cut in (len(data) - 12, len(data) // 2, 100):  # before the footer, mid-message, in the header
+        (tmp_path / "cut.rrd").write_bytes(data[:cut])
+        with pytest.raises(ConfigError, match="cut short") as err:
+            sinks.check_recording(tmp_path / "cut.rrd", shown="shown/run.rrd")
+        assert err.value.where == "shown/run.rrd"
+
+
+def test_moved_names_still_reach_log():
+    assert log.make_sink is sinks.make_sink and log.view is sinks.view
