@@ -123,7 +123,10 @@ def cmd_run(args: argparse.Namespace) -> int:
     scn = load(args.scenario).with_overrides(args.controller, args.seed, args.duration)
     baseline = None
     if args.baseline != "none" and not args.no_plot:
-        baseline = scn.with_overrides(controller=args.baseline)
+        try:
+            baseline = scn.with_overrides(controller=args.baseline)
+        except ConfigError as err:  # the flag that named it
+            raise ConfigError("--baseline", err.what) from None
     out = args.out or Path("runs") / f"{scn.name}-{scn.controller}-s{scn.seed}"
     check_run_folder(out)
     if args.save is not None and args.save.absolute() == (out / "run.rrd").absolute():
