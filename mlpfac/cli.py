@@ -8,12 +8,14 @@ changed), 130 interrupted (Ctrl-C), 143 terminated (SIGTERM).
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 
 EXIT_BAD_INPUT = 2
 EXIT_INTERRUPTED = 130  # Ctrl-C (SIGINT)
 EXIT_TERMINATED = 143  # SIGTERM: handled like Ctrl-C
+EXIT_BROKEN_PIPE = 141  # stdout closed by its reader (128 + SIGPIPE), as shell tools exit
 
 
 class Parser(argparse.ArgumentParser):
@@ -97,6 +99,9 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt as err:
         print("mlpfac: terminated" if isinstance(err, Terminated) else "mlpfac: interrupted", file=sys.stderr)
         return EXIT_TERMINATED if isinstance(err, Terminated) else EXIT_INTERRUPTED
+    except BrokenPipeError:  # stdout closed early (`mlpfac ... | head`): what was written stays, no traceback
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return EXIT_BROKEN_PIPE
 
 
 def cmd_list() -> int:
@@ -121,6 +126,9 @@ def cmd_run(args: argparse.Namespace) -> int:
     from mlpfac.scenario import load
 
     scn = load(args.scenario).with_overrides(args.controller, args.seed, args.duration)
+    if scn.dropped_events:
+        times = ", ".join(f"{t:g} s" for t in scn.dropped_events)
+        print(f"note: --duration {scn.duration:g} s ends before the event at {times}: this run has no such event")
     baseline = None
     if args.baseline != "none" and not args.no_plot:
         try:

@@ -149,3 +149,22 @@ def test_view_of_a_folder_without_a_run(tmp_path, capsys):
     assert main(["view", str(tmp_path)]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "no run.rrd" in err
+
+
+def test_a_duration_before_the_event_says_the_run_has_none(tmp_path, capsys):
+    out = tmp_path / "run"
+    assert main(["run", "eight-payload", "--duration", "0.5", "--no-log", "--no-plot", "--out", str(out)]) == 0
+    assert "ends before the event at 12.5 s" in capsys.readouterr().out
+    config = (out / "config.toml").read_text()
+    assert "duration = 0.5" in config and "[[events]]" not in config  # config.toml is the run as simulated
+
+
+def test_a_reader_that_closes_early_is_no_traceback(tmp_path):
+    """`mlpfac run ... | head -1`: the run's folder is whole, exit 141 as shell tools, nothing on stderr."""
+    cmd = [sys.executable, "-m", "mlpfac.cli", "run", "paper", "--duration", "0.5", "--no-log", "--no-plot"]
+    proc = subprocess.Popen([*cmd, "--out", str(tmp_path / "run")], stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    proc.stdout.readline()
+    proc.stdout.close()
+    assert proc.wait(timeout=120) in (0, 141)  # 0 if everything fitted in the pipe before it closed
+    assert proc.stderr.read() == b""
+    assert json.loads((tmp_path / "run" / "metrics.json").read_text())["status"] == "ok"
