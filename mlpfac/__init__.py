@@ -1,3 +1,63 @@
-"""mlpfac: multilayer-perceptron functional adaptive control of a wheeled mobile robot, tested on MuJoCo."""
+"""mlpfac: multilayer-perceptron functional adaptive control of a wheeled mobile robot, tested on MuJoCo.
+
+The public API::
+
+    import mlpfac
+
+    scn = mlpfac.load("eight-payload").with_overrides(controller="kanayama", seed=4)
+    rec = mlpfac.run(scn)                      # one closed-loop run -> a RunRecord
+    m = mlpfac.metrics(rec)                    # what metrics.json holds
+    mlpfac.scenario_names()                    # the shipped scenarios
+
+Names are imported on first use, so ``import mlpfac`` (and the command line) stays light.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING
 
 __version__ = "0.1.0"
+
+_WHERE = {
+    "load": "mlpfac.scenario",
+    "parse": "mlpfac.scenario",
+    "scenario_names": "mlpfac.scenario",
+    "Scenario": "mlpfac.scenario",
+    "run": "mlpfac.runner",
+    "metrics": "mlpfac.runner",
+    "RunRecord": "mlpfac.record",
+    "CONTROLLERS": "mlpfac.controllers",
+    "ConfigError": "mlpfac.exceptions",
+    "MlpfacError": "mlpfac.exceptions",
+}
+__all__ = [
+    "CONTROLLERS",
+    "ConfigError",
+    "MlpfacError",
+    "RunRecord",
+    "Scenario",
+    "__version__",
+    "load",
+    "metrics",
+    "parse",
+    "run",
+    "scenario_names",
+]
+
+if TYPE_CHECKING:
+    from mlpfac.controllers import CONTROLLERS
+    from mlpfac.exceptions import ConfigError, MlpfacError
+    from mlpfac.record import RunRecord
+    from mlpfac.runner import metrics, run
+    from mlpfac.scenario import Scenario, load, parse, scenario_names
+
+
+def __getattr__(name: str):
+    if name in _WHERE:
+        return getattr(importlib.import_module(_WHERE[name]), name)
+    raise AttributeError(f"module 'mlpfac' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(__all__)

@@ -69,3 +69,17 @@ def test_phases_exclude_the_warmup_and_split_at_the_event():
 def test_a_scenario_without_events_has_one_phase():
     m = metrics(run(parse({"duration": 3.0, "controller": {"name": "kanayama"}})))
     assert list(m["phases"]) == ["before"] and m["phases"]["before"]["end_s"] == 3.0
+
+
+def test_the_public_api_is_small_and_lazy():
+    """``import mlpfac`` imports no numpy; every name in __all__ resolves; the README's example runs."""
+    import subprocess
+    import sys
+
+    code = "import sys, mlpfac; assert 'numpy' not in sys.modules; [getattr(mlpfac, n) for n in mlpfac.__all__]"
+    assert subprocess.run([sys.executable, "-c", code], capture_output=True, text=True).returncode == 0
+    import mlpfac
+
+    scn = mlpfac.load("eight-payload").with_overrides(controller="kanayama", seed=4, duration=0.5)
+    m = mlpfac.metrics(mlpfac.run(scn))
+    assert m["status"] == "ok" and m["controller"] == "kanayama" and m["seed"] == 4
