@@ -223,7 +223,7 @@ def _check_provenance(recorded, config, where: str) -> None:
     want = recorded.get("model_sha256")
     if want is None or not hasattr(config, "path"):
         return
-    from mlpfac.plants.mujoco import model_fingerprint
+    from mlpfac.plants.robot import model_fingerprint
 
     got = model_fingerprint(config.path)
     if got != want:
@@ -386,7 +386,7 @@ def parse(table: dict, source: str = "<scenario>", check_model: bool = True) -> 
 
         plant_config = build(KinematicConfig, plant_table, where)
     elif plant_kind == "mujoco":
-        from mlpfac.plants.mujoco import MujocoConfig
+        from mlpfac.plants.robot import MujocoConfig
 
         plant_config = build(MujocoConfig, plant_table, where)
     else:

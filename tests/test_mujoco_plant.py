@@ -520,6 +520,7 @@ def test_scenario_builds_a_plant_and_its_events_pass(path):
     plant_table["model"] = str((path.parent / plant_table["model"]).resolve())
     cfg = MujocoConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in plant_table.items()})
     plant = MujocoPlant(cfg, table["T"])
+    plant.reset(np.zeros(3), np.random.default_rng(0))
     events = table.get("events", [])
     assert len(events) == (0 if path.stem in ("eight-nominal", "eight-torque") else 1)
     for i, ev in enumerate(events):

@@ -223,7 +223,7 @@ def test_serve_listens_on_localhost_only(tmp_path):
             line = proc.stdout.readline()
             assert line, f"it stopped before serving: {proc.communicate()}"
             lines.append(line)
-        assert f"http://127.0.0.1:{web}/" in lines[0]
+        assert any(f"http://127.0.0.1:{web}/" in ln for ln in lines)
         assert listening_addresses(grpc) == {"127.0.0.1"} and listening_addresses(web) == {"127.0.0.1"}
     finally:
         proc.send_signal(signal.SIGINT)

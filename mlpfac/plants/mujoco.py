@@ -1,5 +1,7 @@
 """A differential-drive robot simulated by MuJoCo, as a plant (see :mod:`mlpfac.plants.base`).
 
+What the robot is (actuators, wheels, site, radius, track, rest pose) is read once from its model
+by :func:`mlpfac.plants.robot.read_robot`; this module steps it, from :meth:`MujocoPlant.reset` on.
 The controller's u = (v, omega) is turned into wheel speeds by the inverse kinematics
 (:func:`mlpfac.kinematics.wheel_speeds`) with the wheel radius and track the IK *believes* (the
 nominal ones), and held for one control period of ``n_substeps`` physics steps,
@@ -22,12 +24,8 @@ derived quantity (site pose, ``cvel``, sensors) belongs to the current state.
 
 from __future__ import annotations
 
-import hashlib
-import importlib.resources
 import math
 from collections import deque
-from dataclasses import dataclass, field
-from pathlib import Path
 
 import mujoco
 import numpy as np
@@ -35,92 +33,9 @@ import numpy as np
 from mlpfac.events import EVENT_KINDS, Event
 from mlpfac.exceptions import ConfigError
 from mlpfac.kinematics import body_velocity, wheel_speeds
+from mlpfac.plants.robot import ROUND, MujocoConfig, model_fingerprint, read_robot, yaw
 
-SETTLE_S = 0.5  # seconds the robot settles on its wheels at construction (the rest pose)
 DIVERGENCE_WARNINGS = ("mjWARN_BADQPOS", "mjWARN_BADQVEL", "mjWARN_BADQACC")  # MuJoCo resets the data on these
-SHAPES = {
-    int(mujoco.mjtGeom.mjGEOM_BOX): "box",
-    int(mujoco.mjtGeom.mjGEOM_CYLINDER): "cylinder",
-    int(mujoco.mjtGeom.mjGEOM_SPHERE): "sphere",
-}
-SIZE_LEN = {"box": 3, "cylinder": 2, "sphere": 1}
-ROUND = (int(mujoco.mjtGeom.mjGEOM_SPHERE), int(mujoco.mjtGeom.mjGEOM_CYLINDER))  # wheel shapes: size[0] is the radius
-
-
-def _positive(name: str, value, optional: bool = False) -> None:
-    if optional and value is None:
-        return
-    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value) or value <= 0:
-        raise ConfigError(name, f"must be a positive number, got {value!r}")
-
-
-def shipped_model() -> str:
-    """The shipped robot's scene (models/scene.xml, installed as package data mlpfac.models)."""
-    return str(importlib.resources.files("mlpfac.models") / "scene.xml")
-
-
-def model_fingerprint(path: Path) -> str:
-    """sha256 of the compiled model (MuJoCo's binary MJB): what is simulated, included files and
-    meshes too. Compiled afresh each time: a file that changed is never mistaken for the old one."""
-    try:
-        model = mujoco.MjSpec.from_file(str(path)).compile()
-    except ValueError as err:
-        raise ConfigError(str(path), f"MuJoCo cannot load the model: {err}") from None
-    buf = np.empty(mujoco.mj_sizeModel(model), np.uint8)
-    mujoco.mj_saveModel(model, None, buf)
-    return hashlib.sha256(buf.tobytes()).hexdigest()
-
-
-@dataclass(frozen=True)
-class MujocoConfig:
-    """The robot and its drive. Defaults are the shipped robot (models/README.md)."""
-
-    model: str = field(default_factory=shipped_model)  # MJCF file; a scenario file resolves it from its folder
-    actuator: str = "velocity"  # "velocity": the model's velocity servos; "torque": torque motors + PI here
-    left_actuator: str = "left_wheel"  # velocity servo (<velocity kv forcerange>) on the left wheel's hinge
-    right_actuator: str = "right_wheel"
-    site: str = "axle_mid"  # on the axle midpoint, x axis forward: the pose is measured here
-    wheel_radius: float | None = None  # radius the IK believes (m); None: read from the model
-    track: float | None = None  # wheel separation the IK believes (m); None: read from the model
-    max_wheel_speed: float | None = None  # rad/s; faster commands are scaled down keeping the curvature
-    pose_noise_std: float | tuple[float, ...] = 0.0  # std of Gaussian noise on (x, y, theta): scalar or 3
-    pi_kp: float = 0.5  # torque drive: PI proportional gain, N m per rad/s of wheel-speed error
-    pi_ki: float = 10.0  # torque drive: PI integral gain, N m per rad of integrated error
-
-    def __post_init__(self) -> None:
-        if self.actuator not in ("velocity", "torque"):
-            raise ConfigError("actuator", f"choose 'velocity' or 'torque', got {self.actuator!r}")
-        for name in ("model", "left_actuator", "right_actuator", "site"):
-            if not isinstance(getattr(self, name), str) or not getattr(self, name):
-                raise ConfigError(name, f"expected a non-empty name, got {getattr(self, name)!r}")
-        for name in ("wheel_radius", "track", "max_wheel_speed"):
-            _positive(name, getattr(self, name), optional=True)
-        _positive("pi_kp", self.pi_kp)
-        ki = self.pi_ki
-        if isinstance(ki, bool) or not isinstance(ki, int | float) or not math.isfinite(ki) or ki < 0:
-            raise ConfigError("pi_ki", f"must be a number >= 0, got {ki!r}")
-        self.noise_std()
-        if not self.path.is_file():
-            raise ConfigError(str(self.path), "MJCF model file not found")
-
-    @property
-    def path(self) -> Path:
-        """The model file (a scenario file's relative path was resolved from its folder when it was loaded)."""
-        return Path(self.model).absolute()
-
-    def noise_std(self) -> np.ndarray | None:
-        """(3,) standard deviations of the pose noise, or None when there is none."""
-        try:
-            std = np.broadcast_to(np.asarray(self.pose_noise_std, dtype=float), (3,))
-        except (TypeError, ValueError):
-            raise ConfigError(
-                "pose_noise_std", f"expected a number or 3 numbers, got {self.pose_noise_std!r}"
-            ) from None
-        if not np.all(np.isfinite(std)) or np.any(std < 0):
-            raise ConfigError(
-                "pose_noise_std", f"standard deviations must be finite and >= 0, got {self.pose_noise_std!r}"
-            )
-        return std.copy() if np.any(std > 0) else None
 
 
 class MujocoPlant:
@@ -135,152 +50,27 @@ class MujocoPlant:
     def __init__(self, config: MujocoConfig, T: float) -> None:
         self.config = config
         self.T = float(T)
-        self._where = str(config.path)
-        try:
-            spec = mujoco.MjSpec.from_file(self._where)
-            model = spec.compile()
-        except ValueError as err:
-            raise ConfigError(self._where, f"MuJoCo cannot load the model: {err}") from None
-        self._acts = (self._actuator_id(model, "left_actuator"), self._actuator_id(model, "right_actuator"))
-        if self._acts[0] == self._acts[1]:
-            raise ConfigError(
-                "right_actuator", f"left and right wheels need two actuators, both are {config.left_actuator!r}"
-            )
-        if config.actuator == "torque":
-            _to_torque_motors(spec, model, self._acts)
-            model = spec.compile()
-        self._spec_nominal = spec
-        self._spec = spec.copy()
-        self.model = model
-        self.data = mujoco.MjData(model)
-
-        m = model
-        self._dt = float(m.opt.timestep)
+        self.robot = r = read_robot(config)
+        self._where = r.where
+        self._spec_nominal, self._spec = r.spec, r.spec.copy()
+        self.model, self.data = r.model, mujoco.MjData(r.model)
+        self._dt = r.dt
         self.n_substeps = self._substeps(self.T, "T")
-        self._site = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, config.site)
-        if self._site < 0:
-            raise ConfigError(
-                "site",
-                f"no site named {config.site!r} in {self._where} ({_names(m, mujoco.mjtObj.mjOBJ_SITE, m.nsite)})",
-            )
-        self._root = int(m.body_rootid[m.site_bodyid[self._site]])
-        jnt = int(m.body_jntadr[self._root])
-        if jnt < 0 or int(m.jnt_type[jnt]) != mujoco.mjtJoint.mjJNT_FREE:
-            raise ConfigError(
-                "site", f"the body tree of site {config.site!r} must hang from a <freejoint/> (a robot free to drive)"
-            )
-        self._qroot, self._droot = int(m.jnt_qposadr[jnt]), int(m.jnt_dofadr[jnt])
-        joints = [int(m.actuator_trnid[a, 0]) for a in self._acts]
-        self._dofs = tuple(int(m.jnt_dofadr[j]) for j in joints)
-        self._wheel_bodies = tuple(int(m.jnt_bodyid[j]) for j in joints)
-        self._tyres = [g for b in self._wheel_bodies for g in _collision_geoms(m, b) if int(m.geom_type[g]) in ROUND]
-        for key, b in zip(("left_actuator", "right_actuator"), self._wheel_bodies, strict=True):
-            if not any(m.geom_bodyid[g] == b for g in self._tyres):
-                raise ConfigError(
-                    key,
-                    f"the body moved by {getattr(config, key)!r} has no sphere or cylinder collision geom (the wheel)",
-                )
-
-        self._settle()
-        d = self.data
-        self._qpos_rest = d.qpos.copy()
-        self._site_rest = (d.site_xpos[self._site].copy(), _yaw(d.site_xmat[self._site]))
-        self.real_radius = max(float(m.geom_size[g, 0]) for g in self._tyres)
-        anchors = [d.xanchor[j].copy() for j in joints]
-        self.ik_radius = config.wheel_radius if config.wheel_radius is not None else self.real_radius
-        self._real_track = float(np.linalg.norm(anchors[1] - anchors[0]))
-        self.ik_track = config.track if config.track is not None else self._real_track
-        self._sign = self._wheel_signs(joints, anchors)  # +-1: joint velocity -> forward wheel speed
-        # Actuator units per forward wheel unit: ctrl = c w_cmd (servo), joint torque = c force (motor).
-        c = [s * g for s, g in zip(self._sign, m.actuator_gear[list(self._acts), 0], strict=True)]
-        self._act_per_wheel = (float(c[0]), float(c[1]))
-        self._geometry = self._static_geometry()
+        self._acts, self._site, self._root, self._dofs = r.acts, r.site, r.root, r.dofs
+        self._qroot, self._droot = r.qroot, r.droot
+        self._wheel_bodies, self._tyres = r.wheel_bodies, list(r.tyres)
+        self._qpos_rest, self._site_rest = r.qpos_rest, r.site_rest
+        self.real_radius, self._real_track = r.real_radius, r.real_track
+        self.ik_radius = config.wheel_radius if config.wheel_radius is not None else r.real_radius
+        self.ik_track = config.track if config.track is not None else r.real_track
+        self._sign, self._act_per_wheel = r.sign, r.act_per_wheel
+        self._geometry = r.geometry
         self._noise = config.noise_std()
+        self._torque_max = self._force_limits()
         self._changed = False
-        self.reset(np.zeros(3), np.random.default_rng(0))
-
-    # --- construction helpers ------------------------------------------------------------------
-
-    def _actuator_id(self, m: mujoco.MjModel, key: str) -> int:
-        name = getattr(self.config, key)
-        a = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_ACTUATOR, name)
-        if a < 0:
-            raise ConfigError(
-                key, f"no actuator named {name!r} in {self._where} ({_names(m, mujoco.mjtObj.mjOBJ_ACTUATOR, m.nu)})"
-            )
-        if (
-            int(m.actuator_trntype[a]) != mujoco.mjtTrn.mjTRN_JOINT
-            or int(m.jnt_type[m.actuator_trnid[a, 0]]) != mujoco.mjtJoint.mjJNT_HINGE
-        ):
-            raise ConfigError(key, f"actuator {name!r} must drive a hinge joint (the wheel)")
-        kv = m.actuator_gainprm[a, 0]
-        servo = (
-            int(m.actuator_gaintype[a]) == mujoco.mjtGain.mjGAIN_FIXED
-            and int(m.actuator_biastype[a]) == mujoco.mjtBias.mjBIAS_AFFINE
-            and kv > 0
-            and m.actuator_biasprm[a, 0] == 0
-            and m.actuator_biasprm[a, 1] == 0
-            and m.actuator_biasprm[a, 2] == -kv
-        )
-        if not servo:
-            raise ConfigError(key, f"actuator {name!r} must be a velocity servo (<velocity kv=... forcerange=...>)")
-        return a
 
     def _substeps(self, period: float, where: str) -> int:
-        n = period / self._dt
-        if round(n) < 1 or abs(n - round(n)) > 1e-6 * n:
-            raise ConfigError(
-                where, f"{period:g} s is not a whole number of physics steps of {self._dt:g} s (the model's timestep)"
-            )
-        return int(round(n))
-
-    def _settle(self) -> None:
-        """From the model's initial pose, let the robot settle on its wheels with zero wheel speed."""
-        m, d = self.model, self.data
-        mujoco.mj_resetData(m, d)
-        mujoco.mj_forward(m, d)
-        mujoco.mj_step(m, d, nstep=int(round(SETTLE_S / self._dt)))
-        mujoco.mj_forward(m, d)
-
-    def _wheel_signs(self, joints: list[int], anchors: list[np.ndarray]) -> tuple[float, float]:
-        d = self.data
-        R = d.site_xmat[self._site].reshape(3, 3)  # columns: site axes in the world
-        signs = []
-        for key, j, p, side in zip(("left_actuator", "right_actuator"), joints, anchors, (1.0, -1.0), strict=True):
-            roll = float(np.cross(d.xaxis[j], [0.0, 0.0, 1.0]) @ R[:, 0])  # forward speed per rad/s, / radius
-            if abs(roll) < 0.5:
-                raise ConfigError(key, "the wheel's hinge axis must be across the site's x axis (forward)")
-            if side * float((p - d.site_xpos[self._site]) @ R[:, 1]) <= 0:
-                raise ConfigError(
-                    key,
-                    f"this wheel is not on the {'left' if side > 0 else 'right'} of site {self.config.site!r} (y axis to the left)",
-                )
-            signs.append(1.0 if roll > 0 else -1.0)
-        return signs[0], signs[1]
-
-    def _static_geometry(self) -> list[dict]:
-        """Visual geoms (contype = conaffinity = 0) of the robot, posed relative to the site frame."""
-        m, d = self.model, self.data
-        ps, Rs = d.site_xpos[self._site], d.site_xmat[self._site].reshape(3, 3)
-        robot = [
-            g for g in range(m.ngeom) if m.body_rootid[m.geom_bodyid[g]] == self._root and int(m.geom_type[g]) in SHAPES
-        ]
-        visual = [g for g in robot if m.geom_contype[g] == 0 and m.geom_conaffinity[g] == 0] or robot
-        shapes = []
-        for g in visual:
-            kind = SHAPES[int(m.geom_type[g])]
-            quat = np.empty(4)
-            mujoco.mju_mat2Quat(quat, (Rs.T @ d.geom_xmat[g].reshape(3, 3)).ravel())
-            rgba = m.mat_rgba[m.geom_matid[g]] if m.geom_matid[g] >= 0 else m.geom_rgba[g]
-            shapes.append({
-                "name": m.geom(g).name or f"geom{g}",
-                "type": kind,
-                "size": [round(float(x), 9) for x in m.geom_size[g, : SIZE_LEN[kind]]],
-                "pos": [round(float(x), 9) for x in Rs.T @ (d.geom_xpos[g] - ps)],
-                "quat": [round(float(x), 9) for x in quat],
-                "rgba": [round(float(x), 6) for x in rgba],
-            })  # fmt: skip
-        return shapes
+        return self.robot.substeps(period, where)
 
     # --- the Plant interface -------------------------------------------------------------------
 
@@ -398,7 +188,7 @@ class MujocoPlant:
     def _read_pose(self) -> np.ndarray:
         d = self.data
         p = d.site_xpos[self._site]
-        self._theta += math.remainder(_yaw(d.site_xmat[self._site]) - self._theta, 2.0 * math.pi)  # unwrapped
+        self._theta += math.remainder(yaw(d.site_xmat[self._site]) - self._theta, 2.0 * math.pi)  # unwrapped
         return np.array([p[0], p[1], self._theta])
 
     def _noisy(self, pose: np.ndarray) -> np.ndarray:
@@ -575,28 +365,3 @@ class MujocoPlant:
             raise ConfigError(self._where, f"MuJoCo cannot compile the changed model: {err}") from None
         mujoco.mj_forward(self.model, self.data)
         self._changed = True
-
-
-def _to_torque_motors(spec: mujoco.MjSpec, m: mujoco.MjModel, acts: tuple[int, int]) -> None:
-    """Turn the velocity servos into torque motors (force = ctrl) limited to the same force range."""
-    for a in acts:
-        act = spec.actuators[a]
-        act.gaintype, act.biastype = mujoco.mjtGain.mjGAIN_FIXED, mujoco.mjtBias.mjBIAS_NONE
-        act.gainprm = [1.0] + [0.0] * 9
-        act.biasprm = [0.0] * 10
-        if m.actuator_forcelimited[a]:
-            act.ctrllimited, act.ctrlrange = mujoco.mjtLimited.mjLIMITED_TRUE, m.actuator_forcerange[a].copy()
-
-
-def _collision_geoms(m: mujoco.MjModel, body: int) -> list[int]:
-    return [g for g in range(m.ngeom) if m.geom_bodyid[g] == body and (m.geom_contype[g] or m.geom_conaffinity[g])]
-
-
-def _names(m: mujoco.MjModel, obj: mujoco.mjtObj, n: int) -> str:
-    names = [mujoco.mj_id2name(m, obj, i) for i in range(n)]
-    return "it has: " + ", ".join(repr(x) for x in names if x) if any(names) else "it has none with a name"
-
-
-def _yaw(xmat: np.ndarray) -> float:
-    """Heading of a frame: the angle of its x axis projected on the floor, atan2(R[1, 0], R[0, 0])."""
-    return math.atan2(xmat[3], xmat[0])
