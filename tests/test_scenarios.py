@@ -32,10 +32,11 @@ def test_every_scenario_runs_briefly_and_applies_its_events(name, controller):
     scn = parse(table, f"sims/{name}.toml")
     rec = run(scn)
     if name == "paper-faithful" and controller == "adaptive":
-        assert rec.status == "diverged"  # the paper's numbers, see the README
+        assert rec.status == "diverged"  # the paper's numbers, see the README: within a few steps, before 0.3 s
+        assert rec.events == [] and rec.n < 30
     else:
         assert rec.status == "ok", rec.reason
-    assert len(rec.events) == (len(scn.events) if rec.status == "ok" else len(rec.events))
+        assert [ev["kind"] for ev in rec.events] == [ev.kind for ev in scn.events]
     assert all(ev["text"] and ev["time"] == pytest.approx(0.3) for ev in rec.events)
     assert np.all(np.isfinite(rec.pose[: rec.n]))
 
