@@ -36,10 +36,13 @@ every worker) and, for MuJoCo scenarios, the model files at the same absolute pa
 from __future__ import annotations
 
 import argparse
+import contextlib
+import hashlib
 import json
 import math
 import os
 import shlex
+import shutil
 import sys
 import tempfile
 import time
@@ -47,10 +50,20 @@ from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from mlpfac.exceptions import ConfigError
-from mlpfac.outputs import sigint_deferred, write_atomic, write_run_folder
+from mlpfac.exceptions import ConfigError, MlpfacError
+from mlpfac.outputs import Terminated, folder_lock, sigint_deferred, write_atomic, write_run_folder
 
-EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
+EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_TERMINATED = 0, 1, 2, 130, 143
+MAX_RUNS = 100_000  # runs per sweep: a larger plan is refused before anything is loaded
+WORKERS_PER_CORE = 4  # --workers above this many per core is refused (each worker holds ~130 MB)
+TMP_DIR = ".tmp"  # OUT/.tmp: recordings being made; removed when the sweep ends and when the next one starts
+BLAS_THREAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
+
+
+class OutputError(MlpfacError):
+    """Writing the sweep's results failed (a full disk, a lost permission): one line naming the path."""
+
+
 PHASES = ("before", "after")
 COMPARE_CONTROLLERS = ("adaptive", "corradini", "kanayama")
 
@@ -59,9 +72,12 @@ COMPARE_CONTROLLERS = ("adaptive", "corradini", "kanayama")
 # Input
 
 
-def parse_seeds(text: str) -> list[int]:
-    """``"0-99"``, ``"3"``, ``"0,2,5"``, ``"0-4,10"`` -> sorted distinct seeds; ``"5-2"`` is an error."""
-    seeds: set[int] = set()
+def parse_seeds(text: str, limit: int | None = MAX_RUNS) -> list[int]:
+    """``"0-99"``, ``"3"``, ``"0,2,5"``, ``"0-4,10"`` -> sorted distinct seeds; ``"5-2"`` is an error.
+
+    More than ``limit`` seeds is a ConfigError, found before any list is built (``0-10000000`` is cheap).
+    """
+    ranges: list[tuple[int, int]] = []
     for part in str(text).split(","):
         part = part.strip()
         lo, sep, hi = part.partition("-")
@@ -74,6 +90,16 @@ def parse_seeds(text: str) -> list[int]:
             raise ConfigError("--seeds", f"seeds are whole numbers >= 0, got {part!r}")
         if b < a:
             raise ConfigError("--seeds", f"empty range {part!r}: the end must not be below the start")
+        ranges.append((a, b))
+    count, end = 0, -1  # distinct seeds in the union of the ranges
+    for a, b in sorted(ranges):
+        if b > end:
+            count += b - max(a, end + 1) + 1
+            end = b
+    if limit is not None and count > limit:
+        raise ConfigError("--seeds", f"{count} seeds is more than the limit of {limit} runs per sweep; split them")
+    seeds: set[int] = set()
+    for a, b in ranges:
         seeds.update(range(a, b + 1))
     return sorted(seeds)
 
@@ -136,10 +162,25 @@ def plan(
             )
         names[base.name] = src
         for ctrl in controllers:
+            # parsed once; only the seed varies, so each seed's table is this one with its seed
+            # (what with_overrides(seed=...) gives: parse checks a seed >= 0, which parse_seeds did)
+            scn = base.with_overrides(controller=ctrl, duration=duration)
+            configs = _seed_configs(scn.table, seeds, to_toml)
             for seed in seeds:
-                scn = base.with_overrides(controller=ctrl, seed=seed, duration=duration)
-                jobs.append(Job(scn.name, scn.controller, seed, scn.source, scn.table, to_toml(scn.table)))
+                table = {**scn.table, "seed": seed}
+                jobs.append(Job(scn.name, scn.controller, seed, scn.source, table, configs(seed, table)))
     return jobs
+
+
+def _seed_configs(table: dict, seeds: list[int], to_toml) -> Callable[[int, dict], str]:
+    """``configs(seed, table)`` = ``to_toml(table)``, made by replacing the seed line of one rendering."""
+    marker = max(seeds, default=0) + 10**18 + 7  # a number no seed line has
+    text = to_toml({**table, "seed": marker})
+    line = f"seed = {marker!r}\n"
+    if text.count(str(marker)) != 1 or text.count(line) != 1:
+        return lambda seed, t: to_toml(t)
+    head, tail = text.split(line)
+    return lambda seed, t: f"{head}seed = {seed!r}\n{tail}"
 
 
 def check_writable(out: Path) -> None:
@@ -157,11 +198,12 @@ def check_writable(out: Path) -> None:
 # Running one task (in this process, a pool worker or a Dask worker)
 
 
-def run_task(jobs: list[Job], batched: bool = False, save_rrd: bool = False) -> list[dict]:
+def run_task(jobs: list[Job], batched: bool = False, save_rrd: bool = False, tmp_dir: str | None = None) -> list[dict]:
     """Run ``jobs`` (one, or seeds of one scenario and controller when ``batched``).
 
     Returns one result per job: {"key", "metrics", "rrd" (bytes or None), "error" (str or None)}.
-    An interrupted run raises KeyboardInterrupt: it must never be written as done.
+    Recordings are made in ``tmp_dir`` (OUT/.tmp for a local sweep; the system's temporary folder
+    on a Dask worker). An interrupted run raises KeyboardInterrupt: it must never be written as done.
     """
     from mlpfac.runner import metrics
     from mlpfac.scenario import parse
@@ -178,10 +220,10 @@ def run_task(jobs: list[Job], batched: bool = False, save_rrd: bool = False) -> 
         return [
             {"key": j.key, "metrics": metrics(r), "rrd": None, "error": None} for j, r in zip(jobs, recs, strict=True)
         ]
-    return [_run_one(j, save_rrd) for j in jobs]
+    return [_run_one(j, save_rrd, tmp_dir) for j in jobs]
 
 
-def _run_one(job: Job, save_rrd: bool) -> dict:
+def _run_one(job: Job, save_rrd: bool, tmp_dir: str | None = None) -> dict:
     from mlpfac.runner import metrics, run
     from mlpfac.scenario import parse
 
@@ -189,11 +231,18 @@ def _run_one(job: Job, save_rrd: bool) -> dict:
     try:
         scn = parse(job.table, job.source)
         if save_rrd:
-            sink, rrd_path = _make_sink(job)
+            sink, rrd_path = _make_sink(job, tmp_dir)
         rec = run(scn, sink=sink)
         if rec.status == "interrupted":
             raise KeyboardInterrupt
-        rrd = rrd_path.read_bytes() if rrd_path is not None and rrd_path.exists() else None
+        rrd = None
+        if rrd_path is not None:
+            rrd = rrd_path.read_bytes() if rrd_path.exists() else b""
+            if not rrd_is_whole(rrd):
+                raise OSError(
+                    f"the recording is not whole ({len(rrd)} bytes, no rerun footer): "
+                    "was the disk full? see the rerun messages above"
+                )
         return {"key": job.key, "metrics": metrics(rec), "rrd": rrd, "error": None}
     except KeyboardInterrupt:
         raise
@@ -204,20 +253,32 @@ def _run_one(job: Job, save_rrd: bool) -> dict:
             rrd_path.unlink(missing_ok=True)
 
 
-def _make_sink(job: Job):
+def rrd_is_whole(data: bytes) -> bool:
+    """A rerun file that was closed: the stream header at the start, the footer magic at the end.
+
+    A file cut by a full disk or a killed writer has no footer (rerun writes it when the sink closes).
+    """
+    return len(data) >= 16 and data[:4] == b"RRF2" and data[-12:-4] == b"RRF2FOOT"
+
+
+def _make_sink(job: Job, tmp_dir: str | None = None):
     """A rerun sink saving to a temporary file (its bytes go back to the client); (None, None) without mlpfac.log."""
     try:
         from mlpfac import log
     except ImportError:
         return None, None
-    fd, tmp = tempfile.mkstemp(suffix=".rrd", prefix="mlpfac-")
+    fd, tmp = tempfile.mkstemp(suffix=".rrd", prefix="mlpfac-", dir=tmp_dir)
     os.close(fd)
     path = Path(tmp)
-    sink = log.make_sink(
-        save=path,
-        recording_name=f"{job.scenario} / {job.controller} / seed {job.seed}",
-        recording_id=f"{job.scenario}-{job.controller}-{job.seed}",
-    )
+    try:
+        sink = log.make_sink(
+            save=path,
+            recording_name=f"{job.scenario} / {job.controller} / seed {job.seed}",
+            recording_id=f"{job.scenario}-{job.controller}-{job.seed}",
+        )
+    except BaseException:
+        path.unlink(missing_ok=True)
+        raise
     return sink, path
 
 
@@ -227,11 +288,37 @@ def _error_text(err: BaseException) -> str:
     return "".join(traceback.format_exception(err))
 
 
-def _ignore_sigint() -> None:
-    """Pool workers leave Ctrl-C to the parent, which stops them; a half run is never returned."""
+def _worker_init(parent: int) -> None:
+    """Pool workers leave Ctrl-C and SIGTERM to the parent, which stops them (a half run is never
+    returned), and die with the parent: a killed sweep leaves no worker behind."""
     import signal
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    _die_with_parent(parent)
+
+
+def _die_with_parent(parent: int) -> None:
+    """Linux: the kernel sends SIGKILL when the parent dies (prctl PR_SET_PDEATHSIG). Everywhere: a
+    daemon thread exits the process once it has another parent (the parent died, it was reparented)."""
+    import signal
+    import threading
+
+    if sys.platform.startswith("linux"):
+        with contextlib.suppress(OSError, AttributeError):
+            import ctypes
+
+            libc = ctypes.CDLL(None, use_errno=True)
+            libc.prctl(1, int(signal.SIGKILL), 0, 0, 0)  # 1 = PR_SET_PDEATHSIG
+    if os.getppid() != parent:  # the parent died before the line above
+        os._exit(1)
+
+    def watch() -> None:
+        while os.getppid() == parent:
+            time.sleep(0.5)
+        os._exit(1)
+
+    threading.Thread(target=watch, name="mlpfac-parent-watch", daemon=True).start()
 
 
 # --------------------------------------------------------------------------------------------
@@ -239,7 +326,11 @@ def _ignore_sigint() -> None:
 
 
 def write_result(out: Path, job: Job, result: dict) -> None:
-    """config.toml, run.rrd, then metrics.json (its presence means the folder is whole); or error.txt."""
+    """config.toml, run.rrd, then metrics.json (its presence means the folder is whole); or error.txt.
+
+    With a recording, metrics.json also holds its size and sha256 ("rrd"), checked on resume.
+    An OSError (a full disk) leaves the folder without metrics.json: not done, run again on resume.
+    """
     d = job.folder(out)
     with sigint_deferred():  # a Ctrl-C now waits for the folder to be whole
         d.mkdir(parents=True, exist_ok=True)
@@ -249,18 +340,102 @@ def write_result(out: Path, job: Job, result: dict) -> None:
             write_atomic(d / "error.txt", result["error"])
             return
         (d / "error.txt").unlink(missing_ok=True)
-        write_run_folder(d, job.config, result["metrics"], result.get("rrd"))
+        m, rrd = result["metrics"], result.get("rrd")
+        if rrd is not None:
+            m = m | {"rrd": {"bytes": len(rrd), "sha256": hashlib.sha256(rrd).hexdigest()}}
+        write_run_folder(d, job.config, m, rrd)
 
 
-def load_done(out: Path, job: Job) -> dict | None:
-    """The metrics of ``job`` if its folder is whole and was run with the same configuration."""
+def _number(x) -> bool:
+    return isinstance(x, int | float) and not isinstance(x, bool)
+
+
+def _number_or_none(x) -> bool:
+    return x is None or _number(x)
+
+
+PHASE_KEYS = ("rms_position_error_m", "max_position_error_m", "rms_heading_error_rad")
+
+
+def metrics_problem(m, job: Job) -> str | None:
+    """Why ``m`` (a parsed metrics.json) is not the metrics of ``job`` as ``runner.metrics`` writes them; None if it is."""
+    if not isinstance(m, dict):
+        return "not valid"
+    if m.get("status") not in ("ok", "diverged"):
+        return "not valid"
+    if (m.get("scenario"), m.get("controller"), m.get("seed")) != job.key or isinstance(m.get("seed"), bool):
+        return "of another run"
+    if not (_number(m.get("T")) and isinstance(m.get("steps"), int) and not isinstance(m.get("steps"), bool)):
+        return "not valid"
+    if not all(_number_or_none(m.get(k, 0)) and k in m for k in PHASE_KEYS):
+        return "not valid"
+    for k in ("max_abs_weight", "mean_diag_P_final"):
+        if k not in m or not _number_or_none(m[k]):
+            return "not valid"
+    if not (_number(m.get("sim_time_s")) and _number(m.get("wall_time_s"))):
+        return "not valid"
+    if not isinstance(m.get("events"), list) or not (m.get("reason") is None or isinstance(m.get("reason"), str)):
+        return "not valid"
+    phases = m.get("phases")
+    if not isinstance(phases, dict) or "before" not in phases or not set(phases) <= set(PHASES):
+        return "not valid"
+    for ph in phases.values():
+        if not isinstance(ph, dict) or not (_number(ph.get("start_s")) and _number(ph.get("end_s"))):
+            return "not valid"
+        if not all(k in ph and _number_or_none(ph[k]) for k in PHASE_KEYS):
+            return "not valid"
+    return None
+
+
+def check_done(out: Path, job: Job, save_rrd: bool = False) -> tuple[dict | None, str | None]:
+    """(metrics, None) if ``job``'s folder is whole and was run with the same configuration; else
+    (None, why it must run again), why being None for a run never finished (no metrics.json).
+
+    Whole: config.toml equals the job's, metrics.json is a metrics dict of this scenario, controller
+    and seed, and with ``save_rrd`` run.rrd has the size and sha256 metrics.json recorded.
+    """
     d = job.folder(out)
     try:
-        if (d / "config.toml").read_text() != job.config:
-            return None
-        return json.loads((d / "metrics.json").read_text())
+        text = (d / "metrics.json").read_text()
+    except FileNotFoundError:
+        return None, None
     except (OSError, ValueError):
-        return None
+        return None, "metrics.json unreadable"
+    try:
+        if (d / "config.toml").read_text() != job.config:
+            return None, "configuration changed"
+    except (OSError, ValueError):
+        return None, "config.toml missing"
+    try:
+        m = json.loads(text)
+    except ValueError:
+        return None, "metrics.json not valid"
+    problem = metrics_problem(m, job)
+    if problem is not None:
+        return None, f"metrics.json {problem}"
+    if save_rrd:
+        rec = m.get("rrd")
+        if not (isinstance(rec, dict) and isinstance(rec.get("bytes"), int) and isinstance(rec.get("sha256"), str)):
+            return None, "run.rrd not recorded"
+        try:
+            if (d / "run.rrd").stat().st_size != rec["bytes"] or _sha256(d / "run.rrd") != rec["sha256"]:
+                return None, "run.rrd changed or cut"
+        except OSError:
+            return None, "run.rrd missing"
+    return m, None
+
+
+def _sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def load_done(out: Path, job: Job, save_rrd: bool = False) -> dict | None:
+    """The metrics of ``job`` if its folder is whole and was run with the same configuration (see :func:`check_done`)."""
+    return check_done(out, job, save_rrd)[0]
 
 
 # --------------------------------------------------------------------------------------------
@@ -277,7 +452,9 @@ class Outcome:
     skipped: int
     ran: int
     interrupted: bool = False
+    terminated: bool = False  # the interruption was a SIGTERM
     wall_s: float = 0.0
+    redo: dict[str, int] = field(default_factory=dict)  # why folders found were not done -> how many
 
 
 def make_tasks(jobs: list[Job], batched: bool, batch_size: int) -> list[list[Job]]:
@@ -290,6 +467,11 @@ def make_tasks(jobs: list[Job], batched: bool, batch_size: int) -> list[list[Job
     return [g[i : i + batch_size] for g in groups.values() for i in range(0, len(g), batch_size)]
 
 
+def _oserror(err: OSError, what: str) -> OutputError:
+    path = err.filename or what
+    return OutputError(f"cannot write {path} ({err.strerror or err})")
+
+
 def execute(
     jobs: list[Job],
     out: Path,
@@ -300,35 +482,58 @@ def execute(
     save_rrd: bool = False,
     progress: bool | None = None,
     on_result: Callable[[dict], None] | None = None,
+    locked: bool = False,
 ) -> Outcome:
     """Run the jobs not done yet; write each run's folder as its result arrives.
 
     ``client`` is a ``dask.distributed.Client`` or None (local). ``progress``: None shows a bar
-    only when stderr is a terminal. KeyboardInterrupt stops the workers and returns with
-    ``interrupted=True``; every folder written so far is whole.
+    only when stderr is a terminal. KeyboardInterrupt (Ctrl-C, or SIGTERM as
+    :class:`~mlpfac.outputs.Terminated`) stops the workers and returns with ``interrupted=True``;
+    every folder written so far is whole. ``out`` is locked for the sweep (``folder_lock``) unless
+    the caller holds the lock (``locked``); recordings are made in ``out/.tmp``, which is removed at
+    the end and, left by a killed sweep, at the start. A failed write raises :class:`OutputError`.
     """
+    with contextlib.ExitStack() as stack:
+        if not locked:
+            stack.enter_context(folder_lock(out, "--out"))
+        try:
+            return _execute(jobs, out, workers, client, batched, batch_size, save_rrd, progress, on_result)
+        except OSError as err:
+            raise _oserror(err, str(out)) from None
+
+
+def _execute(jobs, out, workers, client, batched, batch_size, save_rrd, progress, on_result) -> Outcome:
     t0 = time.perf_counter()
     out.mkdir(parents=True, exist_ok=True)
+    tmp = out / TMP_DIR
+    shutil.rmtree(tmp, ignore_errors=True)  # what a killed sweep left; we hold the lock
     done: dict[tuple, dict] = {}
     todo: list[Job] = []
+    redo: dict[str, int] = {}
     for j in jobs:
-        m = load_done(out, j)
+        m, why = check_done(out, j, save_rrd)
         if m is None:
             todo.append(j)
+            if why is not None:
+                redo[why] = redo.get(why, 0) + 1
         else:
             done[j.key] = m
-    outcome = Outcome(jobs, done, {}, skipped=len(done), ran=0)
+    outcome = Outcome(jobs, done, {}, skipped=len(done), ran=0, redo=redo)
     by_key = {j.key: j for j in todo}
     tasks = make_tasks(todo, batched, batch_size)
     bar = _progress(len(todo), progress)
     failed = 0
+    results: Iterator[list[dict]] | None = None
     try:
+        if save_rrd and client is None:
+            tmp.mkdir(exist_ok=True)
+        tmp_dir = str(tmp) if client is None else None  # Dask workers record in their own temporary folder
         if client is not None:
             results = _dask_results(client, tasks, batched, save_rrd)
         elif workers <= 1 or len(tasks) <= 1:
-            results = (run_task(t, batched, save_rrd) for t in tasks)
+            results = (run_task(t, batched, save_rrd, tmp_dir) for t in tasks)
         else:
-            results = _pool_results(tasks, workers, batched, save_rrd)
+            results = _pool_results(tasks, workers, batched, save_rrd, tmp_dir)
         for res_list in results:
             for res in res_list:
                 job = by_key[res["key"]]
@@ -345,11 +550,16 @@ def execute(
                 if bar is not None:
                     bar.set_postfix_str(f"failed {failed}", refresh=False)
                     bar.update(1)
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as err:
         outcome.interrupted = True
+        outcome.terminated = isinstance(err, Terminated)
     finally:
-        if bar is not None:
-            bar.close()
+        with sigint_deferred():  # the workers stop and the temporary files go, whatever comes now
+            if results is not None and hasattr(results, "close"):
+                results.close()  # stops the pool or cancels the Dask futures now, not when collected
+            if bar is not None:
+                bar.close()
+            shutil.rmtree(tmp, ignore_errors=True)
     outcome.metrics = {j.key: outcome.metrics[j.key] for j in jobs if j.key in outcome.metrics}
     outcome.wall_s = time.perf_counter() - t0
     return outcome
@@ -365,16 +575,50 @@ def _progress(total: int, progress: bool | None):
     )
 
 
-def _pool_results(tasks: list[list[Job]], workers: int, batched: bool, save_rrd: bool) -> Iterator[list[dict]]:
-    """Results of ``tasks`` from a local process pool, as they finish; at most 2 tasks per worker in flight."""
-    import concurrent.futures as cf
+@contextlib.contextmanager
+def one_blas_thread() -> Iterator[None]:
+    """Worker processes started in this block run BLAS on one thread each (unless the user set the
+    variables): N workers on N cores with multi-threaded BLAS are several times slower than their sum."""
+    added = [v for v in BLAS_THREAD_VARIABLES if v not in os.environ]
+    try:
+        for v in added:
+            os.environ[v] = "1"
+        yield
+    finally:
+        for v in added:
+            os.environ.pop(v, None)
 
-    pool = cf.ProcessPoolExecutor(max_workers=min(workers, len(tasks)), initializer=_ignore_sigint)
+
+def _pool_results(
+    tasks: list[list[Job]], workers: int, batched: bool, save_rrd: bool, tmp_dir: str | None = None
+) -> Iterator[list[dict]]:
+    """Results of ``tasks`` from a local process pool, as they finish; at most 2 tasks per worker in flight.
+
+    Workers are fresh interpreters (``spawn``: no copy of this process's threads or BLAS state),
+    started with one BLAS thread each, and die with this process. Closing the generator (or an
+    exception in it) kills the workers: a run being computed is lost, its folder never written.
+    """
+    import concurrent.futures as cf
+    import multiprocessing as mp
+
+    before = set(mp.active_children())
+    with one_blas_thread():
+        pool = cf.ProcessPoolExecutor(
+            max_workers=min(workers, len(tasks)),
+            mp_context=mp.get_context("spawn"),
+            initializer=_worker_init,
+            initargs=(os.getpid(),),
+        )
     pending: set[cf.Future] = set()
     queue = iter(tasks)
+
+    def submit(t: list[Job]) -> None:
+        with one_blas_thread():  # the pool starts its workers as tasks are submitted
+            pending.add(pool.submit(run_task, t, batched, save_rrd, tmp_dir))
+
     try:
         for t in queue:
-            pending.add(pool.submit(run_task, t, batched, save_rrd))
+            submit(t)
             if len(pending) >= 2 * workers:
                 break
         while pending:
@@ -382,14 +626,14 @@ def _pool_results(tasks: list[list[Job]], workers: int, batched: bool, save_rrd:
             for f in finished:
                 nxt = next(queue, None)
                 if nxt is not None:
-                    pending.add(pool.submit(run_task, nxt, batched, save_rrd))
+                    submit(nxt)
                 yield f.result()
         pool.shutdown()
-    except BaseException:
+    except BaseException:  # also GeneratorExit: the consumer stopped
         for f in pending:
             f.cancel()
-        for p in list((getattr(pool, "_processes", None) or {}).values()):
-            p.terminate()  # a running run is lost; its folder was never written
+        for p in set(mp.active_children()) - before:  # this pool's workers: they ignore SIGINT and SIGTERM
+            p.kill()
         pool.shutdown(wait=True, cancel_futures=True)
         raise
 
@@ -632,53 +876,89 @@ def run_compare_cli(args: argparse.Namespace) -> int:
     return _run_cli(args, "compare", COMPARE_COLUMNS)
 
 
-def _run_cli(args: argparse.Namespace, stem: str, columns) -> int:
-    """Validate everything, then run; 0 done, 1 some run raised, 2 bad input (ConfigError), 130 interrupted."""
-    seeds = parse_seeds(args.seeds)
-    controllers = parse_controllers(args.controllers)
-    workers = (os.cpu_count() or 1) if args.workers is None else args.workers
+def check_execution_flags(args: argparse.Namespace) -> int:
+    """The number of local workers; ConfigError naming the flag for a value that cannot work."""
+    cores = os.cpu_count() or 1
+    workers = cores if args.workers is None else args.workers
+    most = WORKERS_PER_CORE * cores
     if workers < 1:
         raise ConfigError("--workers", f"need at least 1, got {workers}")
+    if workers > most and not args.scheduler:
+        raise ConfigError("--workers", f"at most {most} ({WORKERS_PER_CORE} per core on this machine), got {workers}")
     if args.batch_size < 1:
         raise ConfigError("--batch-size", f"need at least 1, got {args.batch_size}")
-    jobs = plan(args.scenarios, controllers, seeds, args.duration)
+    t = args.scheduler_timeout
+    if not (math.isfinite(t) and t > 0):
+        raise ConfigError("--scheduler-timeout", f"must be a positive number of seconds, got {t}")
+    return workers
+
+
+def _run_cli(args: argparse.Namespace, stem: str, columns) -> int:
+    """Validate everything, then run; 0 done, 1 some run failed, 2 bad input or a failed write
+    (one line naming the path), 130 interrupted (Ctrl-C), 143 terminated (SIGTERM)."""
+    seeds = parse_seeds(args.seeds)
+    controllers = parse_controllers(args.controllers)
+    workers = check_execution_flags(args)
+    scenarios = list(dict.fromkeys(args.scenarios))
+    n = len(scenarios) * len(controllers) * len(seeds)
+    if n > MAX_RUNS:
+        raise ConfigError(
+            "--seeds",
+            f"{len(scenarios)} scenarios x {len(controllers)} controllers x {len(seeds)} seeds = {n} runs is more "
+            f"than the limit of {MAX_RUNS} per sweep; split the seeds into several sweeps",
+        )
+    print(f"mlpfac: planning {n} runs ...", file=sys.stderr, flush=True)
+    jobs = plan(scenarios, controllers, seeds, args.duration)
     check_writable(args.out)
     client = connect(args.scheduler, args.scheduler_timeout) if args.scheduler else None
+    cmd = shlex.join(["mlpfac", *sys.argv[1:]]) if sys.argv[1:] else f"mlpfac {stem} ..."
     try:
-        oc = execute(
-            jobs,
-            args.out,
-            workers=workers,
-            client=client,
-            batched=args.batched,
-            batch_size=args.batch_size,
-            save_rrd=args.save_rrd,
-        )
+        with folder_lock(args.out, "--out"):
+            try:
+                oc = execute(
+                    jobs,
+                    args.out,
+                    workers=workers,
+                    client=client,
+                    batched=args.batched,
+                    batch_size=args.batch_size,
+                    save_rrd=args.save_rrd,
+                    locked=True,
+                )
+            except OutputError as err:
+                raise OutputError(f"{err}; the runs written before are whole, resume with: {cmd}") from None
+            rows = aggregate(jobs, oc.metrics)
+            if oc.interrupted:
+                print(
+                    f"mlpfac: {'terminated' if oc.terminated else 'interrupted'}; {len(oc.metrics)} of {len(jobs)} runs"
+                    f" are done and kept in {args.out}.\nResume with the same command:\n  {cmd}",
+                    file=sys.stderr,
+                )
+                return EXIT_TERMINATED if oc.terminated else EXIT_INTERRUPTED
+            meta = {
+                "command": stem,
+                "scenarios": list(args.scenarios),
+                "controllers": sorted({j.controller for j in jobs}),
+                "seeds": args.seeds,
+                "duration": args.duration,
+                "runs": len(jobs),
+            }
+            try:
+                paths = write_tables(args.out, stem, rows, columns, meta)
+            except OSError as err:
+                raise OutputError(
+                    f"{_oserror(err, str(args.out))}; every run folder is whole, resume with: {cmd}"
+                ) from None
     finally:
         if client is not None:
             client.close()
-    rows = aggregate(jobs, oc.metrics)
-    if oc.interrupted:
-        cmd = shlex.join(["mlpfac", *sys.argv[1:]]) if sys.argv[1:] else f"mlpfac {stem} ..."
-        print(
-            f"mlpfac: interrupted; {len(oc.metrics)} of {len(jobs)} runs are done and kept in {args.out}.\n"
-            f"Resume with the same command:\n  {cmd}",
-            file=sys.stderr,
-        )
-        return EXIT_INTERRUPTED
-    meta = {
-        "command": stem,
-        "scenarios": list(args.scenarios),
-        "controllers": sorted({j.controller for j in jobs}),
-        "seeds": args.seeds,
-        "duration": args.duration,
-        "runs": len(jobs),
-    }
-    paths = write_tables(args.out, stem, rows, columns, meta)
     print(markdown(rows, columns), end="")
+    redo = sum(oc.redo.values())
+    why = "; ".join(f"{k} {v}" for k, v in oc.redo.items())
     print(
-        f"{len(jobs)} runs ({oc.skipped} already done, {oc.ran} run now in {oc.wall_s:.1f} s)"
-        f" -> {', '.join(map(str, paths))}"
+        f"{len(jobs)} runs ({oc.skipped} already done, {oc.ran} run now in {oc.wall_s:.1f} s"
+        + (f", of which {redo} were found but run again: {why}" if redo else "")
+        + f") -> {', '.join(map(str, paths))}"
     )
     for key, err in oc.errors.items():
         last = err.strip().splitlines()[-1] if err.strip() else "error"
