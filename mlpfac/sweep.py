@@ -332,6 +332,13 @@ def write_result(out: Path, job: Job, result: dict) -> None:
     An OSError (a full disk) leaves the folder without metrics.json: not done, run again on resume.
     """
     d = job.folder(out)
+    try:
+        _write_result(d, job, result)
+    except OSError as err:  # a write names no file (EFBIG, ENOSPC from write()): name the folder
+        raise _oserror(err, f"into {d}") from None
+
+
+def _write_result(d: Path, job: Job, result: dict) -> None:
     with sigint_deferred():  # a Ctrl-C now waits for the folder to be whole
         d.mkdir(parents=True, exist_ok=True)
         if result["error"] is not None:
@@ -363,8 +370,6 @@ def metrics_problem(m, job: Job) -> str | None:
         return "not valid"
     if m.get("status") not in ("ok", "diverged"):
         return "not valid"
-    if (m.get("scenario"), m.get("controller"), m.get("seed")) != job.key or isinstance(m.get("seed"), bool):
-        return "of another run"
     if not (_number(m.get("T")) and isinstance(m.get("steps"), int) and not isinstance(m.get("steps"), bool)):
         return "not valid"
     if not all(_number_or_none(m.get(k, 0)) and k in m for k in PHASE_KEYS):
@@ -384,6 +389,8 @@ def metrics_problem(m, job: Job) -> str | None:
             return "not valid"
         if not all(k in ph and _number_or_none(ph[k]) for k in PHASE_KEYS):
             return "not valid"
+    if (m.get("scenario"), m.get("controller"), m.get("seed")) != job.key or isinstance(m.get("seed"), bool):
+        return "of another run"
     return None
 
 
@@ -502,6 +509,35 @@ def execute(
             raise _oserror(err, str(out)) from None
 
 
+class _SigtermSeen:
+    """Notes a SIGTERM before the installed handler sees it: a run in this process turns any
+    interruption into its own KeyboardInterrupt, so the exit code would say Ctrl-C."""
+
+    def __init__(self) -> None:
+        import signal
+        import threading
+
+        self.seen = False
+        self.previous = None
+        if threading.current_thread() is threading.main_thread():
+            previous = signal.getsignal(signal.SIGTERM)
+            if callable(previous):  # mlpfac.cli made SIGTERM raise Terminated
+                self.previous = previous
+
+                def note(signum, frame):
+                    self.seen = True
+                    previous(signum, frame)
+
+                signal.signal(signal.SIGTERM, note)
+
+    def restore(self) -> None:
+        import signal
+
+        if self.previous is not None:
+            signal.signal(signal.SIGTERM, self.previous)
+            self.previous = None
+
+
 def _execute(jobs, out, workers, client, batched, batch_size, save_rrd, progress, on_result) -> Outcome:
     t0 = time.perf_counter()
     out.mkdir(parents=True, exist_ok=True)
@@ -524,6 +560,7 @@ def _execute(jobs, out, workers, client, batched, batch_size, save_rrd, progress
     bar = _progress(len(todo), progress)
     failed = 0
     results: Iterator[list[dict]] | None = None
+    sigterm = _SigtermSeen()
     try:
         if save_rrd and client is None:
             tmp.mkdir(exist_ok=True)
@@ -552,8 +589,9 @@ def _execute(jobs, out, workers, client, batched, batch_size, save_rrd, progress
                     bar.update(1)
     except KeyboardInterrupt as err:
         outcome.interrupted = True
-        outcome.terminated = isinstance(err, Terminated)
+        outcome.terminated = isinstance(err, Terminated) or sigterm.seen
     finally:
+        sigterm.restore()
         with sigint_deferred():  # the workers stop and the temporary files go, whatever comes now
             if results is not None and hasattr(results, "close"):
                 results.close()  # stops the pool or cancels the Dask futures now, not when collected
