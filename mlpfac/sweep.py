@@ -64,6 +64,10 @@ class OutputError(MlpfacError):
     """Writing the sweep's results failed (a full disk, a lost permission): one line naming the path."""
 
 
+class WorkerLostError(MlpfacError):
+    """A local worker process died (killed from outside, out of memory): the pool cannot go on."""
+
+
 PHASES = ("before", "after")
 COMPARE_CONTROLLERS = ("adaptive", "corradini", "kanayama")
 
@@ -638,6 +642,7 @@ def _pool_results(
     """
     import concurrent.futures as cf
     import multiprocessing as mp
+    from concurrent.futures.process import BrokenProcessPool
 
     before = set(mp.active_children())
     with one_blas_thread():
@@ -662,10 +667,17 @@ def _pool_results(
         while pending:
             finished, pending = cf.wait(pending, return_when=cf.FIRST_COMPLETED)
             for f in finished:
+                try:
+                    res = f.result()
+                except BrokenProcessPool:
+                    raise WorkerLostError(
+                        "a worker process died (killed from outside, or out of memory: see `dmesg`); "
+                        "the runs it was computing were not written"
+                    ) from None
                 nxt = next(queue, None)
                 if nxt is not None:
                     submit(nxt)
-                yield f.result()
+                yield res
         pool.shutdown()
     except BaseException:  # also GeneratorExit: the consumer stopped
         for f in pending:
@@ -965,6 +977,9 @@ def _run_cli(args: argparse.Namespace, stem: str, columns) -> int:
                 )
             except OutputError as err:
                 raise OutputError(f"{err}; the runs written before are whole, resume with: {cmd}") from None
+            except WorkerLostError as err:
+                print(f"mlpfac: error: {err}; every run written is whole, resume with: {cmd}", file=sys.stderr)
+                return EXIT_FAILED
             rows = aggregate(jobs, oc.metrics)
             if oc.interrupted:
                 print(

@@ -33,6 +33,11 @@ def wait_for(cond, timeout=60.0):
         time.sleep(0.05)
 
 
+def pool_workers(pid: int) -> list:
+    """The pool's worker processes of the sweep ``pid`` (not multiprocessing's resource tracker)."""
+    return [c for c in psutil.Process(pid).children() if "spawn_main" in " ".join(c.cmdline())]
+
+
 def gone(pids, timeout=5.0) -> list[int]:
     """The pids still alive (not zombies) after ``timeout`` seconds."""
     deadline = time.monotonic() + timeout
@@ -66,9 +71,9 @@ def test_workers_die_with_the_sweep(tmp_path, sig):
         env=env,
     )
     try:
-        wait_for(lambda: len(psutil.Process(p.pid).children()) >= 2 and list(out.glob("*/*/seed-*/metrics.json")))
-        workers = psutil.Process(p.pid).children(recursive=True)
-        for w in workers:  # they were started with one BLAS thread
+        wait_for(lambda: len(pool_workers(p.pid)) == 2 and list(out.glob("*/*/seed-*/metrics.json")))
+        workers = psutil.Process(p.pid).children(recursive=True)  # and the resource tracker
+        for w in pool_workers(p.pid):  # they were started with one BLAS thread
             assert w.environ().get("OPENBLAS_NUM_THREADS") == "1"
         p.send_signal(sig)
         if sig == signal.SIGTERM:
@@ -337,3 +342,21 @@ def test_one_blas_thread_leaves_the_users_choice(monkeypatch):
     with sweep.one_blas_thread():
         assert os.environ["OPENBLAS_NUM_THREADS"] == "1" and os.environ["OMP_NUM_THREADS"] == "3"
     assert "OPENBLAS_NUM_THREADS" not in os.environ and os.environ["OMP_NUM_THREADS"] == "3"
+
+
+def test_a_worker_killed_from_outside_is_one_line(tmp_path):
+    out = tmp_path / "o"
+    p = subprocess.Popen(sweep_cmd(out, "--workers", "2"), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    try:
+        wait_for(lambda: len(pool_workers(p.pid)) == 2 and list(out.glob("*/*/seed-*/metrics.json")))
+        workers = psutil.Process(p.pid).children(recursive=True)
+        pool_workers(p.pid)[0].kill()  # as the kernel's out-of-memory killer would
+        _, err = p.communicate(timeout=60)
+    finally:
+        if p.poll() is None:
+            p.kill()
+    assert p.returncode == 1, err
+    assert "Traceback" not in err and err.strip().splitlines()[-1].startswith("mlpfac: error: a worker process died")
+    assert gone([w.pid for w in workers]) == []
+    for d in out.glob("*/*/seed-*"):
+        assert (d / "metrics.json").exists()
