@@ -2,9 +2,10 @@
 
 ``mlpfac sweep`` and ``mlpfac compare`` are one engine with two tables:
 
-1. **Plan** (:func:`plan`): every scenario is loaded and every (scenario, controller, seed) is
-   resolved with :meth:`Scenario.with_overrides` before anything runs, so bad input is a
-   :class:`ConfigError` and no run folder exists yet.
+1. **Plan** (:func:`plan`): every scenario is loaded and resolved once per controller with
+   :meth:`Scenario.with_overrides` before anything runs, so bad input is a :class:`ConfigError`
+   and no run folder exists yet; each seed's table is that table with its seed (the table
+   ``with_overrides(seed=...)`` gives). More than ``MAX_RUNS`` runs is refused.
 2. **Execute** (:func:`execute`): runs already done are skipped; the rest go to this process
    (``workers=1``), a local process pool, or a Dask cluster (``scheduler``), one run or one batch
    of seeds (``batched``, see :mod:`mlpfac.batch`) per task. Workers compute and return the
@@ -15,8 +16,16 @@
        DIR/<scenario>/<controller>/seed-0003/metrics.json   = runner.metrics(rec), written last
 
    Each file goes through a temporary file and ``os.replace``; metrics.json comes last, so a
-   folder with metrics.json is whole. A run counts as done when metrics.json exists and
-   config.toml equals the resolved scenario; a folder whose config differs is run again.
+   folder with metrics.json is whole. A run counts as done (:func:`check_done`) when config.toml
+   equals the resolved scenario, metrics.json is a metrics dict of this scenario, controller and
+   seed, and with ``save_rrd`` run.rrd has the size and sha256 recorded in metrics.json; any other
+   folder is run again, and the summary says how many and why.
+
+   The sweep holds ``folder_lock(DIR)`` throughout: a second sweep into DIR stops with one line.
+   Recordings are made in ``DIR/.tmp`` (removed at the end; a killed sweep's is removed by the
+   next one); a recording without rerun's footer (a full disk) is a failed run. Local workers are
+   fresh interpreters with one BLAS thread each that die with the sweep (``PR_SET_PDEATHSIG``
+   and a thread watching the parent), so a killed sweep leaves no worker behind.
 3. **Aggregate** (:func:`aggregate`): per scenario, controller and phase ("before" / "after" the
    first event; only "before" when the scenario has no event).
 
