@@ -158,6 +158,32 @@ def test_a_failed_write_is_one_line(tmp_path):
     assert list(out.rglob("metrics.json")) == []  # no folder counts as done
 
 
+def test_a_full_disk_keeps_every_written_folder_whole(tmp_path):
+    """A 1 MB tmpfs (needs root and mount): recordings cut, then a write fails with ENOSPC."""
+    disk = tmp_path / "disk"
+    disk.mkdir()
+    if os.geteuid() != 0 or subprocess.run(["mount", "-t", "tmpfs", "-o", "size=1m", "tmpfs", str(disk)]).returncode:
+        pytest.skip("cannot mount a tmpfs here")
+    try:
+        out = disk / "o"
+        res = subprocess.run(
+            sweep_cmd(out, "--workers", "2", "--save-rrd", seeds="0-9", duration="0.5"),
+            capture_output=True,
+            text=True,
+            timeout=120,
+        )
+        assert res.returncode == 2, res.stderr
+        last = res.stderr.strip().splitlines()[-1]
+        assert last.startswith(f"mlpfac: error: cannot write into {out}/") and "No space left on device" in last
+        assert "Traceback" not in res.stderr
+        jobs = {j.folder(out): j for j in sweep.plan(["paper"], ["adaptive"], list(range(10)), 0.5)}
+        written = [d for d in jobs if (d / "metrics.json").exists()]
+        assert written and all(sweep.check_done(out, jobs[d], save_rrd=True)[0] is not None for d in written)
+        assert not (out / ".tmp").exists()
+    finally:
+        subprocess.run(["umount", str(disk)])
+
+
 def test_a_failed_table_write_is_one_line(tmp_path, monkeypatch, capsys):
     import errno
 
