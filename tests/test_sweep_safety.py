@@ -340,15 +340,17 @@ def test_planning_says_how_many_runs_at_once(tmp_path, capsys):
     assert capsys.readouterr().err.splitlines()[0] == "mlpfac: planning 3 runs ..."
 
 
-def test_planned_tables_equal_with_overrides(tmp_path):
+def test_planned_tables_equal_with_overrides():
+    """Planning parses each scenario and controller once; each seed's table is what with_overrides gives."""
     seeds = [0, 5, 123, 10**6]
-    jobs = sweep.plan(["paper", "eight-nominal"], [None, "corradini"], seeds, 1.0)
-    assert len(jobs) == 2 * 2 * len(seeds)
-    for j in jobs:
-        base = load("paper" if j.scenario == "paper" else "eight-nominal")
-        ctrl = None if j.controller == base.controller and jobs.index(j) % 8 < 4 else j.controller
-        ref = base.with_overrides(controller=ctrl, seed=j.seed, duration=1.0)
-        assert j.table == ref.table and j.config == to_toml(ref.table) and j.table["seed"] == j.seed
+    for src in ("paper", "eight-nominal"):
+        for ctrl in (None, "corradini"):
+            jobs = sweep.plan([src], [ctrl], seeds, 1.0)
+            assert [j.seed for j in jobs] == seeds
+            for j in jobs:
+                ref = load(src).with_overrides(controller=ctrl, seed=j.seed, duration=1.0)
+                assert j.table == ref.table and j.config == to_toml(ref.table)
+                assert (j.scenario, j.controller, j.source) == (ref.name, ref.controller, ref.source)
 
 
 def test_planning_100000_runs_is_quick():
