@@ -1,0 +1,284 @@
+"""Executing a plan: skip what is done, run the rest here, in a local pool or on Dask, write as results come."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import shutil
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from mlpfac.exceptions import ConfigError, MlpfacError
+from mlpfac.outputs import Terminated, folder_lock, sigint_deferred
+from mlpfac.sweeps.folders import _oserror, check_done, write_result
+from mlpfac.sweeps.plan import Job
+from mlpfac.sweeps.worker import _worker_init, run_task
+
+TMP_DIR = ".tmp"  # OUT/.tmp: recordings being made; removed when the sweep ends and when the next one starts
+BLAS_THREAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
+
+
+class WorkerLostError(MlpfacError):
+    """A local worker process died (killed from outside, out of memory): the pool cannot go on."""
+
+
+@dataclass
+class Outcome:
+    """What a sweep produced: the metrics of every whole run, in plan order, and the failures."""
+
+    jobs: list[Job]
+    metrics: dict[tuple, dict]
+    errors: dict[tuple, str]
+    skipped: int
+    ran: int
+    interrupted: bool = False
+    terminated: bool = False  # the interruption was a SIGTERM
+    wall_s: float = 0.0
+    redo: dict[str, int] = field(default_factory=dict)  # why folders found were not done -> how many
+
+
+def make_tasks(jobs: list[Job], batched: bool, batch_size: int) -> list[list[Job]]:
+    """One job per task, or with ``batched`` up to ``batch_size`` seeds of one scenario and controller."""
+    if not batched:
+        return [[j] for j in jobs]
+    groups: dict[tuple[str, str], list[Job]] = {}
+    for j in jobs:
+        groups.setdefault((j.scenario, j.controller), []).append(j)
+    return [g[i : i + batch_size] for g in groups.values() for i in range(0, len(g), batch_size)]
+
+
+def execute(
+    jobs: list[Job],
+    out: Path,
+    workers: int = 1,
+    client=None,
+    batched: bool = False,
+    batch_size: int = 64,
+    save_rrd: bool = False,
+    progress: bool | None = None,
+    on_result: Callable[[dict], None] | None = None,
+    locked: bool = False,
+) -> Outcome:
+    """Run the jobs not done yet; write each run's folder as its result arrives.
+
+    ``client`` is a ``dask.distributed.Client`` or None (local). ``progress``: None shows a bar
+    only when stderr is a terminal. KeyboardInterrupt (Ctrl-C, or SIGTERM as
+    :class:`~mlpfac.outputs.Terminated`) stops the workers and returns with ``interrupted=True``;
+    every folder written so far is whole. ``out`` is locked for the sweep (``folder_lock``) unless
+    the caller holds the lock (``locked``); recordings are made in ``out/.tmp``, which is removed at
+    the end and, left by a killed sweep, at the start. A failed write raises :class:`OutputError`.
+    """
+    with contextlib.ExitStack() as stack:
+        if not locked:
+            stack.enter_context(folder_lock(out, "--out"))
+        try:
+            return _execute(jobs, out, workers, client, batched, batch_size, save_rrd, progress, on_result)
+        except OSError as err:
+            raise _oserror(err, str(out)) from None
+
+
+class _SigtermSeen:
+    """Notes a SIGTERM before the installed handler sees it: a run in this process turns any
+    interruption into its own KeyboardInterrupt, so the exit code would say Ctrl-C."""
+
+    def __init__(self) -> None:
+        import signal
+        import threading
+
+        self.seen = False
+        self.previous = None
+        if threading.current_thread() is threading.main_thread():
+            previous = signal.getsignal(signal.SIGTERM)
+            if callable(previous):  # mlpfac.cli made SIGTERM raise Terminated
+                self.previous = previous
+
+                def note(signum, frame):
+                    self.seen = True
+                    previous(signum, frame)
+
+                signal.signal(signal.SIGTERM, note)
+
+    def restore(self) -> None:
+        import signal
+
+        if self.previous is not None:
+            signal.signal(signal.SIGTERM, self.previous)
+            self.previous = None
+
+
+def _execute(jobs, out, workers, client, batched, batch_size, save_rrd, progress, on_result) -> Outcome:
+    t0 = time.perf_counter()
+    out.mkdir(parents=True, exist_ok=True)
+    tmp = out / TMP_DIR
+    shutil.rmtree(tmp, ignore_errors=True)  # what a killed sweep left; we hold the lock
+    done: dict[tuple, dict] = {}
+    todo: list[Job] = []
+    redo: dict[str, int] = {}
+    for j in jobs:
+        m, why = check_done(out, j, save_rrd)
+        if m is None:
+            todo.append(j)
+            if why is not None:
+                redo[why] = redo.get(why, 0) + 1
+        else:
+            done[j.key] = m
+    outcome = Outcome(jobs, done, {}, skipped=len(done), ran=0, redo=redo)
+    by_key = {j.key: j for j in todo}
+    tasks = make_tasks(todo, batched, batch_size)
+    bar = _progress(len(todo), progress)
+    failed = 0
+    results: Iterator[list[dict]] | None = None
+    sigterm = _SigtermSeen()
+    try:
+        if save_rrd and client is None:
+            tmp.mkdir(exist_ok=True)
+        tmp_dir = str(tmp) if client is None else None  # Dask workers record in their own temporary folder
+        if client is not None:
+            results = _dask_results(client, tasks, batched, save_rrd)
+        elif workers <= 1 or len(tasks) <= 1:
+            results = (run_task(t, batched, save_rrd, tmp_dir) for t in tasks)
+        else:
+            results = _pool_results(tasks, workers, batched, save_rrd, tmp_dir)
+        for res_list in results:
+            for res in res_list:
+                job = by_key[res["key"]]
+                write_result(out, job, res)
+                outcome.ran += 1
+                if res["error"] is not None:
+                    outcome.errors[job.key] = res["error"]
+                    failed += 1
+                else:
+                    outcome.metrics[job.key] = res["metrics"]
+                    failed += res["metrics"]["status"] != "ok"
+                if on_result is not None:
+                    on_result(res)
+                if bar is not None:
+                    bar.set_postfix_str(f"failed {failed}", refresh=False)
+                    bar.update(1)
+    except KeyboardInterrupt as err:
+        outcome.interrupted = True
+        outcome.terminated = isinstance(err, Terminated) or sigterm.seen
+    finally:
+        sigterm.restore()
+        with sigint_deferred():  # the workers stop and the temporary files go, whatever comes now
+            if results is not None and hasattr(results, "close"):
+                results.close()  # stops the pool or cancels the Dask futures now, not when collected
+            if bar is not None:
+                bar.close()
+            shutil.rmtree(tmp, ignore_errors=True)
+    outcome.metrics = {j.key: outcome.metrics[j.key] for j in jobs if j.key in outcome.metrics}
+    outcome.wall_s = time.perf_counter() - t0
+    return outcome
+
+
+def _progress(total: int, progress: bool | None):
+    if progress is False or total == 0:
+        return None
+    from tqdm import tqdm
+
+    return tqdm(
+        total=total, unit="run", desc="runs", disable=None if progress is None else not progress, dynamic_ncols=True
+    )
+
+
+@contextlib.contextmanager
+def one_blas_thread() -> Iterator[None]:
+    """Worker processes started in this block run BLAS on one thread each (unless the user set the
+    variables): N workers on N cores with multi-threaded BLAS are several times slower than their sum."""
+    added = [v for v in BLAS_THREAD_VARIABLES if v not in os.environ]
+    try:
+        for v in added:
+            os.environ[v] = "1"
+        yield
+    finally:
+        for v in added:
+            os.environ.pop(v, None)
+
+
+def _pool_results(
+    tasks: list[list[Job]], workers: int, batched: bool, save_rrd: bool, tmp_dir: str | None = None
+) -> Iterator[list[dict]]:
+    """Results of ``tasks`` from a local process pool, as they finish; at most 2 tasks per worker in flight.
+
+    Workers are fresh interpreters (``spawn``: no copy of this process's threads or BLAS state),
+    started with one BLAS thread each, and die with this process. Closing the generator (or an
+    exception in it) kills the workers: a run being computed is lost, its folder never written.
+    """
+    import concurrent.futures as cf
+    import multiprocessing as mp
+    from concurrent.futures.process import BrokenProcessPool
+
+    before = set(mp.active_children())
+    with one_blas_thread():
+        pool = cf.ProcessPoolExecutor(
+            max_workers=min(workers, len(tasks)),
+            mp_context=mp.get_context("spawn"),
+            initializer=_worker_init,
+            initargs=(os.getpid(),),
+        )
+    pending: set[cf.Future] = set()
+    queue = iter(tasks)
+
+    def submit(t: list[Job]) -> None:
+        with one_blas_thread():  # the pool starts its workers as tasks are submitted
+            pending.add(pool.submit(run_task, t, batched, save_rrd, tmp_dir))
+
+    try:
+        for t in queue:
+            submit(t)
+            if len(pending) >= 2 * workers:
+                break
+        while pending:
+            finished, pending = cf.wait(pending, return_when=cf.FIRST_COMPLETED)
+            for f in finished:
+                try:
+                    res = f.result()
+                except BrokenProcessPool:
+                    raise WorkerLostError(
+                        "a worker process died (killed from outside, or out of memory: see `dmesg`); "
+                        "the runs it was computing were not written"
+                    ) from None
+                nxt = next(queue, None)
+                if nxt is not None:
+                    submit(nxt)
+                yield res
+        pool.shutdown()
+    except BaseException:  # also GeneratorExit: the consumer stopped
+        for f in pending:
+            f.cancel()
+        for p in set(mp.active_children()) - before:  # this pool's workers: they ignore SIGINT and SIGTERM
+            p.kill()
+        pool.shutdown(wait=True, cancel_futures=True)
+        raise
+
+
+def _dask_results(client, tasks: list[list[Job]], batched: bool, save_rrd: bool) -> Iterator[list[dict]]:
+    """Results from a Dask cluster. A lost worker's tasks are rescheduled by the scheduler; ``retries``
+    covers a task that failed in transit. Results come back to this process, which writes them."""
+    from dask.distributed import as_completed
+
+    futures = [client.submit(run_task, t, batched, save_rrd, pure=False, retries=2) for t in tasks]
+    try:
+        for f in as_completed(futures):
+            yield f.result()
+            f.release()
+    except BaseException:
+        client.cancel(futures)
+        raise
+
+
+def connect(address: str, timeout: float = 10.0):
+    """A Dask client of the scheduler at ``address``; ConfigError if it cannot be reached in ``timeout`` s."""
+    try:
+        from dask.distributed import Client
+    except ImportError:
+        raise ConfigError("--scheduler", "needs dask[distributed]: pip install 'mlpfac[dask]'") from None
+    try:
+        return Client(address, timeout=timeout)
+    except (OSError, TimeoutError, ValueError) as err:
+        msg = str(err).splitlines()[0] if str(err) else type(err).__name__
+        raise ConfigError(
+            "--scheduler", f"cannot reach a Dask scheduler at {address} within {timeout:g} s ({msg})"
+        ) from None

@@ -1,0 +1,155 @@
+"""Aggregating the runs' metrics per scenario, controller and phase; the CSV, Markdown and JSON tables."""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Callable
+from pathlib import Path
+
+from mlpfac.outputs import write_atomic
+from mlpfac.sweeps.folders import PHASES
+from mlpfac.sweeps.plan import Job
+
+
+def _ci95(xs: list[float]) -> tuple[float | None, float | None]:
+    """95 % confidence interval of the mean (Student t); None for fewer than two values."""
+    n = len(xs)
+    if n < 2:
+        return None, None
+    from scipy.stats import t
+
+    mean = math.fsum(xs) / n
+    sd = math.sqrt(math.fsum((x - mean) ** 2 for x in xs) / (n - 1))
+    half = float(t.ppf(0.975, n - 1)) * sd / math.sqrt(n)
+    return mean - half, mean + half
+
+
+def _median(xs: list[float]) -> float | None:
+    if not xs:
+        return None
+    s = sorted(xs)
+    n = len(s)
+    return s[n // 2] if n % 2 else 0.5 * (s[n // 2 - 1] + s[n // 2])
+
+
+def aggregate(jobs: list[Job], metrics: dict[tuple, dict]) -> list[dict]:
+    """One row per scenario, controller and phase (in plan order) from the runs' metrics."""
+    groups: dict[tuple[str, str], list[dict]] = {}
+    for j in jobs:
+        groups.setdefault((j.scenario, j.controller), [])
+        if j.key in metrics:
+            groups[(j.scenario, j.controller)].append(metrics[j.key])
+    rows = []
+    for (scn, ctrl), ms in groups.items():
+        n = len(ms)
+        ok = [m for m in ms if m["status"] == "ok"]
+        diverged = sorted((m for m in ms if m["status"] != "ok"), key=lambda m: (m["steps"], m["seed"]))
+        has_after = any(
+            "after" in m["phases"] and m["phases"]["after"]["end_s"] > m["phases"]["after"]["start_s"] for m in ms
+        )
+        for phase in PHASES if has_after else PHASES[:1]:
+            ph = [m["phases"][phase] for m in ok]
+            pos = [p["rms_position_error_m"] for p in ph if p["rms_position_error_m"] is not None]
+            head = [p["rms_heading_error_rad"] for p in ph if p["rms_heading_error_rad"] is not None]
+            mx = [p["max_position_error_m"] for p in ph if p["max_position_error_m"] is not None]
+            if diverged:
+                worst = diverged[0]
+            else:
+                scored = [(m["phases"][phase]["rms_position_error_m"] or -1.0, -m["seed"], m) for m in ok]
+                worst = max(scored, key=lambda s: s[:2])[2] if scored else None
+            row = {"scenario": scn, "controller": ctrl, "phase": phase, "runs": n, "bounded": len(ok)}
+            row["bounded_share"] = len(ok) / n if n else None
+            for name, xs in (("pos_rms_m", pos), ("heading_rms_rad", head)):
+                lo, hi = _ci95(xs)
+                row |= {
+                    f"{name}_mean": math.fsum(xs) / len(xs) if xs else None,
+                    f"{name}_median": _median(xs),
+                    f"{name}_ci_lo": lo,
+                    f"{name}_ci_hi": hi,
+                }
+            row["max_err_m_median"] = _median(mx)
+            row["max_err_m_max"] = max(mx) if mx else None
+            weights = [m["max_abs_weight"] for m in ms if m.get("max_abs_weight") is not None]
+            row["max_abs_weight"] = max(weights) if weights else None  # over every run, diverged ones too
+            row["worst_seed"] = worst["seed"] if worst else None
+            row["worst_status"] = worst["status"] if worst else None
+            rows.append(row)
+    return rows
+
+
+def _f(x: float | None, scale: float = 1.0, digits: int = 2) -> str:
+    return "-" if x is None else f"{x * scale:.{digits}f}"
+
+
+def _ci(lo, hi, scale: float) -> str:
+    return "-" if lo is None else f"[{lo * scale:.2f}, {hi * scale:.2f}]"
+
+
+SWEEP_COLUMNS: list[tuple[str, Callable[[dict], str]]] = [
+    ("scenario", lambda r: r["scenario"]),
+    ("controller", lambda r: r["controller"]),
+    ("phase", lambda r: r["phase"]),
+    ("bounded", lambda r: f"{r['bounded']}/{r['runs']}"),
+    ("pos RMS mean [mm]", lambda r: _f(r["pos_rms_m_mean"], 1e3)),
+    ("pos RMS median [mm]", lambda r: _f(r["pos_rms_m_median"], 1e3)),
+    ("pos RMS 95% CI [mm]", lambda r: _ci(r["pos_rms_m_ci_lo"], r["pos_rms_m_ci_hi"], 1e3)),
+    ("heading RMS mean [mrad]", lambda r: _f(r["heading_rms_rad_mean"], 1e3)),
+    ("heading RMS median [mrad]", lambda r: _f(r["heading_rms_rad_median"], 1e3)),
+    ("heading RMS 95% CI [mrad]", lambda r: _ci(r["heading_rms_rad_ci_lo"], r["heading_rms_rad_ci_hi"], 1e3)),
+    ("max abs weight", lambda r: _f(r["max_abs_weight"], 1.0, 3) if r["max_abs_weight"] is not None else "-"),
+    (
+        "worst seed",
+        lambda r: (
+            "-"
+            if r["worst_seed"] is None
+            else f"{r['worst_seed']}" + (f" ({r['worst_status']})" if r["worst_status"] != "ok" else "")
+        ),
+    ),
+]
+
+COMPARE_COLUMNS: list[tuple[str, Callable[[dict], str]]] = [
+    ("scenario", lambda r: r["scenario"]),
+    ("controller", lambda r: r["controller"]),
+    ("phase", lambda r: r["phase"]),
+    ("pos RMS median [mm]", lambda r: _f(r["pos_rms_m_median"], 1e3)),
+    ("max error [mm]", lambda r: _f(r["max_err_m_max"], 1e3)),
+    ("heading RMS median [mrad]", lambda r: _f(r["heading_rms_rad_median"], 1e3)),
+    ("status", lambda r: f"bounded {r['bounded']}/{r['runs']}"),
+]
+
+CSV_FIELDS = [
+    "scenario", "controller", "phase", "runs", "bounded", "bounded_share",
+    "pos_rms_m_mean", "pos_rms_m_median", "pos_rms_m_ci_lo", "pos_rms_m_ci_hi",
+    "heading_rms_rad_mean", "heading_rms_rad_median", "heading_rms_rad_ci_lo", "heading_rms_rad_ci_hi",
+    "max_err_m_median", "max_err_m_max", "max_abs_weight", "worst_seed", "worst_status",
+]  # fmt: skip
+
+
+def markdown(rows: list[dict], columns: list[tuple[str, Callable[[dict], str]]]) -> str:
+    head = [c for c, _ in columns]
+    lines = ["| " + " | ".join(head) + " |", "|" + "|".join(" --- " for _ in head) + "|"]
+    lines += ["| " + " | ".join(fn(r) for _, fn in columns) + " |" for r in rows]
+    return "\n".join(lines) + "\n"
+
+
+def write_tables(out: Path, stem: str, rows: list[dict], columns, meta: dict) -> list[Path]:
+    """``stem``.csv (every statistic, SI units), .md (the readable table), .json (rows + how they were made)."""
+    import csv
+    import io
+
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=CSV_FIELDS, lineterminator="\n")
+    w.writeheader()
+    for r in rows:
+        w.writerow({k: ("" if r[k] is None else r[k]) for k in CSV_FIELDS})
+    paths = [out / f"{stem}.csv", out / f"{stem}.md", out / f"{stem}.json"]
+    note = (
+        "\nStatistics over bounded runs (status ok); 95 % CI of the mean (Student t). Worst seed: the "
+        "first to diverge if any diverged, else the largest position RMS; re-run it alone with "
+        "`mlpfac run SCENARIO --controller C --seed S`.\n"
+    )
+    write_atomic(paths[0], buf.getvalue())
+    write_atomic(paths[1], markdown(rows, columns) + note)
+    write_atomic(paths[2], json.dumps({"meta": meta, "rows": rows}, indent=2) + "\n")
+    return paths

@@ -1,0 +1,135 @@
+"""One task in this process, a local pool worker or a Dask worker: runs -> metrics (and recordings)."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from mlpfac.sweeps.plan import Job
+
+
+def run_task(jobs: list[Job], batched: bool = False, save_rrd: bool = False, tmp_dir: str | None = None) -> list[dict]:
+    """Run ``jobs`` (one, or seeds of one scenario and controller when ``batched``).
+
+    Returns one result per job: {"key", "metrics", "rrd" (bytes or None), "error" (str or None)}.
+    Recordings are made in ``tmp_dir`` (OUT/.tmp for a local sweep; the system's temporary folder
+    on a Dask worker). An interrupted run raises KeyboardInterrupt: it must never be written as done.
+    """
+    from mlpfac.runner import metrics
+    from mlpfac.scenario import parse
+
+    if batched and len(jobs) > 1 and not save_rrd:
+        from mlpfac.batch import run_batch
+
+        try:
+            recs = run_batch([parse(j.table, j.source) for j in jobs])
+        except KeyboardInterrupt:
+            raise
+        except Exception as err:  # a bug, not a divergence: report it per run
+            return [{"key": j.key, "metrics": None, "rrd": None, "error": _error_text(err)} for j in jobs]
+        return [
+            {"key": j.key, "metrics": metrics(r), "rrd": None, "error": None} for j, r in zip(jobs, recs, strict=True)
+        ]
+    return [_run_one(j, save_rrd, tmp_dir) for j in jobs]
+
+
+def _run_one(job: Job, save_rrd: bool, tmp_dir: str | None = None) -> dict:
+    from mlpfac.runner import metrics, run
+    from mlpfac.scenario import parse
+
+    rrd_path = sink = None
+    try:
+        scn = parse(job.table, job.source)
+        if save_rrd:
+            sink, rrd_path = _make_sink(job, tmp_dir)
+        rec = run(scn, sink=sink)
+        if rec.status == "interrupted":
+            raise KeyboardInterrupt
+        rrd = None
+        if rrd_path is not None:
+            rrd = rrd_path.read_bytes() if rrd_path.exists() else b""
+            if not rrd_is_whole(rrd):
+                raise OSError(
+                    f"the recording is not whole ({len(rrd)} bytes, no rerun footer): "
+                    "was the disk full? see the rerun messages above"
+                )
+        return {"key": job.key, "metrics": metrics(rec), "rrd": rrd, "error": None}
+    except KeyboardInterrupt:
+        raise
+    except Exception as err:
+        return {"key": job.key, "metrics": None, "rrd": None, "error": _error_text(err)}
+    finally:
+        if rrd_path is not None:
+            rrd_path.unlink(missing_ok=True)
+
+
+def rrd_is_whole(data: bytes) -> bool:
+    """A rerun file that was closed: the stream header at the start, the footer magic at the end.
+
+    A file cut by a full disk or a killed writer has no footer (rerun writes it when the sink closes).
+    """
+    return len(data) >= 16 and data[:4] == b"RRF2" and data[-12:-4] == b"RRF2FOOT"
+
+
+def _make_sink(job: Job, tmp_dir: str | None = None):
+    """A rerun sink saving to a temporary file (its bytes go back to the client); (None, None) without mlpfac.log."""
+    try:
+        from mlpfac import log
+    except ImportError:
+        return None, None
+    fd, tmp = tempfile.mkstemp(suffix=".rrd", prefix="mlpfac-", dir=tmp_dir)
+    os.close(fd)
+    path = Path(tmp)
+    try:
+        sink = log.make_sink(
+            save=path,
+            recording_name=f"{job.scenario} / {job.controller} / seed {job.seed}",
+            recording_id=f"{job.scenario}-{job.controller}-{job.seed}",
+        )
+    except BaseException:
+        path.unlink(missing_ok=True)
+        raise
+    return sink, path
+
+
+def _error_text(err: BaseException) -> str:
+    import traceback
+
+    return "".join(traceback.format_exception(err))
+
+
+def _worker_init(parent: int) -> None:
+    """Pool workers leave Ctrl-C and SIGTERM to the parent, which stops them (a half run is never
+    returned), and die with the parent: a killed sweep leaves no worker behind."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    _die_with_parent(parent)
+
+
+def _die_with_parent(parent: int) -> None:
+    """Linux: the kernel sends SIGKILL when the parent dies (prctl PR_SET_PDEATHSIG). Everywhere: a
+    daemon thread exits the process once it has another parent (the parent died, it was reparented)."""
+    import signal
+    import threading
+
+    if sys.platform.startswith("linux"):
+        with contextlib.suppress(OSError, AttributeError):
+            import ctypes
+
+            libc = ctypes.CDLL(None, use_errno=True)
+            libc.prctl(1, int(signal.SIGKILL), 0, 0, 0)  # 1 = PR_SET_PDEATHSIG
+    if os.getppid() != parent:  # the parent died before the line above
+        os._exit(1)
+
+    def watch() -> None:
+        while os.getppid() == parent:
+            time.sleep(0.5)
+        os._exit(1)
+
+    threading.Thread(target=watch, name="mlpfac-parent-watch", daemon=True).start()

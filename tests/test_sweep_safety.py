@@ -1,0 +1,390 @@
+"""A sweep never loses or mixes a result and meets every fault with one line: killed sweeps leave no
+worker and no temporary file, a full disk is a failed run or one line, resume trusts only whole
+folders of the same run, one sweep per folder, and plans or flags that cannot work are refused."""
+
+import json
+import os
+import resource
+import shutil
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+from mlpfac import sweep
+from mlpfac.cli import main
+from mlpfac.scenario import load, to_toml
+
+psutil = pytest.importorskip("psutil")
+
+
+def sweep_cmd(out, *extra, seeds="0-200", duration="1"):
+    return [sys.executable, "-m", "mlpfac.cli", "sweep", "paper", "--seeds", seeds, "--duration", duration,
+            "--out", str(out), *extra]  # fmt: skip
+
+
+def wait_for(cond, timeout=60.0):
+    deadline = time.monotonic() + timeout
+    while not cond():
+        if time.monotonic() > deadline:
+            raise AssertionError("timed out")
+        time.sleep(0.05)
+
+
+def pool_workers(pid: int) -> list:
+    """The pool's worker processes of the sweep ``pid`` (not multiprocessing's resource tracker)."""
+    return [c for c in psutil.Process(pid).children() if "spawn_main" in " ".join(c.cmdline())]
+
+
+def gone(pids, timeout=5.0) -> list[int]:
+    """The pids still alive (not zombies) after ``timeout`` seconds."""
+    deadline = time.monotonic() + timeout
+    while True:
+        alive = []
+        for pid in pids:
+            try:
+                if psutil.Process(pid).status() != psutil.STATUS_ZOMBIE:
+                    alive.append(pid)
+            except psutil.NoSuchProcess:
+                pass
+        if not alive or time.monotonic() > deadline:
+            return alive
+        time.sleep(0.1)
+
+
+# --------------------------------------------------------------------------------------------
+# 1. workers die with the sweep; 2. temporary files
+
+
+@pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGTERM])
+def test_workers_die_with_the_sweep(tmp_path, sig):
+    out, systmp = tmp_path / "o", tmp_path / "systmp"
+    systmp.mkdir()
+    env = {k: v for k, v in os.environ.items() if not k.endswith("_NUM_THREADS")} | {"TMPDIR": str(systmp)}
+    p = subprocess.Popen(
+        sweep_cmd(out, "--workers", "2", "--save-rrd"),
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE if sig == signal.SIGTERM else subprocess.DEVNULL,
+        text=True,
+        env=env,
+    )
+    try:
+        wait_for(lambda: len(pool_workers(p.pid)) == 2 and list(out.glob("*/*/seed-*/metrics.json")))
+        workers = psutil.Process(p.pid).children(recursive=True)  # and the resource tracker
+        for w in pool_workers(p.pid):  # they were started with one BLAS thread
+            assert w.environ().get("OPENBLAS_NUM_THREADS") == "1"
+        p.send_signal(sig)
+        if sig == signal.SIGTERM:
+            _, err = p.communicate(timeout=60)
+            assert p.returncode == 143, err
+            assert "Traceback" not in err and "terminated;" in err and "Resume with the same command" in err
+            assert not (out / ".tmp").exists()
+        else:
+            p.wait(timeout=10)
+        assert gone([w.pid for w in workers]) == []
+    finally:
+        if p.poll() is None:
+            p.kill()
+    assert list(systmp.iterdir()) == []  # nothing in the system's temporary folder
+    for d in out.glob("*/*/seed-*"):  # whole folders only
+        assert (d / "metrics.json").exists() and (d / "run.rrd").exists()
+    if sig == signal.SIGKILL:  # the next sweep into the folder removes what the killed one left
+        (out / ".tmp").mkdir(exist_ok=True)
+        (out / ".tmp" / "mlpfac-stale.rrd").write_bytes(b"RRF2")
+        jobs = sweep.plan(["paper"], ["adaptive"], [0], 1.0)
+        sweep.execute(jobs, out, save_rrd=True)
+        assert not (out / ".tmp").exists()
+
+
+def test_an_interrupted_save_rrd_sweep_leaves_no_temporary_file(tmp_path, monkeypatch):
+    jobs = sweep.plan(["paper"], ["corradini"], [0, 1, 2], 0.5)
+    monkeypatch.setenv("TMPDIR", str(tmp_path / "systmp"))
+    (tmp_path / "systmp").mkdir()
+
+    def stop(res):
+        raise KeyboardInterrupt
+
+    oc = sweep.execute(jobs, tmp_path / "o", save_rrd=True, on_result=stop)
+    assert oc.interrupted and oc.ran == 1
+    assert not (tmp_path / "o" / ".tmp").exists() and list((tmp_path / "systmp").iterdir()) == []
+
+
+# --------------------------------------------------------------------------------------------
+# 3. full disk
+
+
+def _file_size_limit(limit):
+    def pre():
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # a write past the limit fails with EFBIG
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+
+    return pre
+
+
+def test_a_cut_recording_is_a_failed_run(tmp_path):
+    out = tmp_path / "o"
+    res = subprocess.run(
+        sweep_cmd(out, "--workers", "1", "--save-rrd", seeds="0-1", duration="0.5"),
+        preexec_fn=_file_size_limit(150_000),  # a recording is ~400 kB
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert res.returncode == 1, res.stderr
+    assert "Traceback" not in res.stderr.split("mlpfac: error:")[-1]
+    assert "the recording is not whole" in res.stderr
+    for seed in (0, 1):
+        d = out / "paper" / "adaptive" / f"seed-{seed:04d}"
+        assert not (d / "metrics.json").exists() and not (d / "run.rrd").exists() and (d / "error.txt").exists()
+    assert not (out / ".tmp").exists()
+
+
+def test_a_failed_write_is_one_line(tmp_path):
+    out = tmp_path / "o"
+    res = subprocess.run(
+        sweep_cmd(out, "--workers", "1", seeds="0-1", duration="0.5"),
+        preexec_fn=_file_size_limit(700),  # config.toml (~500 bytes) fits, metrics.json (~800) does not
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert res.returncode == 2, res.stderr
+    last = res.stderr.strip().splitlines()
+    assert "Traceback" not in res.stderr and len(last) == 2 and last[0].startswith("mlpfac: planning")
+    assert last[1].startswith(f"mlpfac: error: cannot write into {out}/paper/adaptive/seed-0000 (File too large)")
+    assert "resume with: mlpfac sweep paper" in last[1]
+    assert list(out.rglob("metrics.json")) == []  # no folder counts as done
+
+
+def test_a_full_disk_keeps_every_written_folder_whole(tmp_path):
+    """A 1 MB tmpfs (needs root and mount): recordings cut, then a write fails with ENOSPC."""
+    disk = tmp_path / "disk"
+    disk.mkdir()
+    if os.geteuid() != 0 or subprocess.run(["mount", "-t", "tmpfs", "-o", "size=1m", "tmpfs", str(disk)]).returncode:
+        pytest.skip("cannot mount a tmpfs here")
+    try:
+        out = disk / "o"
+        res = subprocess.run(
+            sweep_cmd(out, "--workers", "2", "--save-rrd", seeds="0-9", duration="0.5"),
+            capture_output=True,
+            text=True,
+            timeout=120,
+        )
+        assert res.returncode == 2, res.stderr
+        last = res.stderr.strip().splitlines()[-1]
+        assert last.startswith(f"mlpfac: error: cannot write into {out}/") and "No space left on device" in last
+        assert "Traceback" not in res.stderr
+        jobs = {j.folder(out): j for j in sweep.plan(["paper"], ["adaptive"], list(range(10)), 0.5)}
+        written = [d for d in jobs if (d / "metrics.json").exists()]
+        assert written and all(sweep.check_done(out, jobs[d], save_rrd=True)[0] is not None for d in written)
+        assert not (out / ".tmp").exists()
+    finally:
+        subprocess.run(["umount", str(disk)])
+
+
+def test_a_failed_table_write_is_one_line(tmp_path, monkeypatch, capsys):
+    import errno
+
+    def full(*a, **k):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(tmp_path / "o" / "sweep.csv"))
+
+    monkeypatch.setattr(sweep, "write_tables", full)
+    code = main(["sweep", "paper", "--seeds", "0", "--duration", "0.5", "--workers", "1", "--out", str(tmp_path / "o")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and "No space left on device" in err[-1] and "sweep.csv" in err[-1] and len(err) == 2
+    assert (tmp_path / "o" / "paper" / "adaptive" / "seed-0000" / "metrics.json").exists()
+
+
+# --------------------------------------------------------------------------------------------
+# 4. resume trusts only whole folders of the same run
+
+
+def _seed0(out):
+    return out / "paper" / "adaptive" / "seed-0000"
+
+
+CORRUPTIONS = {
+    "run.rrd deleted": (lambda d: (d / "run.rrd").unlink(), "run.rrd missing"),
+    "run.rrd truncated": (
+        lambda d: (d / "run.rrd").write_bytes((d / "run.rrd").read_bytes()[:1000]),
+        "run.rrd changed or cut",
+    ),
+    "run.rrd same size, other bytes": (
+        lambda d: (d / "run.rrd").write_bytes(bytes(len((d / "run.rrd").read_bytes()))),
+        "run.rrd changed or cut",
+    ),
+    "metrics.json of another seed": (
+        lambda d: shutil.copy(d.parent / "seed-0001" / "metrics.json", d / "metrics.json"),
+        "metrics.json of another run",
+    ),
+    "metrics.json {}": (lambda d: (d / "metrics.json").write_text("{}"), "metrics.json not valid"),
+    "metrics.json []": (lambda d: (d / "metrics.json").write_text("[]"), "metrics.json not valid"),
+    "metrics.json status only": (
+        lambda d: (d / "metrics.json").write_text('{"status": "ok"}'),
+        "metrics.json not valid",
+    ),
+    "metrics.json cut": (
+        lambda d: (d / "metrics.json").write_text((d / "metrics.json").read_text()[:50]),
+        "metrics.json not valid",
+    ),
+    "metrics.json interrupted": (
+        lambda d: (d / "metrics.json").write_text(
+            json.dumps(json.loads((d / "metrics.json").read_text()) | {"status": "interrupted"})
+        ),
+        "metrics.json not valid",
+    ),
+    "metrics.json phases wrong": (
+        lambda d: (d / "metrics.json").write_text(
+            json.dumps(json.loads((d / "metrics.json").read_text()) | {"phases": {"before": 1}})
+        ),
+        "metrics.json not valid",
+    ),
+    "config.toml deleted": (lambda d: (d / "config.toml").unlink(), "config.toml missing"),
+}
+
+
+@pytest.fixture(scope="module")
+def whole_sweep(tmp_path_factory):
+    out = tmp_path_factory.mktemp("whole") / "o"
+    jobs = sweep.plan(["paper"], ["adaptive"], [0, 1], 0.5)
+    oc = sweep.execute(jobs, out, save_rrd=True)
+    assert oc.ran == 2 and not oc.errors
+    return jobs, out, sweep.aggregate(jobs, oc.metrics)
+
+
+@pytest.mark.parametrize("case", list(CORRUPTIONS))
+def test_resume_runs_a_damaged_folder_again(tmp_path, whole_sweep, case):
+    jobs, whole, rows = whole_sweep
+    out = tmp_path / "o"
+    shutil.copytree(whole, out)
+    damage, why = CORRUPTIONS[case]
+    damage(_seed0(out))
+    ran = []
+    oc = sweep.execute(jobs, out, save_rrd=True, on_result=lambda r: ran.append(r["key"]))
+    assert ran == [("paper", "adaptive", 0)] and oc.skipped == 1 and oc.redo == {why: 1}
+    assert sweep.aggregate(jobs, oc.metrics) == rows
+    assert sweep.check_done(out, jobs[0], save_rrd=True)[0] is not None  # whole again
+
+
+def test_resume_reports_how_many_were_run_again(tmp_path, capsys):
+    argv = ["sweep", "paper", "--seeds", "0-1", "--duration", "0.5", "--workers", "1", "--out", str(tmp_path)]
+    assert main(argv) == 0
+    (_seed0(tmp_path) / "metrics.json").write_text("[]")
+    capsys.readouterr()
+    assert main(argv) == 0
+    assert "1 already done, 1 run now in" in (o := capsys.readouterr().out)
+    assert "of which 1 were found but run again: metrics.json not valid 1)" in o
+
+
+# --------------------------------------------------------------------------------------------
+# 5. one sweep per folder
+
+
+def test_a_second_sweep_into_the_same_folder_refuses(tmp_path):
+    out = tmp_path / "o"
+    first = subprocess.Popen(
+        sweep_cmd(out, "--workers", "1"), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True
+    )
+    try:
+        wait_for(lambda: list(out.glob("*/*/seed-*/metrics.json")))
+        second = subprocess.run(sweep_cmd(out, "--workers", "1"), capture_output=True, text=True, timeout=60)
+        assert second.returncode == 2
+        err = second.stderr.strip().splitlines()
+        assert err[-1].startswith(f"mlpfac: error: --out {out}") and "another mlpfac process" in err[-1]
+        assert first.poll() is None  # the first goes on
+    finally:
+        first.send_signal(signal.SIGTERM)
+        first.communicate(timeout=60)
+    assert first.returncode == 143
+
+
+# --------------------------------------------------------------------------------------------
+# 6. sizes and flags
+
+
+def test_a_huge_plan_is_refused_at_once(tmp_path, capsys):
+    t0 = time.perf_counter()
+    assert main(["sweep", "paper", "--seeds", "0-10000000", "--out", str(tmp_path / "o")]) == 2
+    assert time.perf_counter() - t0 < 2.0
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--seeds" in err and "10000001 seeds" in err and "100000" in err
+    argv = ["sweep", "paper", "eight-nominal", "--controllers", "adaptive,corradini", "--seeds", "0-30000"]
+    assert main([*argv, "--out", str(tmp_path / "o")]) == 2
+    assert "120004 runs" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize(
+    ("flag", "value"),
+    [
+        ("--workers", "0"),
+        ("--workers", "-1"),
+        ("--workers", "100000"),
+        ("--batch-size", "0"),
+        ("--scheduler-timeout", "0"),
+        ("--scheduler-timeout", "-1"),
+        ("--scheduler-timeout", "nan"),
+    ],
+)
+def test_bad_execution_flags_are_one_line(tmp_path, capsys, flag, value):
+    assert main(["sweep", "paper", "--seeds", "0", flag, value, "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith(f"mlpfac: error: {flag}:")
+    assert not (tmp_path / "o").exists()
+
+
+def test_planning_says_how_many_runs_at_once(tmp_path, capsys):
+    main(["sweep", "paper", "--seeds", "0-2", "--duration", "0.2", "--workers", "1", "--out", str(tmp_path)])
+    assert capsys.readouterr().err.splitlines()[0] == "mlpfac: planning 3 runs ..."
+
+
+def test_planned_tables_equal_with_overrides():
+    """Planning parses each scenario and controller once; each seed's table is what with_overrides gives."""
+    seeds = [0, 5, 123, 10**6]
+    for src in ("paper", "eight-nominal"):
+        for ctrl in (None, "corradini"):
+            jobs = sweep.plan([src], [ctrl], seeds, 1.0)
+            assert [j.seed for j in jobs] == seeds
+            for j in jobs:
+                ref = load(src).with_overrides(controller=ctrl, seed=j.seed, duration=1.0)
+                assert j.table == ref.table and j.config == to_toml(ref.table)
+                assert (j.scenario, j.controller, j.source) == (ref.name, ref.controller, ref.source)
+
+
+def test_planning_100000_runs_is_quick():
+    t0 = time.perf_counter()
+    jobs = sweep.plan(["paper"], ["adaptive"], sweep.parse_seeds("0-99999"), 1.0)
+    assert len(jobs) == 100_000 and jobs[-1].config.count("seed = 99999\n") == 1
+    assert time.perf_counter() - t0 < 10.0
+
+
+# --------------------------------------------------------------------------------------------
+# 7. BLAS threads
+
+
+def test_one_blas_thread_leaves_the_users_choice(monkeypatch):
+    monkeypatch.setenv("OMP_NUM_THREADS", "3")
+    monkeypatch.delenv("OPENBLAS_NUM_THREADS", raising=False)
+    with sweep.one_blas_thread():
+        assert os.environ["OPENBLAS_NUM_THREADS"] == "1" and os.environ["OMP_NUM_THREADS"] == "3"
+    assert "OPENBLAS_NUM_THREADS" not in os.environ and os.environ["OMP_NUM_THREADS"] == "3"
+
+
+def test_a_worker_killed_from_outside_is_one_line(tmp_path):
+    out = tmp_path / "o"
+    p = subprocess.Popen(sweep_cmd(out, "--workers", "2"), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    try:
+        wait_for(lambda: len(pool_workers(p.pid)) == 2 and list(out.glob("*/*/seed-*/metrics.json")))
+        workers = psutil.Process(p.pid).children(recursive=True)
+        pool_workers(p.pid)[0].kill()  # as the kernel's out-of-memory killer would
+        _, err = p.communicate(timeout=60)
+    finally:
+        if p.poll() is None:
+            p.kill()
+    assert p.returncode == 1, err
+    assert "Traceback" not in err and err.strip().splitlines()[-1].startswith("mlpfac: error: a worker process died")
+    assert gone([w.pid for w in workers]) == []
+    for d in out.glob("*/*/seed-*"):
+        assert (d / "metrics.json").exists()
