@@ -30,6 +30,7 @@ SERVE_WEB_PORT = 9090
 LOCALHOST = "127.0.0.1"
 ANSI = re.compile(r"\x1b\[[0-9;]*m")
 START_TIMEOUT_S = 20.0  # a viewer that does not listen by then is reported as not starting
+WINDOW_GRACE_S = 2.0  # a native viewer listens before it opens its window: it must still run this long after
 
 
 def make_sink(
@@ -75,6 +76,7 @@ def make_sink(
             ports=(SERVE_GRPC_PORT, SERVE_WEB_PORT),
             host=bind,
             outlive=False,
+            window=False,
         )
         urls.append(f"rerun+http://{_url_host(bind)}:{SERVE_GRPC_PORT}/proxy")
         viewer_url = f"http://{_url_host(bind)}:{SERVE_WEB_PORT}/?url={quote(urls[-1], safe='')}"
@@ -174,11 +176,18 @@ def rerun_executable() -> str:
 
 
 def _start_viewer(
-    where: str, args: list[str], ports: Sequence[int], host: str = LOCALHOST, outlive: bool = True
+    where: str,
+    args: list[str],
+    ports: Sequence[int],
+    host: str = LOCALHOST,
+    outlive: bool = True,
+    window: bool = True,
 ) -> subprocess.Popen:
     """Start the rerun binary in its own session and wait until it listens on every port in
     ``ports``; a viewer that exits first or never listens raises ConfigError naming ``where``.
-    ``outlive=False``: on Linux the viewer gets SIGTERM when this process dies, however it dies."""
+    ``window``: a native viewer opens its window after it listens, and one that cannot exits then:
+    it must still run ``WINDOW_GRACE_S`` after it listens. ``outlive=False``: on Linux the viewer
+    gets SIGTERM when this process dies, however it dies."""
     with tempfile.TemporaryFile() as log:  # a file, not a pipe: the viewer outlives us and must not block
         try:
             proc = subprocess.Popen(
@@ -191,7 +200,7 @@ def _start_viewer(
             )
         except OSError as err:
             raise ConfigError(where, f"cannot start the rerun viewer ({err.strerror or err})") from None
-        deadline = time.monotonic() + START_TIMEOUT_S
+        deadline, listening_since = time.monotonic() + START_TIMEOUT_S, None
         while time.monotonic() < deadline:
             code = proc.poll()
             if code is not None:
@@ -201,7 +210,9 @@ def _start_viewer(
                 raise ConfigError(
                     where, f"the rerun viewer exited at once (code {code}{': ' + said[-1] if said else ''})"
                 )
-            if all(_listening(host, p, timeout=0.2) for p in ports):
+            if listening_since is None and all(_listening(host, p, timeout=0.2) for p in ports):
+                listening_since = time.monotonic()
+            if listening_since is not None and (not window or time.monotonic() - listening_since >= WINDOW_GRACE_S):
                 return proc
             time.sleep(0.1)
     _stop(proc)
