@@ -15,8 +15,9 @@ import pyarrow as pa
 import pyarrow.compute as pc
 import pytest
 
-from mlpfac import log, sinks
+from mlpfac import log
 from mlpfac.exceptions import ConfigError
+from mlpfac.log import sinks
 
 WEIGHT_LAYERS = {"NN_f/output": (0, 54), "NN_f/hidden": (54, 162), "NN_G/output": (162, 168), "NN_G/hidden": (168, 171)}
 POSE_ENTITIES = ("/world/robot", "/world/reference_now", "/top/plane/robot", "/top/plane/reference_now")

@@ -1,0 +1,269 @@
+"""Where a recording goes: a file, a viewer started here (native or web), a running viewer; and
+opening saved runs in a viewer. Every output is checked before the run starts (a bad one raises
+ConfigError naming it), every port opened here binds to 127.0.0.1 unless ``bind`` says otherwise,
+and a saved file is read back after it is closed (:func:`check_recording`).
+
+Part of :mod:`mlpfac.log`: it imports rerun, so import it lazily.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import shutil
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+import warnings
+from collections.abc import Sequence
+from pathlib import Path
+from urllib.parse import quote, urlsplit
+
+import rerun as rr
+
+from mlpfac.exceptions import ConfigError
+from mlpfac.log.recorder import APPLICATION_ID, RerunSink
+
+SPAWN_PORT = 9876  # the native viewer's gRPC port, rerun's default
+SERVE_GRPC_PORT = 9876
+SERVE_WEB_PORT = 9090
+LOCALHOST = "127.0.0.1"
+ANSI = re.compile(r"\x1b\[[0-9;]*m")
+START_TIMEOUT_S = 20.0  # a viewer that does not listen by then is reported as not starting
+
+
+def make_sink(
+    save: Path | str | None = None,
+    spawn: bool = False,
+    connect: str | None = None,
+    serve: bool = False,
+    recording_name: str = "",
+    recording_id: str | None = None,
+    bind: str = LOCALHOST,
+) -> RerunSink | None:
+    """A sink for the outputs asked for, or None when none is. Bad outputs raise ConfigError now.
+
+    ``save``: write an .rrd file (the folder is created); ``spawn``: start (or reuse) a native
+    viewer on port 9876; ``connect``: stream to a running viewer at a ``rerun+http://.../proxy``
+    URL; ``serve``: start a web viewer on http://BIND:9090 (its gRPC server on 9876) that serves
+    the recording until :meth:`RerunSink.wait` returns. Viewers started here listen on ``bind``.
+    """
+    if save is None and not spawn and connect is None and not serve:
+        return None
+    # Check every output before anything starts, so a bad one costs nothing.
+    if connect is not None:
+        _check_reachable(connect)
+    if save is not None:
+        save = Path(save)
+        _check_writable(save)
+    if serve:
+        for port in (SERVE_GRPC_PORT, SERVE_WEB_PORT):
+            if _listening(bind, port):
+                raise ConfigError("--serve", f"port {port} is in use; stop what listens there or use --save")
+    rec = rr.RecordingStream(APPLICATION_ID, recording_id=recording_id, send_properties=False)
+    rec.set_log_time_enabled(False)  # no wall clock in the data: same run, same contents
+    rec.set_log_tick_enabled(False)
+    sinks: list = [rr.FileSink(save)] if save is not None else []
+    urls = [connect] if connect is not None else []
+    if spawn:
+        urls.append(_spawn_viewer(bind, SPAWN_PORT))
+    server = viewer_url = None
+    if serve:
+        server = _start_viewer(
+            "--serve",
+            ["--serve-web", "--bind", bind, "--port", str(SERVE_GRPC_PORT), "--web-viewer-port", str(SERVE_WEB_PORT)],
+            ports=(SERVE_GRPC_PORT, SERVE_WEB_PORT),
+            host=bind,
+            outlive=False,
+        )
+        urls.append(f"rerun+http://{_url_host(bind)}:{SERVE_GRPC_PORT}/proxy")
+        viewer_url = f"http://{_url_host(bind)}:{SERVE_WEB_PORT}/?url={quote(urls[-1], safe='')}"
+    sinks += [rr.GrpcSink(url) for url in dict.fromkeys(urls)]  # --spawn and --connect may name one viewer
+    try:
+        rec.set_sinks(*sinks)
+    except RuntimeError as err:  # the file sink writes its header at once: a full disk fails here
+        _stop(server)
+        raise ConfigError(str(save), f"cannot write the recording ({_first_line(err)})") from None
+    sink = RerunSink(rec, recording_name=recording_name, serving=serve, viewer_url=viewer_url)
+    sink.server = server
+    return sink
+
+
+def check_recording(path: Path, shown: Path | str | None = None) -> None:
+    """Read a closed .rrd back: a file cut short (a full disk, a file-size limit, a write error of
+    rerun's file sink) has no footer or a truncated message, and raises ConfigError naming ``shown``.
+    It reads the footer and decodes every chunk: ~20 ms for the 5.5 MB of a 25 s run."""
+    from rerun.chunk import RrdReader
+
+    shown = str(shown or path)
+    size = path.stat().st_size if path.exists() else 0
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")  # "RRD file has no footer": the encoder never finished
+            chunks = sum(1 for _ in RrdReader(path).store().stream().to_chunks())
+    except Exception:  # no footer (rerun's encoder never finished), or a message cut short
+        raise ConfigError(
+            shown, f"the recording was cut short at {size} bytes (a full disk or a file-size limit?); nothing was kept"
+        ) from None
+    if chunks == 0:
+        raise ConfigError(shown, "the recording holds no data")
+
+
+def _check_writable(path: Path) -> None:
+    where = str(path)
+    if path.is_dir():
+        raise ConfigError(where, "is a folder; --save needs a file name such as run.rrd")
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with open(path, "wb"):
+            pass
+    except OSError as err:
+        raise ConfigError(where, f"cannot write the recording here ({err.strerror or err})") from None
+
+
+def _check_reachable(url: str) -> None:
+    parts = urlsplit(url)
+    if parts.scheme not in ("rerun", "rerun+http", "rerun+https") or parts.path != "/proxy":
+        raise ConfigError(url, "a viewer URL looks like rerun+http://127.0.0.1:9876/proxy")
+    try:
+        host, port = parts.hostname or LOCALHOST, parts.port or (443 if parts.scheme == "rerun+https" else 9876)
+    except ValueError as err:
+        raise ConfigError(url, f"bad viewer URL ({err})") from None
+    if not _listening(host, port):
+        raise ConfigError(url, "no rerun viewer is listening there; start one with `rerun` or use --save")
+
+
+def _listening(host: str, port: int, timeout: float = 1.0) -> bool:
+    host = LOCALHOST if host in ("0.0.0.0", "") else "::1" if host == "::" else host  # noqa: S104
+    try:
+        with socket.create_connection((host, port), timeout=timeout):
+            return True
+    except OSError:
+        return False
+
+
+def _url_host(bind: str) -> str:
+    if bind in ("0.0.0.0", "::", ""):  # noqa: S104
+        return LOCALHOST
+    return f"[{bind}]" if ":" in bind else bind
+
+
+def _check_display(where: str) -> None:
+    if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+        raise ConfigError(
+            where,
+            "no display for the native viewer (DISPLAY and WAYLAND_DISPLAY are unset); "
+            "use --save and `rerun --serve-web FILE` to view it in a browser",
+        )
+
+
+def rerun_executable() -> str:
+    """The rerun viewer binary installed with rerun-sdk (not its Python wrapper), else `rerun` on PATH."""
+    try:
+        import rerun_cli
+
+        exe = Path(rerun_cli.__file__).with_name("rerun.exe" if sys.platform.startswith("win") else "rerun")
+        if exe.is_file():
+            return str(exe)
+    except ImportError:
+        pass
+    exe = shutil.which("rerun")
+    if exe is None:
+        raise ConfigError("rerun", "the rerun viewer is not installed (pip install rerun-sdk)")
+    return exe
+
+
+def _start_viewer(
+    where: str, args: list[str], ports: Sequence[int], host: str = LOCALHOST, outlive: bool = True
+) -> subprocess.Popen:
+    """Start the rerun binary in its own session and wait until it listens on every port in
+    ``ports``; a viewer that exits first or never listens raises ConfigError naming ``where``.
+    ``outlive=False``: on Linux the viewer gets SIGTERM when this process dies, however it dies."""
+    with tempfile.TemporaryFile() as log:  # a file, not a pipe: the viewer outlives us and must not block
+        try:
+            proc = subprocess.Popen(
+                [rerun_executable(), *args],
+                start_new_session=True,
+                stdin=subprocess.DEVNULL,
+                stdout=log,
+                stderr=log,
+                preexec_fn=None if outlive or not sys.platform.startswith("linux") else _die_with_parent,
+            )
+        except OSError as err:
+            raise ConfigError(where, f"cannot start the rerun viewer ({err.strerror or err})") from None
+        deadline = time.monotonic() + START_TIMEOUT_S
+        while time.monotonic() < deadline:
+            code = proc.poll()
+            if code is not None:
+                log.seek(0)
+                said = [ANSI.sub("", ln).strip() for ln in log.read().decode(errors="replace").splitlines()]
+                said = [ln for ln in said if ln]
+                raise ConfigError(
+                    where, f"the rerun viewer exited at once (code {code}{': ' + said[-1] if said else ''})"
+                )
+            if all(_listening(host, p, timeout=0.2) for p in ports):
+                return proc
+            time.sleep(0.1)
+    _stop(proc)
+    raise ConfigError(where, f"the rerun viewer did not listen on port {ports[0]} within {START_TIMEOUT_S:g} s")
+
+
+def _die_with_parent() -> None:
+    import ctypes
+    import signal
+
+    ctypes.CDLL(None).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
+
+
+def _stop(proc: subprocess.Popen | None) -> None:
+    if proc is not None and proc.poll() is None:
+        proc.terminate()
+        try:
+            proc.wait(timeout=5)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+
+
+def _spawn_viewer(bind: str, port: int) -> str:
+    """Start a native viewer listening on ``bind:port`` (or reuse the one there); its URL."""
+    url = f"rerun+http://{_url_host(bind)}:{port}/proxy"
+    if _listening(bind, port):
+        return url  # a viewer is already running there: reuse it, as rerun's own spawn does
+    _check_display("--spawn")
+    _start_viewer("--spawn", ["--bind", bind, "--port", str(port), "--expect-data-soon"], ports=(port,), host=bind)
+    return url
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind((LOCALHOST, 0))
+        return s.getsockname()[1]
+
+
+def _first_line(err: BaseException) -> str:
+    lines = str(err).strip().splitlines()
+    return lines[0] if lines else type(err).__name__
+
+
+def view(run_dirs: Sequence[Path | str], bind: str = LOCALHOST) -> subprocess.Popen:
+    """Open one native rerun viewer with the run.rrd of each folder; returns the viewer process.
+
+    The viewer runs on its own (it outlives this process) once it listens. Raises ConfigError for
+    a folder without run.rrd, when there is no display, and when the viewer exits at once or
+    never listens.
+    """
+    files = []
+    for d in run_dirs:
+        d = Path(d)
+        f = d if d.suffix == ".rrd" and d.is_file() else d / "run.rrd"
+        if not f.is_file():
+            raise ConfigError(str(d), "no run.rrd in this folder")
+        files.append(str(f))
+    if not files:
+        raise ConfigError("view", "name at least one run folder")
+    _check_display("view")
+    port = _free_port()
+    return _start_viewer("view", ["--bind", bind, "--port", str(port), *files], ports=(port,), host=bind)
