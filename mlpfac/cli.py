@@ -86,7 +86,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.command == "list":
             return cmd_list()
         if args.command == "view":
-            from mlpfac import sinks
+            from mlpfac.log import sinks
 
             sinks.view(args.runs, bind=args.bind)
             return 0
@@ -166,7 +166,7 @@ def _run_staged(args: argparse.Namespace, scn, out: Path, built, baseline) -> in
         try:
             rec, m = _run_into(folder, out, scn, built, sink, baseline)
             if saving:
-                from mlpfac.sinks import check_recording
+                from mlpfac.log.sinks import check_recording
 
                 check_recording(rrd_path, rrd_shown)
         except BaseException:
@@ -208,7 +208,7 @@ def _open_sink(args: argparse.Namespace, scn, save: tuple[Path, Path] | None):
 
 
 def _make_sink(args: argparse.Namespace, scn, save: Path | None):
-    from mlpfac import sinks
+    from mlpfac.log import sinks
 
     sink = sinks.make_sink(
         save=save,

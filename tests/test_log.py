@@ -15,8 +15,9 @@ import pyarrow as pa
 import pyarrow.compute as pc
 import pytest
 
-from mlpfac import log, sinks
+from mlpfac import log
 from mlpfac.exceptions import ConfigError
+from mlpfac.log import sinks
 
 WEIGHT_LAYERS = {"NN_f/output": (0, 54), "NN_f/hidden": (54, 162), "NN_G/output": (162, 168), "NN_G/hidden": (168, 171)}
 POSE_ENTITIES = ("/world/robot", "/world/reference_now", "/top/plane/robot", "/top/plane/reference_now")
@@ -345,3 +346,41 @@ def test_recording_check_finds_a_file_cut_short(record, tmp_path, save_rrd):
 
 def test_moved_names_still_reach_log():
     assert log.make_sink is sinks.make_sink and log.view is sinks.view
+
+
+@pytest.mark.parametrize("scenario", ["paper", "eight-nominal"])  # the kinematic plant, the MuJoCo robot
+@pytest.mark.parametrize("controller", ["adaptive", "adaptive-best", "corradini", "kanayama"])
+def test_schema_covers_every_key_of_a_real_run(scenario, controller):
+    """Every array a real run records has a row in the log's schema (a new telemetry key needs one),
+    no two series share an entity, and every series shows in a view of the default layout."""
+    from dataclasses import fields
+
+    from mlpfac.log.layout import VIEWS
+    from mlpfac.log.schema import rows_for
+    from mlpfac.runner import run
+    from mlpfac.scenario import load
+
+    rec = run(load(scenario).with_overrides(controller=controller, duration=0.05))
+    arrays = [f.name for f in fields(rec) if isinstance(getattr(rec, f.name), np.ndarray)]
+    keys = [("record", a) for a in arrays] + [(s, k) for s in ("plant", "ctrl") for k in getattr(rec, s)]
+    assert ("plant", "u_meas") in keys and len(keys) > len(arrays) + 1
+    assert [k for k in keys if not rows_for(*k)] == []
+    paths = [s.path for s in log.plan_series(rec)]
+    assert len(paths) == len(set(paths))
+    origins = [origin[1:] for _, _, origin in VIEWS]
+    assert [p for p in paths if not any(p == o or p.startswith(o + "/") for o in origins)] == []
+
+
+def test_schema_rows_are_well_formed():
+    from mlpfac.log import schema
+
+    for row in schema.SCHEMA:
+        assert row.store in ("record", "plant", "ctrl") and row.send in (
+            schema.LINES,
+            schema.LAYERS,
+            schema.SCENE,
+            schema.UNSENT,
+        ), row
+        assert bool(row.path) == (row.send != schema.UNSENT), row
+        assert row.names == () or len(row.names) == len(row.cols or row.names), row
+        assert ("{name}" in row.path) == bool(row.names) or row.send != schema.LINES, row

@@ -212,7 +212,7 @@ def free_port() -> int:
 def test_serve_listens_on_localhost_only(tmp_path):
     grpc, web = free_port(), free_port()
     code = (
-        "import sys; from mlpfac import sinks; from mlpfac.cli import main; "
+        "import sys; from mlpfac.log import sinks; from mlpfac.cli import main; "
         f"sinks.SERVE_GRPC_PORT, sinks.SERVE_WEB_PORT = {grpc}, {web}; "
         f"sys.exit(main(['run', 'paper', '--duration', '1', '--no-plot', '--serve', '--out', {str(tmp_path / 'run')!r}]))"
     )
@@ -241,7 +241,7 @@ def test_serve_listens_on_localhost_only(tmp_path):
     ],
 )
 def test_view_reports_a_viewer_that_does_not_start(tmp_path, monkeypatch, capsys, script, needle):
-    from mlpfac import sinks
+    from mlpfac.log import sinks
 
     fake = tmp_path / "rerun"
     fake.write_text(f"#!/bin/sh\n{script}\n")
@@ -257,7 +257,7 @@ def test_view_reports_a_viewer_that_does_not_start(tmp_path, monkeypatch, capsys
 
 
 def test_spawn_without_a_working_display_is_one_line(tmp_path, monkeypatch, capsys):
-    from mlpfac import sinks
+    from mlpfac.log import sinks
 
     monkeypatch.setenv("DISPLAY", ":97")  # no X server there: the viewer exits at once
     monkeypatch.setattr(sinks, "SPAWN_PORT", free_port())
@@ -277,7 +277,7 @@ def test_a_symlinked_out_replaces_the_folder_it_names(tmp_path):
 
 
 def test_connect_streams_to_a_running_viewer_and_keeps_no_file(tmp_path):
-    from mlpfac.sinks import rerun_executable
+    from mlpfac.log.sinks import rerun_executable
 
     port = free_port()
     server = subprocess.Popen(

@@ -3,7 +3,7 @@ opening saved runs in a viewer. Every output is checked before the run starts (a
 ConfigError naming it), every port opened here binds to 127.0.0.1 unless ``bind`` says otherwise,
 and a saved file is read back after it is closed (:func:`check_recording`).
 
-A logging module: it imports rerun (through :mod:`mlpfac.log`), so import it lazily.
+Part of :mod:`mlpfac.log`: it imports rerun, so import it lazily.
 """
 
 from __future__ import annotations
@@ -21,8 +21,10 @@ from collections.abc import Sequence
 from pathlib import Path
 from urllib.parse import quote, urlsplit
 
+import rerun as rr
+
 from mlpfac.exceptions import ConfigError
-from mlpfac.log import APPLICATION_ID, RerunSink, rr
+from mlpfac.log.recorder import APPLICATION_ID, RerunSink
 
 SPAWN_PORT = 9876  # the native viewer's gRPC port, rerun's default
 SERVE_GRPC_PORT = 9876

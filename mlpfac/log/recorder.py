@@ -1,0 +1,173 @@
+"""The sink a run is logged through: the runner's three calls, batching, events and the final status.
+
+The runner drives a sink (made by :func:`mlpfac.log.make_sink`)::
+
+    sink.begin(record, geometry=plant.geometry(), ref_path=record.ref)  # static scene
+    ...every few hundred steps: sink.flush(record, upto=k + 1)  # rows not sent yet, column-wise
+    sink.end(record)  # in a finally: last rows, events, status; completes the file
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+
+import numpy as np
+import rerun as rr
+
+from mlpfac.log.layout import blueprint
+from mlpfac.log.scene import PATH_STRIDE, POSE_STRIDE, send_poses, send_static_scene, strided
+from mlpfac.log.series import Series, ns, plan_series, send_series, style_series, time_index
+from mlpfac.record import RunRecord
+
+APPLICATION_ID = "mlpfac"
+BATCH_ROWS = 1000  # flush() sends once this many rows are pending ...
+BATCH_SECONDS = 1.0  # ... or this much wall time has passed since the last send
+STATUS_LEVEL = {"ok": "INFO", "interrupted": "WARN", "diverged": "ERROR"}
+
+
+class RerunSink:
+    """Sends one run to rerun. Made by :func:`mlpfac.log.make_sink`; see the module docstring for the call order."""
+
+    def __init__(self, rec: rr.RecordingStream, recording_name: str, serving: bool, viewer_url: str | None) -> None:
+        self.rec = rec
+        self.recording_name = recording_name
+        self.serving = serving
+        self.viewer_url = viewer_url  # the web viewer's address when serving
+        self.sent = 0  # rows of the record already sent
+        self.events_sent = 0
+        self.last_send = time.monotonic()  # wall clock of the last send (batching only, never logged)
+        self.series: list[Series] = []
+        self.planned_keys: tuple | None = None  # telemetry keys the series were planned for
+        self.styled: set[str] = set()
+        self.blueprint_sent = False
+        self.ref_path: np.ndarray | None = None
+        self.ended = False
+        self.closed = False
+        self.server = None  # a viewer process started for this sink (--serve), stopped by close()
+
+    def begin(self, record: RunRecord, geometry: Sequence[dict] = (), ref_path: np.ndarray | None = None) -> None:
+        """Send the static scene: name, run properties, floor, robot shapes, reference path."""
+        if self.recording_name:
+            self.rec.send_recording_name(self.recording_name)
+        self.rec.send_property(
+            "run",
+            rr.AnyValues(
+                scenario=record.scenario, controller=record.controller, seed=int(record.seed), T=float(record.T)
+            ),
+        )
+        ref = record.ref if ref_path is None else np.asarray(ref_path, dtype=float)
+        self.ref_path = ref[np.all(np.isfinite(ref[:, :2]), axis=1), :2]
+        send_static_scene(self.rec, self.ref_path, geometry)
+
+    def flush(self, record: RunRecord, upto: int | None = None, force: bool = False) -> None:
+        """Send rows [sent, upto) of the record (default: up to ``record.n``) and any new events.
+
+        Rows are held back until ``BATCH_ROWS`` are pending or ``BATCH_SECONDS`` of wall time
+        have passed (or ``force``): every send costs a chunk per series, and a 25 s run takes
+        about a second, so bigger chunks are cheaper and no later on screen.
+        """
+        upto = record.n if upto is None else min(int(upto), record.n)  # rows past n are not valid
+        a, b = self.sent, upto
+        due = force or b - a >= BATCH_ROWS or time.monotonic() - self.last_send >= BATCH_SECONDS
+        if b > a and due:
+            self._update_series(record)
+            send_series(self.rec, self.series, record, a, b)
+            send_poses(self.rec, record, strided(a, b, POSE_STRIDE), strided(a, b, PATH_STRIDE))
+            self.sent = b
+            self.last_send = time.monotonic()
+            if not self.blueprint_sent:
+                self._send_blueprint(record)
+        self._send_events(record)
+
+    def end(self, record: RunRecord) -> None:
+        """Send what is left, the final pose, events and status; then close the file and connections.
+
+        Safe to call in a ``finally`` after divergence or Ctrl-C, and more than once. When serving a
+        web viewer the server stays up until :meth:`close` (see :meth:`wait`).
+        """
+        if self.ended:
+            return
+        self.ended = True
+        try:
+            self.flush(record, upto=record.n, force=True)
+            n = record.n
+            if n > 0:
+                last = np.array([n - 1])
+                send_poses(
+                    self.rec,
+                    record,
+                    last if (n - 1) % POSE_STRIDE else last[:0],
+                    last if (n - 1) % PATH_STRIDE else last[:0],
+                )
+            if not self.blueprint_sent:
+                self._send_blueprint(record)
+            self._send_status(record)
+        finally:
+            if not self.serving:
+                self.close()
+
+    def close(self) -> None:
+        """Flush and close every output: the file gets its footer, connections and servers stop."""
+        if not self.closed:
+            self.closed = True
+            self.rec.disconnect()
+            if self.server is not None and self.server.poll() is None:
+                self.server.terminate()
+                self.server.wait()
+
+    def wait(self) -> None:
+        """When serving: keep the web viewer up until Ctrl-C, then close. Otherwise return at once."""
+        if self.serving and not self.closed:
+            try:
+                while True:
+                    time.sleep(1.0)
+            except KeyboardInterrupt:
+                pass
+            finally:
+                self.close()
+
+    def _update_series(self, record: RunRecord) -> None:
+        """(Re)plan the scalar series when the record has keys not seen yet; style new ones."""
+        keys = (tuple(record.plant), tuple(record.ctrl))
+        if keys != self.planned_keys:
+            self.planned_keys = keys
+            self.series = plan_series(record)
+            style_series(self.rec, self.series, self.styled)
+
+    def _send_events(self, record: RunRecord) -> None:
+        new = record.events[self.events_sent :]
+        if not new:
+            return
+        self.events_sent = len(record.events)
+        times = np.array([float(ev["time"]) for ev in new])
+        steps = np.round(times / record.T).astype(np.int64)
+        self.rec.send_columns(
+            "events",
+            indexes=[rr.TimeColumn("sim_time", duration=ns(times)), rr.TimeColumn("step", sequence=steps)],
+            columns=rr.TextLog.columns(text=[event_text(ev) for ev in new], level=["WARN"] * len(new)),
+        )
+
+    def _send_status(self, record: RunRecord) -> None:
+        k = max(record.n - 1, 0)
+        text = f"{record.status}: {record.reason}" if record.reason else record.status
+        text += f" ({record.n} steps, {record.scenario} / {record.controller} / seed {record.seed})"
+        self.rec.send_columns(
+            "status",
+            indexes=time_index(record, np.array([k])),
+            columns=rr.TextLog.columns(text=[text], level=[STATUS_LEVEL.get(record.status, "INFO")]),
+        )
+
+    def _send_blueprint(self, record: RunRecord) -> None:
+        self.blueprint_sent = True
+        layout = blueprint(record, self.ref_path, self.series if self.planned_keys else None)
+        self.rec.send_blueprint(layout, make_active=True, make_default=True)
+
+
+def event_text(ev: dict) -> str:
+    """An event's text, or its kind and parameters when it has none."""
+    text = ev.get("text")
+    if text:
+        return str(text)
+    args = ", ".join(f"{k}={v}" for k, v in sorted((ev.get("params") or {}).items()))
+    return f"{ev.get('kind', 'event')}({args}) at {float(ev['time']):g} s"
