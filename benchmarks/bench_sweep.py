@@ -35,10 +35,13 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from mlpfac import sweep  # noqa: E402
-from mlpfac.batch import run_batch  # noqa: E402
 from mlpfac.estimators import EKF, covariance  # noqa: E402
 from mlpfac.reference import sample  # noqa: E402
-from mlpfac.runner import run, seeded_generators  # noqa: E402
+from mlpfac.runner import (  # noqa: E402
+    run,
+    run_batch,  # noqa: E402
+    seeded_generators,
+)
 from mlpfac.scenario import load  # noqa: E402
 
 RESULTS: list[tuple[str, str, bool | None]] = []

@@ -173,37 +173,31 @@ class Adaptive:
         c = self.config
         self.est = self._estimator(z0)  # the compiled EKF's state: z (B, alpha), P (B, alpha, alpha), C-ordered
         self.est.P = np.broadcast_to(c.P0 * np.eye(a), (B, a, a))
-        self._state = tuple(np.zeros(s) for s in ((B, 6), (B, 3), (B, c.networks.L_f), (B, c.networks.L_G)))
-        self._prev = tuple(np.zeros((B, n)) for n in (2, 3, 3))  # u_{k-1}, e_{k-1}, nominal prediction of e_k
+        Lf, LG = c.networks.L_f, c.networks.L_G
+        self._S = np.zeros((B, 17 + Lf + LG))  # x_f, x_G, phi_f, phi_G, u_{k-1}, e_{k-1}, nominal e_k
         self._u, self._innovation, self._h_hat = np.zeros((B, 2)), np.zeros((B, 3)), np.zeros((B, 3))
         self._trace = np.zeros(B)
         self._H = np.zeros((B, 3, a))
-        lim = self.law
-        self._consts = (
-            c.networks.L_f,
-            c.networks.L_G,
-            float(c.networks.error_scale),
-            bool(c.networks.residual),
-            self.prior is not None,
-            float(T),
-            *lim.lambdas,
-            np.inf if lim.v_max is None else float(lim.v_max),
-            np.inf if lim.omega_max is None else float(lim.omega_max),
-            self.est.R,
-            float(self.est.forgetting),
-            self.est.Q if self.est.Q is not None else np.zeros((1, 1)),
-            self.est.Q is not None,
-            np.inf if self.est.P_max is None else float(self.est.P_max),
+        est, lim = self.est, self.law
+        ints = np.array([Lf, LG, c.networks.residual, self.prior is not None, est.Q is not None], dtype=np.int64)
+        params = np.array(
+            [
+                c.networks.error_scale,
+                T,
+                *lim.lambdas,
+                np.inf if lim.v_max is None else lim.v_max,
+                np.inf if lim.omega_max is None else lim.omega_max,
+                est.forgetting,
+                np.inf if est.P_max is None else est.P_max,
+            ],
+            dtype=float,
         )
+        Q = est.Q if est.Q is not None else np.zeros((1, 1))
+        self._args = (est.z, est.P, self._S, self._H, self._u, self._innovation, self._h_hat, self._trace)
+        self._consts = (ints, params, est.R, Q)
         self._tele = {"z": None, "trace_P": None, "mean_diag_P": None, "innovation": None, "h_hat": None}
-        self._kernel(np.zeros((0, 3)), np.zeros(5), slice(0))  # load (or compile) the kernel now, not mid-run
-
-    def _kernel(self, E: np.ndarray, r: np.ndarray, seeds: slice) -> None:
-        adaptive_step(
-            E, float(r[3]), float(r[4]), self.first, self.est.z[seeds], self.est.P[seeds],
-            *(x[seeds] for x in self._state), *(x[seeds] for x in self._prev), self._u[seeds],
-            self._innovation[seeds], self._h_hat[seeds], self._trace[seeds], self._H[seeds], *self._consts,
-        )  # fmt: skip
+        # load (or compile) the kernel now, not mid-run: zero seeds
+        adaptive_step(np.zeros((0, 3)), 1.0, 0.0, True, *(x[:0] for x in self._args), *self._consts)
 
     def step(self, e: np.ndarray, r: np.ndarray) -> np.ndarray:
         E = e[None] if self.single else e
@@ -211,7 +205,9 @@ class Adaptive:
             u = np.stack([s.step(E[b], r, self.first) for b, s in enumerate(self.seeds)])
         else:
             u = self._u
-            self._kernel(np.ascontiguousarray(E, dtype=float), r, slice(None))
+            adaptive_step(
+                np.ascontiguousarray(E, dtype=float), float(r[3]), float(r[4]), self.first, *self._args, *self._consts
+            )
         self.first = False
         return u[0].copy() if self.single else u
 

@@ -5,8 +5,10 @@ the kinematic plant (7).
 Every kernel takes a leading batch dimension B and loops over it inside, one seed after another,
 so a seed's arithmetic does not depend on B or on the other seeds: a seed in a batch of 64 gets
 the same bits as the same seed run alone (B = 1). They are compiled by numba on first use and
-cached on disk (see ``_cache_dir``); ``error_model="numpy"`` makes a division by zero give inf or
-NaN as numpy does (a diverging run is detected by the runner, not by an exception here).
+cached on disk (``cache=True``: beside this file in ``__pycache__`` when that folder is writable,
+else in numba's user-wide cache, ``~/.cache/numba`` or ``$NUMBA_CACHE_DIR``). With
+``error_model="numpy"`` a division by zero gives inf or NaN as numpy does: a diverging run is
+detected by the runner, not by an exception here.
 
 Weight layout (16)-(18), as :mod:`mlpfac.networks`: z = [W_f (3, L_f), S_f (L_f, 6), W_G (3, 2, L_G),
 S_G (L_G, 3)], row-major blocks.
@@ -15,36 +17,9 @@ S_G (L_G, 3)], row-major blocks.
 from __future__ import annotations
 
 import math
-import os
-import tempfile
-from pathlib import Path
 
 import numpy as np
-
-
-def _cache_dir() -> None:
-    """Where numba keeps compiled kernels: beside the sources when that folder is writable (an
-    editable install), else under the user's cache folder (a read-only site-packages), unless
-    NUMBA_CACHE_DIR is set already. Without a writable place numba compiles again in each process."""
-    if os.environ.get("NUMBA_CACHE_DIR"):
-        return
-    here = Path(__file__).resolve().parent
-    if os.access(here, os.W_OK):
-        return
-    base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
-    for cand in (base / "mlpfac" / "numba", Path(tempfile.gettempdir()) / f"mlpfac-numba-{os.getuid()}"):
-        try:
-            cand.mkdir(parents=True, exist_ok=True)
-        except OSError:
-            continue
-        if os.access(cand, os.W_OK):
-            os.environ["NUMBA_CACHE_DIR"] = str(cand)
-            return
-
-
-_cache_dir()
-
-from numba import njit  # noqa: E402  (after the cache folder is chosen)
+from numba import njit
 
 
 def seeds(rng) -> tuple[list[np.random.Generator], bool]:
@@ -138,16 +113,30 @@ def _ekf(z, P, innov, H, R, forgetting, Q, has_Q, P_max, PHt, W):
     PHt, W: work arrays (3, alpha).
     """
     a = z.shape[0]
-    for k in range(3):
+    P0, P1, P2 = PHt[0], PHt[1], PHt[2]
+    for c in range(a):
+        P0[c] = 0.0
+        P1[c] = 0.0
+        P2[c] = 0.0
+    r = 0
+    while r + 1 < a:  # (P H')' = H P: P is symmetric, so rows r, r + 1 of P times H[:, r], H[:, r + 1]
+        pa, pb = P[r], P[r + 1]
+        a0, a1, a2 = H[0, r], H[1, r], H[2, r]
+        b0, b1, b2 = H[0, r + 1], H[1, r + 1], H[2, r + 1]
         for c in range(a):
-            PHt[k, c] = 0.0
-    for r in range(a):  # (P H')' = H P: P is symmetric, so row r of P times H[:, r]
-        h0, h1, h2 = H[0, r], H[1, r], H[2, r]
+            x, y = pa[c], pb[c]
+            P0[c] += x * a0 + y * b0
+            P1[c] += x * a1 + y * b1
+            P2[c] += x * a2 + y * b2
+        r += 2
+    if r < a:
+        pa = P[r]
+        a0, a1, a2 = H[0, r], H[1, r], H[2, r]
         for c in range(a):
-            p = P[r, c]
-            PHt[0, c] += p * h0
-            PHt[1, c] += p * h1
-            PHt[2, c] += p * h2
+            x = pa[c]
+            P0[c] += x * a0
+            P1[c] += x * a1
+            P2[c] += x * a2
     S = np.empty((3, 3))
     for k in range(3):
         for m in range(k + 1):
@@ -171,25 +160,35 @@ def _ekf(z, P, innov, H, R, forgetting, Q, has_Q, P_max, PHt, W):
         w2 = (PHt[2, c] - L20 * w0 - L21 * w1) / L22
         W[0, c], W[1, c], W[2, c] = w0, w1, w2
         z[c] += w0 * v0 + w1 * v1 + w2 * v2  # (30): z += K i
-    inv = 1.0 / forgetting
-    scale_it = forgetting != 1.0
+    W0, W1, W2 = W[0], W[1], W[2]
+    if forgetting == 1.0:
+        for r in range(a):  # (29): P -= W'W
+            pr = P[r]
+            w0, w1, w2 = W0[r], W1[r], W2[r]
+            for c in range(a):
+                pr[c] = pr[c] - (w0 * W0[c] + w1 * W1[c] + w2 * W2[c])
+    else:  # the same pass with forgetting, P /= lambda (one sweep over P, not two)
+        inv = 1.0 / forgetting
+        for r in range(a):
+            pr = P[r]
+            w0, w1, w2 = W0[r], W1[r], W2[r]
+            for c in range(a):
+                pr[c] = (pr[c] - (w0 * W0[c] + w1 * W1[c] + w2 * W2[c])) * inv
+    if has_Q:
+        for r in range(a):
+            pr, qr = P[r], Q[r]
+            for c in range(a):
+                pr[c] = pr[c] + qr[c]
     peak = 0.0
     for r in range(a):
-        w0, w1, w2 = W[0, r], W[1, r], W[2, r]
-        for c in range(a):
-            p = P[r, c] - (w0 * W[0, c] + w1 * W[1, c] + w2 * W[2, c])  # (29)
-            if scale_it:
-                p = p * inv
-            if has_Q:
-                p = p + Q[r, c]
-            P[r, c] = p
         if P[r, r] > peak or P[r, r] != P[r, r]:
             peak = P[r, r]
     if P_max < peak:
         s = P_max / peak
         for r in range(a):
+            pr = P[r]
             for c in range(a):
-                P[r, c] *= s
+                pr[c] *= s
 
 
 @njit(**JIT)
@@ -216,49 +215,56 @@ def _law(e0, e1, e2, h1, h2, h5, v_r, T, l1, l2, l3, v_max, omega_max, u):
 
 
 @njit(**JIT)
-def adaptive_step(
-    e, v_r, omega_r, first, z, P, xf, xG, phif, phiG, u_prev, e_prev, e_nom, u, innov, h_hat, diag_sum, H,
-    Lf, LG, c, residual, prior, T, l1, l2, l3, v_max, omega_max, R, forgetting, Q, has_Q, P_max,
-):  # fmt: skip
+def adaptive_step(e, v_r, omega_r, first, z, P, S, H, u, innov, h_hat, trace, ints, params, R, Q):
     """One step of the adaptive controller for B seeds, e (B, 3) -> u (B, 2).
 
     Unless ``first``: the EKF update (28)-(32) with measurement e_k (minus the nominal prediction
     e_nom with ``prior``), model h(x_{k-1}, u_{k-1}, z_k) and its Jacobian from the hidden layers the
     law computed at z_k the step before (same weights, same inputs). Then the inputs (8)-(9), the
     networks at the new z, h_hat (34) (plus the nominal f, G (5)-(6) with ``prior``), the law (35).
-    State per seed, updated in place: z, P, xf, xG, phif, phiG, u_prev, e_prev, e_nom.
-    Out: u, innov, h_hat, diag_sum (trace P). H (B, 3, alpha): the Jacobian, kept for inspection.
+
+    State per seed, updated in place: z (B, alpha), P (B, alpha, alpha) and S (B, 17 + L_f + L_G) =
+    [x_f (6), x_G (3), phi_f (L_f), phi_G (L_G), u_{k-1} (2), e_{k-1} (3), e_nom (3)].
+    Out: u, innov (32), h_hat (34), trace (trace P); H (B, 3, alpha) the Jacobian of the update.
+    ints = (L_f, L_G, residual, prior, has_Q); params = (c, T, lambda_1..3, v_max, omega_max,
+    forgetting, P_max) with c the input scale on the errors.
     """
+    Lf, LG, residual, prior, has_Q = ints[0], ints[1], ints[2] != 0, ints[3] != 0, ints[4] != 0
+    c, T, l1, l2, l3, v_max, omega_max, forgetting, P_max = (
+        params[0], params[1], params[2], params[3], params[4], params[5], params[6], params[7], params[8],
+    )  # fmt: skip
     B, a = z.shape
     PHt = np.empty((3, a))
     W = np.empty((3, a))
     f = np.empty(3)
     G = np.empty((3, 2))
+    o = 9 + Lf + LG
     for b in range(B):
-        zb, eb = z[b], e[b]
+        zb, eb, Sb = z[b], e[b], S[b]
+        xb, gb, phif, phiG = Sb[0:6], Sb[6:9], Sb[9 : 9 + Lf], Sb[9 + Lf : o]
+        u_prev, e_prev, e_nom = Sb[o : o + 2], Sb[o + 2 : o + 5], Sb[o + 5 : o + 8]
         if not first:
-            _f_G(zb, Lf, LG, phif[b], phiG[b], f, G)
+            _f_G(zb, Lf, LG, phif, phiG, f, G)
             for j in range(3):
-                hj = f[j] + (G[j, 0] * u_prev[b, 0] + G[j, 1] * u_prev[b, 1])  # (26)
+                hj = f[j] + (G[j, 0] * u_prev[0] + G[j, 1] * u_prev[1])  # (26)
                 if residual:
-                    hj += e_prev[b, j]
-                y = eb[j] - e_nom[b, j] if prior else eb[j]
+                    hj += e_prev[j]
+                y = eb[j] - e_nom[j] if prior else eb[j]
                 if prior and j == 2:
                     y = math.pi - ((math.pi - y) % (2.0 * math.pi))
                 innov[b, j] = y - hj  # (32)
-            _jacobian(zb, Lf, LG, xf[b], xG[b], phif[b], phiG[b], u_prev[b], H[b])
+            _jacobian(zb, Lf, LG, xb, gb, phif, phiG, u_prev, H[b])
             _ekf(zb, P[b], innov[b], H[b], R, forgetting, Q, has_Q, P_max, PHt, W)
         tr = 0.0
         for i in range(a):
             tr += P[b, i, i]
-        diag_sum[b] = tr
+        trace[b] = tr
         # (8)-(9)
-        xb, gb = xf[b], xG[b]
         xb[0], xb[1], xb[2] = c * eb[0], c * eb[1], c * eb[2]
         xb[3], xb[4], xb[5] = v_r, omega_r, 1.0
         gb[0], gb[1], gb[2] = xb[0], xb[1], 1.0
-        _hidden(zb, Lf, LG, xb, gb, phif[b], phiG[b])
-        _f_G(zb, Lf, LG, phif[b], phiG[b], f, G)
+        _hidden(zb, Lf, LG, xb, gb, phif, phiG)
+        _f_G(zb, Lf, LG, phif, phiG, f, G)
         if residual:
             for j in range(3):
                 f[j] += eb[j]
@@ -272,11 +278,11 @@ def adaptive_step(
         _law(eb[0], eb[1], eb[2], h1, h2, h5, v_r, T, l1, l2, l3, v_max, omega_max, u[b])
         if prior:  # the nominal prediction of e_{k+1}: f_true + G_true u, (5)-(6)
             u0, u1 = u[b, 0], u[b, 1]
-            e_nom[b, 0] = (eb[0] + T * v_r * math.cos(eb[2])) + (-T * u0 + T * eb[1] * u1)
-            e_nom[b, 1] = (eb[1] + T * v_r * math.sin(eb[2])) + (-T * eb[0]) * u1
-            e_nom[b, 2] = (eb[2] + T * omega_r) + (-T) * u1
-        u_prev[b, 0], u_prev[b, 1] = u[b, 0], u[b, 1]
-        e_prev[b, 0], e_prev[b, 1], e_prev[b, 2] = eb[0], eb[1], eb[2]
+            e_nom[0] = (eb[0] + T * v_r * math.cos(eb[2])) + (-T * u0 + T * eb[1] * u1)
+            e_nom[1] = (eb[1] + T * v_r * math.sin(eb[2])) + (-T * eb[0]) * u1
+            e_nom[2] = (eb[2] + T * omega_r) + (-T) * u1
+        u_prev[0], u_prev[1] = u[b, 0], u[b, 1]
+        e_prev[0], e_prev[1], e_prev[2] = eb[0], eb[1], eb[2]
 
 
 @njit(**JIT)

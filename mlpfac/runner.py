@@ -75,9 +75,22 @@ class PlantList:
         texts = [self.plants[i].apply(event) for i in self.live]
         return texts[0] if texts else ""
 
-    def put_telemetry(self, rec_stores: list[dict], recs: list[RunRecord], k: int) -> None:
+    def put_telemetry(self, store: dict[str, np.ndarray], recs: list[RunRecord], k: int) -> None:
+        """Row k of each live seed's plant telemetry, into ``store`` (B, N, ...) (allocated on first use)."""
         for i in self.live:
-            recs[i].put(rec_stores[i], k, self.plants[i].telemetry())
+            tele = self.plants[i].telemetry()
+            if not store:
+                _allocate(
+                    store,
+                    {key: np.asarray(v)[None] for key, v in tele.items()},
+                    recs,
+                    "plant",
+                    len(recs),
+                    len(recs[0].t),
+                    True,
+                )
+            for key, val in tele.items():
+                store[key][i, k] = val
 
     def diverged(self) -> list[str | None]:
         return [self.plants[i].diverged() if i in self.live else None for i in range(len(self.plants))]
@@ -206,7 +219,7 @@ def _loop(scns, ref, plant, ctrl, sink, on_step, full: bool) -> list[RunRecord]:
                     break
             plant.step(u)
             if listed:
-                plant.put_telemetry([r_.plant for r_ in recs], recs, k)
+                plant.put_telemetry(plant_store, recs, k)
             else:
                 ptele = plant.telemetry()
                 if not plant_store:
