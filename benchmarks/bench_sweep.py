@@ -7,7 +7,7 @@ the minimum per side kept), because the machine is shared and absolute times are
 target is printed as missed. Not a test.
 
 1. adaptive controller step vs the bare EKF update of the same size (alpha = 171): the floor is
-   ``EKF.update`` with h and H precomputed (the Joseph-form covariance update, gain, weights);
+   ``EKF.update`` with h and H precomputed (the compiled short-form covariance update, gain, weights);
    and the ``adaptive-best`` variant's step vs the paper's EKF scheme's (target <= 3).
 2. closed-loop MuJoCo run vs bare physics substeps + bare EKF updates for the same step count
    (skipped while the MuJoCo plant or sims/eight-nominal.toml is missing), and where the time goes:
