@@ -7,7 +7,7 @@ the minimum per side kept), because the machine is shared and absolute times are
 target is printed as missed. Not a test.
 
 1. adaptive controller step vs the bare EKF update of the same size (alpha = 171): the floor is
-   ``EKF.update`` with h and H precomputed (the Joseph-form covariance update, gain, weights);
+   ``EKF.update`` with h and H precomputed (the compiled short-form covariance update, gain, weights);
    and the ``adaptive-best`` variant's step vs the paper's EKF scheme's (target <= 3).
 2. closed-loop MuJoCo run vs bare physics substeps + bare EKF updates for the same step count
    (skipped while the MuJoCo plant or sims/eight-nominal.toml is missing), and where the time goes:
@@ -35,10 +35,13 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from mlpfac import sweep  # noqa: E402
-from mlpfac.batch import run_batch  # noqa: E402
 from mlpfac.estimators import EKF, covariance  # noqa: E402
 from mlpfac.reference import sample  # noqa: E402
-from mlpfac.runner import run, seeded_generators  # noqa: E402
+from mlpfac.runner import (  # noqa: E402
+    run,
+    run_batch,  # noqa: E402
+    seeded_generators,
+)
 from mlpfac.scenario import load  # noqa: E402
 
 RESULTS: list[tuple[str, str, bool | None]] = []

@@ -12,9 +12,10 @@ from typing import Protocol
 
 import numpy as np
 
-from mlpfac.error_model import G_true, f_true, h_true, wrap
+from mlpfac.error_model import G_true, f_true, wrap
 from mlpfac.estimators import EKF, UKF, covariance
 from mlpfac.exceptions import ConfigError
+from mlpfac.kernels import adaptive_step, corradini_step, kanayama_step, seeds
 from mlpfac.law import GAIN_RANGE, Law
 from mlpfac.networks import Networks
 
@@ -93,11 +94,36 @@ class AdaptiveConfig:
             raise ConfigError("prior", "prior already adds e to f (f = f_nominal + NN_f); turn residual off")
 
 
+class NominalPrior:
+    """The nominal kinematic functions (5)-(6) under the networks: f = f_nominal + NN_f,
+    G = G_nominal + NN_G; the filter's measurement is what they miss, e_k - f_nominal - G_nominal u_{k-1}."""
+
+    @staticmethod
+    def predict(e: np.ndarray, r: np.ndarray, u: np.ndarray, T: float) -> np.ndarray:
+        return f_true(e, r[3], r[4], T) + G_true(e, T) @ u
+
+    @staticmethod
+    def measurement(e: np.ndarray, e_nom: np.ndarray) -> np.ndarray:
+        y = e - e_nom
+        y[2] = wrap(y[2])
+        return y
+
+    @staticmethod
+    def add(f: np.ndarray, G: np.ndarray, e: np.ndarray, r: np.ndarray, T: float) -> tuple[np.ndarray, np.ndarray]:
+        return f + f_true(e, r[3], r[4], T), G + G_true(e, T)
+
+
 class Adaptive:
     """The paper's scheme: NN_f, NN_G tuned by the EKF (29)-(32), used in (35) through (34).
 
-    The options of :class:`AdaptiveConfig` change the estimator, the law or the model structure;
-    with all of them off, ``step`` runs exactly the paper's equations (the same floating-point operations).
+    Composed of parts, chosen by :class:`AdaptiveConfig`: the estimator (the EKF, compiled, or the
+    UKF), the nominal prior (or none), the law (certainty equivalence, or cautious with weight c),
+    the input gains (T, or learned). The paper's parts, the EKF with the certainty-equivalence law
+    and fixed gains, with or without the prior, run as one compiled kernel per step for all seeds
+    (:func:`mlpfac.kernels.adaptive_step`); the other compositions run numpy parts seed by seed.
+
+    ``reset(T, rng)`` with one Generator: one run, ``step`` takes e (3,) and returns u (2,);
+    with a sequence of B Generators: B seeds, e (B, 3) -> u (B, 2), telemetry (B, ...).
     """
 
     name = "adaptive"
@@ -107,14 +133,20 @@ class Adaptive:
         self.config = config
         self.nets = config.networks
         self.labels = {"z": self.nets.labels(), "h_hat": ["h1", "h2", "h5"]}
-        self.plain = not (config.cautious > 0 or config.prior or config.learned_gains)
+        self.prior = NominalPrior() if config.prior else None
+        self.caution = config.cautious
+        self.learned_gains = config.learned_gains
+        self.compiled = config.estimator == "ekf" and config.cautious == 0 and not config.learned_gains
 
-    def reset(self, T: float, rng: np.random.Generator) -> None:
+    def _initial_weights(self, rng: np.random.Generator) -> np.ndarray:
         c, a = self.config, self.nets.alpha
-        self.T = T
         z0 = rng.normal(0.0, c.weight_std, a)
         if c.output_weight_std is not None:  # rescale the same draws: the random stream does not change
             z0[self.nets.output_mask()] *= c.output_weight_std / c.weight_std
+        return z0
+
+    def _estimator(self, z0: np.ndarray) -> EKF | UKF:
+        c, a = self.config, self.nets.alpha
         common = {
             "z0": z0,
             "P0": c.P0 * np.eye(a),
@@ -124,23 +156,108 @@ class Adaptive:
             "P_max": c.P_max,
         }
         if c.estimator == "ukf":
-            self.est = UKF(**common, alpha=c.ukf_alpha, beta=c.ukf_beta, kappa=c.ukf_kappa)
+            return UKF(**common, alpha=c.ukf_alpha, beta=c.ukf_beta, kappa=c.ukf_kappa)
+        return EKF(**common)
+
+    def reset(self, T: float, rng) -> None:
+        rngs, self.single = seeds(rng)
+        self.T = T
+        z0 = np.stack([self._initial_weights(g) for g in rngs])  # (B, alpha)
+        B, a = z0.shape
+        self.first = True
+        if not self.compiled:
+            self.seeds = [_NumpySeed(self, self._estimator(z0[b]), T) for b in range(B)]
+            self.est = self.seeds[0].est if self.single else None  # one run: its estimator, for inspection
+            self._tele = None
+            return
+        c = self.config
+        self.est = self._estimator(z0)  # the compiled EKF's state: z (B, alpha), P (B, alpha, alpha), C-ordered
+        self.est.P = np.broadcast_to(c.P0 * np.eye(a), (B, a, a))
+        Lf, LG = c.networks.L_f, c.networks.L_G
+        self._S = np.zeros((B, 17 + Lf + LG))  # x_f, x_G, phi_f, phi_G, u_{k-1}, e_{k-1}, nominal e_k
+        self._u, self._innovation, self._h_hat = np.zeros((B, 2)), np.zeros((B, 3)), np.zeros((B, 3))
+        self._trace = np.zeros(B)
+        self._H = np.zeros((B, 3, a))
+        est, lim = self.est, self.law
+        ints = np.array([Lf, LG, c.networks.residual, self.prior is not None, est.Q is not None], dtype=np.int64)
+        params = np.array(
+            [
+                c.networks.error_scale,
+                T,
+                *lim.lambdas,
+                np.inf if lim.v_max is None else lim.v_max,
+                np.inf if lim.omega_max is None else lim.omega_max,
+                est.forgetting,
+                np.inf if est.P_max is None else est.P_max,
+            ],
+            dtype=float,
+        )
+        Q = est.Q if est.Q is not None else np.zeros((1, 1))
+        self._args = (est.z, est.P, self._S, self._H, self._u, self._innovation, self._h_hat, self._trace)
+        self._consts = (ints, params, est.R, Q)
+        self._tele = {"z": None, "trace_P": None, "mean_diag_P": None, "innovation": None, "h_hat": None}
+        # load (or compile) the kernel now, not mid-run: zero seeds
+        adaptive_step(np.zeros((0, 3)), 1.0, 0.0, True, *(x[:0] for x in self._args), *self._consts)
+
+    def step(self, e: np.ndarray, r: np.ndarray) -> np.ndarray:
+        E = e[None] if self.single else e
+        if not self.compiled:
+            u = np.stack([s.step(E[b], r, self.first) for b, s in enumerate(self.seeds)])
         else:
-            self.est = EKF(**common)
-        self.ekf = self.est  # the name the telemetry and older callers use
+            u = self._u
+            adaptive_step(
+                np.ascontiguousarray(E, dtype=float), float(r[3]), float(r[4]), self.first, *self._args, *self._consts
+            )
+        self.first = False
+        return u[0].copy() if self.single else u
+
+    def telemetry(self) -> dict[str, np.ndarray | float]:
+        """z, trace P, mean diag P, the innovation (32) and h_hat (34); per seed, (B, ...), for a batch."""
+        if not self.compiled:
+            per = [s.telemetry() for s in self.seeds]
+            if self.single:
+                return per[0]
+            return {k: np.stack([np.asarray(p[k]) for p in per]) for k in per[0]}
+        t, alpha = self._tele, self.nets.alpha
+        if self.single:
+            tr = float(self._trace[0])
+            t["z"], t["trace_P"], t["mean_diag_P"] = self.est.z[0], tr, tr / alpha
+            t["innovation"], t["h_hat"] = self._innovation[0], self._h_hat[0]
+        else:
+            t["z"], t["trace_P"], t["mean_diag_P"] = self.est.z, self._trace, self._trace / alpha
+            t["innovation"], t["h_hat"] = self._innovation, self._h_hat
+        return t
+
+    @property
+    def h_hat(self) -> np.ndarray:
+        """h_hat (34) of the last step: (3,) for one run, (B, 3) for a batch."""
+        h = np.stack([s.h_hat for s in self.seeds]) if not self.compiled else self._h_hat
+        return h[0] if self.single else h
+
+    def drop(self, b: int) -> None:
+        """Seed b of a batch diverged: the numpy parts stop stepping it (the kernel's NaNs are harmless)."""
+        if not self.compiled:
+            self.seeds[b].dropped = True
+
+
+class _NumpySeed:
+    """One seed of the adaptive controller with numpy parts: the UKF, the cautious law, learned gains."""
+
+    def __init__(self, ctrl: Adaptive, est: EKF | UKF, T: float) -> None:
+        self.c, self.est, self.T = ctrl, est, T
         self.prev: tuple | None = None  # step k-1: x_f, x_G, e, u, nominal prediction of e_k, z, hidden layers
         self.innovation = np.zeros(3)
         self.h_hat = np.zeros(3)
+        self.dropped = False
 
-    def step(self, e: np.ndarray, r: np.ndarray) -> np.ndarray:
-        nets, c, T = self.nets, self.config, self.T
+    def step(self, e: np.ndarray, r: np.ndarray, first: bool) -> np.ndarray:
+        ctrl, nets, T = self.c, self.c.nets, self.T
+        if self.dropped:
+            return np.full(2, np.nan)
         if self.prev is not None:  # tune the weights with the error this step revealed, (28)-(32)
             x_f, x_G, e_prev, u_prev, e_nom, z_prev, head = self.prev
-            y = e
-            if c.prior:  # the networks model only what the nominal functions miss
-                y = e - e_nom
-                y[2] = wrap(y[2])
-            if c.estimator == "ukf":
+            y = e if ctrl.prior is None else ctrl.prior.measurement(e, e_nom)
+            if isinstance(self.est, UKF):
                 self.innovation = self.est.update(y, None, lambda Z: nets.h(Z, x_f, x_G, e_prev, u_prev))
             else:  # the hidden layers at z_k are last step's, unless something changed z since
                 self.innovation = self.est.update(
@@ -149,42 +266,41 @@ class Adaptive:
         x_f, x_G = nets.inputs(e, r[3], r[4])
         z = self.est.z
         head = nets.head(z, x_f, x_G, e)
-        if self.plain:
-            f_hat, G_hat = nets.forward(z, x_f, x_G, e, head)
-            self.h_hat = np.array([G_hat[0, 1], f_hat[0] - e[0], f_hat[2] - e[2]])  # (34)
-            u = self.law.control(e, self.h_hat, r[3], T)
-        else:
-            u = self._control(e, r, x_f, x_G, head)
-        e_nom = f_true(e, r[3], r[4], T) + G_true(e, T) @ u if c.prior else None
+        u = self._control(e, r, x_f, x_G, head)
+        e_nom = ctrl.prior.predict(e, r, u, T) if ctrl.prior is not None else None
         self.prev = (x_f, x_G, e, u, e_nom, z, head)
         return u
 
     def _control(self, e: np.ndarray, r: np.ndarray, x_f: np.ndarray, x_G: np.ndarray, head: tuple) -> np.ndarray:
-        """(35) through (34) with the options: nominal prior, learned input gains, cautious law."""
-        c, T = self.config, self.T
-        f, G, df, dG = self.nets.jacobians(self.est.z, x_f, x_G, e, head)
-        if c.prior:
-            f = f + f_true(e, r[3], r[4], T)
-            G = G + G_true(e, T)
+        """(35) through (34) with the parts: nominal prior, learned input gains, cautious law.
+        The Jacobians of the estimates are computed only for the cautious law, which uses them."""
+        ctrl, T = self.c, self.T
+        if ctrl.caution > 0:
+            f, G, df, dG = ctrl.nets.jacobians(self.est.z, x_f, x_G, e, head)
+        else:
+            f, G = ctrl.nets.forward(self.est.z, x_f, x_G, e, head)
+        if ctrl.prior is not None:
+            f, G = ctrl.prior.add(f, G, e, r, T)
         theta = np.array([G[0, 1], f[0] - e[0], f[2] - e[2], T, T])  # h1, h2, h5 (34), b_v, b_omega
-        J = np.stack([dG[0, 1], df[0], df[2], np.zeros_like(df[0]), np.zeros_like(df[0])])  # (5, alpha)
-        if c.learned_gains:
+        if ctrl.learned_gains:
             lo, hi = GAIN_RANGE[0] * T, GAIN_RANGE[1] * T
             theta[3], theta[4] = np.clip(-G[0, 0], lo, hi), np.clip(-G[2, 1], lo, hi)
-            J[3], J[4] = -dG[0, 0], -dG[2, 1]
         self.theta, self.h_hat = theta, theta[:3]
-        if c.cautious > 0:
-            return self.law.cautious_control(e, theta, self.est.project(J), r[3], T, c.cautious)
-        if c.learned_gains:
-            return self.law.cautious_control(e, theta, None, r[3], T, 0.0)
-        return self.law.control(e, self.h_hat, r[3], T)
+        if ctrl.caution > 0:
+            J = np.stack([dG[0, 1], df[0], df[2], np.zeros_like(df[0]), np.zeros_like(df[0])])  # (5, alpha)
+            if ctrl.learned_gains:
+                J[3], J[4] = -dG[0, 0], -dG[2, 1]
+            return ctrl.law.cautious_control(e, theta, self.est.project(J), r[3], T, ctrl.caution)
+        if ctrl.learned_gains:
+            return ctrl.law.cautious_control(e, theta, None, r[3], T, 0.0)
+        return ctrl.law.control(e, self.h_hat, r[3], T)
 
     def telemetry(self) -> dict[str, np.ndarray | float]:
         trace = float(self.est.diag_P().sum())
         return {
             "z": self.est.z,
             "trace_P": trace,
-            "mean_diag_P": trace / self.nets.alpha,  # what np.mean computes, to the bit
+            "mean_diag_P": trace / self.c.nets.alpha,  # what np.mean computes, to the bit
             "innovation": self.innovation,
             "h_hat": self.h_hat,
         }
@@ -198,17 +314,30 @@ class Corradini:
 
     def __init__(self, law: Law) -> None:
         self.law = law
+        lam = law
+        self._limits = (
+            np.inf if lam.v_max is None else float(lam.v_max),
+            np.inf if lam.omega_max is None else float(lam.omega_max),
+        )
 
-    def reset(self, T: float, rng: np.random.Generator) -> None:
+    def reset(self, T: float, rng) -> None:
+        rngs, self.single = seeds(rng)
         self.T = T
-        self.h_hat = np.zeros(3)
+        self._h, self._u = np.zeros((len(rngs), 3)), np.zeros((len(rngs), 2))
+        self._tele = {"h_hat": self._h[0] if self.single else self._h}
+        corradini_step(np.zeros((0, 3)), 1.0, 0.0, T, *self.law.lambdas, *self._limits, self._h[:0], self._u[:0])
 
     def step(self, e: np.ndarray, r: np.ndarray) -> np.ndarray:
-        self.h_hat = h_true(e, r[3], r[4], self.T)
-        return self.law.control(e, self.h_hat, r[3], self.T)
+        E = e[None] if self.single else e
+        corradini_step(E, float(r[3]), float(r[4]), self.T, *self.law.lambdas, *self._limits, self._h, self._u)
+        return self._u[0].copy() if self.single else self._u
+
+    @property
+    def h_hat(self) -> np.ndarray:
+        return self._h[0] if self.single else self._h
 
     def telemetry(self) -> dict[str, np.ndarray | float]:
-        return {"h_hat": self.h_hat}
+        return self._tele
 
 
 @dataclass(frozen=True)
@@ -232,22 +361,28 @@ class Kanayama:
     def __init__(self, law: Law, gains: KanayamaGains) -> None:
         self.law = law  # only its limits are used
         self.g = gains
+        self._consts = (
+            float(gains.Kx),
+            float(gains.Ky),
+            float(gains.Ktheta),
+            np.inf if law.v_max is None else float(law.v_max),
+            np.inf if law.omega_max is None else float(law.omega_max),
+        )
 
-    def reset(self, T: float, rng: np.random.Generator) -> None:
+    def reset(self, T: float, rng) -> None:
+        rngs, self.single = seeds(rng)
         self.T = T
+        self._u = np.zeros((len(rngs), 2))
+        self._tele: dict = {}
+        kanayama_step(np.zeros((0, 3)), 1.0, 0.0, *self._consts, self._u[:0])  # load the kernel before the run
 
     def step(self, e: np.ndarray, r: np.ndarray) -> np.ndarray:
-        g, v_r = self.g, r[3]
-        v = v_r * np.cos(e[2]) + g.Kx * e[0]
-        omega = r[4] + v_r * (g.Ky * e[1] + g.Ktheta * np.sin(e[2]))
-        if self.law.v_max is not None:
-            v = np.clip(v, -self.law.v_max, self.law.v_max)
-        if self.law.omega_max is not None:
-            omega = np.clip(omega, -self.law.omega_max, self.law.omega_max)
-        return np.array([v, omega])
+        E = e[None] if self.single else e
+        kanayama_step(E, float(r[3]), float(r[4]), *self._consts, self._u)
+        return self._u[0].copy() if self.single else self._u
 
     def telemetry(self) -> dict[str, np.ndarray | float]:
-        return {}
+        return self._tele
 
 
 # Named variants of the adaptive controller: AdaptiveConfig fields (and Networks fields under

@@ -46,19 +46,20 @@ class _WeightFilter:
         if not 0.0 < forgetting <= 1.0:
             raise ConfigError("forgetting", f"must be in (0, 1], got {forgetting}")
         self.z = np.array(z0, dtype=float)
-        self.R = np.asarray(R, dtype=float)
-        self.Q = None if Q is None or not np.any(Q) else np.asarray(Q, dtype=float)
+        self.R = np.ascontiguousarray(R, dtype=float)
+        self.Q = None if Q is None or not np.any(Q) else np.ascontiguousarray(Q, dtype=float)
         self.forgetting = forgetting
         self.P_max = P_max
 
 
 class EKF(_WeightFilter):
-    """Extended Kalman filter over the network weights, eqs. (29)-(32).
+    """Extended Kalman filter over the network weights, eqs. (29)-(32), compiled
+    (:func:`mlpfac.kernels.ekf_update`).
 
     ``forgetting`` in (0, 1] divides P by itself after each update (exponential forgetting; 1 is
     the paper). ``Q`` is added after each update. ``P_max`` (optional) caps the diagonal of P so
     that forgetting cannot inflate it without bound: P is scaled down as a whole when max diag P
-    exceeds it.
+    exceeds it. P is kept C-ordered, (..., alpha, alpha) with the batch outermost.
     """
 
     def __init__(
@@ -71,40 +72,32 @@ class EKF(_WeightFilter):
         P_max: float | None = None,
     ) -> None:
         super().__init__(z0, R, Q, forgetting, P_max)
-        self.P = np.array(np.broadcast_to(P0, (*self.z.shape, self.z.shape[-1])), dtype=float)
+        a = self.z.shape[-1]
+        self.P = np.broadcast_to(P0, (*self.z.shape, a))
 
     def update(self, y: np.ndarray, jac: Jacobian, h_of: Callable | None = None) -> np.ndarray:
         """One step of (29)-(32) with measurement y = e_k; returns the innovation i_k (32).
 
-        ``jac(z)`` gives h and nabla_h at the current z. The covariance update is the Joseph form
-        P+ = (I - K H) P (I - K H)' + K R K', evaluated in O(alpha^2) because K H has rank 3; it keeps
-        P symmetric positive definite where the short form P - K H P can lose it in round-off.
+        ``jac(z)`` gives h and nabla_h at the current z. The covariance update is the short form
+        P+ = P - K H P, written as P - W'W (W = L^-1 H P, S = H P H' + R = L L'), which keeps P
+        exactly symmetric; it costs half the Joseph form, and P stays positive definite over long
+        runs (tests/test_core.py).
         """
+        from mlpfac.kernels import ekf_update
+
+        a = self.z.shape[-1]
         h, H = jac(self.z)
-        P = self._P
-        Ht = np.swapaxes(H, -1, -2)
-        PHt = P @ Ht  # (..., alpha, 3)
-        S = H @ PHt + self.R  # (..., 3, 3) innovation covariance
-        K = np.swapaxes(np.linalg.solve(S, np.swapaxes(PHt, -1, -2)), -1, -2)  # (31), solve not inv
-        Kt = np.swapaxes(K, -1, -2)
-        i = y - h  # (32)
-        self.z = self.z + np.einsum("...ak,...k->...a", K, i)  # (30)
-        # The (alpha, alpha) work happens in place in P and one buffer B: a fresh 234 kB array per
-        # operation would cost more in page faults than the arithmetic, and two such arrays leave
-        # room in a 1 MB L2 cache where four would fill it. Same operations, same bits as the plain formula.
-        P, B = self._work()
-        np.subtract(P, np.matmul(K, np.swapaxes(PHt, -1, -2), out=B), out=P)  # A = (I - K H) P: (29)
-        np.subtract(P, np.matmul(P @ Ht, Kt, out=B), out=B)  # A - A H' K'
-        np.add(B, np.matmul(K @ self.R, Kt, out=P), out=B)  # + K R K'
-        np.multiply(0.5, np.add(B, np.swapaxes(B, -1, -2), out=P), out=P)  # symmetric
-        if self.forgetting < 1.0:
-            np.divide(P, self.forgetting, out=P)
-        if self.Q is not None:
-            np.add(P, self.Q, out=P)
-        if self.P_max is not None:
-            peak = np.max(np.diagonal(P, axis1=-2, axis2=-1), axis=-1)
-            np.multiply(P, np.minimum(1.0, self.P_max / peak)[..., None, None], out=P)
-        return i
+        z = np.ascontiguousarray(self.z, dtype=float).reshape(-1, a)
+        P = self._P.reshape(-1, a, a)
+        y2 = np.ascontiguousarray(np.broadcast_to(y, self.z.shape[:-1] + (3,)), dtype=float).reshape(-1, 3)
+        h2 = np.ascontiguousarray(np.broadcast_to(h, y2.shape), dtype=float).reshape(-1, 3)
+        H2 = np.ascontiguousarray(np.broadcast_to(H, (len(z), 3, a)), dtype=float)
+        innov = np.empty_like(y2)
+        Q = self.Q if self.Q is not None else np.zeros((1, 1))
+        P_max = np.inf if self.P_max is None else float(self.P_max)
+        ekf_update(z, P, y2, h2, H2, self.R, float(self.forgetting), Q, self.Q is not None, P_max, innov)
+        self.z = z.reshape(self.z.shape)
+        return innov.reshape(y2.shape if self.z.ndim > 1 else (3,))
 
     @property
     def P(self) -> np.ndarray:
@@ -113,22 +106,15 @@ class EKF(_WeightFilter):
 
     @P.setter
     def P(self, value: np.ndarray) -> None:
-        self._P, self._B = value, None  # not ours: the next update copies it first
+        self._P = np.array(value, dtype=float, order="C")  # our own C-ordered copy, batch outermost
 
     def __copy__(self) -> EKF:
         """A shallow copy that shares no storage with the original (two filters must never share it)."""
         new = object.__new__(type(self))
         new.__dict__.update(self.__dict__)
         new._P = self._P.copy()
-        new._B = np.empty_like(new._P)
+        new.z = self.z.copy()
         return new
-
-    def _work(self) -> tuple[np.ndarray, np.ndarray]:
-        """P, owned by the filter, and a work buffer B of the same shape."""
-        if self._B is None or self._B.shape != self._P.shape:
-            self._P = np.array(self._P, dtype=float)
-            self._B = np.empty_like(self._P)
-        return self._P, self._B
 
     def diag_P(self) -> np.ndarray:
         """diag P_k (..., alpha)."""

@@ -6,8 +6,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-STATUSES = ("ok", "diverged", "interrupted")
-
 
 @dataclass
 class RunRecord:
@@ -67,7 +65,3 @@ class RunRecord:
                 shape = np.shape(val)
                 arr = store[key] = np.full((N, *shape), np.nan)
             arr[k] = val
-
-    def trimmed(self, name: str) -> np.ndarray:
-        """The valid rows of a top-level array, e.g. ``trimmed("e_true")``."""
-        return getattr(self, name)[: self.n]

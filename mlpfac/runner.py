@@ -2,14 +2,13 @@
 
 from __future__ import annotations
 
-import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
-from mlpfac.error_model import tracking_error
+from mlpfac.kernels import bad_seeds, tracking_errors
 from mlpfac.outputs import Terminated
 from mlpfac.record import RunRecord
 from mlpfac.reference import sample
@@ -40,6 +39,69 @@ def build(scn: Scenario) -> Built:
     return Built(ref, scn.make_plant(ref), scn.make_controller())
 
 
+class PlantList:
+    """Plants without a batch form (MuJoCo) as one object per seed, stepped in a loop: each seed's
+    physics is exactly its one-at-a-time physics. Poses (B, 3); ``live`` seeds only are stepped."""
+
+    batched = True
+
+    def __init__(self, plants: list) -> None:
+        self.plants = plants
+
+    def reset(self, q0: np.ndarray, rngs: list[np.random.Generator], u0: np.ndarray | None = None) -> None:
+        for p, rng in zip(self.plants, rngs, strict=True):
+            p.reset(q0, rng, u0)
+        self.live = list(range(len(self.plants)))
+        self._q, self._m = np.zeros((len(self.plants), 3)), np.zeros((len(self.plants), 3))
+        self._read()
+
+    def _read(self) -> None:
+        for i in self.live:
+            self._q[i] = self.plants[i].true_pose()
+            self._m[i] = self.plants[i].measure()
+
+    def true_pose(self) -> np.ndarray:
+        return self._q
+
+    def measure(self) -> np.ndarray:
+        return self._m
+
+    def step(self, u: np.ndarray) -> None:
+        for i in self.live:
+            self.plants[i].step(u[i])
+        self._read()
+
+    def apply(self, event) -> str:
+        texts = [self.plants[i].apply(event) for i in self.live]
+        return texts[0] if texts else ""
+
+    def put_telemetry(self, store: dict[str, np.ndarray], recs: list[RunRecord], k: int) -> None:
+        """Row k of each live seed's plant telemetry, into ``store`` (B, N, ...) (allocated on first use)."""
+        for i in self.live:
+            tele = self.plants[i].telemetry()
+            if not store:
+                _allocate(
+                    store,
+                    {key: np.asarray(v)[None] for key, v in tele.items()},
+                    recs,
+                    "plant",
+                    len(recs),
+                    len(recs[0].t),
+                    True,
+                )
+            for key, val in tele.items():
+                store[key][i, k] = val
+
+    def diverged(self) -> list[str | None]:
+        return [self.plants[i].diverged() if i in self.live else None for i in range(len(self.plants))]
+
+    def sim_time(self, i: int, n: int, T: float) -> float:
+        return float(getattr(self.plants[i], "sim_time", n * T))
+
+    def drop(self, i: int) -> None:
+        self.live.remove(i)
+
+
 def run(
     scn: Scenario, sink=None, on_step: Callable[[int], None] | None = None, built: Built | None = None
 ) -> RunRecord:
@@ -48,76 +110,194 @@ def run(
     ``sink`` (see :mod:`mlpfac.log`) receives the record every ``FLUSH_EVERY`` steps and at the end,
     also after a divergence, a Ctrl-C or a SIGTERM (the reason says "interrupted" or "terminated").
     ``built``: from :func:`build`, used once (the plant and the controller keep state).
+    A run is the closed loop of :func:`run_batch` with one seed (B = 1).
     """
-    N, T = scn.steps, scn.T
     built = built or build(scn)
-    ref, plant, ctrl = built.ref, built.plant, built.ctrl
-    c_rng, p_rng = seeded_generators(scn.seed)
-    ctrl.reset(T, c_rng)
-    q0, u0 = scn.initial_state(ref)
-    plant.reset(q0, p_rng, u0)
+    return _loop([scn], built.ref, built.plant, built.ctrl, sink, on_step, full=True)[0]
 
-    rec = RunRecord.allocate(scn.name, ctrl.name, scn.seed, T, N)
-    rec.warmup_s = scn.warmup
-    rec.split_s = scn.events[0].time if scn.events else None
-    rec.labels = dict(ctrl.labels)
-    rec.ref[:] = ref[:N]
-    pending = list(scn.events)
+
+def same_but_seed(scns: list[Scenario]) -> bool:
+    t0 = {k: v for k, v in scns[0].table.items() if k != "seed"}
+    return all({k: v for k, v in s.table.items() if k != "seed"} == t0 for s in scns[1:])
+
+
+def run_batch(scns: list[Scenario], plant_list: bool = False) -> list[RunRecord]:
+    """Run seeds of one scenario together, one record per scenario, each equal to ``run(scn)``.
+
+    ``scns`` must differ in their seed only (ValueError otherwise). Every controller and variant
+    runs batched: the compiled controllers step all seeds in one kernel call per step, the numpy
+    parts (UKF, cautious law, learned gains) seed by seed; the kinematic plant is batched, any
+    other plant (MuJoCo) is one object per seed (``plant_list`` forces that for the kinematic one
+    too). Each seed's arithmetic does not depend on the others, so its record is its B = 1 run's
+    to the last bit (tests/test_batch.py). A seed that diverges stops recording there; the others
+    go on. Weights are recorded as max |z| per step (what :func:`metrics` reads), not all alpha
+    of them. ``wall_time_s`` is the batch's wall time / B. KeyboardInterrupt propagates: an
+    interrupted batch has no whole run.
+    """
+    if not scns:
+        return []
+    if not same_but_seed(scns):
+        raise ValueError("run_batch needs scenarios that differ in their seed only")
+    base = scns[0]
+    ref = sample(base.reference, np.arange(base.steps + 1) * base.T)  # (N + 1, 5)
+    plant = base.make_plant(ref)
+    if plant_list or not getattr(plant, "batched", False):
+        plant = [plant] + [s.make_plant(ref) for s in scns[1:]]
+    recs = _loop(scns, ref, plant, base.make_controller(), None, None, full=False)
+    if any(r.status == "interrupted" for r in recs):
+        raise KeyboardInterrupt
+    return recs
+
+
+def _loop(scns, ref, plant, ctrl, sink, on_step, full: bool) -> list[RunRecord]:
+    """The closed loop for B = len(scns) seeds of one scenario. ``full``: record every weight (else
+    max |z| per step). A list of plants, or a plant without a batch form, steps one per seed."""
+    base = scns[0]
+    B, N, T = len(scns), base.steps, base.T
+    if isinstance(plant, list) or not getattr(plant, "batched", False):
+        plant = PlantList(plant if isinstance(plant, list) else [plant])
+    gens = [seeded_generators(s.seed) for s in scns]
+    ctrl.reset(T, [c for c, _ in gens])
+    q0, u0 = base.initial_state(ref)
+    plant.reset(q0, [p for _, p in gens], u0)
+    listed = isinstance(plant, PlantList)
+
+    nan = np.full
+    pose, pose_meas, e_all, e_true, u_all = (nan((B, N, d), np.nan) for d in (3, 3, 3, 3, 2))
+    recs = []
+    for b, s in enumerate(scns):
+        rec = RunRecord(s.name, ctrl.name, s.seed, T, np.arange(N) * T, np.array(ref[:N]), pose[b], pose_meas[b],
+                        e_all[b], e_true[b], u_all[b])  # fmt: skip
+        rec.warmup_s, rec.split_s = s.warmup, s.events[0].time if s.events else None
+        rec.labels = dict(ctrl.labels)
+        recs.append(rec)
+    rec0 = recs[0]
+    ctrl_store: dict[str, np.ndarray] = {}
+    plant_store: dict[str, np.ndarray] = {}
+    e, et = np.zeros((B, 3)), np.zeros((B, 3))
+    bad = np.zeros(B, dtype=np.bool_)
+    no_z = np.zeros((B, 0))
+    live = list(range(B))
+    pending = list(base.events)
+    stopped: dict[int, int] = {}  # seed -> the step its record ends at
+    tracking_errors(e[:0], ref[0], e[:0])  # load (or compile) the loop's kernels before it starts
+    bad_seeds(e[:0], np.zeros((0, 2)), e[:0], no_z[:0], 1.0, bad[:0])
     wall0 = time.perf_counter()
     if sink is not None:
-        sink.begin(rec, geometry=plant.geometry(), ref_path=ref[:N])
+        sink.begin(rec0, geometry=plant.plants[0].geometry() if listed else plant.geometry(), ref_path=ref[:N])
+    k = 0
     try:
         for k in range(N):
-            t = k * T
-            while pending and pending[0].time <= t + 1e-9:
-                ev = pending.pop(0)
-                rec.events.append({"time": t, "kind": ev.kind, "params": dict(ev.params), "text": plant.apply(ev)})
-            q = plant.true_pose()
-            q_meas = plant.measure()
-            r = ref[k]
-            e = tracking_error(q_meas, r)
+            if pending and pending[0].time <= k * T + 1e-9:
+                t = k * T
+                while pending and pending[0].time <= t + 1e-9:
+                    ev = pending.pop(0)
+                    text = plant.apply(ev)
+                    for b in live:
+                        recs[b].events.append({"time": t, "kind": ev.kind, "params": dict(ev.params), "text": text})
+            q, q_meas, r = plant.true_pose(), plant.measure(), ref[k]
+            tracking_errors(q_meas, r, e)
             u = ctrl.step(e, r)
-            rec.pose[k], rec.pose_meas[k], rec.e[k] = q, q_meas, e
-            rec.e_true[k] = tracking_error(q, r)
-            rec.u[k] = u
-            rec.put(rec.ctrl, k, ctrl.telemetry())
-            rec.n = k + 1
-            reason = _diverged(rec, k, scn.divergence_m)
-            if reason is None:
-                plant.step(u)
-                rec.put(rec.plant, k, plant.telemetry())
-                reason = plant.diverged()
-            if reason is not None:
-                rec.status, rec.reason = "diverged", f"{reason} at t = {t:.2f} s"
-                break
+            tracking_errors(q, r, et)
+            pose[:, k], pose_meas[:, k], e_all[:, k], e_true[:, k], u_all[:, k] = q, q_meas, e, et, u
+            tele = ctrl.telemetry()
+            if not ctrl_store:
+                _allocate(ctrl_store, tele, recs, "ctrl", B, N, full)
+            z = tele.get("z")
+            for key, val in tele.items():
+                if key == "z" and not full:
+                    ctrl_store[key][:, k, 0] = np.max(np.abs(val), axis=-1)
+                else:
+                    ctrl_store[key][:, k] = val
+            for b in live:
+                recs[b].n = k + 1
+            if bad_seeds(q, u, et, no_z if z is None else z, base.divergence_m, bad):
+                for b in [b for b in live if bad[b]]:
+                    why = _diverged(q[b], u[b], et[b], None if z is None else z[b], base.divergence_m)
+                    _stop(recs, b, why, k * T, live, plant, ctrl, listed, stopped, k)
+                if not live:
+                    break
+            plant.step(u)
+            if listed:
+                plant.put_telemetry(plant_store, recs, k)
+            else:
+                ptele = plant.telemetry()
+                if not plant_store:
+                    _allocate(plant_store, ptele, recs, "plant", B, N, True)
+                for key, val in ptele.items():
+                    plant_store[key][:, k] = val
+            reasons = plant.diverged()
+            if isinstance(reasons, str) or reasons is None:
+                reasons = [reasons]
+            if any(x is not None for x in reasons):
+                for b in [b for b in live if reasons[b] is not None]:
+                    _stop(recs, b, reasons[b], k * T, live, plant, ctrl, listed, stopped, k + 1)
+                if not live:
+                    break
             if on_step is not None:
                 on_step(k)
             if sink is not None and (k + 1) % FLUSH_EVERY == 0:
-                sink.flush(rec, k + 1)
+                sink.flush(rec0, k + 1)
     except KeyboardInterrupt as err:
         how = "terminated by SIGTERM" if isinstance(err, Terminated) else "interrupted"
-        rec.status, rec.reason = "interrupted", f"{how} at t = {rec.n * T:.2f} s"
+        for b in live:
+            recs[b].status, recs[b].reason = "interrupted", f"{how} at t = {recs[b].n * T:.2f} s"
     finally:
-        rec.wall_time_s = time.perf_counter() - wall0
-        rec.sim_time_s = float(getattr(plant, "sim_time", rec.n * T))
+        wall = (time.perf_counter() - wall0) / B
+        for b, rec in enumerate(recs):
+            _clear_after(rec, stopped.get(b), plant_store)
+            rec.wall_time_s = wall
+            rec.sim_time_s = plant.sim_time(b, rec.n, T) if listed else rec.n * T
         if sink is not None:
-            sink.end(rec)
-    return rec
+            sink.end(rec0)
+    return recs
 
 
-def _diverged(rec: RunRecord, k: int, limit_m: float) -> str | None:
-    pose, u, e = rec.pose[k], rec.u[k], rec.e_true[k]
-    z = rec.ctrl.get("z")
-    err = float(np.hypot(e[0], e[1]))  # np.hypot, as the batched path's test
-    # the common case in a few float operations: every test below fails on a NaN or an infinity
-    fine = err <= limit_m and math.isfinite(pose[0] + pose[1] + pose[2] + u[0] + u[1])
-    if fine and (z is None or math.isfinite(np.dot(z[k], z[k]))):
-        return None
-    if not (np.isfinite(pose).all() and np.isfinite(u).all()):
+def _allocate(store: dict, tele: dict, recs: list[RunRecord], which: str, B: int, N: int, full: bool) -> None:
+    """Per-seed telemetry arrays (B, N, ...), each record's rows a view of its seed's."""
+    for key, val in tele.items():
+        shape = np.shape(val)[1:]
+        if key == "z" and not full:
+            shape = (1,)
+        store[key] = np.full((B, N, *shape), np.nan)
+        for b, rec in enumerate(recs):
+            getattr(rec, which)[key] = store[key][b]
+
+
+def _stop(recs, b, reason, t, live, plant, ctrl, listed, stopped, plant_rows) -> None:
+    """Seed b diverged at time t: its record ends here, its plant is no longer stepped, and the rows
+    after its end (which the batch went on computing) are cleared in ``_clear_after``."""
+    recs[b].status, recs[b].reason = "diverged", f"{reason} at t = {t:.2f} s"
+    live.remove(b)
+    if listed:
+        plant.drop(b)
+    drop = getattr(ctrl, "drop", None)
+    if drop is not None:
+        drop(b)
+    stopped[b] = (recs[b].n, plant_rows)
+
+
+def _clear_after(rec: RunRecord, stop: tuple[int, int] | None, plant_store: dict) -> None:
+    if stop is None:
+        n, plant_rows = rec.n, rec.n
+    else:
+        n, plant_rows = stop
+    for name in ("pose", "pose_meas", "e", "e_true", "u"):
+        getattr(rec, name)[n:] = np.nan
+    for val in rec.ctrl.values():
+        val[n:] = np.nan
+    for val in rec.plant.values():
+        val[plant_rows:] = np.nan
+
+
+def _diverged(q: np.ndarray, u: np.ndarray, e_true: np.ndarray, z: np.ndarray | None, limit_m: float) -> str | None:
+    """Why one seed's step diverged (the reasons of :func:`mlpfac.kernels.bad_seeds`), or None."""
+    err = float(np.hypot(e_true[0], e_true[1]))
+    if not (np.isfinite(q).all() and np.isfinite(u).all()):
         return "non-finite pose or command"
-    if z is not None and not np.isfinite(z[k]).all():
+    if z is not None and not np.isfinite(z).all():
         return "non-finite network weights"
-    if err > limit_m:
+    if not err <= limit_m:
         return f"position error {err:.3g} m beyond {limit_m:g} m"
     return None
 

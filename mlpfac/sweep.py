@@ -10,7 +10,7 @@ the command line and the engine's API (every name below is importable from here)
    ``with_overrides(seed=...)`` gives). More than ``MAX_RUNS`` runs is refused.
 2. **Execute** (:func:`execute`): runs already done are skipped; the rest go to this process
    (``workers=1``), a local process pool, or a Dask cluster (``scheduler``), one run or one batch
-   of seeds (``batched``, see :mod:`mlpfac.batch`) per task. Workers compute and return the
+   of seeds (``batched``, see :func:`mlpfac.runner.run_batch`) per task. Workers compute and return the
    metrics; **the client writes every run folder**, so Dask workers need no shared disk::
 
        DIR/<scenario>/<controller>/seed-0003/config.toml    the scenario as resolved
@@ -99,7 +99,9 @@ def _add_common(p: argparse.ArgumentParser, seeds: str, out: str) -> None:
     g = p.add_argument_group("execution")
     g.add_argument("--workers", type=int, default=None, help="local worker processes (default: number of CPUs)")
     g.add_argument(
-        "--batched", action="store_true", help="step the seeds of one scenario and controller together (mlpfac.batch)"
+        "--batched",
+        action="store_true",
+        help="step the seeds of one scenario and controller together (runner.run_batch)",
     )
     g.add_argument("--batch-size", type=int, default=64, help="seeds per batch with --batched (default 64)")
     g.add_argument(

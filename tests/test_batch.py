@@ -1,12 +1,11 @@
-"""The batched path (mlpfac.batch) against one-at-a-time runs: bit-identical per seed."""
+"""The batched closed loop (mlpfac.runner.run_batch) against one-at-a-time runs: bit-identical per seed."""
 
 import copy
 
 import numpy as np
 import pytest
 
-from mlpfac.batch import batch_controller, run_batch
-from mlpfac.runner import metrics, run
+from mlpfac.runner import metrics, run, run_batch
 from mlpfac.scenario import load, parse
 
 ARRAYS = ("pose", "pose_meas", "e", "e_true", "u", "ref")
@@ -73,15 +72,30 @@ def test_batch_events_full_noise_and_plant_list(plant_list):
 def test_shipped_paper_scenario_batches_bit_identically():
     """The shipped tuning (output_weight_std and whatever else sims/paper.toml sets) is batched too."""
     scns = [load("paper").with_overrides(seed=s, duration=1.0) for s in range(3)]
-    assert batch_controller(scns[0].make_controller()) is not None
     for a, s in zip(run_batch(scns), scns, strict=True):
         same_run(a, run(s))
 
 
-def test_unbatchable_controller_runs_one_at_a_time():
-    scns = [load("paper").with_overrides(controller="adaptive-ukf", seed=s, duration=0.3) for s in range(2)]
-    assert batch_controller(scns[0].make_controller()) is None
+@pytest.mark.parametrize(
+    "controller",
+    [
+        "adaptive-best",
+        "adaptive-prior",
+        "adaptive-forget",
+        "adaptive-q",
+        "adaptive-ukf",
+        "adaptive-cautious",
+        "adaptive-gains",
+    ],
+)
+def test_every_variant_batches_bit_identically(controller):
+    """Every variant runs batched; the compiled ones in one kernel call for all seeds, the numpy parts
+    seed by seed. An event mid-run."""
+    t = events_table()
+    scns = [parse(t | {"seed": s}, "events").with_overrides(controller=controller, duration=0.8) for s in range(3)]
+    assert scns[0].events
     for a, s in zip(run_batch(scns), scns, strict=True):
+        assert a.controller == controller and a.events
         same_run(a, run(s))
 
 
@@ -91,7 +105,7 @@ def test_batch_needs_one_scenario():
         run_batch([a, a.with_overrides(duration=0.3)])
 
 
-@pytest.mark.parametrize("controller", ["adaptive", "corradini"])
+@pytest.mark.parametrize("controller", ["adaptive", "adaptive-best", "corradini"])
 def test_batch_equals_one_at_a_time_on_the_mujoco_robot(controller):
     # the event moved early so that the batch applies it too
     t = copy.deepcopy(load("eight-wheel-radius").table)
@@ -102,3 +116,12 @@ def test_batch_equals_one_at_a_time_on_the_mujoco_robot(controller):
     for a, b in zip(run_batch(scns), [run(s) for s in scns], strict=True):
         assert a.events and a.events[0]["text"] == b.events[0]["text"]
         same_run(a, b)
+
+
+def test_a_seed_in_a_batch_of_64_is_its_run_alone_to_the_last_bit():
+    """The kernels loop over the batch inside, so a seed's arithmetic does not depend on B."""
+    scns = [load("paper").with_overrides(controller="adaptive-best", seed=s, duration=0.3) for s in range(64)]
+    recs = run_batch(scns)
+    for b in (0, 17, 63):
+        same_run(recs[b], run(scns[b]))
+        same_run(recs[b], run_batch([scns[b]])[0])

@@ -12,10 +12,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from mlpfac.error_model import G_true, f_true, h_true, pose_from_error, tracking_error
+from mlpfac.error_model import pose_from_error, tracking_error
 from mlpfac.estimators import covariance
 from mlpfac.events import Event
 from mlpfac.exceptions import ConfigError
+from mlpfac.kernels import kinematic_step, seeds
 
 
 @dataclass(frozen=True)
@@ -29,7 +30,15 @@ class KinematicConfig:
 
 
 class KinematicPlant:
+    """Model (7) for one run or a batch of seeds (one T_p and one delay for all, as events apply to all).
+
+    ``reset`` with one Generator: one run, poses (3,); with a sequence of B Generators: B seeds,
+    poses (B, 3). Each seed draws its noise from its own generator, all N steps at reset (the same
+    stream as one draw of 3 per step), so a seed's run does not depend on the others.
+    """
+
     supported_events = frozenset({"control_period", "sensor_delay"})
+    batched = True
 
     def __init__(self, config: KinematicConfig, T: float, ref: np.ndarray) -> None:
         self.T = T
@@ -38,31 +47,40 @@ class KinematicPlant:
         w, V = np.linalg.eigh(R)
         self.L = V * np.sqrt(np.maximum(w, 0.0)) if np.any(w > 0) else None  # L L' = R
 
-    def reset(self, q0: np.ndarray, rng: np.random.Generator, u0: np.ndarray | None = None) -> None:
+    def reset(self, q0: np.ndarray, rng, u0: np.ndarray | None = None) -> None:
         """``u0`` is ignored: the error model (7) has no velocity state."""
-        self.rng = rng
+        rngs, self.single = seeds(rng)
+        B, N = len(rngs), len(self.ref) - 1
         self.k = 0
         self.T_p = self.T
-        self.e = tracking_error(q0, self.ref[0])
+        self.e = np.tile(tracking_error(q0, self.ref[0]), (B, 1))
+        self.noise = np.zeros((B, max(N, 1), 3))
+        if self.L is not None:
+            for b, g in enumerate(rngs):  # each seed alone: L eps_k, eps_k ~ N(0, I)
+                self.noise[b] = g.standard_normal((N, 3)) @ self.L.T
         self.delay = 0
-        self.history: deque[np.ndarray] = deque([self.true_pose()], maxlen=1)
-        self._tele = {"u_meas": np.zeros(2), "h_true": np.zeros(3)}
+        self._pose = np.array([pose_from_error(e, self.ref[0]) for e in self.e])
+        self.history: deque[np.ndarray] = deque([self._pose], maxlen=1)
+        self._u, self._h = np.zeros((B, 2)), np.zeros((B, 3))
+        self._tele = {"u_meas": self._u, "h_true": self._h}
+        e0 = np.empty((0, 3))  # load (or compile) the kernel now, not mid-run
+        kinematic_step(e0, self.ref[0], self.ref[0], self.T, self._u[:0], self.noise[:0, 0], e0, e0, e0)
 
     def true_pose(self) -> np.ndarray:
-        return pose_from_error(self.e, self.ref[self.k])
+        return self._pose[0] if self.single else self._pose
 
     def measure(self) -> np.ndarray:
-        return self.history[0]
+        return self.history[0][0] if self.single else self.history[0]
 
     def step(self, u: np.ndarray) -> None:
-        r, e, Tp = self.ref[self.k], self.e, self.T_p
-        self._tele = {"u_meas": np.array(u, dtype=float), "h_true": h_true(e, r[3], r[4], Tp)}
-        e_next = f_true(e, r[3], r[4], Tp) + G_true(e, Tp) @ u  # (7)
-        if self.L is not None:
-            e_next = e_next + self.L @ self.rng.standard_normal(3)
-        self.e = e_next
-        self.k += 1
-        self.history.append(self.true_pose())
+        k = self.k
+        U = np.asarray(u, dtype=float).reshape(-1, 2)
+        self._u[:] = U
+        e, pose = np.empty_like(self.e), np.empty_like(self._pose)
+        kinematic_step(self.e, self.ref[k], self.ref[k + 1], self.T_p, U, self.noise[:, k], e, pose, self._h)
+        self.e, self._pose = e, pose
+        self.k = k + 1
+        self.history.append(pose)
 
     def check_event(self, event: Event, where: str) -> None:
         if event.kind not in self.supported_events:
@@ -81,10 +99,16 @@ class KinematicPlant:
         return f"sensor delay {old} -> {n} control steps"
 
     def telemetry(self) -> dict[str, np.ndarray | float]:
+        """``u_meas`` (the command, held exactly) and ``h_true`` (34) at the step's start; (B, ...) for a batch."""
+        if self.single:
+            return {"u_meas": self._u[0], "h_true": self._h[0]}
         return self._tele
 
-    def diverged(self) -> str | None:
-        return None if np.all(np.isfinite(self.e)) else "non-finite tracking error"
+    def diverged(self) -> str | None | list[str | None]:
+        """A reason, or None; a list of them, one per seed, for a batch."""
+        ok = np.isfinite(self.e).all(axis=-1)
+        out = [None if x else "non-finite tracking error" for x in ok]
+        return out[0] if self.single else out
 
     def geometry(self) -> list[dict]:
         return [

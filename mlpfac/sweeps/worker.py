@@ -23,7 +23,7 @@ def run_task(jobs: list[Job], batched: bool = False, save_rrd: bool = False, tmp
     from mlpfac.scenario import parse
 
     if batched and len(jobs) > 1 and not save_rrd:
-        from mlpfac.batch import run_batch
+        from mlpfac.runner import run_batch
 
         try:
             recs = run_batch([parse(j.table, j.source) for j in jobs])

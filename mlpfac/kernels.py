@@ -1,0 +1,365 @@
+"""Compiled kernels of the controller's hot path, batch-first: the networks (10)-(15) and their
+closed-form Jacobian (19)-(24), the EKF update (29)-(32), the law (35) with the corrected (36), and
+the kinematic plant (7).
+
+Every kernel takes a leading batch dimension B and loops over it inside, one seed after another,
+so a seed's arithmetic does not depend on B or on the other seeds: a seed in a batch of 64 gets
+the same bits as the same seed run alone (B = 1). They are compiled by numba on first use and
+cached on disk (``cache=True``: beside this file in ``__pycache__`` when that folder is writable,
+else in numba's user-wide cache, ``~/.cache/numba`` or ``$NUMBA_CACHE_DIR``). With
+``error_model="numpy"`` a division by zero gives inf or NaN as numpy does: a diverging run is
+detected by the runner, not by an exception here.
+
+Weight layout (16)-(18), as :mod:`mlpfac.networks`: z = [W_f (3, L_f), S_f (L_f, 6), W_G (3, 2, L_G),
+S_G (L_G, 3)], row-major blocks.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+
+def seeds(rng) -> tuple[list[np.random.Generator], bool]:
+    """The batch convention of ``reset(..., rng)``: one Generator is one run (arrays without a batch
+    dimension, "single"), a sequence of B Generators is a batch (arrays (B, ...))."""
+    if isinstance(rng, np.random.Generator):
+        return [rng], True
+    return list(rng), False
+
+
+JIT = {"cache": True, "error_model": "numpy", "nogil": True}
+V_R_MIN = 1e-3  # as mlpfac.law.V_R_MIN
+
+
+@njit(**JIT)
+def _sigmoid(a):
+    return 0.5 * (1.0 + math.tanh(0.5 * a))
+
+
+@njit(**JIT)
+def _hidden(z, Lf, LG, xf, xG, phif, phiG):
+    """(10)-(11): phi_f (L_f,), phi_G (L_G,) at weights z (alpha,) and inputs x_f (6,), x_G (3,)."""
+    o = 3 * Lf
+    for i in range(Lf):
+        a = 0.0
+        for m in range(6):
+            a += z[o + 6 * i + m] * xf[m]
+        phif[i] = _sigmoid(a)
+    o = 9 * Lf + 6 * LG
+    for i in range(LG):
+        a = 0.0
+        for m in range(3):
+            a += z[o + 3 * i + m] * xG[m]
+        phiG[i] = _sigmoid(a)
+
+
+@njit(**JIT)
+def _f_G(z, Lf, LG, phif, phiG, f, G):
+    """(14)-(15): NN_f (3,) and NN_G (3, 2) from the hidden layers (without the residual e)."""
+    for j in range(3):
+        a = 0.0
+        for i in range(Lf):
+            a += z[j * Lf + i] * phif[i]
+        f[j] = a
+    o = 9 * Lf
+    for j in range(3):
+        for n in range(2):
+            a = 0.0
+            for i in range(LG):
+                a += z[o + (2 * j + n) * LG + i] * phiG[i]
+            G[j, n] = a
+
+
+@njit(**JIT)
+def _jacobian(z, Lf, LG, xf, xG, phif, phiG, u, H):
+    """nabla_h (3, alpha), (19)-(24), at the hidden layers phi_f, phi_G of (z, x_f, x_G); H is all written."""
+    alpha = H.shape[1]
+    for j in range(3):
+        for c in range(alpha):
+            H[j, c] = 0.0
+    o = 3 * Lf
+    for i in range(Lf):
+        d = phif[i] * (1.0 - phif[i])
+        for j in range(3):
+            H[j, j * Lf + i] = phif[i]  # (21)
+            w = z[j * Lf + i] * d
+            for m in range(6):
+                H[j, o + 6 * i + m] = w * xf[m]  # (22)
+    o2 = 9 * Lf
+    o3 = o2 + 6 * LG
+    for i in range(LG):
+        d = phiG[i] * (1.0 - phiG[i])
+        for j in range(3):
+            sigma = 0.0
+            for n in range(2):
+                H[j, o2 + (2 * j + n) * LG + i] = phiG[i] * u[n]  # (23)
+                sigma += z[o2 + (2 * j + n) * LG + i] * u[n]
+            w = sigma * d
+            for m in range(3):
+                H[j, o3 + 3 * i + m] = w * xG[m]  # (24)
+
+
+@njit(**JIT)
+def _ekf(z, P, innov, H, R, forgetting, Q, has_Q, P_max, PHt, W):
+    """One EKF update (29)-(32) of z (alpha,), P (alpha, alpha) in place, innovation i (3,) given.
+
+    Short form P+ = P - K H P written as P - W'W with W = L^-1 (P H')', S = H P H' + R = L L':
+    each element of W'W is the same sum in either order of its indices, so P stays exactly
+    symmetric (it is symmetric on entry) with no symmetrisation pass. K i = W' L^-1 i.
+    Then forgetting (P /= lambda), process noise (P += Q) and the cap max diag P <= P_max.
+    PHt, W: work arrays (3, alpha).
+    """
+    a = z.shape[0]
+    P0, P1, P2 = PHt[0], PHt[1], PHt[2]
+    for c in range(a):
+        P0[c] = 0.0
+        P1[c] = 0.0
+        P2[c] = 0.0
+    r = 0
+    while r + 1 < a:  # (P H')' = H P: P is symmetric, so rows r, r + 1 of P times H[:, r], H[:, r + 1]
+        pa, pb = P[r], P[r + 1]
+        a0, a1, a2 = H[0, r], H[1, r], H[2, r]
+        b0, b1, b2 = H[0, r + 1], H[1, r + 1], H[2, r + 1]
+        for c in range(a):
+            x, y = pa[c], pb[c]
+            P0[c] += x * a0 + y * b0
+            P1[c] += x * a1 + y * b1
+            P2[c] += x * a2 + y * b2
+        r += 2
+    if r < a:
+        pa = P[r]
+        a0, a1, a2 = H[0, r], H[1, r], H[2, r]
+        for c in range(a):
+            x = pa[c]
+            P0[c] += x * a0
+            P1[c] += x * a1
+            P2[c] += x * a2
+    S = np.empty((3, 3))
+    for k in range(3):
+        for m in range(k + 1):
+            s = 0.0
+            for c in range(a):
+                s += H[k, c] * PHt[m, c]
+            S[k, m] = s + 0.5 * (R[k, m] + R[m, k])
+    # Cholesky S = L L' (lower triangle of S)
+    L00 = math.sqrt(S[0, 0])
+    L10 = S[1, 0] / L00
+    L20 = S[2, 0] / L00
+    L11 = math.sqrt(S[1, 1] - L10 * L10)
+    L21 = (S[2, 1] - L20 * L10) / L11
+    L22 = math.sqrt(S[2, 2] - L20 * L20 - L21 * L21)
+    v0 = innov[0] / L00
+    v1 = (innov[1] - L10 * v0) / L11
+    v2 = (innov[2] - L20 * v0 - L21 * v1) / L22
+    for c in range(a):
+        w0 = PHt[0, c] / L00
+        w1 = (PHt[1, c] - L10 * w0) / L11
+        w2 = (PHt[2, c] - L20 * w0 - L21 * w1) / L22
+        W[0, c], W[1, c], W[2, c] = w0, w1, w2
+        z[c] += w0 * v0 + w1 * v1 + w2 * v2  # (30): z += K i
+    W0, W1, W2 = W[0], W[1], W[2]
+    if forgetting == 1.0:
+        for r in range(a):  # (29): P -= W'W
+            pr = P[r]
+            w0, w1, w2 = W0[r], W1[r], W2[r]
+            for c in range(a):
+                pr[c] = pr[c] - (w0 * W0[c] + w1 * W1[c] + w2 * W2[c])
+    else:  # the same pass with forgetting, P /= lambda (one sweep over P, not two)
+        inv = 1.0 / forgetting
+        for r in range(a):
+            pr = P[r]
+            w0, w1, w2 = W0[r], W1[r], W2[r]
+            for c in range(a):
+                pr[c] = (pr[c] - (w0 * W0[c] + w1 * W1[c] + w2 * W2[c])) * inv
+    if has_Q:
+        for r in range(a):
+            pr, qr = P[r], Q[r]
+            for c in range(a):
+                pr[c] = pr[c] + qr[c]
+    peak = 0.0
+    for r in range(a):
+        if P[r, r] > peak or P[r, r] != P[r, r]:
+            peak = P[r, r]
+    if P_max < peak:
+        s = P_max / peak
+        for r in range(a):
+            pr = P[r]
+            for c in range(a):
+                pr[c] *= s
+
+
+@njit(**JIT)
+def ekf_update(z, P, y, h, H, R, forgetting, Q, has_Q, P_max, innov):
+    """:func:`_ekf` for a batch: z (B, alpha), P (B, alpha, alpha), y, h (B, 3), H (B, 3, alpha); innov (B, 3) out."""
+    a = z.shape[1]
+    PHt = np.empty((3, a))
+    W = np.empty((3, a))
+    for b in range(z.shape[0]):
+        for k in range(3):
+            innov[b, k] = y[b, k] - h[b, k]  # (32)
+        _ekf(z[b], P[b], innov[b], H[b], R, forgetting, Q, has_Q, P_max, PHt, W)
+
+
+@njit(**JIT)
+def _law(e0, e1, e2, h1, h2, h5, v_r, T, l1, l2, l3, v_max, omega_max, u):
+    """(35) with the corrected gains (36); omega first, limited, then v with the omega sent."""
+    k2 = (1.0 - l2) * (1.0 - l3) / (T * max(v_r, V_R_MIN))
+    omega = (h5 + k2 * e1 + (2.0 - l2 - l3) * e2) / T
+    omega = min(max(omega, -omega_max), omega_max)
+    v = ((1.0 - l1) * e0 + h1 * omega + h2) / T
+    u[0] = min(max(v, -v_max), v_max)
+    u[1] = omega
+
+
+@njit(**JIT)
+def adaptive_step(e, v_r, omega_r, first, z, P, S, H, u, innov, h_hat, trace, ints, params, R, Q):
+    """One step of the adaptive controller for B seeds, e (B, 3) -> u (B, 2).
+
+    Unless ``first``: the EKF update (28)-(32) with measurement e_k (minus the nominal prediction
+    e_nom with ``prior``), model h(x_{k-1}, u_{k-1}, z_k) and its Jacobian from the hidden layers the
+    law computed at z_k the step before (same weights, same inputs). Then the inputs (8)-(9), the
+    networks at the new z, h_hat (34) (plus the nominal f, G (5)-(6) with ``prior``), the law (35).
+
+    State per seed, updated in place: z (B, alpha), P (B, alpha, alpha) and S (B, 17 + L_f + L_G) =
+    [x_f (6), x_G (3), phi_f (L_f), phi_G (L_G), u_{k-1} (2), e_{k-1} (3), e_nom (3)].
+    Out: u, innov (32), h_hat (34), trace (trace P); H (B, 3, alpha) the Jacobian of the update.
+    ints = (L_f, L_G, residual, prior, has_Q); params = (c, T, lambda_1..3, v_max, omega_max,
+    forgetting, P_max) with c the input scale on the errors.
+    """
+    Lf, LG, residual, prior, has_Q = ints[0], ints[1], ints[2] != 0, ints[3] != 0, ints[4] != 0
+    c, T, l1, l2, l3, v_max, omega_max, forgetting, P_max = (
+        params[0], params[1], params[2], params[3], params[4], params[5], params[6], params[7], params[8],
+    )  # fmt: skip
+    B, a = z.shape
+    PHt = np.empty((3, a))
+    W = np.empty((3, a))
+    f = np.empty(3)
+    G = np.empty((3, 2))
+    o = 9 + Lf + LG
+    for b in range(B):
+        zb, eb, Sb = z[b], e[b], S[b]
+        xb, gb, phif, phiG = Sb[0:6], Sb[6:9], Sb[9 : 9 + Lf], Sb[9 + Lf : o]
+        u_prev, e_prev, e_nom = Sb[o : o + 2], Sb[o + 2 : o + 5], Sb[o + 5 : o + 8]
+        if not first:
+            _f_G(zb, Lf, LG, phif, phiG, f, G)
+            for j in range(3):
+                hj = f[j] + (G[j, 0] * u_prev[0] + G[j, 1] * u_prev[1])  # (26)
+                if residual:
+                    hj += e_prev[j]
+                y = eb[j] - e_nom[j] if prior else eb[j]
+                if prior and j == 2:
+                    y = math.pi - ((math.pi - y) % (2.0 * math.pi))
+                innov[b, j] = y - hj  # (32)
+            _jacobian(zb, Lf, LG, xb, gb, phif, phiG, u_prev, H[b])
+            _ekf(zb, P[b], innov[b], H[b], R, forgetting, Q, has_Q, P_max, PHt, W)
+        tr = 0.0
+        for i in range(a):
+            tr += P[b, i, i]
+        trace[b] = tr
+        # (8)-(9)
+        xb[0], xb[1], xb[2] = c * eb[0], c * eb[1], c * eb[2]
+        xb[3], xb[4], xb[5] = v_r, omega_r, 1.0
+        gb[0], gb[1], gb[2] = xb[0], xb[1], 1.0
+        _hidden(zb, Lf, LG, xb, gb, phif, phiG)
+        _f_G(zb, Lf, LG, phif, phiG, f, G)
+        if residual:
+            for j in range(3):
+                f[j] += eb[j]
+        if prior:  # f = f_nominal + NN_f, G = G_nominal + NN_G, (5)-(6)
+            h1 = G[0, 1] + T * eb[1]
+            h2 = (f[0] + (eb[0] + T * v_r * math.cos(eb[2]))) - eb[0]
+            h5 = (f[2] + (eb[2] + T * omega_r)) - eb[2]
+        else:
+            h1, h2, h5 = G[0, 1], f[0] - eb[0], f[2] - eb[2]  # (34)
+        h_hat[b, 0], h_hat[b, 1], h_hat[b, 2] = h1, h2, h5
+        _law(eb[0], eb[1], eb[2], h1, h2, h5, v_r, T, l1, l2, l3, v_max, omega_max, u[b])
+        if prior:  # the nominal prediction of e_{k+1}: f_true + G_true u, (5)-(6)
+            u0, u1 = u[b, 0], u[b, 1]
+            e_nom[0] = (eb[0] + T * v_r * math.cos(eb[2])) + (-T * u0 + T * eb[1] * u1)
+            e_nom[1] = (eb[1] + T * v_r * math.sin(eb[2])) + (-T * eb[0]) * u1
+            e_nom[2] = (eb[2] + T * omega_r) + (-T) * u1
+        u_prev[0], u_prev[1] = u[b, 0], u[b, 1]
+        e_prev[0], e_prev[1], e_prev[2] = eb[0], eb[1], eb[2]
+
+
+@njit(**JIT)
+def networks_h_jacobian(z, xf, xG, e, u, Lf, LG, residual, h, H):
+    """h (B, 3) and nabla_h (B, 3, alpha) of (26), (19)-(24): for tests against :mod:`mlpfac.networks`."""
+    phif = np.empty(Lf)
+    phiG = np.empty(LG)
+    f = np.empty(3)
+    G = np.empty((3, 2))
+    for b in range(z.shape[0]):
+        _hidden(z[b], Lf, LG, xf[b], xG[b], phif, phiG)
+        _f_G(z[b], Lf, LG, phif, phiG, f, G)
+        for j in range(3):
+            h[b, j] = f[j] + (G[j, 0] * u[b, 0] + G[j, 1] * u[b, 1]) + (e[b, j] if residual else 0.0)
+        _jacobian(z[b], Lf, LG, xf[b], xG[b], phif, phiG, u[b], H[b])
+
+
+@njit(**JIT)
+def tracking_errors(q, r, out):
+    """Eq. (2) for poses q (B, 3) and one reference sample r (>= 3,): out (B, 3), e3 wrapped to (-pi, pi]."""
+    for b in range(q.shape[0]):
+        c, s = math.cos(q[b, 2]), math.sin(q[b, 2])
+        dx, dy = r[0] - q[b, 0], r[1] - q[b, 1]
+        out[b, 0] = c * dx + s * dy
+        out[b, 1] = -s * dx + c * dy
+        out[b, 2] = math.pi - ((math.pi - (r[2] - q[b, 2])) % (2.0 * math.pi))
+
+
+@njit(**JIT)
+def kinematic_step(e, r, r_next, Tp, u, noise, e_out, pose_out, h_true):
+    """Model (7) for B seeds: e_out = f(e) + G(e) u + noise with the true f, G (5)-(6) at period Tp;
+    pose_out the pose whose error (2) to r_next is e_out; h_true (B, 3) the true (34) at e."""
+    for b in range(e.shape[0]):
+        e0, e1, e2 = e[b, 0], e[b, 1], e[b, 2]
+        u0, u1 = u[b, 0], u[b, 1]
+        h_true[b, 0], h_true[b, 1], h_true[b, 2] = Tp * e1, Tp * r[3] * math.cos(e2), Tp * r[4]
+        n0 = (e0 + Tp * r[3] * math.cos(e2)) + (-Tp * u0 + Tp * e1 * u1) + noise[b, 0]
+        n1 = (e1 + Tp * r[3] * math.sin(e2)) + (-Tp * e0) * u1 + noise[b, 1]
+        n2 = (e2 + Tp * r[4]) + (-Tp) * u1 + noise[b, 2]
+        e_out[b, 0], e_out[b, 1], e_out[b, 2] = n0, n1, n2
+        th = r_next[2] - n2
+        c, s = math.cos(th), math.sin(th)
+        pose_out[b, 0] = r_next[0] - (c * n0 - s * n1)
+        pose_out[b, 1] = r_next[1] - (s * n0 + c * n1)
+        pose_out[b, 2] = th
+
+
+@njit(**JIT)
+def corradini_step(e, v_r, omega_r, T, l1, l2, l3, v_max, omega_max, h_hat, u):
+    """(35) given the nominal h1 = T e2, h2 = T v_r cos e3, h5 = T omega_r, for B seeds."""
+    for b in range(e.shape[0]):
+        e0, e1, e2 = e[b, 0], e[b, 1], e[b, 2]
+        h1, h2, h5 = T * e1, T * v_r * math.cos(e2), T * omega_r
+        h_hat[b, 0], h_hat[b, 1], h_hat[b, 2] = h1, h2, h5
+        _law(e0, e1, e2, h1, h2, h5, v_r, T, l1, l2, l3, v_max, omega_max, u[b])
+
+
+@njit(**JIT)
+def kanayama_step(e, v_r, omega_r, Kx, Ky, Ktheta, v_max, omega_max, u):
+    """Kanayama's law for B seeds: v = v_r cos e3 + Kx e1, omega = omega_r + v_r (Ky e2 + Ktheta sin e3)."""
+    for b in range(e.shape[0]):
+        v = v_r * math.cos(e[b, 2]) + Kx * e[b, 0]
+        omega = omega_r + v_r * (Ky * e[b, 1] + Ktheta * math.sin(e[b, 2]))
+        u[b, 0] = min(max(v, -v_max), v_max)
+        u[b, 1] = min(max(omega, -omega_max), omega_max)
+
+
+@njit(**JIT)
+def bad_seeds(q, u, e_true, z, limit, bad):
+    """The runner's divergence test for B seeds: bad[b] when the pose or the command is not finite, the
+    weights z (B, alpha) (or (B, 0)) are not, or the position error exceeds ``limit``. Returns the count."""
+    n = 0
+    for b in range(q.shape[0]):
+        s = q[b, 0] + q[b, 1] + q[b, 2] + u[b, 0] + u[b, 1]
+        for i in range(z.shape[1]):
+            s += z[b, i] * 0.0
+        x = math.hypot(e_true[b, 0], e_true[b, 1])
+        bad[b] = not (math.isfinite(s) and x <= limit)
+        n += bad[b]
+    return n
