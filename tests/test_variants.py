@@ -9,6 +9,7 @@ import pytest
 from mlpfac.controllers import CONTROLLERS, VARIANTS, Adaptive, AdaptiveConfig, Corradini
 from mlpfac.estimators import EKF, UKF, covariance
 from mlpfac.exceptions import ConfigError
+from mlpfac.factory import make_controller
 from mlpfac.law import Law
 from mlpfac.networks import Networks
 from mlpfac.reference import Eight, sample
@@ -202,7 +203,7 @@ def test_options_are_scenario_file_keys():
         },
     }
     scn = parse(table)
-    ctrl = scn.make_controller()
+    ctrl = make_controller(scn)
     c = ctrl.config
     assert (c.estimator, c.ukf_alpha, c.cautious, c.prior, c.learned_gains) == ("ukf", 0.2, 0.5, True, True)
     assert isinstance(ctrl, Adaptive) and not ctrl.compiled  # the UKF and the cautious law: numpy parts
