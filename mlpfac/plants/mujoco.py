@@ -3,7 +3,7 @@
 What the robot is (actuators, wheels, site, radius, track, rest pose) is read once from its model
 by :func:`mlpfac.plants.robot.read_robot`; this module steps it, from :meth:`MujocoPlant.reset` on.
 The controller's u = (v, omega) is turned into wheel speeds by the inverse kinematics
-(:func:`mlpfac.kinematics.wheel_speeds`) with the wheel radius and track the IK *believes* (the
+(:func:`mlpfac.ik.wheel_speeds`) with the wheel radius and track the IK *believes* (the
 nominal ones), and held for one control period of ``n_substeps`` physics steps,
 ``control_dt = n_substeps * model.opt.timestep``. Two wheel drives:
 
@@ -25,14 +25,13 @@ derived quantity (site pose, ``cvel``, sensors) belongs to the current state.
 from __future__ import annotations
 
 import math
-from collections import deque
 
 import mujoco
 import numpy as np
 
-from mlpfac.events import EVENT_KINDS, Event
+from mlpfac.events import EVENT_KINDS, DelayLine, Event
 from mlpfac.exceptions import ConfigError
-from mlpfac.kinematics import body_velocity_vw, wheel_speeds, wheel_speeds_lr
+from mlpfac.ik import body_velocity_vw, wheel_speeds, wheel_speeds_lr
 from mlpfac.plants.robot import ROUND, MujocoConfig, model_fingerprint, read_robot, yaw
 
 DIVERGENCE_WARNINGS = ("mjWARN_BADQPOS", "mjWARN_BADQVEL", "mjWARN_BADQACC")  # MuJoCo resets the data on these
@@ -119,7 +118,7 @@ class MujocoPlant:
         self._noise_left = 0
         self._pose = self._read_pose()
         self._wheel_cmd = (0.0, 0.0)
-        self._history: deque[np.ndarray] = deque([self._noisy(self._pose)], maxlen=1)
+        self._history = DelayLine(self._noisy(self._pose))
 
     def _views(self) -> None:
         """Views into the current data that the per-step path reads (made again when the data change)."""
@@ -148,7 +147,7 @@ class MujocoPlant:
         return self._pose
 
     def measure(self) -> np.ndarray:
-        return self._history[0]
+        return self._history.read()
 
     def step(self, u: np.ndarray) -> None:
         wl, wr = wheel_speeds_lr(float(u[0]), float(u[1]), self.ik_radius, self.ik_track, self.config.max_wheel_speed)
@@ -167,7 +166,7 @@ class MujocoPlant:
             self._pi_steps(wl, wr, n)
         self.sim_time += n * self._dt
         self._pose = self._read_pose()
-        self._history.append(self._noisy(self._pose))
+        self._history.push(self._noisy(self._pose))
 
     def _pi_steps(self, wl: float, wr: float, n: int) -> None:
         """n physics steps of the discrete wheel-speed PI loop (torque drive).
@@ -319,9 +318,7 @@ class MujocoPlant:
             old, self._n = self._n, self._substeps(float(p["factor"]) * self.T, "factor")
             return f"plant holds each command {old * self._dt:g} -> {self._n * self._dt:g} s ({self._n} physics steps; controller keeps T = {self.T:g} s)"
         if event.kind == "sensor_delay":
-            n = int(p["steps"])
-            old, self._history = self._history.maxlen - 1, deque(self._history, maxlen=n + 1)
-            return f"sensor delay {old} -> {n} control steps"
+            return self._history.delay(int(p["steps"]))
         spec = self._spec
         if event.kind == "payload":
             b = self._payload_body(p, "")

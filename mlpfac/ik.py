@@ -1,4 +1,4 @@
-"""Differential-drive (unicycle) kinematics: body velocity (v, omega) <-> wheel speeds.
+"""The inverse-kinematics layer (IK) of a differential-drive robot: body velocity (v, omega) <-> wheel speeds.
 
 Wheels of radius ``radius`` (m) on one axle, ``track`` (m) apart; wheel speeds in rad/s, positive
 when the wheel drives the robot forward; v in m/s along the heading, omega in rad/s (counter-
