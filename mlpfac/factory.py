@@ -1,5 +1,7 @@
 """The blocks of a run built from a scenario's data: the plant and the controller.
 
+The control period T is the scenario's; both blocks get it here, when they are built, and nowhere else.
+
 A :class:`~mlpfac.scenario.Scenario` is plain, validated data; the runner asks this module for the
 blocks it steps, and so does :func:`mlpfac.scenario.load` once, to check before any run that the
 robot can be built and can apply every event.
@@ -21,12 +23,12 @@ def make_controller(scn: Scenario):
     if scn.controller in VARIANTS:
         over = dict(VARIANTS[scn.controller])
         nets = dataclasses.replace(scn.adaptive.networks, **over.pop("networks", {}))
-        ctrl = Adaptive(scn.law, dataclasses.replace(scn.adaptive, networks=nets, **over))
+        ctrl = Adaptive(scn.law, dataclasses.replace(scn.adaptive, networks=nets, **over), scn.T)
         ctrl.name = scn.controller
         return ctrl
     if scn.controller == "corradini":
-        return Corradini(scn.law)
-    return Kanayama(scn.law, scn.kanayama)
+        return Corradini(scn.law, scn.T)
+    return Kanayama(scn.law, scn.kanayama, scn.T)
 
 
 def make_plant(scn: Scenario, ref: np.ndarray):

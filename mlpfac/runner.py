@@ -158,7 +158,7 @@ def _loop(scns, ref, plant, ctrl, sink, on_step, full: bool) -> list[RunRecord]:
     if isinstance(plant, list) or not getattr(plant, "batched", False):
         plant = PlantList(plant if isinstance(plant, list) else [plant])
     gens = [seeded_generators(s.seed) for s in scns]
-    ctrl.reset(T, [c for c, _ in gens])
+    ctrl.reset([c for c, _ in gens])
     q0, u0 = base.initial_state(ref)
     plant.reset(q0, [p for _, p in gens], u0)
     listed = isinstance(plant, PlantList)
