@@ -1,20 +1,17 @@
-"""Costs of the experiments-at-scale path, as ratios against their floors, each with its target.
+"""Costs of the experiments-at-scale path, each with its target. Not a test.
 
     python benchmarks/bench_sweep.py [--quick]
 
-Every ratio is measured side by side in this one process (the two sides interleaved, repeated,
-the minimum per side kept), because the machine is shared and absolute times are noisy. A missed
-target is printed as missed. Not a test.
+The per-step costs of one run against fixed floors (bare MuJoCo physics, a reference EKF update
+written independently in numpy) are ``benchmarks/perf_floor.py``'s job. This script measures
+what a sweep adds, side by side in one process (interleaved repeats, the minimum kept):
 
-1. adaptive controller step vs the bare EKF update of the same size (alpha = 171): the floor is
-   ``EKF.update`` with h and H precomputed (the compiled short-form covariance update, gain, weights);
-   and the ``adaptive-best`` variant's step vs the paper's EKF scheme's (target <= 3).
-2. closed-loop MuJoCo run vs bare physics substeps + bare EKF updates for the same step count
-   (skipped while the MuJoCo plant or sims/eight-nominal.toml is missing), and where the time goes:
-   the same run with the non-adaptive law and bare physics alone, side by side with the two.
-3. sweep throughput with 2 workers vs 1; batched vs one-at-a-time for 64 seeds on one core, with the
-   ceiling that one EKF update per seed puts on any batching: one run's step / the bare EKF update.
-4. peak memory of a 100-seed sweep: ``mlpfac sweep`` in a child process, the RSS of it and all its
+1. sweep throughput with 2 workers vs 1 (runs of the paper scenario);
+2. batched seeds: ``runner.run_batch`` of 64 seeds of ``adaptive`` and ``adaptive-best``, CPU time
+   per seed-step against one reference short-form EKF update of the same size (``perf_floor``'s
+   ``UpdateFloor``, alpha = 171, m = 3; target <= 1.2: everything but the update amortised), and
+   against the same seeds one at a time;
+3. peak memory of a 100-seed sweep: ``mlpfac sweep`` in a child process, the RSS of it and all its
    workers summed and sampled every 20 ms with psutil (plus getrusage maxrss of the largest one).
 """
 
@@ -34,18 +31,15 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from perf_floor import UpdateFloor  # noqa: E402
+
 from mlpfac import sweep  # noqa: E402
-from mlpfac.estimators import EKF, covariance  # noqa: E402
-from mlpfac.reference import sample  # noqa: E402
-from mlpfac.runner import (  # noqa: E402
-    run,
-    run_batch,  # noqa: E402
-    seeded_generators,
-)
+from mlpfac.runner import run, run_batch  # noqa: E402
 from mlpfac.scenario import load  # noqa: E402
 
 RESULTS: list[tuple[str, str, bool | None]] = []
-FLOOR: dict[str, float] = {}  # measured floors that later sections compare with, in seconds per step
 
 
 def report(name: str, value: float, target: str, met: bool | None, detail: str = "") -> None:
@@ -68,135 +62,8 @@ def side_by_side(fns: dict, repeat: int) -> dict[str, float]:
 # --------------------------------------------------------------------------------------------
 
 
-def bench_controller(steps: int, repeat: int) -> None:
-    print("1. adaptive controller step vs bare EKF update (alpha = 171)")
-    scn = load("paper")
-    # a realistic input sequence: errors and references of a bounded run of the same scenario
-    rec = run(scn.with_overrides(controller="corradini", duration=steps * scn.T + 0.1))
-    es, refs = rec.e[:steps].copy(), rec.ref[:steps].copy()
-    ctrl = scn.make_controller()
-    c = scn.adaptive
-    a = c.networks.alpha
-    rng = np.random.default_rng(0)
-    H = rng.normal(0.0, 0.3, (3, a))  # (3, alpha), fixed: the update's cost does not depend on the values
-    h0 = np.zeros(3)
-
-    def controller_loop():
-        ctrl.reset(scn.T, seeded_generators(1)[0])
-        for k in range(steps):
-            ctrl.step(es[k], refs[k])
-
-    def ekf_loop():
-        ekf = EKF(rng.normal(0.0, c.weight_std, a), c.P0 * np.eye(a), covariance(c.R, 3, "R"))
-        for k in range(steps):
-            ekf.update(es[k], lambda z: (h0, H))
-
-    t = side_by_side({"ctrl": controller_loop, "ekf": ekf_loop}, repeat)
-    step_us, ekf_us = t["ctrl"] / steps * 1e6, t["ekf"] / steps * 1e6
-    FLOOR["ekf"] = t["ekf"] / steps
-    ratio = step_us / ekf_us
-    report(
-        "controller step / bare EKF update",
-        ratio,
-        "<= 1.5",
-        ratio <= 1.5,
-        f"({step_us:.0f} us vs {ekf_us:.0f} us per step)",
-    )
-
-    # the best adaptive variant against the paper's EKF scheme, on the same inputs
-    best = scn.with_overrides(controller="adaptive-best").make_controller()
-
-    def best_loop():
-        best.reset(scn.T, seeded_generators(1)[0])
-        for k in range(steps):
-            best.step(es[k], refs[k])
-
-    t = side_by_side({"ctrl": controller_loop, "best": best_loop}, repeat)
-    ratio = t["best"] / t["ctrl"]
-    report(
-        "adaptive-best step / adaptive (EKF) step",
-        ratio,
-        "<= 3",
-        ratio <= 3.0,
-        f"({t['best'] / steps * 1e6:.0f} us vs {t['ctrl'] / steps * 1e6:.0f} us per step)",
-    )
-
-
-def bench_mujoco(repeat: int) -> None:
-    print("2. closed-loop MuJoCo run vs bare physics + bare EKF update (figure of eight, 25 s, no logging)")
-    path = ROOT / "sims" / "eight-nominal.toml"
-    if not (ROOT / "mlpfac" / "plants" / "mujoco.py").exists() or not path.exists():
-        print("  skipped: mlpfac/plants/mujoco.py or sims/eight-nominal.toml is not there yet")
-        return
-    import mujoco
-
-    scn = load(str(path)).with_overrides(duration=25.0)
-    N = scn.steps
-    ref = sample(scn.reference, np.arange(N + 1) * scn.T)
-    plant = scn.make_plant(ref)
-    m = next((getattr(plant, n) for n in ("model", "m") if isinstance(getattr(plant, n, None), mujoco.MjModel)), None)
-    n_sub = next((int(getattr(plant, n)) for n in ("n_substeps", "substeps") if hasattr(plant, n)), None)
-    if m is None:
-        print("  skipped: the MuJoCo plant exposes no MjModel as .model or .m")
-        return
-    if n_sub is None:
-        n_sub = max(1, int(round(scn.T / m.opt.timestep)))
-    d = mujoco.MjData(m)
-    c = scn.adaptive
-    a = c.networks.alpha
-    rng = np.random.default_rng(0)
-    H, h0, y = rng.normal(0.0, 0.3, (3, a)), np.zeros(3), np.zeros(3)
-
-    def floor():
-        mujoco.mj_resetData(m, d)
-        ekf = EKF(rng.normal(0.0, c.weight_std, a), c.P0 * np.eye(a), covariance(c.R, 3, "R"))
-        for _ in range(N):
-            for _ in range(n_sub):
-                mujoco.mj_step(m, d)
-            ekf.update(y, lambda z: (h0, H))
-
-    rec = {}
-
-    def closed_loop():
-        rec["r"] = run(scn)
-
-    corradini = scn.with_overrides(controller="corradini")
-
-    def physics():
-        mujoco.mj_resetData(m, d)
-        for _ in range(N * n_sub):
-            mujoco.mj_step(m, d)
-
-    loops = {"loop": closed_loop, "floor": floor, "corradini": lambda: run(corradini), "physics": physics}
-    t = side_by_side(loops, repeat)
-    ratio = t["loop"] / t["floor"]
-    r = rec["r"]
-    report(
-        "closed loop / (physics + EKF update)",
-        ratio,
-        "<= 1.3",
-        ratio <= 1.3,
-        f"({t['loop']:.2f} s vs {t['floor']:.2f} s, {N} steps x {n_sub} substeps, status {r.status})",
-    )
-    report("real-time factor of the closed loop", r.sim_time_s / t["loop"], "-", None, "(simulated s per wall s)")
-    # Where the time goes, per step: the same run with the non-adaptive law (runner, plant glue,
-    # recording and a law of a few float operations) against bare physics gives the loop's own cost;
-    # what the adaptive run adds beyond that and the EKF update is its controller: networks,
-    # Jacobian, law, and recording its telemetry (171 weights, trace(P), innovation, h).
-    us = {k: v / N * 1e6 for k, v in t.items()}
-    ekf = us["floor"] - us["physics"]
-    glue = us["corradini"] - us["physics"]
-    adaptive = us["loop"] - us["corradini"] - ekf
-    print(
-        f"  per step: physics {us['physics']:.0f} us + EKF update {ekf:.0f} us (the floor); the loop adds "
-        f"runner, plant glue and recording {glue:.0f} us (a run with the non-adaptive law, minus physics) "
-        f"and the adaptive controller beyond its EKF update {adaptive:.0f} us ({us['loop']:.0f} us in all)",
-        flush=True,
-    )
-
-
-def bench_sweep(seeds: int, duration: float, batch_seeds: int, batch_duration: float, repeat: int) -> None:
-    print(f"3. sweep throughput ({os.cpu_count()} CPUs, shared with other processes)")
+def bench_sweep(seeds: int, duration: float, repeat: int) -> None:
+    print(f"1. sweep throughput ({os.cpu_count()} CPUs)")
     jobs = sweep.plan(["paper"], ["adaptive"], list(range(seeds)), duration)
     tmp = Path(tempfile.mkdtemp(prefix="bench-sweep-"))
     i = iter(range(10**6))
@@ -230,39 +97,53 @@ def bench_sweep(seeds: int, duration: float, batch_seeds: int, batch_duration: f
     )
     report("2 workers / 1 worker (runs per second)", ratio, ">= 1.8", ratio >= 1.8, detail)
 
-    for ctrl in ("adaptive", "corradini"):
+
+def bench_batched(batch_seeds: int, batch_duration: float, repeat: int) -> None:
+    print(f"2. {batch_seeds} seeds batched (runner.run_batch), CPU time, one process")
+    floor = UpdateFloor(171, 3, 1e-3, 0.1)
+    steps = 2000
+
+    def update() -> float:
+        floor.reset()
+        c = time.process_time()
+        floor.short(steps)
+        return (time.process_time() - c) / steps
+
+    for ctrl in ("adaptive", "adaptive-best"):
         scns = [
             load("paper").with_overrides(controller=ctrl, seed=s, duration=batch_duration) for s in range(batch_seeds)
         ]
-        fns = {"one": lambda scns=scns: [run(s) for s in scns]}
-        for bs in (8, 16, 64):
-            fns[str(bs)] = lambda scns=scns, bs=bs: [run_batch(scns[j : j + bs]) for j in range(0, len(scns), bs)]
-        t = side_by_side(fns, max(1, repeat - 1))
-        if ctrl == "adaptive" and "ekf" in FLOOR:
-            # Each seed's covariance update is done per seed in a batch too (stacked, it is memory-bound
-            # and slower), so a batch step costs at least one bare EKF update per seed.
-            one = t["one"] / (batch_seeds * scns[0].steps)
-            report(
-                "ceiling: one-at-a-time step / bare EKF update",
-                one / FLOOR["ekf"],
-                "-",
-                None,
-                f"({one * 1e6:.0f} us vs {FLOOR['ekf'] * 1e6:.0f} us: no batching that keeps one EKF update "
-                "per seed can beat this ratio)",
-            )
-        for bs in (8, 16, 64):
-            ratio = t["one"] / t[str(bs)]
-            report(
-                f"batched ({bs} per batch) / one at a time, {ctrl}",
-                ratio,
-                ">= 5",
-                ratio >= 5,
-                f"({batch_seeds} seeds of {batch_duration:g} s: {t['one']:.2f} s vs {t[str(bs)]:.2f} s)",
-            )
+        seed_steps = batch_seeds * scns[0].steps
+        best = {"batch": float("inf"), "one": float("inf"), "update": float("inf")}
+        for _ in range(repeat):
+            c = time.process_time()
+            recs = run_batch(scns)
+            best["batch"] = min(best["batch"], (time.process_time() - c) / seed_steps)
+            best["update"] = min(best["update"], update())
+            c = time.process_time()
+            for s in scns:
+                run(s)
+            best["one"] = min(best["one"], (time.process_time() - c) / seed_steps)
+        ok = sum(r.status == "ok" for r in recs)
+        ratio = best["batch"] / best["update"]
+        report(
+            f"batched {ctrl} per seed-step / reference update",
+            ratio,
+            "<= 1.2",
+            ratio <= 1.2,
+            f"({best['batch'] * 1e6:.1f} us vs {best['update'] * 1e6:.1f} us; {ok}/{batch_seeds} ok)",
+        )
+        report(
+            f"one at a time / batched, {ctrl}",
+            best["one"] / best["batch"],
+            "-",
+            None,
+            f"({best['one'] * 1e6:.1f} us vs {best['batch'] * 1e6:.1f} us per seed-step)",
+        )
 
 
 def bench_memory(seeds: int, duration: float) -> None:
-    print(f"4. peak memory of a {seeds}-seed sweep (mlpfac sweep in a child process, 2 workers)")
+    print(f"3. peak memory of a {seeds}-seed sweep (mlpfac sweep in a child process, 2 workers)")
     try:
         import psutil
     except ImportError:
@@ -336,15 +217,8 @@ def main() -> None:
         f"numpy {np.__version__}, {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f} "
         "(min of interleaved repeats)"
     )
-    bench_controller(steps=300 if q else 1000, repeat=5 if q else 9)
-    bench_mujoco(repeat=2 if q else 3)
-    bench_sweep(
-        seeds=8 if q else 24,
-        duration=5.0 if q else 10.0,
-        batch_seeds=64,
-        batch_duration=2.0 if q else 5.0,
-        repeat=2 if q else 3,
-    )
+    bench_sweep(seeds=8 if q else 24, duration=5.0 if q else 25.0, repeat=2 if q else 3)
+    bench_batched(batch_seeds=64, batch_duration=2.0 if q else 5.0, repeat=2 if q else 3)
     bench_memory(seeds=100, duration=5.0 if q else 25.0)
     missed = [n for n, _, met in RESULTS if met is False]
     print(f"\n{len(missed)} target(s) missed" + (": " + "; ".join(missed) if missed else ""))

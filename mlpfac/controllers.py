@@ -24,7 +24,7 @@ class Controller(Protocol):
     name: str
     labels: dict[str, list[str]]
 
-    def reset(self, T: float, rng: np.random.Generator) -> None: ...
+    def reset(self, rng: np.random.Generator) -> None: ...
 
     def step(self, e: np.ndarray, r: np.ndarray) -> np.ndarray: ...
 
@@ -128,7 +128,8 @@ class Adaptive:
 
     name = "adaptive"
 
-    def __init__(self, law: Law, config: AdaptiveConfig) -> None:
+    def __init__(self, law: Law, config: AdaptiveConfig, T: float) -> None:
+        self.T = float(T)  # the control period the law and the networks' nominal prior are designed for
         self.law = law
         self.config = config
         self.nets = config.networks
@@ -159,9 +160,9 @@ class Adaptive:
             return UKF(**common, alpha=c.ukf_alpha, beta=c.ukf_beta, kappa=c.ukf_kappa)
         return EKF(**common)
 
-    def reset(self, T: float, rng) -> None:
+    def reset(self, rng) -> None:
         rngs, self.single = seeds(rng)
-        self.T = T
+        T = self.T
         z0 = np.stack([self._initial_weights(g) for g in rngs])  # (B, alpha)
         B, a = z0.shape
         self.first = True
@@ -312,7 +313,8 @@ class Corradini:
     name = "corradini"
     labels: dict[str, list[str]] = {"h_hat": ["h1", "h2", "h5"]}
 
-    def __init__(self, law: Law) -> None:
+    def __init__(self, law: Law, T: float) -> None:
+        self.T = float(T)
         self.law = law
         lam = law
         self._limits = (
@@ -320,9 +322,9 @@ class Corradini:
             np.inf if lam.omega_max is None else float(lam.omega_max),
         )
 
-    def reset(self, T: float, rng) -> None:
+    def reset(self, rng) -> None:
         rngs, self.single = seeds(rng)
-        self.T = T
+        T = self.T
         self._h, self._u = np.zeros((len(rngs), 3)), np.zeros((len(rngs), 2))
         self._tele = {"h_hat": self._h[0] if self.single else self._h}
         corradini_step(np.zeros((0, 3)), 1.0, 0.0, T, *self.law.lambdas, *self._limits, self._h[:0], self._u[:0])
@@ -358,7 +360,8 @@ class Kanayama:
     name = "kanayama"
     labels: dict[str, list[str]] = {}
 
-    def __init__(self, law: Law, gains: KanayamaGains) -> None:
+    def __init__(self, law: Law, gains: KanayamaGains, T: float) -> None:
+        self.T = float(T)
         self.law = law  # only its limits are used
         self.g = gains
         self._consts = (
@@ -369,9 +372,8 @@ class Kanayama:
             np.inf if law.omega_max is None else float(law.omega_max),
         )
 
-    def reset(self, T: float, rng) -> None:
+    def reset(self, rng) -> None:
         rngs, self.single = seeds(rng)
-        self.T = T
         self._u = np.zeros((len(rngs), 2))
         self._tele: dict = {}
         kanayama_step(np.zeros((0, 3)), 1.0, 0.0, *self._consts, self._u[:0])  # load the kernel before the run

@@ -9,6 +9,7 @@ physics steps) is the plant's own check, also made before the first step.
 from __future__ import annotations
 
 import math
+from collections import deque
 from dataclasses import dataclass, field
 
 from mlpfac.exceptions import ConfigError
@@ -102,3 +103,26 @@ def parse_event(table, duration: float, where: str) -> Event:
     if kind == "actuator" and not params:
         raise ConfigError(where, "an actuator event needs 'kv_scale' and/or 'force_scale'")
     return Event(float(t), kind, params)
+
+
+class DelayLine:
+    """What a ``sensor_delay`` event changes: the measurement is the one taken ``steps`` control
+    steps ago (0: the newest). Every plant keeps its measurements in one."""
+
+    def __init__(self, first) -> None:
+        self._q: deque = deque([first], maxlen=1)
+
+    def push(self, measurement) -> None:
+        self._q.append(measurement)
+
+    def read(self):
+        return self._q[0]
+
+    @property
+    def steps(self) -> int:
+        return self._q.maxlen - 1
+
+    def delay(self, steps: int) -> str:
+        """Set the delay; keeps what it holds (a longer delay repeats the oldest until it fills)."""
+        old, self._q = self.steps, deque(self._q, maxlen=steps + 1)
+        return f"sensor delay {old} -> {steps} control steps"

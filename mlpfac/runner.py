@@ -8,6 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from mlpfac.factory import make_controller, make_plant
 from mlpfac.kernels import bad_seeds, tracking_errors
 from mlpfac.outputs import Terminated
 from mlpfac.record import RunRecord
@@ -36,7 +37,7 @@ def build(scn: Scenario) -> Built:
     """Sample the reference, build the plant and the controller: what can fail (a bad model, a
     missing actuator) fails here, before a run writes or sends anything."""
     ref = sample(scn.reference, np.arange(scn.steps + 1) * scn.T)  # (N + 1, 5)
-    return Built(ref, scn.make_plant(ref), scn.make_controller())
+    return Built(ref, make_plant(scn, ref), make_controller(scn))
 
 
 class PlantList:
@@ -140,10 +141,10 @@ def run_batch(scns: list[Scenario], plant_list: bool = False) -> list[RunRecord]
         raise ValueError("run_batch needs scenarios that differ in their seed only")
     base = scns[0]
     ref = sample(base.reference, np.arange(base.steps + 1) * base.T)  # (N + 1, 5)
-    plant = base.make_plant(ref)
+    plant = make_plant(base, ref)
     if plant_list or not getattr(plant, "batched", False):
-        plant = [plant] + [s.make_plant(ref) for s in scns[1:]]
-    recs = _loop(scns, ref, plant, base.make_controller(), None, None, full=False)
+        plant = [plant] + [make_plant(s, ref) for s in scns[1:]]
+    recs = _loop(scns, ref, plant, make_controller(base), None, None, full=False)
     if any(r.status == "interrupted" for r in recs):
         raise KeyboardInterrupt
     return recs
@@ -157,7 +158,7 @@ def _loop(scns, ref, plant, ctrl, sink, on_step, full: bool) -> list[RunRecord]:
     if isinstance(plant, list) or not getattr(plant, "batched", False):
         plant = PlantList(plant if isinstance(plant, list) else [plant])
     gens = [seeded_generators(s.seed) for s in scns]
-    ctrl.reset(T, [c for c, _ in gens])
+    ctrl.reset([c for c, _ in gens])
     q0, u0 = base.initial_state(ref)
     plant.reset(q0, [p for _, p in gens], u0)
     listed = isinstance(plant, PlantList)

@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from mlpfac.controllers import CONTROLLERS, VARIANTS, Adaptive, AdaptiveConfig, Corradini, Kanayama, KanayamaGains
+from mlpfac.controllers import CONTROLLERS, VARIANTS, AdaptiveConfig, KanayamaGains
 from mlpfac.error_model import pose_from_error
 from mlpfac.events import Event, parse_event
 from mlpfac.exceptions import ConfigError
@@ -124,36 +124,6 @@ class Scenario:
         q0 = pose_from_error(np.array(self.initial_error), ref[0])
         return q0, (ref[0, 3:5].copy() if self.start_moving else None)
 
-    def make_controller(self):
-        if self.controller in VARIANTS:
-            over = dict(VARIANTS[self.controller])
-            nets = dataclasses.replace(self.adaptive.networks, **over.pop("networks", {}))
-            ctrl = Adaptive(self.law, dataclasses.replace(self.adaptive, networks=nets, **over))
-            ctrl.name = self.controller
-            return ctrl
-        if self.controller == "corradini":
-            return Corradini(self.law)
-        return Kanayama(self.law, self.kanayama)
-
-    def make_plant(self, ref: np.ndarray):
-        """The plant; ``ref`` (N + 1, 5) are the reference samples the kinematic plant needs.
-        A plant that cannot be built, or cannot apply an event, is a ConfigError naming the file."""
-        try:
-            if self.plant_kind == "kinematic":
-                from mlpfac.plants.kinematic import KinematicPlant
-
-                plant = KinematicPlant(self.plant_config, self.T, ref)
-            else:
-                from mlpfac.plants.mujoco import MujocoPlant
-
-                plant = MujocoPlant(self.plant_config, self.T)
-        except ConfigError as err:
-            where = err.where if err.where.startswith(self.source) else f"{self.source} [plant] {err.where}".rstrip()
-            raise ConfigError(where, err.what) from None
-        for i, ev in enumerate(self.events):
-            plant.check_event(ev, f"{self.source} [[events]] #{i + 1}")
-        return plant
-
 
 def _after(t, duration: float) -> bool:
     return isinstance(t, int | float) and not isinstance(t, bool) and t >= duration
@@ -207,9 +177,10 @@ def load(name_or_path: str | Path) -> Scenario:
 def _provenance(scn: Scenario) -> dict:
     """Build the plant once (every check made), and what it simulates."""
     from mlpfac import __version__
+    from mlpfac.factory import make_plant
     from mlpfac.reference import sample
 
-    plant = scn.make_plant(sample(scn.reference, np.arange(2) * scn.T))
+    plant = make_plant(scn, sample(scn.reference, np.arange(2) * scn.T))
     out = {"mlpfac": __version__, "numpy": np.__version__}
     if hasattr(plant, "provenance"):
         out |= plant.provenance()

@@ -115,8 +115,8 @@ def test_the_controller_feeds_the_law_the_first_order_covariance_of_its_estimate
     """Sigma = J P J' with J the Jacobian of (h1, h2, h5, b_v, b_omega); checked by sampling the weights."""
     nets = Networks(L_f=4, L_G=1, error_scale=20.0)
     cfg = AdaptiveConfig(networks=nets, P0=1e-6, weight_std=0.5, cautious=1.0, learned_gains=True, prior=True)
-    ctrl = Adaptive(Law(), cfg)
-    ctrl.reset(T, np.random.default_rng(14))
+    ctrl = Adaptive(Law(), cfg, T)
+    ctrl.reset(np.random.default_rng(14))
     e, r = np.array([0.02, -0.01, 0.05]), np.array([0.0, 0.0, 0.0, 0.8, 0.3])
     seen = {}
     ctrl.law = type("Spy", (), {"cautious_control": lambda self, *a: seen.setdefault("args", a) and np.zeros(2)})()

@@ -9,6 +9,7 @@ import pytest
 from mlpfac.controllers import CONTROLLERS, VARIANTS, Adaptive, AdaptiveConfig, Corradini
 from mlpfac.estimators import EKF, UKF, covariance
 from mlpfac.exceptions import ConfigError
+from mlpfac.factory import make_controller
 from mlpfac.law import Law
 from mlpfac.networks import Networks
 from mlpfac.reference import Eight, sample
@@ -21,12 +22,11 @@ T = 0.01
 class PaperStep:
     """The adaptive step exactly as written before the options existed (reference implementation)."""
 
-    def __init__(self, law, c):
-        self.law, self.c, self.nets = law, c, c.networks
+    def __init__(self, law, c, T):
+        self.law, self.c, self.nets, self.T = law, c, c.networks, T
 
-    def reset(self, T, rng):
+    def reset(self, rng):
         c, a = self.c, self.nets.alpha
-        self.T = T
         self.ekf = EKF(rng.normal(0.0, c.weight_std, a), c.P0 * np.eye(a), covariance(c.R, 3, "R"),
                        c.Q * np.eye(a) if c.Q > 0 else None, c.forgetting, c.P_max)  # fmt: skip
         self.prev = None
@@ -46,7 +46,7 @@ class PaperStep:
 
 def drive(ctrl, steps=300, seed=21):
     """Feed a controller a fixed synthetic error sequence (open loop, so any difference shows)."""
-    ctrl.reset(T, np.random.default_rng(seed))
+    ctrl.reset(np.random.default_rng(seed))
     rng = np.random.default_rng(seed + 1)
     ref = sample(Eight(), np.arange(steps) * T)
     out = []
@@ -72,13 +72,13 @@ def test_default_options_are_the_paper_scheme(base):
     explicit = dataclasses.replace(
         base, estimator="ekf", cautious=0.0, prior=False, learned_gains=False, output_weight_std=None
     )
-    ref = drive(PaperStep(law, base))
-    got = drive(Adaptive(law, base))
+    ref = drive(PaperStep(law, base, T))
+    got = drive(Adaptive(law, base, T))
     np.testing.assert_allclose(got, ref, rtol=0, atol=1e-9)
-    np.testing.assert_array_equal(drive(Adaptive(law, explicit)), got)
+    np.testing.assert_array_equal(drive(Adaptive(law, explicit, T)), got)
     # output_weight_std equal to weight_std rescales nothing
     np.testing.assert_array_equal(
-        drive(Adaptive(law, dataclasses.replace(base, output_weight_std=base.weight_std))), got
+        drive(Adaptive(law, dataclasses.replace(base, output_weight_std=base.weight_std), T)), got
     )
 
 
@@ -147,9 +147,9 @@ def test_prior_with_zero_output_weights_starts_as_corradinis_law(opts):
     """f = f_nominal + NN_f, G = G_nominal + NN_G with NN = 0: the first command is Corradini's."""
     law = Law(v_max=2.0, omega_max=5.0)
     cfg = AdaptiveConfig(prior=True, output_weight_std=0.0, P0=1e-2, **opts)
-    ctrl, corr = Adaptive(law, cfg), Corradini(law)
-    ctrl.reset(T, np.random.default_rng(5))
-    corr.reset(T, np.random.default_rng(5))
+    ctrl, corr = Adaptive(law, cfg, T), Corradini(law, T)
+    ctrl.reset(np.random.default_rng(5))
+    corr.reset(np.random.default_rng(5))
     r = sample(Eight(), np.array([1.0]))[0]
     e = np.array([0.03, -0.02, 0.05])
     u = ctrl.step(e, r)
@@ -202,7 +202,7 @@ def test_options_are_scenario_file_keys():
         },
     }
     scn = parse(table)
-    ctrl = scn.make_controller()
+    ctrl = make_controller(scn)
     c = ctrl.config
     assert (c.estimator, c.ukf_alpha, c.cautious, c.prior, c.learned_gains) == ("ukf", 0.2, 0.5, True, True)
     assert isinstance(ctrl, Adaptive) and not ctrl.compiled  # the UKF and the cautious law: numpy parts

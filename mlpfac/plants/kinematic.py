@@ -7,14 +7,13 @@ The pose is reconstructed from e and the reference by inverting (2).
 
 from __future__ import annotations
 
-from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
 
 from mlpfac.error_model import pose_from_error, tracking_error
 from mlpfac.estimators import covariance
-from mlpfac.events import Event
+from mlpfac.events import DelayLine, Event
 from mlpfac.exceptions import ConfigError
 from mlpfac.kernels import kinematic_step, seeds
 
@@ -58,9 +57,8 @@ class KinematicPlant:
         if self.L is not None:
             for b, g in enumerate(rngs):  # each seed alone: L eps_k, eps_k ~ N(0, I)
                 self.noise[b] = g.standard_normal((N, 3)) @ self.L.T
-        self.delay = 0
         self._pose = np.array([pose_from_error(e, self.ref[0]) for e in self.e])
-        self.history: deque[np.ndarray] = deque([self._pose], maxlen=1)
+        self.history = DelayLine(self._pose)
         self._u, self._h = np.zeros((B, 2)), np.zeros((B, 3))
         self._tele = {"u_meas": self._u, "h_true": self._h}
         e0 = np.empty((0, 3))  # load (or compile) the kernel now, not mid-run
@@ -70,7 +68,7 @@ class KinematicPlant:
         return self._pose[0] if self.single else self._pose
 
     def measure(self) -> np.ndarray:
-        return self.history[0][0] if self.single else self.history[0]
+        return self.history.read()[0] if self.single else self.history.read()
 
     def step(self, u: np.ndarray) -> None:
         k = self.k
@@ -80,7 +78,7 @@ class KinematicPlant:
         kinematic_step(self.e, self.ref[k], self.ref[k + 1], self.T_p, U, self.noise[:, k], e, pose, self._h)
         self.e, self._pose = e, pose
         self.k = k + 1
-        self.history.append(pose)
+        self.history.push(pose)
 
     def check_event(self, event: Event, where: str) -> None:
         if event.kind not in self.supported_events:
@@ -93,10 +91,7 @@ class KinematicPlant:
         if event.kind == "control_period":
             old, self.T_p = self.T_p, float(event.params["factor"]) * self.T
             return f"plant sampling interval {old:g} -> {self.T_p:g} s (controller keeps T = {self.T:g} s)"
-        n = int(event.params["steps"])
-        old, self.delay = self.delay, n
-        self.history = deque(self.history, maxlen=n + 1)
-        return f"sensor delay {old} -> {n} control steps"
+        return self.history.delay(int(event.params["steps"]))
 
     def telemetry(self) -> dict[str, np.ndarray | float]:
         """``u_meas`` (the command, held exactly) and ``h_true`` (34) at the step's start; (B, ...) for a batch."""

@@ -3,7 +3,7 @@
 What the robot is (actuators, wheels, site, radius, track, rest pose) is read once from its model
 by :func:`mlpfac.plants.robot.read_robot`; this module steps it, from :meth:`MujocoPlant.reset` on.
 The controller's u = (v, omega) is turned into wheel speeds by the inverse kinematics
-(:func:`mlpfac.kinematics.wheel_speeds`) with the wheel radius and track the IK *believes* (the
+(:func:`mlpfac.ik.wheel_speeds`) with the wheel radius and track the IK *believes* (the
 nominal ones), and held for one control period of ``n_substeps`` physics steps,
 ``control_dt = n_substeps * model.opt.timestep``. Two wheel drives:
 
@@ -25,17 +25,17 @@ derived quantity (site pose, ``cvel``, sensors) belongs to the current state.
 from __future__ import annotations
 
 import math
-from collections import deque
 
 import mujoco
 import numpy as np
 
-from mlpfac.events import EVENT_KINDS, Event
+from mlpfac.events import EVENT_KINDS, DelayLine, Event
 from mlpfac.exceptions import ConfigError
-from mlpfac.kinematics import body_velocity, wheel_speeds
+from mlpfac.ik import body_velocity_vw, wheel_speeds, wheel_speeds_lr
 from mlpfac.plants.robot import ROUND, MujocoConfig, model_fingerprint, read_robot, yaw
 
 DIVERGENCE_WARNINGS = ("mjWARN_BADQPOS", "mjWARN_BADQVEL", "mjWARN_BADQACC")  # MuJoCo resets the data on these
+NOISE_CHUNK = 1024  # pose-noise draws made at once: the same stream as one draw of 3 per step
 
 
 class MujocoPlant:
@@ -114,9 +114,22 @@ class MujocoPlant:
         self._torque_max = self._force_limits()
         self._integral = (0.0, 0.0)
         self._theta = float(q0[2])
+        self._views()
+        self._noise_left = 0
         self._pose = self._read_pose()
-        self._wheel_cmd = np.zeros(2)
-        self._history: deque[np.ndarray] = deque([self._noisy(self._pose)], maxlen=1)
+        self._wheel_cmd = (0.0, 0.0)
+        self._history = DelayLine(self._noisy(self._pose))
+
+    def _views(self) -> None:
+        """Views into the current data that the per-step path reads (made again when the data change)."""
+        d = self.data
+        self._site_xpos, self._site_xmat, self._root_xmat = (
+            d.site_xpos[self._site],
+            d.site_xmat[self._site],
+            d.xmat[self._root],
+        )
+        self._vel = np.empty(6)  # mj_objectVelocity's output
+        self._tele = {key: np.zeros(2) for key in ("u_meas", "u_true", "wheel_cmd", "wheel_meas", "torque")}
 
     def _set_velocity(self, v: float, omega: float, theta: float) -> None:
         """Body velocity (v, omega) at the site, the wheels rolling to match it."""
@@ -134,25 +147,26 @@ class MujocoPlant:
         return self._pose
 
     def measure(self) -> np.ndarray:
-        return self._history[0]
+        return self._history.read()
 
     def step(self, u: np.ndarray) -> None:
-        w = wheel_speeds(float(u[0]), float(u[1]), self.ik_radius, self.ik_track, self.config.max_wheel_speed)
-        self._wheel_cmd = w
+        wl, wr = wheel_speeds_lr(float(u[0]), float(u[1]), self.ik_radius, self.ik_track, self.config.max_wheel_speed)
+        self._wheel_cmd = (wl, wr)
         m, d, n = self.model, self.data, self._n
         if self.config.actuator == "velocity":
             al, ar = self._acts
-            d.ctrl[al] = self._act_per_wheel[0] * w[0]
-            d.ctrl[ar] = self._act_per_wheel[1] * w[1]
+            ctrl = d.ctrl
+            ctrl[al] = self._act_per_wheel[0] * wl
+            ctrl[ar] = self._act_per_wheel[1] * wr
             mujoco.mj_step2(m, d)
             if n > 1:
                 mujoco.mj_step(m, d, nstep=n - 1)
             mujoco.mj_step1(m, d)
         else:
-            self._pi_steps(float(w[0]), float(w[1]), n)
+            self._pi_steps(wl, wr, n)
         self.sim_time += n * self._dt
         self._pose = self._read_pose()
-        self._history.append(self._noisy(self._pose))
+        self._history.push(self._noisy(self._pose))
 
     def _pi_steps(self, wl: float, wr: float, n: int) -> None:
         """n physics steps of the discrete wheel-speed PI loop (torque drive).
@@ -186,13 +200,17 @@ class MujocoPlant:
         self._integral = (il, ir)
 
     def _read_pose(self) -> np.ndarray:
-        d = self.data
-        p = d.site_xpos[self._site]
-        self._theta += math.remainder(yaw(d.site_xmat[self._site]) - self._theta, 2.0 * math.pi)  # unwrapped
+        p = self._site_xpos
+        self._theta += math.remainder(yaw(self._site_xmat) - self._theta, 2.0 * math.pi)  # unwrapped
         return np.array([p[0], p[1], self._theta])
 
     def _noisy(self, pose: np.ndarray) -> np.ndarray:
-        return pose if self._noise is None else pose + self._noise * self.rng.standard_normal(3)
+        if self._noise is None:
+            return pose
+        if not self._noise_left:  # the next NOISE_CHUNK steps' draws: the values one draw per step gives
+            self._noise_draws, self._noise_left = self.rng.standard_normal((NOISE_CHUNK, 3)), NOISE_CHUNK
+        self._noise_left -= 1
+        return pose + self._noise * self._noise_draws[NOISE_CHUNK - 1 - self._noise_left]
 
     def _force_limits(self) -> tuple[float, float]:
         """Largest forward wheel torque of each drive (N m at the joint), inf when not limited."""
@@ -208,21 +226,20 @@ class MujocoPlant:
         """``u_meas`` (2,) (v, omega) from the measured wheel speeds through the nominal FK;
         ``u_true`` (2,) (v, omega) of the axle midpoint (differs from u_meas by slip and radius);
         ``wheel_cmd``, ``wheel_meas`` (2,) left/right in rad/s (forward positive); ``torque`` (2,)
-        wheel torques in N m (forward positive)."""
-        m, d = self.model, self.data
-        wheel_meas = np.array([self._sign[0] * d.qvel[self._dofs[0]], self._sign[1] * d.qvel[self._dofs[1]]])
-        torque = np.array([self._act_per_wheel[i] * d.actuator_force[a] for i, a in enumerate(self._acts)])
-        vel = np.empty(6)  # (angular, linear) in the world frame
+        wheel torques in N m (forward positive). The arrays are the plant's own, overwritten by the
+        next call: copy what you keep."""
+        m, d, t = self.model, self.data, self._tele
+        qvel, force, (dl, dr), (al, ar) = d.qvel, d.actuator_force, self._dofs, self._acts
+        wl, wr = self._sign[0] * qvel[dl], self._sign[1] * qvel[dr]
+        t["wheel_meas"][:] = wl, wr
+        t["torque"][:] = self._act_per_wheel[0] * force[al], self._act_per_wheel[1] * force[ar]
+        vel = self._vel  # (angular, linear) in the world frame
         mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_SITE, self._site, vel, 0)
         th = self._theta
-        u_true = np.array([vel[3] * math.cos(th) + vel[4] * math.sin(th), vel[2]])
-        return {
-            "u_meas": body_velocity(wheel_meas, self.ik_radius, self.ik_track),
-            "u_true": u_true,
-            "wheel_cmd": self._wheel_cmd,
-            "wheel_meas": wheel_meas,
-            "torque": torque,
-        }
+        t["u_true"][:] = vel[3] * math.cos(th) + vel[4] * math.sin(th), vel[2]
+        t["u_meas"][:] = body_velocity_vw(float(wl), float(wr), self.ik_radius, self.ik_track)
+        t["wheel_cmd"][:] = self._wheel_cmd
+        return t
 
     def mujoco_warnings(self) -> dict[str, int]:
         """MuJoCo's warning counters that are not zero, by name (``{}`` when all is well)."""
@@ -235,10 +252,10 @@ class MujocoPlant:
             return f"MuJoCo {' '.join(bad) or 'reset'}: the simulation became unstable and was reset"
         if not math.isfinite(d.qpos.sum() + d.qvel.sum()):
             return "non-finite MuJoCo state"
-        lift = float(d.site_xpos[self._site, 2]) - self._z_rest
+        lift = float(self._site_xpos[2]) - self._z_rest
         if lift > 0.5 * self.real_radius:
             return f"the robot left the floor (axle {lift * 1e3:.0f} mm above its rest height)"
-        up = float(d.xmat[self._root, 8])  # world z component of the chassis z axis
+        up = float(self._root_xmat[8])  # world z component of the chassis z axis
         if up < 0.5:
             return f"the robot tipped over (chassis up axis {math.degrees(math.acos(max(-1.0, up))):.0f} deg from vertical)"
         return None
@@ -301,9 +318,7 @@ class MujocoPlant:
             old, self._n = self._n, self._substeps(float(p["factor"]) * self.T, "factor")
             return f"plant holds each command {old * self._dt:g} -> {self._n * self._dt:g} s ({self._n} physics steps; controller keeps T = {self.T:g} s)"
         if event.kind == "sensor_delay":
-            n = int(p["steps"])
-            old, self._history = self._history.maxlen - 1, deque(self._history, maxlen=n + 1)
-            return f"sensor delay {old} -> {n} control steps"
+            return self._history.delay(int(p["steps"]))
         spec = self._spec
         if event.kind == "payload":
             b = self._payload_body(p, "")
@@ -364,4 +379,5 @@ class MujocoPlant:
         except ValueError as err:
             raise ConfigError(self._where, f"MuJoCo cannot compile the changed model: {err}") from None
         mujoco.mj_forward(self.model, self.data)
+        self._views()
         self._changed = True

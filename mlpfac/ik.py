@@ -1,4 +1,4 @@
-"""Differential-drive (unicycle) kinematics: body velocity (v, omega) <-> wheel speeds.
+"""The inverse-kinematics layer (IK) of a differential-drive robot: body velocity (v, omega) <-> wheel speeds.
 
 Wheels of radius ``radius`` (m) on one axle, ``track`` (m) apart; wheel speeds in rad/s, positive
 when the wheel drives the robot forward; v in m/s along the heading, omega in rad/s (counter-
@@ -27,6 +27,13 @@ def wheel_speeds(
     by the same factor s = max_wheel_speed / max(|w_l|, |w_r|) < 1, so the path curvature
     omega / v (the ratio w_r / w_l) is kept and only the speed along the path drops.
     """
+    return np.array(wheel_speeds_lr(v, omega, radius, track, max_wheel_speed))
+
+
+def wheel_speeds_lr(
+    v: float, omega: float, radius: float, track: float, max_wheel_speed: float | None = None
+) -> tuple[float, float]:
+    """:func:`wheel_speeds` as two Python floats (a plant's per-step path, without an array)."""
     half = 0.5 * omega * track
     w_l = (v - half) / radius
     w_r = (v + half) / radius
@@ -35,7 +42,7 @@ def wheel_speeds(
         if peak > max_wheel_speed:
             s = max_wheel_speed / peak
             w_l, w_r = s * w_l, s * w_r
-    return np.array([w_l, w_r])
+    return w_l, w_r
 
 
 def body_velocity(wheel_lr: np.ndarray, radius: float, track: float) -> np.ndarray:
@@ -43,5 +50,9 @@ def body_velocity(wheel_lr: np.ndarray, radius: float, track: float) -> np.ndarr
 
     v = radius (w_l + w_r) / 2, omega = radius (w_r - w_l) / track.
     """
-    w_l, w_r = float(wheel_lr[0]), float(wheel_lr[1])
-    return np.array([0.5 * radius * (w_l + w_r), radius * (w_r - w_l) / track])
+    return np.array(body_velocity_vw(float(wheel_lr[0]), float(wheel_lr[1]), radius, track))
+
+
+def body_velocity_vw(w_l: float, w_r: float, radius: float, track: float) -> tuple[float, float]:
+    """:func:`body_velocity` as two Python floats."""
+    return 0.5 * radius * (w_l + w_r), radius * (w_r - w_l) / track
