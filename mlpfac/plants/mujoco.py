@@ -32,7 +32,7 @@ import numpy as np
 from mlpfac.events import EVENT_KINDS, DelayLine, Event
 from mlpfac.exceptions import ConfigError
 from mlpfac.ik import body_velocity_vw, wheel_speeds, wheel_speeds_lr
-from mlpfac.plants.robot import ROUND, MujocoConfig, model_fingerprint, read_robot, yaw
+from mlpfac.plants.robot import ROUND, MujocoConfig, read_robot, yaw
 
 DIVERGENCE_WARNINGS = ("mjWARN_BADQPOS", "mjWARN_BADQVEL", "mjWARN_BADQACC")  # MuJoCo resets the data on these
 NOISE_CHUNK = 1024  # pose-noise draws made at once: the same stream as one draw of 3 per step
@@ -269,7 +269,7 @@ class MujocoPlant:
         m, (tl, tr) = self.model, self._torque_max
         return {
             "model": str(self.config.path),
-            "model_sha256": model_fingerprint(self.config.path),
+            "model_sha256": self.robot.sha256,
             "mujoco": mujoco.__version__,
             "timestep_s": float(m.opt.timestep),
             "substeps": self.n_substeps,

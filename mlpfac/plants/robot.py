@@ -47,6 +47,10 @@ def model_fingerprint(path: Path) -> str:
         model = mujoco.MjSpec.from_file(str(path)).compile()
     except ValueError as err:
         raise ConfigError(str(path), f"MuJoCo cannot load the model: {err}") from None
+    return _fingerprint(model)
+
+
+def _fingerprint(model: mujoco.MjModel) -> str:
     buf = np.empty(mujoco.mj_sizeModel(model), np.uint8)
     mujoco.mj_saveModel(model, None, buf)
     return hashlib.sha256(buf.tobytes()).hexdigest()
@@ -115,6 +119,7 @@ class Robot:
     """
 
     where: str  # the model file, for messages
+    sha256: str  # the file as compiled (before any change for the torque drive): model_fingerprint
     spec: mujoco.MjSpec
     model: mujoco.MjModel
     dt: float  # physics timestep
@@ -152,6 +157,7 @@ def read_robot(config: MujocoConfig) -> Robot:
         m = spec.compile()
     except ValueError as err:
         raise ConfigError(where, f"MuJoCo cannot load the model: {err}") from None
+    sha256 = _fingerprint(m)
     acts = (_actuator_id(m, config, "left_actuator", where), _actuator_id(m, config, "right_actuator", where))
     if acts[0] == acts[1]:
         raise ConfigError(
@@ -187,6 +193,7 @@ def read_robot(config: MujocoConfig) -> Robot:
     c = [s * g for s, g in zip(sign, m.actuator_gear[list(acts), 0], strict=True)]
     return Robot(
         where=where,
+        sha256=sha256,
         spec=spec,
         model=m,
         dt=dt,
