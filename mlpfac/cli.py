@@ -1,4 +1,4 @@
-"""The command line: mlpfac run / list / compare / sweep / view.
+"""The command line: mlpfac run / list / compare / sweep / view / plot.
 
 Arguments are parsed before any heavy import; bad input prints one line and exits with code 2.
 Exit codes of ``run``: 0 ok, 1 the run diverged, 2 bad input or a write that failed (nothing
@@ -67,9 +67,23 @@ def build_parser() -> argparse.ArgumentParser:
     sweep.add_compare_arguments(sub.add_parser("compare", help="controllers x scenarios x seeds -> a per-phase table"))
     sweep.add_sweep_arguments(sub.add_parser("sweep", help="Monte Carlo sweep -> mean, median, 95 %% CI per phase"))
 
-    p = sub.add_parser("view", help="open saved runs in one rerun viewer")
-    p.add_argument("runs", nargs="+", type=Path, help="run folders (each with a run.rrd)")
+    p = sub.add_parser(
+        "view",
+        help="open saved runs in one rerun viewer",
+        description="Open one run, or several side by side and overlaid (one colour per controller), in rerun.",
+    )
+    p.add_argument("runs", nargs="+", type=Path, help="run folders (each with a run.rrd) or .rrd files")
     p.add_argument("--bind", metavar="ADDRESS", default="127.0.0.1", help=BIND_HELP)
+    p.add_argument(
+        "--save", metavar="FILE.rrd", type=Path, help="write the comparison of several runs to this file, open nothing"
+    )
+
+    p = sub.add_parser(
+        "plot",
+        help="draw a sweep's or comparison's plots again",
+        description="Draw sweep.png / compare.png beside the tables of finished sweep folders.",
+    )
+    p.add_argument("folders", nargs="+", type=Path, help="results folders of `mlpfac sweep` or `mlpfac compare`")
     return parser
 
 
@@ -86,10 +100,9 @@ def main(argv: list[str] | None = None) -> int:
         if args.command == "list":
             return cmd_list()
         if args.command == "view":
-            from mlpfac.log import sinks
-
-            sinks.view(args.runs, bind=args.bind)
-            return 0
+            return cmd_view(args)
+        if args.command == "plot":
+            return cmd_plot(args)
         from mlpfac import sweep
 
         return sweep.run_compare_cli(args) if args.command == "compare" else sweep.run_sweep_cli(args)
@@ -114,6 +127,34 @@ def cmd_list() -> int:
         scn = load(name)
         print(f"{name:<{width}}  {scn.plant_kind:<9}  {scn.description}")
     print(f"\ncontrollers: {', '.join(CONTROLLERS)}")
+    return 0
+
+
+def cmd_view(args: argparse.Namespace) -> int:
+    from mlpfac.log import sinks
+
+    if args.save is not None:
+        print(f"{len(args.runs)} runs -> {sinks.save_comparison(args.runs, args.save)}")
+    else:
+        sinks.view(args.runs, bind=args.bind)
+    return 0
+
+
+def cmd_plot(args: argparse.Namespace) -> int:
+    from mlpfac.exceptions import ConfigError
+    from mlpfac.plots import sweep_plots
+
+    for folder in args.folders:
+        if not folder.is_dir():
+            raise ConfigError(str(folder), "is not a folder")
+    for folder in args.folders:
+        try:
+            written = sweep_plots(folder)
+        except OSError as err:
+            raise ConfigError(str(err.filename or folder), f"cannot write ({err.strerror or err})") from None
+        if not written:
+            raise ConfigError(str(folder), "holds no finished runs (<scenario>/<controller>/seed-*/metrics.json)")
+        print(" ".join(map(str, written)))
     return 0
 
 

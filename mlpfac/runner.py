@@ -362,4 +362,20 @@ def metrics(rec: RunRecord) -> dict:
     out["events"] = [{k: ev[k] for k in ("time", "kind", "params", "text")} for ev in rec.events]
     out["sim_time_s"] = rec.sim_time_s
     out["wall_time_s"] = rec.wall_time_s
+    out["series"] = error_series(rec)
     return out
+
+
+SERIES_DT_S = 0.1  # metrics.json keeps the position error as its RMS over each 0.1 s
+
+
+def error_series(rec: RunRecord, dt: float = SERIES_DT_S) -> dict:
+    """The position error |(e1, e2)| as its RMS over each ``dt`` (in um-rounded metres; None past
+    the last valid step or where not finite): the sweep plots' error over time, ~250 numbers a run."""
+    w = max(1, int(round(dt / rec.T)))
+    k = rec.n // w * w
+    e = rec.e_true[:k, :2].reshape(-1, w, 2)
+    rms = np.sqrt(np.mean(np.sum(e**2, axis=2), axis=1))
+    tail = [] if k == rec.n else [float(np.sqrt(np.mean(np.sum(rec.e_true[k : rec.n, :2] ** 2, axis=1))))]
+    vals = [*rms.tolist(), *tail]
+    return {"dt_s": w * rec.T, "position_error_m": [round(v, 6) if np.isfinite(v) else None for v in vals]}

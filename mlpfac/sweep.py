@@ -221,6 +221,9 @@ def _run_cli(args: argparse.Namespace, stem: str, columns) -> int:
             }
             try:
                 paths = write_tables(args.out, stem, rows, columns, meta)
+                from mlpfac.plots import sweep_plots
+
+                paths += sweep_plots(args.out, (stem,))  # <stem>.png beside the table
             except OSError as err:
                 raise OutputError(
                     f"{_oserror(err, str(args.out))}; every run folder is whole, resume with: {cmd}"

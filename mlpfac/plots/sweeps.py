@@ -1,0 +1,233 @@
+"""The pictures of a sweep or a comparison, written next to its table (``sweep.png`` beside
+``sweep.md``, ``compare.png`` beside ``compare.md``): one row per scenario, with
+
+- left, the position RMS after the event per controller (whole run after the warm-up when the
+  scenario has no event): one dot per tracking run over a box (quartiles, whiskers 1.5 IQR), on a
+  log scale when the runs spread over more than a decade, the share of tracking runs above;
+- right, the position error over time (metrics.json's RMS per 0.1 s): the median over the
+  tracking runs and the band between their quartiles, the event marked.
+
+Everything is read from the run folders (``<scenario>/<controller>/seed-*/metrics.json``), so the
+plots can be made again from a finished sweep with ``mlpfac plot DIR``.
+"""
+
+from __future__ import annotations
+
+import json
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from mlpfac.plots.colors import controller_colors, mpl
+
+STEMS = ("sweep", "compare")
+
+
+def outcome(m: dict) -> str:
+    """ "tracking", "lost" or "diverged": the run's outcome where its metrics say it, else from
+    ``status`` ("ok": the error stayed under the divergence limit, counted as tracking)."""
+    for key in ("outcome", "tracking_status", "status"):
+        if m.get(key) in ("tracking", "lost", "diverged"):
+            return m[key]
+    return "tracking" if m.get("status") == "ok" else "diverged"
+
+
+def load_runs(out: Path) -> dict[tuple[str, str], list[dict]]:
+    """Every whole run's metrics under ``out``, by (scenario, controller), in seed order."""
+    runs: dict[tuple[str, str], list[dict]] = {}
+    for f in sorted(out.glob("*/*/seed-*/metrics.json")):
+        try:
+            m = json.loads(f.read_text())
+        except (OSError, ValueError):
+            continue
+        if isinstance(m, dict) and m.get("status") in ("ok", "diverged") and "phases" in m:
+            runs.setdefault((str(m.get("scenario")), str(m.get("controller"))), []).append(m)
+    return runs
+
+
+def _order(out: Path, stem: str, runs: dict) -> list[tuple[str, str]]:
+    """(scenario, controller) pairs in the table's order, then any others found in the folder."""
+    pairs: list[tuple[str, str]] = []
+    try:
+        rows = json.loads((out / f"{stem}.json").read_text())["rows"]
+        pairs = [(r["scenario"], r["controller"]) for r in rows]
+    except (OSError, ValueError, KeyError, TypeError):
+        pass
+    return [p for p in dict.fromkeys(pairs + sorted(runs)) if p in runs]
+
+
+def sweep_plots(out: Path, stems: tuple[str, ...] = STEMS) -> list[Path]:
+    """Draw ``<stem>.png`` for each table ``<stem>.json`` in ``out`` (or one ``sweep.png`` when the
+    folder has runs but no table); returns the files written. A folder without runs draws nothing."""
+    out = Path(out)
+    runs = load_runs(out)
+    if not runs:
+        return []
+    found = [s for s in stems if (out / f"{s}.json").is_file()] or [stems[0]]
+    written = []
+    for stem in found:
+        pairs = _order(out, stem, runs)
+        written.append(draw(out / f"{stem}.png", pairs, runs))
+    return written
+
+
+def draw(path: Path, pairs: list[tuple[str, str]], runs: dict) -> Path:
+    """One row per scenario: the error distribution per controller and the error over time."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    scenarios = list(dict.fromkeys(s for s, _ in pairs))
+    colors = {k: mpl(v) for k, v in controller_colors(c for _, c in pairs).items()}
+    fig, axes = plt.subplots(
+        len(scenarios),
+        2,
+        figsize=(13.5, 3.6 * len(scenarios) + 0.4),
+        gridspec_kw={"width_ratios": [1, 1.5]},
+        squeeze=False,
+        layout="constrained",
+    )
+    for row, scn in zip(axes, scenarios, strict=True):
+        ctrls = [c for s, c in pairs if s == scn]
+        _distribution(row[0], scn, ctrls, runs, colors)
+        _over_time(row[1], ctrls, [runs[(scn, c)] for c in ctrls], colors)
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    return path
+
+
+def _phase(ms: list[dict]) -> str:
+    has_after = any(
+        "after" in m["phases"] and m["phases"]["after"]["end_s"] > m["phases"]["after"]["start_s"] for m in ms
+    )
+    return "after" if has_after else "before"
+
+
+def _event_text(ms: list[dict]) -> tuple[float | None, str]:
+    for m in ms:
+        for ev in m.get("events") or []:
+            return float(ev["time"]), str(ev.get("text") or ev.get("kind") or "event")
+    return None, ""
+
+
+def _distribution(ax, scn: str, ctrls: list[str], runs: dict, colors: dict) -> None:
+    all_ms = [m for c in ctrls for m in runs[(scn, c)]]
+    phase = _phase(all_ms)
+    rng = np.random.default_rng(0)  # the dots' jitter: the same picture every time
+    values = []
+    for c in ctrls:
+        ms = [m for m in runs[(scn, c)] if outcome(m) == "tracking"]
+        v = [m["phases"].get(phase, {}).get("rms_position_error_m") for m in ms]
+        values.append(np.array([x * 1e3 for x in v if x is not None and np.isfinite(x)]))
+    pos = np.arange(len(ctrls))
+    filled = [(p, v) for p, v in zip(pos, values, strict=True) if len(v)]
+    if filled:
+        ax.boxplot(
+            [v for _, v in filled],
+            positions=[p for p, _ in filled],
+            widths=0.55,
+            showfliers=False,
+            medianprops={"color": "black", "lw": 1.5},
+            boxprops={"color": "0.35"},
+            whiskerprops={"color": "0.35"},
+            capprops={"color": "0.35"},
+        )
+        for (p, v), c in zip(filled, [c for c, v in zip(ctrls, values, strict=True) if len(v)], strict=True):
+            ax.scatter(p + rng.uniform(-0.18, 0.18, len(v)), v, s=12, color=colors[c], alpha=0.75, zorder=3, lw=0)
+            ax.annotate(f"{np.median(v):.3g}", (p + 0.3, np.median(v)), va="center", fontsize=7.5, color="0.2")
+        lo, hi = min(v.min() for _, v in filled), max(v.max() for _, v in filled)
+        if lo > 0 and hi / lo > 10:
+            ax.set_yscale("log")
+    else:
+        ax.text(0.5, 0.5, "no run kept tracking", transform=ax.transAxes, ha="center", va="center", color="0.3")
+    for p, c in zip(pos, ctrls, strict=True):
+        ms = runs[(scn, c)]
+        n_ok = sum(outcome(m) == "tracking" for m in ms)
+        other = ", ".join(
+            f"{k} {sum(outcome(m) == k for m in ms)}" for k in ("lost", "diverged") if any(outcome(m) == k for m in ms)
+        )
+        label = f"{n_ok}/{len(ms)} tracking" + (f"\n{other}" if other else "")
+        if n_ok == 0:
+            ax.annotate("none\ntracking", (p, 0.5), xycoords=("data", "axes fraction"), ha="center", color="firebrick")
+        ax.annotate(
+            label,
+            (p, 1.0),
+            xycoords=("data", "axes fraction"),
+            xytext=(0, 3),
+            textcoords="offset points",
+            ha="center",
+            va="bottom",
+            fontsize=8,
+            color="black" if n_ok == len(ms) else "firebrick",
+        )
+    ax.set_xticks(pos, ctrls, rotation=25 if len(ctrls) > 3 else 0, ha="right" if len(ctrls) > 3 else "center")
+    ax.set_xlim(-0.6, len(ctrls) - 0.4)
+    what = "after the event" if phase == "after" else "after the warm-up"
+    ax.set_ylabel(f"position RMS {what} [mm]")
+    ax.set_title(f"{scn}: one dot per tracking run, median in mm", fontsize=10, pad=28)
+    ax.grid(axis="y", alpha=0.3, which="both")
+
+
+def _over_time(ax, ctrls: list[str], groups: list[list[dict]], colors: dict) -> None:
+    t_event, text = _event_text([m for ms in groups for m in ms])
+    warm = max((m.get("excluded_s", [0, 0])[1] for ms in groups for m in ms), default=0.0)
+    spans, missing, peak = [], 0, 0.0
+    for c, ms in zip(ctrls, groups, strict=True):
+        series = [m["series"] for m in ms if outcome(m) == "tracking" and isinstance(m.get("series"), dict)]
+        missing += sum(outcome(m) == "tracking" and not isinstance(m.get("series"), dict) for m in ms)
+        if not series:
+            continue
+        dt = float(series[0]["dt_s"])
+        width = max(len(s["position_error_m"]) for s in series)
+        arr = np.full((len(series), width), np.nan)
+        for i, s in enumerate(series):
+            v = np.array([np.nan if x is None else x for x in s["position_error_m"]], dtype=float)
+            arr[i, : len(v)] = v * 1e3
+        t = (np.arange(width) + 0.5) * dt
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN columns past a short run's end
+            q1, med, q3 = np.nanpercentile(arr, [25, 50, 75], axis=0)
+        ax.fill_between(t, q1, q3, color=colors[c], alpha=0.22, lw=0)
+        ax.plot(t, med, color=colors[c], lw=1.4, label=f"{c} ({len(series)} runs)")
+        spans.append(q3[np.isfinite(q3) & (t >= warm)])
+        peak = max(peak, float(np.nanmax(q3, initial=0.0)))
+    if not spans:
+        ax.text(0.5, 0.5, "no error series in these runs' metrics.json", transform=ax.transAxes, ha="center")
+        return
+    vals = np.concatenate(spans)
+    vals = vals[vals > 0]
+    if len(vals) and np.percentile(vals, 99) / max(np.percentile(vals, 1), 1e-9) > 20:
+        ax.set_yscale("log")
+    elif len(vals) and peak > 1.5 * vals.max():  # the start's transient would flatten the rest: clip it
+        ax.set_ylim(0, 1.6 * vals.max())
+        ax.annotate(
+            f"start clipped\n(up to {peak:.3g} mm)", (warm, 0.97), xycoords=("data", "axes fraction"),
+            xytext=(3, 0), textcoords="offset points", va="top", fontsize=7, color="0.4",
+        )  # fmt: skip
+    if warm > 0:
+        ax.axvspan(0, warm, color="0.85", lw=0, zorder=0)
+        ax.annotate(
+            "warm-up", (warm / 2, 0.02), xycoords=("data", "axes fraction"), ha="center", fontsize=7, color="0.4"
+        )
+    if t_event is not None:
+        ax.axvline(t_event, color="firebrick", ls="--", lw=1.0)
+        ax.annotate(
+            f"event: {text.split(' (')[0]}",
+            (t_event, 1.0),
+            xycoords=("data", "axes fraction"),
+            xytext=(4, -4),
+            bbox={"fc": "white", "ec": "none", "alpha": 0.8, "pad": 1},
+            textcoords="offset points",
+            va="top",
+            fontsize=8,
+            color="firebrick",
+        )
+    ax.set_xlabel("t [s]")
+    ax.set_ylabel("position error [mm]\n(RMS per 0.1 s)")
+    note = f"; {missing} runs without a series" if missing else ""
+    ax.set_title(f"error over time: median, band = quartiles over tracking runs{note}", fontsize=10)
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
+    ax.grid(alpha=0.3, which="both")
+    ax.set_xlim(0, None)
