@@ -1,5 +1,9 @@
-"""Figure 1 of the paper redrawn from a run record: (a)-(c) errors, (d) weights, (e)-(f) paths,
-(g) mean diag(P_k), (h) e2 of the non-adaptive law on the same scenario and seed."""
+"""Figure 1 of the paper redrawn from a run record, each panel at a scale where its signal reads:
+(a)-(c) e1, e2 [mm] and e3 [mrad], (d) the weights that moved most, (e) the reference and the
+driven path, (f) a close-up where the error is largest, (g) mean diag(P_k), (h) e2 of the
+non-adaptive law on the same scenario and seed. Panels that do not apply (no weights, no P, the
+baseline being the run itself) are left out; the others keep the paper's letters.
+"""
 
 from __future__ import annotations
 
@@ -9,58 +13,146 @@ import numpy as np
 
 from mlpfac.record import RunRecord
 
+EVENT_COLOR = "firebrick"
+RUN_COLOR = "tab:blue"
+
 
 def figure1(rec: RunRecord, baseline: RunRecord | None, path: Path) -> None:
-    """Write the eight panels of Figure 1 for ``rec`` (and ``baseline`` for panel h) to ``path`` (PNG)."""
+    """Write Figure 1 for ``rec`` (and ``baseline`` for panel h) to ``path`` (PNG)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     n = rec.n
+    z, P = rec.ctrl.get("z"), rec.ctrl.get("mean_diag_P")
+    adaptive = z is not None and z.ndim == 2 and z.shape[1] > 1
+    show_h = baseline is not None and baseline.controller != rec.controller and baseline.n > 0
+    time_panels = ["a", "b", "c"] + (["d"] if adaptive else []) + (["g"] if P is not None else [])
+    time_panels += ["h"] if show_h else []
+    rows = -(-len(time_panels) // 2) + 1
+    fig = plt.figure(figsize=(12, 2.9 * rows + 0.6), layout="constrained")
+    grid = fig.add_gridspec(rows, 2)
+    title = f"{rec.scenario} / {rec.controller} / seed {rec.seed}: {rec.status}"
+    fig.suptitle(title + (f" ({rec.reason})" if rec.reason else ""), fontsize=12)
     t = rec.t[:n]
-    fig, ax = plt.subplots(4, 2, figsize=(11, 12), constrained_layout=True)
-    ax = ax.ravel()
-    title = f"{rec.scenario} / {rec.controller} / seed {rec.seed} — {rec.status}"
-    fig.suptitle(title + (f" ({rec.reason})" if rec.reason else ""))
-    for i, (name, unit) in enumerate([("e1", "m"), ("e2", "m"), ("e3", "rad")]):
-        ax[i].plot(t, rec.e_true[:n, i], lw=0.8)
-        ax[i].set(title=f"({'abc'[i]}) {name}", xlabel="t [s]", ylabel=f"{name} [{unit}]")
-    z = rec.ctrl.get("z")
-    if z is not None:
-        labels = rec.labels.get("z", [])
-        picks = np.linspace(0, z.shape[1] - 1, 4).astype(int)
-        for j in picks:
-            ax[3].plot(t, z[:n, j], lw=0.8, label=labels[j] if j < len(labels) else f"z{j}")
-        ax[3].legend(fontsize=7)
-        ax[3].set(title="(d) some weights", xlabel="t [s]")
-    else:
-        ax[3].plot(t, rec.u[:n, 0], lw=0.8, label="v [m/s]")
-        ax[3].plot(t, rec.u[:n, 1], lw=0.8, label="omega [rad/s]")
-        ax[3].legend(fontsize=7)
-        ax[3].set(title="(d) commands (no weights: non-adaptive)", xlabel="t [s]")
-    for i, (lo, hi, tag) in enumerate(
-        [(0, n, "(e) reference (—) and actual (o) paths"), (0, min(n, int(round(3.0 / rec.T))), "(f) initial phase")]
+    warm = min(rec.warmup_s, t[-1] if n else 0.0)
+    axes = {}
+    for i, tag in enumerate(time_panels):
+        axes[tag] = fig.add_subplot(grid[i // 2 + (i >= 4), i % 2])  # the paths' row follows (c), (d)
+    for i, (name, scale, unit, what) in enumerate(
+        [("e1", 1e3, "mm", "along the path"), ("e2", 1e3, "mm", "across the path"), ("e3", 1e3, "mrad", "heading")]
     ):
-        a = ax[4 + i]
-        a.plot(rec.ref[lo:hi, 0], rec.ref[lo:hi, 1], "k-", lw=1.0)
-        step = max(1, (hi - lo) // 300)
-        a.plot(rec.pose[lo:hi:step, 0], rec.pose[lo:hi:step, 1], "o", ms=2, mfc="none")
-        a.set(title=tag, xlabel="x [m]", ylabel="y [m]", aspect="equal")
-    P = rec.ctrl.get("mean_diag_P")
+        ax = axes["abc"[i]]
+        _signal(ax, t, rec.e_true[:n, i] * scale, warm)
+        ax.set(title=f"({'abc'[i]}) {name}: {what}", ylabel=f"{name} [{unit}]")
+    if adaptive:
+        _weights(axes["d"], rec, t)
     if P is not None:
-        ax[6].semilogy(t, P[:n], lw=0.8)
-        ax[6].set(title="(g) mean of diag(P_k)", xlabel="t [s]")
-    else:
-        ax[6].set(title="(g) mean of diag(P_k): not an adaptive run")
-    if baseline is not None:
+        ax = axes["g"]
+        ax.semilogy(t, P[:n], color=RUN_COLOR, lw=1.0)
+        ax.set(title="(g) mean of diag(P_k): the EKF's uncertainty", ylabel="mean diag(P_k) [-]")
+    if show_h:
         nb = baseline.n
-        ax[7].plot(baseline.t[:nb], baseline.e_true[:nb, 1], lw=0.8)
-        ax[7].set(title=f"(h) e2, {baseline.controller} law ({baseline.status})", xlabel="t [s]", ylabel="e2 [m]")
-    else:
-        ax[7].set(title="(h) no baseline run")
-    for ev in rec.events:
-        for a in (ax[0], ax[1], ax[2], ax[3], ax[6], ax[7]):
-            a.axvline(ev["time"], color="r", lw=0.6, ls="--")
+        ax = axes["h"]
+        _signal(ax, baseline.t[:nb], baseline.e_true[:nb, 1] * 1e3, min(baseline.warmup_s, baseline.t[nb - 1]))
+        ax.set(title=f"(h) e2 under the {baseline.controller} law, same seed ({baseline.status})", ylabel="e2 [mm]")
+    for tag, ax in axes.items():
+        ax.set_xlabel("t [s]")
+        ax.grid(alpha=0.3, which="both")
+        ax.set_xlim(0, rec.t[-1] + rec.T)
+        for j, ev in enumerate(rec.events):
+            label = f"event: {str(ev.get('text') or ev.get('kind')).split(' (')[0]}" if j == 0 else None
+            ax.axvline(float(ev["time"]), color=EVENT_COLOR, lw=0.9, ls="--", label=label if tag == "a" else None)
+    if rec.events:
+        axes["a"].legend(loc="upper right", fontsize=8, framealpha=0.9)
+    prow = min(2, rows - 1)
+    _paths(fig.add_subplot(grid[prow, 0]), fig.add_subplot(grid[prow, 1]), rec, warm)
     fig.savefig(path, dpi=90)
     plt.close(fig)
+
+
+def _signal(ax, t: np.ndarray, y: np.ndarray, warm: float) -> None:
+    """One signal, its y range set by what follows the warm-up (a larger start is clipped and said so)."""
+    ax.plot(t, y, color=RUN_COLOR, lw=0.8)
+    after = y[(t >= warm) & np.isfinite(y)]
+    if warm > 0:
+        ax.axvspan(0, warm, color="0.88", lw=0, zorder=0)
+    if len(after) < 2:
+        return
+    lo, hi = np.percentile(after, [0.2, 99.8])
+    lo, hi = min(lo, 0.0), max(hi, 0.0)
+    pad = 0.12 * (hi - lo or 1.0)
+    lo, hi = lo - pad, hi + pad
+    ax.set_ylim(lo, hi)
+    early = y[(t < warm) & np.isfinite(y)]
+    if len(early) and (early.max() > hi or early.min() < lo):
+        peak = early[np.argmax(np.abs(early))]
+        ax.annotate(
+            f"warm-up, clipped\n(up to {peak:.3g})",
+            (warm, 0.96),
+            xycoords=("data", "axes fraction"),
+            xytext=(3, 0),
+            textcoords="offset points",
+            va="top",
+            fontsize=7,
+            color="0.35",
+        )
+
+
+def _weights(ax, rec: RunRecord, t: np.ndarray) -> None:
+    """(d): the six weights that moved most from their initial values, named."""
+    z = rec.ctrl["z"][: rec.n]
+    labels = rec.labels.get("z") or [f"z{j}" for j in range(z.shape[1])]
+    moved = np.nan_to_num(np.nanmax(np.abs(z - z[0]), axis=0), nan=-1.0)
+    for j in np.argsort(moved)[::-1][:6]:
+        ax.plot(t, z[:, j], lw=0.9, label=labels[j] if j < len(labels) else f"z{j}")
+    ax.legend(
+        fontsize=7, loc="center left", bbox_to_anchor=(1.0, 0.5), frameon=False, title="moved most", title_fontsize=7
+    )
+    ax.set(title=f"(d) the 6 of {z.shape[1]} weights that moved most", ylabel="weight z_i [-]")
+
+
+def _paths(full, close, rec: RunRecord, warm: float) -> None:
+    """(e) the whole reference and driven paths; (f) a close-up around the largest error after the warm-up."""
+    n = rec.n
+    ref, pose = rec.ref[:n, :2], rec.pose[:n, :2]
+    ok = np.all(np.isfinite(pose), axis=1)
+    err = np.where(ok, np.hypot(*(pose - ref).T), -1.0)
+    w = min(int(round(warm / rec.T)), max(n - 1, 0))
+    k = w + int(np.argmax(err[w:])) if n else 0
+    half = float(np.clip(3.0 * err[k], 0.03, 0.5)) if n else 0.5
+    for ax in (full, close):
+        ax.plot(rec.ref[: len(rec.t), 0], rec.ref[: len(rec.t), 1], color="black", lw=1.0, label="reference")
+        ax.plot(pose[ok, 0], pose[ok, 1], color=RUN_COLOR, lw=1.0, label="robot")
+        ax.set(xlabel="x [m]", ylabel="y [m]", aspect="equal")
+        ax.grid(alpha=0.3)
+    full.set_title("(e) reference and driven paths")
+    full.legend(loc="upper right", fontsize=8)
+    if not n:
+        return
+    c = ref[k]
+    full.add_patch(_box(c, half))
+    stride = max(1, int(round(0.1 / rec.T)))
+    near = np.arange(max(k - 60 * stride, 0), min(k + 60 * stride, n), stride)
+    near = near[ok[near] & (np.abs(ref[near] - c).max(axis=1) < half)]
+    for j in near:  # where the robot is (blue) against where it should be (black), every 0.1 s
+        close.plot(*np.c_[pose[j], ref[j]], color="0.55", lw=0.7)
+    close.plot(*np.c_[pose[k], ref[k]], color=EVENT_COLOR, lw=1.5)
+    close.plot(*pose[k], "o", color=RUN_COLOR, ms=6)
+    close.plot(*ref[k], "o", color="black", ms=6, mfc="white")
+    close.set(xlim=(c[0] - half, c[0] + half), ylim=(c[1] - half, c[1] + half))
+    close.set_title(f"(f) close-up: largest error after warm-up, {err[k] * 1e3:.1f} mm at t = {rec.t[k]:.1f} s")
+    close.annotate(
+        "robot (blue dot) to its reference point (white); grey: every 0.1 s",
+        (0.02, 0.02),
+        xycoords="axes fraction",
+        fontsize=7,
+        color="0.3",
+    )
+
+
+def _box(center: np.ndarray, half: float):
+    from matplotlib.patches import Rectangle
+
+    return Rectangle(tuple(center - half), 2 * half, 2 * half, fill=False, ec=EVENT_COLOR, lw=1.2)
