@@ -259,6 +259,7 @@ def _make_sink(args: argparse.Namespace, scn, save: Path | None):
         recording_name=f"{scn.name} / {scn.controller} / seed {scn.seed}",
         recording_id=f"{scn.name}-{scn.controller}-{scn.seed}",
         bind=args.bind,
+        description=scn.description,
     )
     if sink is not None and args.serve:
         print(f"web viewer: {sink.viewer_url}", flush=True)

@@ -367,7 +367,7 @@ def test_schema_covers_every_key_of_a_real_run(scenario, controller):
     assert [k for k in keys if not rows_for(*k)] == []
     paths = [s.path for s in log.plan_series(rec)]
     assert len(paths) == len(set(paths))
-    origins = [origin[1:] for _, _, origin in VIEWS]
+    origins = [origin[1:] for _, _, origin, _ in VIEWS]
     assert [p for p in paths if not any(p == o or p.startswith(o + "/") for o in origins)] == []
 
 
@@ -378,6 +378,7 @@ def test_schema_rows_are_well_formed():
         assert row.store in ("record", "plant", "ctrl") and row.send in (
             schema.LINES,
             schema.LAYERS,
+            schema.CHANGE,
             schema.SCENE,
             schema.UNSENT,
         ), row

@@ -1,67 +1,129 @@
-"""The default layout (a rerun blueprint): 3D world, top view and events on the left; the time
-series on the right, each view shown when the record has a series under its origin."""
+"""The default layout (a rerun blueprint), made to be read in ten seconds.
+
+Left: what the run is and where to look (a text panel), the 3D world, the top view, the events.
+Right, top to bottom: e1, e2, e3 and |(e1, e2)| each on its own axis; v, omega and the wheel speeds;
+then the learning (the weights' change per layer, every weight one tab away) beside the EKF
+(trace(P) and the innovation as log10, the raw values and h1, h2, h5 in tabs). A view is shown when
+the record has a series under its origin. Titles say what is drawn, in which unit and colour, so
+legends stay hidden and cover nothing; every time plot marks the events (dark-red diamonds).
+
+The same layout shows several runs (:func:`blueprint` with ``prefixes``, used by
+:func:`mlpfac.log.compare.save_comparison`): each view then holds that view's series of every run,
+each run in its controller's colour.
+"""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 import rerun.blueprint as rrb
+import rerun.blueprint.encodings as rbe
 
 from mlpfac.log.scene import bounds
-from mlpfac.log.schema import unit
 from mlpfac.log.series import Series, plan_series
 from mlpfac.record import RunRecord
 
-# (place, title, origin). Places, top to bottom: "errors", "speeds" (side by side), "weights", "tabs".
+# (place, title, origin, marked: the events are marked on its first series).
 VIEWS = (
-    ("errors", "tracking error (true)", "/errors"),
-    ("speeds", f"v ({unit('u', 0)})", "/controls/v"),
-    ("speeds", f"omega ({unit('u', 1)})", "/controls/omega"),
-    ("speeds", f"wheel speeds ({unit('wheel_cmd')})", "/wheels"),
-    ("weights", "network weights", "/weights"),
-    ("tabs", "trace(P)", "/ekf/trace_P"),
-    ("tabs", "mean diag(P)", "/ekf/mean_diag_P"),
-    ("tabs", "innovation", "/ekf/innovation"),
-    ("tabs", "h1, h2, h5", "/h"),
-    ("tabs", "other plant telemetry", "/plant"),
-    ("tabs", "other ctrl telemetry", "/ctrl"),
+    ("errors", "e1: lag along the path [m]", "/errors/e1", True),
+    ("errors", "e2: off the path, sideways [m]", "/errors/e2", True),
+    ("errors", "e3: heading error [rad]", "/errors/e3", True),
+    ("errors", "|(e1, e2)|: distance to reference [m]", "/errors/position", True),
+    ("speeds", "v [m/s]: commanded blue, measured orange, v_r grey", "/controls/v", True),
+    ("speeds", "omega [rad/s]: commanded blue, measured orange, omega_r grey", "/controls/omega", True),
+    ("speeds", "wheel speeds [rad/s]: left blue, right red; pale: measured", "/wheels", True),
+    ("learning", "weights: RMS change since t = 0, per layer", "/weight_change", True),
+    ("learning", "every weight, one line each", "/weights", False),
+    ("ekf", "log10 trace(P)", "/ekf/log10_trace_P", True),
+    ("ekf", "log10 |innovation|", "/ekf/log10_innovation", True),
+    ("ekf", "h1, h2, h5: estimate blue, true grey", "/h", False),
+    ("ekf", "trace(P)", "/ekf/trace_P", False),
+    ("ekf", "mean diag(P)", "/ekf/mean_diag_P", False),
+    ("ekf", "innovation [m, m, rad]: e1 red, e2 green, e3 blue", "/ekf/innovation", False),
+    ("ekf", "other plant telemetry", "/plant", False),
+    ("ekf", "other ctrl telemetry", "/ctrl", False),
 )
+ABOUT = "about"  # the text panel's entity
 
 
-def blueprint(record: RunRecord, ref_xy: np.ndarray | None = None, series: list[Series] | None = None) -> rrb.Blueprint:
-    """The default layout for ``record`` (its series: ``series``, default :func:`plan_series`)."""
+def marked_origins(paths: Sequence[str]) -> list[str]:
+    """Origins of the views that mark the events, among those the series ``paths`` fill."""
+    return [o for _, _, o, marked in VIEWS if marked and any(_under(p, o) for p in paths)]
+
+
+def _under(path: str, origin: str) -> bool:
+    return path == origin or path.startswith(origin + "/")
+
+
+def blueprint(
+    record: RunRecord,
+    ref_xy: np.ndarray | None = None,
+    series: list[Series] | None = None,
+    prefixes: Sequence[str] = ("",),
+) -> rrb.Blueprint:
+    """The default layout for ``record`` (its series: ``series``, default :func:`plan_series`).
+    ``prefixes``: the entity-path prefixes of the runs shown together ("" for one run)."""
     ref_xy = record.ref[: max(record.n, 1), :2] if ref_xy is None else ref_xy
     lo, hi = bounds(ref_xy)
     center, size = (lo + hi) / 2, max(float(np.max(hi - lo)), 1.0)
-    margin = 0.15 * size + 0.3
+    margin = 0.12 * size + 0.2
+    one = tuple(prefixes) == ("",)
+
+    def within(origin: str) -> dict:
+        if one:
+            return {"origin": origin}
+        return {"origin": "/", "contents": [f"/{p}{origin.lstrip('/')}/**" for p in prefixes]}
+
     left = rrb.Vertical(
+        rrb.TextDocumentView(name="about this run" if one else "about these runs", origin=f"/{ABOUT}"),
         rrb.Spatial3DView(
             name="world",
-            origin="/world",
+            **within("/world"),
             eye_controls=rrb.EyeControls3D(
-                position=[center[0], center[1] - 1.1 * size, 0.9 * size],
+                position=[center[0], center[1] - 1.0 * size, 0.75 * size],
                 look_target=[center[0], center[1], 0.0],
                 eye_up=[0.0, 0.0, 1.0],
             ),
         ),
         rrb.Spatial2DView(
-            name="top view (x right, y up)",
-            origin="/top",
+            name="top view: reference orange, driven path blue, robot purple (x right, y up)"
+            if one
+            else "top view: reference orange, one colour per run (x right, y up)",
+            **within("/top"),
+            background=(245, 245, 245),
             visual_bounds=rrb.VisualBounds2D(
                 x_range=[lo[0] - margin, hi[0] + margin], y_range=[-hi[1] - margin, -lo[1] + margin]
             ),
         ),
-        rrb.TextLogView(name="events and status", origin="/", contents=["/events", "/status"]),
-        row_shares=[4, 4, 1.5],
+        rrb.TextLogView(
+            name="events and status",
+            origin="/",
+            contents=[f"/{p}{e}" for p in prefixes for e in ("events", "status")],
+            columns=rrb.TextLogColumns(
+                timeline_columns=[rbe.TimelineColumn("sim_time")],
+                text_log_columns=[
+                    rbe.TextLogColumn("LogLevel", visible=False),
+                    rbe.TextLogColumn("EntityPath", visible=one is False),
+                    rbe.TextLogColumn("Body"),
+                ],
+            ),
+        ),
+        row_shares=[1.6, 2.4, 3.0, 1.2],
     )
     paths = ["/" + s.path for s in (plan_series(record) if series is None else series)]
-    views: dict[str, list] = {"errors": [], "speeds": [], "weights": [], "tabs": []}
-    for place, title, origin in VIEWS:
-        if any(p == origin or p.startswith(origin + "/") for p in paths):
-            legend = rrb.PlotLegend(visible=False) if place == "weights" else None
-            views[place].append(rrb.TimeSeriesView(name=title, origin=origin, plot_legend=legend))
-    right = views["errors"] + ([rrb.Horizontal(*views["speeds"])] if views["speeds"] else []) + views["weights"]
-    if views["tabs"]:
-        right.append(rrb.Tabs(*views["tabs"]))
+    views: dict[str, list] = {"errors": [], "speeds": [], "learning": [], "ekf": []}
+    for place, title, origin, _ in VIEWS:
+        if any(_under(p, origin) for p in paths):
+            corner = place == "learning" and origin == "/weight_change" and one
+            legend = rrb.PlotLegend(corner="RightBottom", visible=True) if corner else rrb.PlotLegend(visible=False)
+            if not one and "blue" in title:  # colours are the runs', not the lines'
+                title = title.split(":")[0]
+            views[place].append(rrb.TimeSeriesView(name=title, **within(origin), plot_legend=legend))
+    right = [rrb.Horizontal(*views[k]) for k in ("errors", "speeds") if views[k]]
+    bottom = [rrb.Tabs(*views[k]) for k in ("learning", "ekf") if views[k]]
+    if bottom:
+        right.append(rrb.Horizontal(*bottom))
     return rrb.Blueprint(
         rrb.Horizontal(left, rrb.Vertical(*right), column_shares=[2, 3]),
         rrb.BlueprintPanel(state="collapsed"),

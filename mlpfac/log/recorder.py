@@ -15,8 +15,10 @@ from collections.abc import Sequence
 import numpy as np
 import rerun as rr
 
-from mlpfac.log.layout import blueprint
+from mlpfac.log.about import about_text
+from mlpfac.log.layout import ABOUT, blueprint, marked_origins
 from mlpfac.log.scene import PATH_STRIDE, POSE_STRIDE, send_poses, send_static_scene, strided
+from mlpfac.log.schema import EVENT_COLOR
 from mlpfac.log.series import Series, ns, plan_series, send_series, style_series, time_index
 from mlpfac.record import RunRecord
 
@@ -29,8 +31,12 @@ STATUS_LEVEL = {"ok": "INFO", "interrupted": "WARN", "diverged": "ERROR"}
 class RerunSink:
     """Sends one run to rerun. Made by :func:`mlpfac.log.make_sink`; see the module docstring for the call order."""
 
-    def __init__(self, rec: rr.RecordingStream, recording_name: str, serving: bool, viewer_url: str | None) -> None:
+    def __init__(
+        self, rec: rr.RecordingStream, recording_name: str, serving: bool, viewer_url: str | None, description: str = ""
+    ) -> None:
         self.rec = rec
+        self.description = description  # the scenario's, for the text panel
+        self.events_marked = 0  # events whose markers are on the plots
         self.recording_name = recording_name
         self.serving = serving
         self.viewer_url = viewer_url  # the web viewer's address when serving
@@ -59,6 +65,7 @@ class RerunSink:
         ref = record.ref if ref_path is None else np.asarray(ref_path, dtype=float)
         self.ref_path = ref[np.all(np.isfinite(ref[:, :2]), axis=1), :2]
         send_static_scene(self.rec, self.ref_path, geometry)
+        self._send_about(record, ended=False)
 
     def flush(self, record: RunRecord, upto: int | None = None, force: bool = False) -> None:
         """Send rows [sent, upto) of the record (default: up to ``record.n``) and any new events.
@@ -75,6 +82,7 @@ class RerunSink:
             send_series(self.rec, self.series, record, a, b)
             send_poses(self.rec, record, strided(a, b, POSE_STRIDE), strided(a, b, PATH_STRIDE))
             self.sent = b
+            self._mark_events(record)
             self.last_send = time.monotonic()
             if not self.blueprint_sent:
                 self._send_blueprint(record)
@@ -103,6 +111,7 @@ class RerunSink:
             if not self.blueprint_sent:
                 self._send_blueprint(record)
             self._send_status(record)
+            self._send_about(record, ended=True)
         finally:
             if not self.serving:
                 self.close()
@@ -147,6 +156,32 @@ class RerunSink:
             indexes=[rr.TimeColumn("sim_time", duration=ns(times)), rr.TimeColumn("step", sequence=steps)],
             columns=rr.TextLog.columns(text=[event_text(ev) for ev in new], level=["WARN"] * len(new)),
         )
+
+    def _send_about(self, record: RunRecord, ended: bool) -> None:
+        self.rec.log(
+            ABOUT, rr.TextDocument(about_text(record, self.description, ended), media_type="text/markdown"), static=True
+        )
+
+    def _mark_events(self, record: RunRecord) -> None:
+        """A diamond on the first series of every time plot at each event sent rows have reached."""
+        steps = [int(round(float(ev["time"]) / record.T)) for ev in record.events[self.events_marked :]]
+        steps = [k for k in steps if k < self.sent]
+        if not steps:
+            return
+        first = self.events_marked == 0
+        self.events_marked += len(steps)
+        rows = np.array(steps)
+        for origin in marked_origins(["/" + s.path for s in self.series]):
+            s = next(s for s in self.series if ("/" + s.path + "/").startswith(origin + "/"))
+            values = np.array([np.ravel(s.get(record, slice(k, k + 1)))[0] for k in steps], dtype=float)
+            path = origin.lstrip("/") + "/event"
+            if first:
+                self.rec.log(
+                    path,
+                    rr.SeriesPoints(colors=[EVENT_COLOR], markers=["Diamond"], marker_sizes=[6.0], names=["event"]),
+                    static=True,
+                )
+            self.rec.send_columns(path, indexes=time_index(record, rows), columns=rr.Scalars.columns(scalars=values))
 
     def _send_status(self, record: RunRecord) -> None:
         k = max(record.n - 1, 0)

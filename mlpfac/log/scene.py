@@ -65,7 +65,7 @@ def send_static_scene(rec: rr.RecordingStream, ref_xy: np.ndarray, geometry: Seq
         static=True,
     )
     rec.log("top/plane/path", rr.LineStrips2D.from_fields(colors=[PATH_COLOR], radii=[0.012]), static=True)
-    rec.log("top/plane/robot", rr.Arrows2D.from_fields(colors=[ROBOT_COLOR], radii=[0.02]), static=True)
+    rec.log("top/plane/robot", rr.Arrows2D.from_fields(colors=[ROBOT_COLOR], radii=[0.03]), static=True)
     rec.log("top/plane/reference_now", rr.Points2D.from_fields(colors=[REF_COLOR], radii=[0.05]), static=True)
 
 
@@ -95,7 +95,7 @@ def send_poses(rec: rr.RecordingStream, record: RunRecord, rows: np.ndarray, pat
         rec.send_columns(
             "top/plane/robot",
             indexes=idx,
-            columns=rr.Arrows2D.columns(origins=np.c_[x, y], vectors=0.25 * np.c_[np.cos(th), np.sin(th)]),
+            columns=rr.Arrows2D.columns(origins=np.c_[x, y], vectors=0.35 * np.c_[np.cos(th), np.sin(th)]),
         )
         rec.send_columns("top/plane/reference_now", indexes=idx, columns=rr.Points2D.columns(positions=r[:, :2]))
     if len(path_rows):

@@ -13,6 +13,8 @@ How a row is sent (``send``):
 - ``LAYERS``: one entity per layer, several lines each: the components are grouped by their label
   up to the last ``/`` (``NN_f/hidden/w3`` is line ``w3`` of ``weights/NN_f/hidden``). A chunk per
   component made saving a run three times as slow and its file three times as big.
+- ``CHANGE``: one entity per layer (grouped as for ``LAYERS``), one line: the RMS of the layer's
+  change since the first step, what a person reads from 171 weights at a glance.
 - ``SCENE``: drawn in the 3D world and the top view by :mod:`mlpfac.log.scene`; ``path`` lists its
   entities.
 - ``UNSENT``: kept in the record (and its metrics), not in the recording.
@@ -27,15 +29,19 @@ from dataclasses import dataclass
 import numpy as np
 
 RGB = tuple[int, int, int]
-LINES, LAYERS, SCENE, UNSENT = "lines", "layers", "scene", "unsent"
+LINES, LAYERS, CHANGE, SCENE, UNSENT = "lines", "layers", "change", "scene", "unsent"
 
-# Colours: the reference is orange, the robot's own path blue, e1/e2/e3 red/green/blue.
+# Colours: the reference is orange, the robot's own path blue, e1/e2/e3 red/green/blue; the robot's
+# heading arrow purple (it reads on the viewer's light and dark backgrounds); events dark red.
 REF_COLOR: RGB = (255, 160, 40)
 PATH_COLOR: RGB = (60, 140, 255)
-ROBOT_COLOR: RGB = (230, 230, 230)
+ROBOT_COLOR: RGB = (160, 40, 200)
+EVENT_COLOR: RGB = (200, 20, 40)
 ERROR_COLORS: tuple[RGB, ...] = ((230, 70, 70), (80, 200, 90), (80, 140, 255), (240, 220, 80))
 CMD_COLOR: RGB = (80, 160, 255)
 MEAS_COLOR: RGB = (255, 130, 60)
+WHEEL_CMD_COLORS: tuple[RGB, ...] = ((30, 80, 200), (200, 60, 20))  # left blue, right red-orange ...
+WHEEL_MEAS_COLORS: tuple[RGB, ...] = ((120, 180, 255), (255, 170, 90))  # ... paler when measured
 REFSPEED_COLOR: RGB = (150, 150, 150)
 TRUE_COLOR: RGB = (150, 150, 150)
 P_COLOR: RGB = (240, 200, 80)
@@ -51,6 +57,18 @@ WEIGHT_COLORS: dict[str, RGB] = {  # one hue per network and layer
 def position_error(e: np.ndarray) -> np.ndarray:
     """|(e1, e2)| of tracking errors (rows, 3): the distance from the reference point."""
     return np.hypot(e[:, 0], e[:, 1])
+
+
+def log10(x: np.ndarray) -> np.ndarray:
+    """log10 of a positive series (NaN where it is not): trace(P) spans decades."""
+    x = np.asarray(x, dtype=float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(x > 0, np.log10(np.where(x > 0, x, 1.0)), np.nan)
+
+
+def log10_norm(x: np.ndarray) -> np.ndarray:
+    """log10 of each row's Euclidean norm: the innovation's size, which spans decades."""
+    return log10(np.sqrt(np.sum(np.asarray(x, dtype=float) ** 2, axis=1)))
 
 
 @dataclass(frozen=True)
@@ -100,18 +118,22 @@ SCHEMA: tuple[Row, ...] = (
     Row("pose", "record", SCENE, "world/path top/plane/path", "m", colors=(PATH_COLOR,)),
     # Plant telemetry.
     Row("u_meas", "plant", LINES, "controls/{name}/meas", "m/s, rad/s", _VW, "{name} measured", (MEAS_COLOR,)),
-    Row("wheel_cmd", "plant", LINES, "wheels/{name}/cmd", "rad/s", _LR, "{name} commanded", (CMD_COLOR,)),
-    Row("wheel_meas", "plant", LINES, "wheels/{name}/meas", "rad/s", _LR, "{name} measured", (MEAS_COLOR,)),
+    Row("wheel_cmd", "plant", LINES, "wheels/{name}/cmd", "rad/s", _LR, "{name} commanded", WHEEL_CMD_COLORS),
+    Row("wheel_meas", "plant", LINES, "wheels/{name}/meas", "rad/s", _LR, "{name} measured", WHEEL_MEAS_COLORS),
     Row("h_true", "plant", LINES, "h/{name}/true", "", _H, "{name} true", (TRUE_COLOR,), labels="h_hat", prefix="h"),
     # (v, omega) of the axle midpoint and the (left, right) wheel torques: named by index, as always.
     Row("u_true", "plant", LINES, "plant/u_true/{name}", "m/s, rad/s", ("0", "1"), labels="u_true"),
     Row("torque", "plant", LINES, "plant/torque/{name}", "N m", ("0", "1"), labels="torque"),
     # Controller telemetry.
     Row("z", "ctrl", LAYERS, "weights/{layer}", colors=WEIGHT_COLORS, width=1.0, labels="z", prefix="w"),
+    Row("z", "ctrl", CHANGE, "weight_change/{layer}", colors=WEIGHT_COLORS, width=2.0, labels="z", prefix="w"),
     Row("trace_P", "ctrl", LINES, "ekf/trace_P", line="trace(P)", colors=(P_COLOR,)),
+    Row("trace_P", "ctrl", LINES, "ekf/log10_trace_P", line="log10 trace(P)", colors=(P_COLOR,), derive=log10),
     Row("mean_diag_P", "ctrl", LINES, "ekf/mean_diag_P", line="mean diag(P)", colors=(P_COLOR,)),
     Row("innovation", "ctrl", LINES, "ekf/innovation/{name}", "m, m, rad", ("e1", "e2", "e3"), colors=ERROR_COLORS[:3],
         labels="innovation", prefix="e"),
+    Row("innovation", "ctrl", LINES, "ekf/log10_innovation", line="log10 |innovation|", colors=(P_COLOR,),
+        derive=log10_norm),
     Row("h_hat", "ctrl", LINES, "h/{name}/estimate", "", _H, "{name} estimate", (CMD_COLOR,), labels="h_hat",
         prefix="h"),
 )

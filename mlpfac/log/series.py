@@ -12,7 +12,19 @@ import numpy as np
 import pyarrow as pa
 import rerun as rr
 
-from mlpfac.log.schema import LAYERS, LINES, OTHER_COLOR, RGB, SCHEMA, Row, component_names, fill, generic, rows_for
+from mlpfac.log.schema import (
+    CHANGE,
+    LAYERS,
+    LINES,
+    OTHER_COLOR,
+    RGB,
+    SCHEMA,
+    Row,
+    component_names,
+    fill,
+    generic,
+    rows_for,
+)
 from mlpfac.record import RunRecord
 
 SCALARS = rr.Scalars.descriptor_scalars()
@@ -55,7 +67,7 @@ def plan_series(record: RunRecord) -> list[Series]:
     labels: Mapping[str, list[str]] = getattr(record, "labels", None) or {}
     out: list[Series] = []
     for row in SCHEMA:
-        if row.send in (LINES, LAYERS):
+        if row.send in (LINES, LAYERS, CHANGE):
             arr = getattr(record, row.key) if row.store == "record" else getattr(record, row.store).get(row.key)
             if arr is not None:
                 out += _expand(row, arr, labels)
@@ -69,6 +81,8 @@ def plan_series(record: RunRecord) -> list[Series]:
 def _expand(row: Row, arr: np.ndarray, labels: Mapping[str, list[str]]) -> list[Series]:
     """The series one schema row makes of one array."""
     colors = row.colors
+    if row.send == CHANGE:
+        return _changes(row, arr, labels) if arr.ndim == 2 else []  # a batch's max |z| has no layers
     if row.derive is not None or (arr.ndim == 1 and row.cols is None):
         return [Series(row.path, _getter(row, None), row.line, colors[0], row.width)]
     names = component_names(row, arr, labels)
@@ -92,6 +106,32 @@ def _expand(row: Row, arr: np.ndarray, labels: Mapping[str, list[str]]) -> list[
             fill(row.path, name=name), _getter(row, c), fill(row.line, name=name), colors[j % len(colors)], row.width
         )
         for j, (c, name) in enumerate(zip(cols, names, strict=True))
+    ]
+
+
+def _changes(row: Row, arr: np.ndarray, labels: Mapping[str, list[str]]) -> list[Series]:
+    """One series per layer: the RMS over its weights of z_i(t) - z_i(0)."""
+    layers: dict[str, list[int]] = {}
+    for i, label in enumerate(component_names(row, arr, labels)):
+        layers.setdefault(label.rpartition("/")[0] or "all", []).append(i)
+    key, store = row.key, row.store
+
+    def change(idx: list[int]) -> Getter:
+        def get(record: RunRecord, s: slice) -> np.ndarray:
+            z = getattr(record, store)[key]
+            return np.sqrt(np.mean((z[s][:, idx] - z[0, idx]) ** 2, axis=1))
+
+        return get
+
+    return [
+        Series(
+            fill(row.path, layer=layer),
+            change(idx),
+            f"{layer} ({len(idx)})",
+            row.colors.get(layer, OTHER_COLOR),
+            row.width,
+        )
+        for layer, idx in layers.items()
     ]
 
 

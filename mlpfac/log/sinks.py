@@ -43,6 +43,7 @@ def make_sink(
     recording_name: str = "",
     recording_id: str | None = None,
     bind: str = LOCALHOST,
+    description: str = "",
 ) -> RerunSink | None:
     """A sink for the outputs asked for, or None when none is. Bad outputs raise ConfigError now.
 
@@ -50,6 +51,7 @@ def make_sink(
     viewer on port 9876; ``connect``: stream to a running viewer at a ``rerun+http://.../proxy``
     URL; ``serve``: start a web viewer on http://BIND:9090 (its gRPC server on 9876) that serves
     the recording until :meth:`RerunSink.wait` returns. Viewers started here listen on ``bind``.
+    ``description``: the scenario's, for the recording's text panel.
     """
     if save is None and not spawn and connect is None and not serve:
         return None
@@ -88,7 +90,7 @@ def make_sink(
     except RuntimeError as err:  # the file sink writes its header at once: a full disk fails here
         _stop(server)
         raise ConfigError(str(save), f"cannot write the recording ({_first_line(err)})") from None
-    sink = RerunSink(rec, recording_name=recording_name, serving=serve, viewer_url=viewer_url)
+    sink = RerunSink(rec, recording_name=recording_name, serving=serve, viewer_url=viewer_url, description=description)
     sink.server = server
     return sink
 
