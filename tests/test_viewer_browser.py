@@ -1,16 +1,20 @@
-"""The saved recording opens in rerun's web viewer: served on 127.0.0.1, rendered by headless Chromium.
+"""A real run's recording, and a comparison of two runs, open in rerun's web viewer: served on
+127.0.0.1, rendered by headless Chromium.
 
-Chromium is driven over the DevTools protocol. The viewer draws everything on one canvas (its DOM
-and accessibility tree hold only the page title), so readiness is read from the pixels: the
-orange reference path and the blue driven path must appear in the 3D and top views on the left,
-and a network-weight colour in the plots on the right. Set MLPFAC_SCREENSHOT=docs/viewer.png to
-keep the picture.
+The runs are made here, short: the figure of eight on the MuJoCo robot for 8 s, its wheel radius
+x1.5 at 4 s, with the adaptive scheme and with the corradini law (`mlpfac run FILE`), then
+`mlpfac view A B --save` for the comparison. Chromium is driven over the DevTools protocol. The
+viewer draws everything on one canvas (its DOM and accessibility tree hold only the page title), so
+readiness is read from the pixels: the run's own colours must appear in the views on the left and
+on the right. MLPFAC_SCREENSHOT_DIR=docs keeps the pictures as docs/viewer.png and
+docs/viewer-compare.png (the README's).
 """
 
 from __future__ import annotations
 
 import base64
 import contextlib
+import copy
 import io
 import json
 import os
@@ -28,9 +32,9 @@ import pytest
 pytestmark = pytest.mark.browser
 
 CHROMIUM = next((p for p in map(shutil.which, ("chromium", "chromium-browser", "google-chrome")) if p), None)
-TIMEOUT_S = float(os.environ.get("MLPFAC_BROWSER_TIMEOUT", "60"))  # until the run is drawn
+TIMEOUT_S = float(os.environ.get("MLPFAC_BROWSER_TIMEOUT", "120"))  # until the run is drawn
 SETTLE_S = 60.0  # then until the picture stops changing
-MIN_PIXELS = 200
+MIN_PIXELS = 100
 WIDTH, HEIGHT = 1600, 1000
 
 
@@ -107,27 +111,46 @@ def _count(img: np.ndarray, rgb: tuple[int, int, int], tol: int = 40) -> int:
     return int((np.abs(img - np.array(rgb)).sum(axis=-1) < tol).sum())
 
 
-def shows_run(img: np.ndarray) -> dict[str, int]:
-    """Pixels of the run's own colours: paths in the left column, weights in the right (below the top bar)."""
-    from mlpfac.log import PATH_COLOR, REF_COLOR, WEIGHT_COLORS
-
+def _shows(img: np.ndarray, left: dict, right: dict) -> dict[str, int]:
+    """Pixels of each named colour: ``left`` ones in the left column, ``right`` ones in the right
+    (below the top bar)."""
     body = img[60:]
-    left, right = body[:, : img.shape[1] * 2 // 5], body[:, img.shape[1] * 2 // 5 :]
-    return {
-        "reference path": _count(left, REF_COLOR),
-        "driven path": _count(left, PATH_COLOR),
-        "weights": _count(right, WEIGHT_COLORS["NN_f/hidden"]),
+    cut = img.shape[1] * 2 // 5
+    return {k: _count(body[:, :cut], c) for k, c in left.items()} | {
+        k: _count(body[:, cut:], c) for k, c in right.items()
     }
 
 
-@pytest.mark.skipif(CHROMIUM is None, reason="no chromium binary (Debian: apt-get install chromium)")
-def test_web_viewer_renders_saved_run(tmp_path: Path, make_record, save_rrd) -> None:
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory) -> dict[str, Path]:
+    """Two real short runs (adaptive, corradini) and their comparison recording."""
+    from mlpfac.cli import main
+    from mlpfac.scenario import load, to_toml
+
+    d = tmp_path_factory.mktemp("runs")
+    table = copy.deepcopy(load("eight-wheel-radius").table)
+    table["duration"] = 8.0
+    table["events"][0]["time"] = 4.0
+    table["description"] = (
+        "Figure of eight on the MuJoCo robot; real wheel radius x1.5 at 4 s, IK keeps the nominal one."
+    )
+    (d / "short.toml").write_text(to_toml(table))
+    assert main(["run", str(d / "short.toml"), "--out", str(d / "adaptive")]) == 0
+    assert (
+        main(["run", str(d / "short.toml"), "--controller", "corradini", "--out", str(d / "corradini"), "--no-plot"])
+        == 0
+    )
+    assert main(["view", str(d / "adaptive"), str(d / "corradini"), "--save", str(d / "compare.rrd")]) == 0
+    return {"run": d / "adaptive" / "run.rrd", "compare": d / "compare.rrd"}
+
+
+def render(rrd: Path, tmp_path: Path, ready) -> bytes:
+    """Serve ``rrd`` in rerun's web viewer, open it in headless Chromium, wait until ``ready(img)``
+    (a dict of pixel counts) has every count at least MIN_PIXELS and the picture settles; the PNG."""
     ws_client = pytest.importorskip("websockets.sync.client")
     pytest.importorskip("PIL")
     from mlpfac.log import rerun_executable
 
-    rrd = tmp_path / "run" / "run.rrd"
-    save_rrd(make_record(), rrd)
     web_port, grpc_port, devtools_port = _free_port(), _free_port(), _free_port()
     procs: list[subprocess.Popen] = []
     try:
@@ -171,7 +194,8 @@ def test_web_viewer_renders_saved_run(tmp_path: Path, make_record, save_rrd) -> 
                 time.sleep(2.0)
                 with contextlib.suppress(RuntimeError):  # "Not attached to an active page" while navigating
                     png, img = dt.screenshot()
-                    seen = shows_run(img)
+                    (tmp_path / "last.png").write_bytes(png)  # what it showed, kept on failure
+                    seen = ready(img)
                     print(f"{time.monotonic() - t0:5.1f} s: {seen}")  # shown with pytest -s
             # The viewer streams the file in for a while after it first draws: keep the picture once
             # two screenshots in a row agree (or after SETTLE_S, with whatever it shows then).
@@ -179,18 +203,59 @@ def test_web_viewer_renders_saved_run(tmp_path: Path, make_record, save_rrd) -> 
             while time.monotonic() - t1 < SETTLE_S:
                 time.sleep(2.0)
                 png, img = dt.screenshot()
-                previous, seen = seen, shows_run(img)
+                previous, seen = seen, ready(img)
                 print(f"{time.monotonic() - t0:5.1f} s: {seen}")
                 if seen == previous:
                     break
             assert min(seen.values()) >= MIN_PIXELS, seen
             assert dt.call("Runtime.evaluate", expression="document.title")["result"]["value"] == "Rerun Viewer"
-        out = os.environ.get("MLPFAC_SCREENSHOT")
-        if out:
-            Path(out).parent.mkdir(parents=True, exist_ok=True)
-            Path(out).write_bytes(png)
     finally:
         for p in reversed(procs):
             _stop(p)
     for p in procs:
         assert p.poll() is not None and _group_gone(p.pid, 0.5), f"{p.args[0]} left processes behind"
+    return png
+
+
+def _keep(png: bytes, name: str) -> None:
+    folder = os.environ.get("MLPFAC_SCREENSHOT_DIR")
+    if folder:
+        Path(folder).mkdir(parents=True, exist_ok=True)
+        (Path(folder) / name).write_bytes(png)
+
+
+@pytest.mark.skipif(CHROMIUM is None, reason="no chromium binary (Debian: apt-get install chromium)")
+def test_web_viewer_renders_a_real_run(tmp_path: Path, runs) -> None:
+    """The default layout: paths on the left, the event diamonds and the weights' change on the right."""
+    from mlpfac.log import PATH_COLOR, REF_COLOR, WEIGHT_COLORS
+    from mlpfac.log.schema import EVENT_COLOR, ROBOT_COLOR
+
+    png = render(
+        runs["run"],
+        tmp_path,
+        lambda img: _shows(
+            img,
+            {"reference path": REF_COLOR, "driven path": PATH_COLOR, "heading arrow": ROBOT_COLOR},
+            {"event marks": EVENT_COLOR, "weights": WEIGHT_COLORS["NN_f/hidden"]},
+        ),
+    )
+    _keep(png, "viewer.png")
+
+
+@pytest.mark.skipif(CHROMIUM is None, reason="no chromium binary (Debian: apt-get install chromium)")
+def test_web_viewer_renders_a_comparison(tmp_path: Path, runs) -> None:
+    """Two runs overlaid in one layout, each in its controller's colour."""
+    from mlpfac.log import REF_COLOR
+    from mlpfac.plots import controller_colors
+
+    colors = controller_colors(["adaptive", "corradini"])
+    png = render(
+        runs["compare"],
+        tmp_path,
+        lambda img: _shows(
+            img,
+            {"reference path": REF_COLOR, "adaptive path": colors["adaptive"]},
+            {"adaptive": colors["adaptive"], "corradini": colors["corradini"]},
+        ),
+    )
+    _keep(png, "viewer-compare.png")

@@ -11,11 +11,16 @@ import numpy as np
 from mlpfac.record import RunRecord
 
 CONTROLLERS = {
-    "adaptive": "the paper's scheme: two MLPs learn f and G of the error model, an EKF tunes their weights on-line",
-    "corradini": "the law (35) given the nominal functions h (no learning)",
-    "kanayama": "Kanayama's kinematic law (no learning)",
+    "adaptive": "the paper's scheme: MLPs learn f and G, an EKF tunes their weights",
+    "corradini": "the law (35) given the nominal h, no learning",
+    "kanayama": "Kanayama's kinematic law, no learning",
     "oracle": "the law (35) given the plant's true functions",
 }
+COLOURS = (
+    "**colours**: v, omega: commanded blue, measured orange, reference grey; wheels: left blue, right red, "
+    "pale when measured"
+)
+LEARNING_COLOURS = "; weights: NN_f hidden green, NN_f output blue, NN_G hidden pink, NN_G output orange"
 
 
 def controller_text(name: str) -> str:
@@ -30,22 +35,21 @@ def about_text(record: RunRecord, description: str = "", ended: bool = False) ->
     lines = [
         f"**{record.scenario}**" + (f": {description}" if description else ""),
         "",
-        f"**controller** `{record.controller}`"
-        + (f": {what}" if what else "")
-        + f"; seed {record.seed}, T = {record.T:g} s",
+        f"**controller** `{record.controller}`" + (f": {what}" if what else "") + f"; seed {record.seed}",
         "",
     ]
     if record.events:
         for ev in record.events:
             lines.append(
-                f"**event at {float(ev['time']):g} s**: {ev.get('text') or ev.get('kind')} (the controller is not told)"
+                f"**event at {float(ev['time']):g} s**: {ev.get('text') or ev.get('kind')}; the controller is not told"
             )
     elif record.split_s is not None:
-        lines.append(f"**event at {record.split_s:g} s** (the controller is not told)")
+        lines.append(f"**event at {record.split_s:g} s**; the controller is not told")
     else:
         lines.append("**no event**: the robot as the controller believes it")
     if ended:
         lines += ["", *_where_to_look(record)]
+    lines += ["", COLOURS + (LEARNING_COLOURS if "z" in record.ctrl else "") + "; events: dark-red diamonds"]
     return "\n".join(lines) + "\n"
 
 
@@ -54,32 +58,27 @@ def _where_to_look(record: RunRecord) -> list[str]:
     w = min(int(round(record.warmup_s / T)), n)
     e = record.e_true[w:n]
     e = e[np.all(np.isfinite(e), axis=1)]
-    out = [f"**{record.status}**" + (f": {record.reason}" if record.reason else "")]
+    out = [f"**{record.status}**" + (f" ({record.reason})" if record.reason else "")]
     if not len(e):
         return out
     pos = np.hypot(e[:, 0], e[:, 1])
     m1, m2 = float(np.mean(e[:, 0])), float(np.mean(e[:, 1]))
-    out.append(
-        f"after the {record.warmup_s:g} s warm-up: position RMS **{1e3 * np.sqrt(np.mean(pos**2)):.1f} mm**, "
+    out[0] += (
+        f"; after the {record.warmup_s:g} s warm-up: position RMS **{1e3 * np.sqrt(np.mean(pos**2)):.1f} mm**, "
         f"mean e1 {1e3 * m1:+.1f} mm, mean e2 {1e3 * m2:+.1f} mm"
     )
     out.append("")
-    out.append("**where to look**")
     if abs(m1) > 0.01 and abs(m1) > 3 * abs(m2):
         side = "behind" if m1 > 0 else "ahead of"
-        out.append(f"- e1: the robot runs {side} its reference by {1e3 * abs(m1):.0f} mm on average, along the path")
+        lag = f"- e1: the robot runs {side} its reference by {1e3 * abs(m1):.0f} mm on average, along the path"
         if record.controller.startswith("adaptive"):
-            out.append("  (the networks do not learn this lag away: the README's finding on the robot, see Results)")
+            lag += "; the networks do not learn this lag away (the README's finding on the robot, see Results)"
+        out.append(lag)
     if record.split_s is not None and record.split_s / T < n:
         k = int(round(record.split_s / T))
         before = _rms(record.e_true[w:k])
         after = _rms(record.e_true[k:n])
-        out.append(
-            f"- the event at {record.split_s:g} s (diamonds on every plot): position RMS {before:.1f} mm before, "
-            f"{after:.1f} mm after"
-        )
-    if "z" in record.ctrl:
-        out.append("- weights: how far each layer moves; trace(P) falls as the EKF grows sure")
+        out.append(f"- the event at {record.split_s:g} s: position RMS {before:.1f} mm before, {after:.1f} mm after")
     if record.controller != "corradini":
         out.append(
             f"- next: the same seed without learning, `mlpfac run {record.scenario} --controller corradini "

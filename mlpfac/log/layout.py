@@ -4,8 +4,9 @@ Left: what the run is and where to look (a text panel), the 3D world, the top vi
 Right, top to bottom: e1, e2, e3 and |(e1, e2)| each on its own axis; v, omega and the wheel speeds;
 then the learning (the weights' change per layer, every weight one tab away) beside the EKF
 (trace(P) and the innovation as log10, the raw values and h1, h2, h5 in tabs). A view is shown when
-the record has a series under its origin. Titles say what is drawn, in which unit and colour, so
-legends stay hidden and cover nothing; every time plot marks the events (dark-red diamonds).
+the record has a series under its origin. Titles say what is drawn and in which unit; the text
+panel names the colours, so legends stay hidden and cover nothing; every time plot marks the
+events (dark-red diamonds).
 
 The same layout shows several runs (:func:`blueprint` with ``prefixes``, used by
 :func:`mlpfac.log.compare.save_comparison`): each view then holds that view's series of every run,
@@ -26,21 +27,21 @@ from mlpfac.record import RunRecord
 
 # (place, title, origin, marked: the events are marked on its first series).
 VIEWS = (
-    ("errors", "e1: lag along the path [m]", "/errors/e1", True),
-    ("errors", "e2: off the path, sideways [m]", "/errors/e2", True),
-    ("errors", "e3: heading error [rad]", "/errors/e3", True),
-    ("errors", "|(e1, e2)|: distance to reference [m]", "/errors/position", True),
-    ("speeds", "v [m/s]: commanded blue, measured orange, v_r grey", "/controls/v", True),
-    ("speeds", "omega [rad/s]: commanded blue, measured orange, omega_r grey", "/controls/omega", True),
-    ("speeds", "wheel speeds [rad/s]: left blue, right red; pale: measured", "/wheels", True),
-    ("learning", "weights: RMS change since t = 0, per layer", "/weight_change", True),
-    ("learning", "every weight, one line each", "/weights", False),
+    ("errors", "e1 along path [m]", "/errors/e1", True),
+    ("errors", "e2 sideways [m]", "/errors/e2", True),
+    ("errors", "e3 heading [rad]", "/errors/e3", True),
+    ("errors", "|(e1, e2)| [m]", "/errors/position", True),
+    ("speeds", "v [m/s]", "/controls/v", True),
+    ("speeds", "omega [rad/s]", "/controls/omega", True),
+    ("speeds", "wheel speeds [rad/s]", "/wheels", True),
+    ("learning", "weights: RMS change per layer", "/weight_change", True),
+    ("learning", "all weights", "/weights", False),
     ("ekf", "log10 trace(P)", "/ekf/log10_trace_P", True),
     ("ekf", "log10 |innovation|", "/ekf/log10_innovation", True),
-    ("ekf", "h1, h2, h5: estimate blue, true grey", "/h", False),
+    ("ekf", "h1, h2, h5", "/h", False),
     ("ekf", "trace(P)", "/ekf/trace_P", False),
     ("ekf", "mean diag(P)", "/ekf/mean_diag_P", False),
-    ("ekf", "innovation [m, m, rad]: e1 red, e2 green, e3 blue", "/ekf/innovation", False),
+    ("ekf", "innovation [m, m, rad]", "/ekf/innovation", False),
     ("ekf", "other plant telemetry", "/plant", False),
     ("ekf", "other ctrl telemetry", "/ctrl", False),
 )
@@ -56,19 +57,21 @@ def _under(path: str, origin: str) -> bool:
     return path == origin or path.startswith(origin + "/")
 
 
-def blueprint(
-    record: RunRecord,
-    ref_xy: np.ndarray | None = None,
-    series: list[Series] | None = None,
-    prefixes: Sequence[str] = ("",),
-) -> rrb.Blueprint:
-    """The default layout for ``record`` (its series: ``series``, default :func:`plan_series`).
-    ``prefixes``: the entity-path prefixes of the runs shown together ("" for one run)."""
+def blueprint(record: RunRecord, ref_xy: np.ndarray | None = None, series: list[Series] | None = None) -> rrb.Blueprint:
+    """The default layout for ``record`` (its series: ``series``, default :func:`plan_series`)."""
     ref_xy = record.ref[: max(record.n, 1), :2] if ref_xy is None else ref_xy
-    lo, hi = bounds(ref_xy)
+    paths = ["/" + s.path for s in (plan_series(record) if series is None else series)]
+    return layout(ref_xy, paths)
+
+
+def layout(
+    ref_xy: np.ndarray | None, paths: Sequence[str], prefixes: Sequence[str] = ("",), one: bool = True
+) -> rrb.Blueprint:
+    """The layout for series ``paths`` (entity paths of one run) of the runs under ``prefixes``
+    ("" for one run); the views frame ``ref_xy`` (the reference path) when given."""
+    lo, hi = bounds(ref_xy if ref_xy is not None else np.zeros((0, 2)))
     center, size = (lo + hi) / 2, max(float(np.max(hi - lo)), 1.0)
     margin = 0.12 * size + 0.2
-    one = tuple(prefixes) == ("",)
 
     def within(origin: str) -> dict:
         if one:
@@ -87,9 +90,7 @@ def blueprint(
             ),
         ),
         rrb.Spatial2DView(
-            name="top view: reference orange, driven path blue, robot purple (x right, y up)"
-            if one
-            else "top view: reference orange, one colour per run (x right, y up)",
+            name="top view (x right, y up)",
             **within("/top"),
             background=(245, 245, 245),
             visual_bounds=rrb.VisualBounds2D(
@@ -109,17 +110,14 @@ def blueprint(
                 ],
             ),
         ),
-        row_shares=[1.6, 2.4, 3.0, 1.2],
+        row_shares=[3.0, 1.8, 2.8, 1.0],
     )
-    paths = ["/" + s.path for s in (plan_series(record) if series is None else series)]
     views: dict[str, list] = {"errors": [], "speeds": [], "learning": [], "ekf": []}
     for place, title, origin, _ in VIEWS:
         if any(_under(p, origin) for p in paths):
-            corner = place == "learning" and origin == "/weight_change" and one
-            legend = rrb.PlotLegend(corner="RightBottom", visible=True) if corner else rrb.PlotLegend(visible=False)
-            if not one and "blue" in title:  # colours are the runs', not the lines'
-                title = title.split(":")[0]
-            views[place].append(rrb.TimeSeriesView(name=title, **within(origin), plot_legend=legend))
+            views[place].append(
+                rrb.TimeSeriesView(name=title, **within(origin), plot_legend=rrb.PlotLegend(visible=False))
+            )
     right = [rrb.Horizontal(*views[k]) for k in ("errors", "speeds") if views[k]]
     bottom = [rrb.Tabs(*views[k]) for k in ("learning", "ekf") if views[k]]
     if bottom:

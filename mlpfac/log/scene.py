@@ -40,7 +40,7 @@ def send_static_scene(rec: rr.RecordingStream, ref_xy: np.ndarray, geometry: Seq
     if len(ref_xy):
         rec.log(
             "world/reference_path",
-            rr.LineStrips3D([np.c_[ref_xy, np.full(len(ref_xy), 0.002)]], colors=[REF_COLOR], radii=[0.008]),
+            rr.LineStrips3D([np.c_[ref_xy, np.full(len(ref_xy), 0.002)]], colors=[REF_COLOR], radii=[0.02]),
             static=True,
         )
     for name, arch in robot_shapes(geometry):
@@ -52,7 +52,7 @@ def send_static_scene(rec: rr.RecordingStream, ref_xy: np.ndarray, geometry: Seq
     # entities below it keep the record's own (x, y).
     rec.log("top/plane", rr.Transform3D(scale=[1.0, -1.0, 1.0]), static=True)
     if len(ref_xy):
-        rec.log("top/plane/reference_path", rr.LineStrips2D([ref_xy], colors=[REF_COLOR], radii=[0.01]), static=True)
+        rec.log("top/plane/reference_path", rr.LineStrips2D([ref_xy], colors=[REF_COLOR], radii=[0.03]), static=True)
     rec.log(
         "top/plane/axes",
         rr.Arrows2D(
@@ -65,7 +65,7 @@ def send_static_scene(rec: rr.RecordingStream, ref_xy: np.ndarray, geometry: Seq
         static=True,
     )
     rec.log("top/plane/path", rr.LineStrips2D.from_fields(colors=[PATH_COLOR], radii=[0.012]), static=True)
-    rec.log("top/plane/robot", rr.Arrows2D.from_fields(colors=[ROBOT_COLOR], radii=[0.03]), static=True)
+    rec.log("top/plane/robot", rr.Arrows2D.from_fields(colors=[ROBOT_COLOR], radii=[0.04]), static=True)
     rec.log("top/plane/reference_now", rr.Points2D.from_fields(colors=[REF_COLOR], radii=[0.05]), static=True)
 
 
@@ -95,7 +95,7 @@ def send_poses(rec: rr.RecordingStream, record: RunRecord, rows: np.ndarray, pat
         rec.send_columns(
             "top/plane/robot",
             indexes=idx,
-            columns=rr.Arrows2D.columns(origins=np.c_[x, y], vectors=0.35 * np.c_[np.cos(th), np.sin(th)]),
+            columns=rr.Arrows2D.columns(origins=np.c_[x, y], vectors=0.45 * np.c_[np.cos(th), np.sin(th)]),
         )
         rec.send_columns("top/plane/reference_now", indexes=idx, columns=rr.Points2D.columns(positions=r[:, :2]))
     if len(path_rows):

@@ -20,10 +20,19 @@ KNOWN: dict[str, RGB] = {
     "adaptive-gains": (214, 39, 40),
     "adaptive-best": (0, 0, 128),
 }
+NAMES: dict[RGB, str] = dict(
+    zip(
+        KNOWN.values(),
+        ["blue", "orange", "green", "black", "purple", "brown", "pink", "olive", "cyan", "red", "navy"],
+        strict=True,
+    )
+)
 PALETTE: tuple[RGB, ...] = (  # for controllers not named above, picked by name
     (214, 39, 40), (148, 103, 189), (140, 86, 75), (227, 119, 194), (188, 189, 34), (23, 190, 207),
     (127, 127, 127), (174, 199, 232), (255, 187, 120), (152, 223, 138), (255, 152, 150), (197, 176, 213),
 )  # fmt: skip
+NAMES |= dict(zip(PALETTE, ["red", "purple", "brown", "pink", "olive", "cyan", "grey", "light blue",
+                            "light orange", "light green", "light red", "lavender"], strict=True))  # fmt: skip
 
 
 def controller_colors(names: Iterable[str]) -> dict[str, RGB]:

@@ -1,0 +1,158 @@
+"""Several saved runs in one recording, to compare them in one viewer with the default layout.
+
+Each run's recording is read back and sent again under ``runs/<controller>-s<seed>/``; its plotted
+lines, driven path and heading arrow take its controller's colour (a second run of one controller
+a paler shade of it), the reference and the event diamonds keep theirs. Every view of the layout
+then overlays that view's series of every run; the text panel lists the runs, their colours and
+their figures (from each folder's metrics.json).
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+import rerun as rr
+
+from mlpfac.exceptions import ConfigError
+from mlpfac.log.layout import ABOUT, layout
+from mlpfac.log.recorder import APPLICATION_ID
+from mlpfac.log.schema import REFSPEED_COLOR, RGB, entity_part
+from mlpfac.plots.colors import NAMES, controller_colors
+
+SCALAR_ROOTS = ("errors", "controls", "wheels", "weight_change", "weights", "ekf", "h", "plant", "ctrl")
+
+
+def run_files(runs: Sequence[Path | str]) -> list[tuple[Path, dict]]:
+    """(run.rrd, metrics) of each run folder (or .rrd file beside its metrics.json); ConfigError
+    naming the first that has no recording."""
+    out = []
+    for d in map(Path, runs):
+        f = d if d.suffix == ".rrd" and d.is_file() else d / "run.rrd"
+        if not f.is_file():
+            raise ConfigError(str(d), "no run.rrd in this folder")
+        try:
+            m = json.loads((f.parent / "metrics.json").read_text())
+            m = m if isinstance(m, dict) else {}
+        except (OSError, ValueError):
+            m = {}
+        out.append((f, m))
+    if not out:
+        raise ConfigError("view", "name at least one run folder")
+    return out
+
+
+def save_comparison(runs: Sequence[Path | str], path: Path | str) -> Path:
+    """Write the runs' comparison recording to ``path`` (checked and read back like a run's)."""
+    from mlpfac.log.sinks import _check_writable, check_recording
+
+    files = run_files(runs)
+    path = Path(path)
+    _check_writable(path)
+    rec = rr.RecordingStream(APPLICATION_ID, recording_id=f"compare-{path.stem}", send_properties=False)
+    rec.set_log_time_enabled(False)
+    rec.set_log_tick_enabled(False)
+    rec.set_sinks(rr.FileSink(path))
+    send_comparison(rec, files)
+    rec.disconnect()
+    check_recording(path)
+    return path
+
+
+def send_comparison(rec: rr.RecordingStream, files: list[tuple[Path, dict]]) -> None:
+    """Every run's chunks under its own prefix, recoloured; the text panel; the layout."""
+    from rerun.chunk import RrdReader
+
+    labels = _labels([m for _, m in files], [f for f, _ in files])
+    colors = _colors([m.get("controller", label) for (_, m), label in zip(files, labels, strict=True)])
+    rec.send_recording_name(" vs ".join(labels))
+    paths: set[str] = set()
+    refs = []
+    for (f, _), label, (color, _) in zip(files, labels, colors, strict=True):
+        prefix = f"runs/{label}/"
+        chunks = []
+        for chunk in RrdReader(f).store().stream().to_chunks():
+            p = str(chunk.entity_path).lstrip("/")
+            if p.startswith("__") or p == ABOUT:
+                continue
+            chunks.append(chunk.with_entity_path("/" + prefix + p))
+            if p == "top/plane/reference_path":
+                refs.append(_strip_points(chunk))
+            if not chunk.is_static and p.split("/")[0] in SCALAR_ROOTS:
+                paths.add(p)
+        rec.send_chunks(chunks)
+        _recolor(rec, prefix, paths, color)
+    rec.log(ABOUT, rr.TextDocument(_about(files, labels, colors), media_type="text/markdown"), static=True)
+    bp = layout(
+        np.concatenate(refs) if refs else None,
+        sorted("/" + p for p in paths),
+        [f"runs/{label}/" for label in labels],
+        one=False,
+    )
+    rec.send_blueprint(bp, make_active=True, make_default=True)
+
+
+def _strip_points(chunk) -> np.ndarray:
+    """The (x, y) points of a LineStrips2D chunk."""
+    v = chunk.to_record_batch().column("LineStrips2D:strips")
+    while not str(v.type).startswith("fixed_size_list"):
+        v = v.flatten()
+    return np.asarray(v.flatten(), dtype=float).reshape(-1, 2)
+
+
+def _labels(ms: list[dict], files: list[Path]) -> list[str]:
+    labels = []
+    for m, f in zip(ms, files, strict=True):
+        base = f"{m['controller']}-s{m['seed']}" if "controller" in m and "seed" in m else f.parent.name or f.stem
+        label, i = entity_part(base), 2
+        while label in labels:
+            label, i = f"{entity_part(base)}-{i}", i + 1
+        labels.append(label)
+    return labels
+
+
+def _colors(controllers: list[str]) -> list[tuple[RGB, str]]:
+    """The controller's colour and its name; each further run of one controller a paler shade."""
+    base = controller_colors(controllers)
+    seen: dict[str, int] = {}
+    out = []
+    for c in controllers:
+        k = seen[c] = seen.get(c, -1) + 1
+        f = 1.0 - 0.6**k  # 0, 0.4, 0.64, ...: towards white
+        name = ("paler " * k) + NAMES.get(base[c], "rgb" + str(base[c]))
+        out.append((tuple(int(round(v + (255 - v) * f)) for v in base[c]), name.replace("paler ", "pale ", 1)))
+    return out
+
+
+def _recolor(rec: rr.RecordingStream, prefix: str, paths: set[str], color: RGB) -> None:
+    for p in sorted(paths):
+        if p.endswith("/event"):
+            continue
+        leaf = p.rsplit("/", 1)[-1]
+        c = REFSPEED_COLOR if leaf == "ref" else _pale(color) if leaf == "meas" else color
+        rec.log(prefix + p, rr.SeriesLines.from_fields(colors=[c]), static=True)
+    rec.log(prefix + "world/path", rr.LineStrips3D.from_fields(colors=[color]), static=True)
+    rec.log(prefix + "top/plane/path", rr.LineStrips2D.from_fields(colors=[color]), static=True)
+    rec.log(prefix + "top/plane/robot", rr.Arrows2D.from_fields(colors=[color]), static=True)
+
+
+def _pale(c: RGB) -> RGB:
+    return tuple(int(round(v + (255 - v) * 0.5)) for v in c)
+
+
+def _about(files: list[tuple[Path, dict]], labels: list[str], colors: list[tuple[RGB, str]]) -> str:
+    lines = ["**runs compared** (one colour per controller; pale: measured, grey: reference speeds)", ""]
+    for (f, m), label, (_, name) in zip(files, labels, colors, strict=True):
+        after = (m.get("phases") or {}).get("after") or (m.get("phases") or {}).get("before") or {}
+        rms = after.get("rms_position_error_m")
+        fig = f", position RMS {'after the event' if 'after' in (m.get('phases') or {}) else ''} {rms * 1e3:.1f} mm"
+        lines.append(
+            f"- **{label}** ({name}): {m.get('scenario', f.parent)}, {m.get('status', '?')}"
+            + (fig.replace("  ", " ") if isinstance(rms, int | float) else "")
+        )
+    events = {(ev.get("time"), ev.get("text")) for _, m in files for ev in m.get("events") or []}
+    for t, text in sorted(events, key=str):
+        lines.append(f"\n**event at {t:g} s**: {text} (diamonds on every plot)")
+    return "\n".join(lines) + "\n"
