@@ -34,7 +34,7 @@ pytestmark = pytest.mark.browser
 CHROMIUM = next((p for p in map(shutil.which, ("chromium", "chromium-browser", "google-chrome")) if p), None)
 TIMEOUT_S = float(os.environ.get("MLPFAC_BROWSER_TIMEOUT", "120"))  # until the run is drawn
 SETTLE_S = 60.0  # then until the picture stops changing
-MIN_PIXELS = 100
+MIN_PIXELS = 50
 WIDTH, HEIGHT = 1600, 1000
 
 
@@ -245,7 +245,7 @@ def test_web_viewer_renders_a_real_run(tmp_path: Path, runs) -> None:
 @pytest.mark.skipif(CHROMIUM is None, reason="no chromium binary (Debian: apt-get install chromium)")
 def test_web_viewer_renders_a_comparison(tmp_path: Path, runs) -> None:
     """Two runs overlaid in one layout, each in its controller's colour."""
-    from mlpfac.log import REF_COLOR
+    from mlpfac.log.compare import COMPARE_REF_COLOR
     from mlpfac.plots import controller_colors
 
     colors = controller_colors(["adaptive", "corradini"])
@@ -254,7 +254,11 @@ def test_web_viewer_renders_a_comparison(tmp_path: Path, runs) -> None:
         tmp_path,
         lambda img: _shows(
             img,
-            {"reference path": REF_COLOR, "adaptive path": colors["adaptive"]},
+            {
+                "reference": COMPARE_REF_COLOR,
+                "adaptive path": colors["adaptive"],
+                "corradini path": colors["corradini"],
+            },
             {"adaptive": colors["adaptive"], "corradini": colors["corradini"]},
         ),
     )

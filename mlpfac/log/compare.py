@@ -22,6 +22,7 @@ from mlpfac.log.recorder import APPLICATION_ID
 from mlpfac.log.schema import REFSPEED_COLOR, RGB, entity_part
 from mlpfac.plots.colors import NAMES, controller_colors
 
+COMPARE_REF_COLOR: RGB = (110, 110, 110)  # the reference, when the runs' colours include orange
 SCALAR_ROOTS = ("errors", "controls", "wheels", "weight_change", "weights", "ekf", "h", "plant", "ctrl")
 
 
@@ -70,7 +71,7 @@ def send_comparison(rec: rr.RecordingStream, files: list[tuple[Path, dict]]) -> 
     rec.send_recording_name(" vs ".join(labels))
     paths: set[str] = set()
     refs = []
-    for (f, _), label, (color, _) in zip(files, labels, colors, strict=True):
+    for i, ((f, _), label, (color, _)) in enumerate(zip(files, labels, colors, strict=True)):
         prefix = f"runs/{label}/"
         chunks = []
         for chunk in RrdReader(f).store().stream().to_chunks():
@@ -83,7 +84,7 @@ def send_comparison(rec: rr.RecordingStream, files: list[tuple[Path, dict]]) -> 
             if not chunk.is_static and p.split("/")[0] in SCALAR_ROOTS:
                 paths.add(p)
         rec.send_chunks(chunks)
-        _recolor(rec, prefix, paths, color)
+        _recolor(rec, prefix, paths, color, 0.03 * 0.6**i)
     rec.log(ABOUT, rr.TextDocument(_about(files, labels, colors), media_type="text/markdown"), static=True)
     bp = layout(
         np.concatenate(refs) if refs else None,
@@ -126,16 +127,31 @@ def _colors(controllers: list[str]) -> list[tuple[RGB, str]]:
     return out
 
 
-def _recolor(rec: rr.RecordingStream, prefix: str, paths: set[str], color: RGB) -> None:
+def _recolor(rec: rr.RecordingStream, prefix: str, paths: set[str], color: RGB, radius: float) -> None:
+    """The run's lines in its colour; its driven path ``radius`` wide (each run's narrower than the
+    one before, so that paths lying on each other all show)."""
     for p in sorted(paths):
         if p.endswith("/event"):
             continue
         leaf = p.rsplit("/", 1)[-1]
         c = REFSPEED_COLOR if leaf == "ref" else _pale(color) if leaf == "meas" else color
         rec.log(prefix + p, rr.SeriesLines.from_fields(colors=[c]), static=True)
-    rec.log(prefix + "world/path", rr.LineStrips3D.from_fields(colors=[color]), static=True)
-    rec.log(prefix + "top/plane/path", rr.LineStrips2D.from_fields(colors=[color]), static=True)
+    rec.log(prefix + "world/path", rr.LineStrips3D.from_fields(colors=[color], radii=[radius]), static=True)
+    rec.log(prefix + "top/plane/path", rr.LineStrips2D.from_fields(colors=[color], radii=[radius]), static=True)
     rec.log(prefix + "top/plane/robot", rr.Arrows2D.from_fields(colors=[color]), static=True)
+    # The reference in grey, thin: the runs' colours are drawn over it.
+    rec.log(
+        prefix + "world/reference_path",
+        rr.LineStrips3D.from_fields(colors=[COMPARE_REF_COLOR], radii=[0.008]),
+        static=True,
+    )
+    rec.log(
+        prefix + "top/plane/reference_path",
+        rr.LineStrips2D.from_fields(colors=[COMPARE_REF_COLOR], radii=[0.01]),
+        static=True,
+    )
+    rec.log(prefix + "world/reference_now", rr.Arrows3D.from_fields(colors=[COMPARE_REF_COLOR]), static=True)
+    rec.log(prefix + "top/plane/reference_now", rr.Points2D.from_fields(colors=[COMPARE_REF_COLOR]), static=True)
 
 
 def _pale(c: RGB) -> RGB:
@@ -143,7 +159,7 @@ def _pale(c: RGB) -> RGB:
 
 
 def _about(files: list[tuple[Path, dict]], labels: list[str], colors: list[tuple[RGB, str]]) -> str:
-    lines = ["**runs compared** (one colour per controller; pale: measured, grey: reference speeds)", ""]
+    lines = ["**runs compared**: one colour per controller (pale: measured); grey: the reference", ""]
     for (f, m), label, (_, name) in zip(files, labels, colors, strict=True):
         after = (m.get("phases") or {}).get("after") or (m.get("phases") or {}).get("before") or {}
         rms = after.get("rms_position_error_m")
@@ -154,5 +170,5 @@ def _about(files: list[tuple[Path, dict]], labels: list[str], colors: list[tuple
         )
     events = {(ev.get("time"), ev.get("text")) for _, m in files for ev in m.get("events") or []}
     for t, text in sorted(events, key=str):
-        lines.append(f"\n**event at {t:g} s**: {text} (diamonds on every plot)")
+        lines.append(f"\n**event at {t:g} s**: {text} (dark-red diamonds on every plot)")
     return "\n".join(lines) + "\n"

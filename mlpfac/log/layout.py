@@ -110,7 +110,7 @@ def layout(
                 ],
             ),
         ),
-        row_shares=[3.0, 1.8, 2.8, 1.0],
+        row_shares=[3.2, 1.5, 2.6, 1.3] if one else [1.6, 1.8, 2.8, 0.8 + 0.4 * len(prefixes)],
     )
     views: dict[str, list] = {"errors": [], "speeds": [], "learning": [], "ekf": []}
     for place, title, origin, _ in VIEWS:
