@@ -120,6 +120,26 @@ def test_bad_flag(tmp_path, capsys, monkeypatch, case):
     assert not (tmp_path / "out").exists()
 
 
+# view and plot: (argv, text the message must hold); "D" is a folder holding no run
+BAD_VIEW_PLOT = {
+    "view: no run.rrd": (["view", "D"], "no run.rrd"),
+    "view --save onto a folder": (["view", "D", "D", "--save", "D"], "no run.rrd"),
+    "plot: not a folder": (["plot", "missing"], "is not a folder"),
+    "plot: no runs": (["plot", "D"], "holds no finished runs"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD_VIEW_PLOT))
+def test_bad_view_or_plot(tmp_path, capsys, monkeypatch, case):
+    argv, needle = BAD_VIEW_PLOT[case]
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "D").mkdir()
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and needle in err, err
+    assert [p.name for p in tmp_path.rglob("*")] == ["D"]
+
+
 def test_a_bad_file_from_the_command_line_has_no_traceback(tmp_path):
     path = tmp_path / "bad.toml"
     path.write_bytes(b"\xff\xfe\x00binary")

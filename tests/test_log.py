@@ -6,6 +6,7 @@ transforms as float32, so those are compared to float32.
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -385,3 +386,69 @@ def test_schema_rows_are_well_formed():
         assert bool(row.path) == (row.send != schema.UNSENT), row
         assert row.names == () or len(row.names) == len(row.cols or row.names), row
         assert ("{name}" in row.path) == bool(row.names) or row.send != schema.LINES, row
+
+
+@pytest.fixture(scope="module")
+def logged(tmp_path_factory):
+    """The synthetic record (events at 12.5 s and 20 s) logged as the runner does, read back."""
+    from conftest import log_record, read_rrd, synthetic_record
+
+    rec = synthetic_record()
+    path = tmp_path_factory.mktemp("logged") / "run.rrd"
+    log_record(rec, path)
+    return rec, read_rrd(path)
+
+
+def test_events_are_marked_on_every_time_plot_and_the_text_panel_says_where_to_look(logged):
+    """A diamond at each event on the first series of every marked view, at that series' value; the
+    text panel names the scenario, the controller, the events and the run's figures."""
+    from mlpfac.log.layout import marked_origins
+
+    record, ents = logged
+    steps = [int(round(ev["time"] / record.T)) for ev in record.events]
+    origins = marked_origins(list(ents))
+    assert {"/errors/e1", "/errors/e3", "/wheels", "/weight_change", "/ekf/log10_trace_P"} <= set(origins)
+    for origin in origins:
+        col = ents[f"{origin}/event"].temporal["Scalars:scalars"]
+        assert col.times["step"].tolist() == steps, origin
+    e1 = [v[0] for v in ents["/errors/e1/event"].temporal["Scalars:scalars"].values.to_pylist()]
+    assert e1 == pytest.approx(record.e_true[steps, 0].tolist())
+    text = ents["/about"].static["TextDocument:text"].to_pylist()[0][0]
+    assert "**synthetic**" in text and "`adaptive`" in text and "event at 12.5 s" in text and "position RMS" in text
+
+
+def test_weights_show_as_their_change_per_layer(logged):
+    from mlpfac.networks import Networks
+
+    labels = Networks().labels()
+    idx = [i for i, name in enumerate(labels) if name.startswith("NN_G/hidden/")]
+    record, ents = logged
+    col = ents["/weight_change/NN_G/hidden"].temporal["Scalars:scalars"]
+    z = record.ctrl["z"]
+    k = col.times["step"][100]
+    want = np.sqrt(np.mean((z[k, idx] - z[0, idx]) ** 2))
+    assert col.values.to_pylist()[100][0] == pytest.approx(want)
+
+
+def test_runs_compared_in_one_recording_take_their_controllers_colours(tmp_path, make_record, save_rrd):
+    """`mlpfac view A B --save`: each run under runs/<controller>-s<seed>/, its lines recoloured, one layout."""
+    from conftest import read_rrd
+
+    from mlpfac.cli import main
+    from mlpfac.plots import controller_colors
+    from mlpfac.runner import metrics
+
+    for ctrl, seed in (("adaptive", 3), ("kanayama", 4)):
+        rec = make_record(N=600, seed=seed)
+        rec.controller = ctrl
+        save_rrd(rec, tmp_path / ctrl / "run.rrd")
+        (tmp_path / ctrl / "metrics.json").write_text(json.dumps(metrics(rec)))
+    out = tmp_path / "both.rrd"
+    assert main(["view", str(tmp_path / "adaptive"), str(tmp_path / "kanayama"), "--save", str(out)]) == 0
+    ents = read_rrd(out)
+    for label in ("adaptive-s3", "kanayama-s4"):
+        assert f"/runs/{label}/errors/e1" in ents and f"/runs/{label}/top/plane/path" in ents
+    r, g, b = controller_colors(["kanayama"])["kanayama"]
+    colors = ents["/runs/kanayama-s4/errors/e1"].static["SeriesLines:colors"].to_pylist()[0]
+    assert colors == [(r << 24) | (g << 16) | (b << 8) | 255]
+    assert "kanayama-s4** (green)" in ents["/about"].static["TextDocument:text"].to_pylist()[0][0]

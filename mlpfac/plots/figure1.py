@@ -17,8 +17,9 @@ EVENT_COLOR = "firebrick"
 RUN_COLOR = "tab:blue"
 
 
-def figure1(rec: RunRecord, baseline: RunRecord | None, path: Path) -> None:
-    """Write Figure 1 for ``rec`` (and ``baseline`` for panel h) to ``path`` (PNG)."""
+def figure1(rec: RunRecord, baseline: RunRecord | None, path: Path) -> list[str]:
+    """Write Figure 1 for ``rec`` (and ``baseline`` for panel h) to ``path`` (PNG); the letters of
+    the panels drawn."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -70,6 +71,7 @@ def figure1(rec: RunRecord, baseline: RunRecord | None, path: Path) -> None:
     _paths(fig.add_subplot(grid[prow, 0]), fig.add_subplot(grid[prow, 1]), rec, warm)
     fig.savefig(path, dpi=90)
     plt.close(fig)
+    return sorted([*axes, "e", "f"])
 
 
 def _signal(ax, t: np.ndarray, y: np.ndarray, warm: float) -> None:

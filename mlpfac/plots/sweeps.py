@@ -178,6 +178,7 @@ def _over_time(ax, ctrls: list[str], groups: list[list[dict]], colors: dict) -> 
         series = [m["series"] for m in ms if outcome(m) == "tracking" and isinstance(m.get("series"), dict)]
         missing += sum(outcome(m) == "tracking" and not isinstance(m.get("series"), dict) for m in ms)
         if not series:
+            ax.plot([], [], color=colors[c], label=f"{c} (no tracking run)")
             continue
         dt = float(series[0]["dt_s"])
         width = max(len(s["position_error_m"]) for s in series)
