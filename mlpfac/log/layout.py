@@ -105,7 +105,7 @@ def layout(
                 timeline_columns=[rbe.TimelineColumn("sim_time")],
                 text_log_columns=[
                     rbe.TextLogColumn("LogLevel", visible=False),
-                    rbe.TextLogColumn("EntityPath", visible=one is False),
+                    rbe.TextLogColumn("EntityPath", visible=False),  # the texts name their run
                     rbe.TextLogColumn("Body"),
                 ],
             ),
