@@ -14,6 +14,7 @@ plots can be made again from a finished sweep with ``mlpfac plot DIR``.
 from __future__ import annotations
 
 import json
+import textwrap
 import warnings
 from pathlib import Path
 
@@ -215,7 +216,7 @@ def _over_time(ax, ctrls: list[str], groups: list[list[dict]], colors: dict) -> 
     if t_event is not None:
         ax.axvline(t_event, color="firebrick", ls="--", lw=1.0)
         ax.annotate(
-            f"event: {text.split(' (')[0]}",
+            "event: " + textwrap.shorten(text.split(" (")[0], 60, placeholder=" ..."),
             (t_event, 1.0),
             xycoords=("data", "axes fraction"),
             xytext=(4, -4),
