@@ -8,7 +8,8 @@ The only package that imports rerun: import it lazily, so runs without logging d
 - :mod:`~mlpfac.log.schema`: what each record array and telemetry key becomes (paths, names, colours)
 - :mod:`~mlpfac.log.series`: a record's rows as scalar columns, sent in batches
 - :mod:`~mlpfac.log.scene`: robot shapes, poses and paths in the 3D world and the top view
-- :mod:`~mlpfac.log.layout`: the default blueprint
+- :mod:`~mlpfac.log.layout`: the default blueprint; :mod:`~mlpfac.log.about`: its text panel
+- :mod:`~mlpfac.log.compare`: several saved runs in one recording (``mlpfac view A B``)
 
 No wall-clock time is recorded, so the same run gives the same decoded contents. The bytes of two
 .rrd files still differ: rerun stamps every chunk and row with a time-based unique id.
