@@ -135,6 +135,7 @@ class Column:
 @dataclass
 class Entity:
     static: dict[str, object] = field(default_factory=dict)  # component -> pyarrow array (last write)
+    static_row: dict[str, bytes] = field(default_factory=dict)  # component -> row id of that write
     temporal: dict[str, Column] = field(default_factory=dict)
 
 
@@ -150,9 +151,11 @@ def read_rrd(path) -> dict[str, Entity]:
         rb = chunk.to_record_batch()
         names = [f.name for f in rb.schema if f.metadata and f.metadata.get(b"rerun:kind") == b"data"]
         timelines = [f.name for f in rb.schema if f.metadata and f.metadata.get(b"rerun:kind") == b"index"]
+        row_id = max(rb.column("rerun.controls.RowId").to_pylist())  # time-ordered: the last write wins
         for name in names:
             if chunk.is_static:
-                ent.static[name] = rb.column(name)
+                if row_id >= ent.static_row.get(name, b""):
+                    ent.static[name], ent.static_row[name] = rb.column(name), row_id
             else:
                 times = {tl: rb.column(tl).cast(pa.int64()).to_numpy() for tl in timelines}
                 parts.setdefault(chunk.entity_path, {}).setdefault(name, []).append((times, rb.column(name)))
