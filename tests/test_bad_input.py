@@ -123,7 +123,7 @@ def test_bad_flag(tmp_path, capsys, monkeypatch, case):
 # view and plot: (argv, text the message must hold); "D" is a folder holding no run
 BAD_VIEW_PLOT = {
     "view: no run.rrd": (["view", "D"], "no run.rrd"),
-    "view --save onto a folder": (["view", "D", "D", "--save", "D"], "no run.rrd"),
+    "view --save: folders without run.rrd": (["view", "D", "D", "--save", "x.rrd"], "no run.rrd"),
     "plot: not a folder": (["plot", "missing"], "is not a folder"),
     "plot: no runs": (["plot", "D"], "holds no finished runs"),
 }

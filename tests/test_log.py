@@ -462,3 +462,4 @@ def test_runs_compared_in_one_recording_take_their_controllers_colours(tmp_path,
     colors = ents["/runs/kanayama-s4/errors/e1"].static["SeriesLines:colors"].to_pylist()[0]
     assert colors == [(r << 24) | (g << 16) | (b << 8) | 255]
     assert "kanayama-s4** (green)" in about_texts(out)[0][0]
+    assert main(["view", str(tmp_path / "adaptive"), str(tmp_path / "kanayama"), "--save", str(tmp_path)]) == 2
