@@ -85,8 +85,11 @@ def draw(path: Path, pairs: list[tuple[str, str]], runs: dict) -> Path:
     fig, axes = plt.subplots(
         len(scenarios),
         2,
-        figsize=(13.5, 3.6 * len(scenarios) + 0.4),
-        gridspec_kw={"width_ratios": [1, 1.5]},
+        figsize=(14, sum(_row_height(sum(s == scn for s, _ in pairs)) for scn in scenarios) + 0.4),
+        gridspec_kw={
+            "width_ratios": [1, 1.3],
+            "height_ratios": [_row_height(sum(s == x for s, _ in pairs)) for x in scenarios],
+        },
         squeeze=False,
         layout="constrained",
     )
@@ -97,6 +100,10 @@ def draw(path: Path, pairs: list[tuple[str, str]], runs: dict) -> Path:
     fig.savefig(path, dpi=90)
     plt.close(fig)
     return path
+
+
+def _row_height(controllers: int) -> float:
+    return max(3.4, 0.38 * controllers + 1.3)
 
 
 def _phase(ms: list[dict]) -> str:
@@ -114,61 +121,52 @@ def _event_text(ms: list[dict]) -> tuple[float | None, str]:
 
 
 def _distribution(ax, scn: str, ctrls: list[str], runs: dict, colors: dict) -> None:
+    """Controllers top to bottom; each tracking run a dot over its box; "k/n" tracking and the
+    median in the labels (red when a run was lost or diverged)."""
     all_ms = [m for c in ctrls for m in runs[(scn, c)]]
     phase = _phase(all_ms)
     rng = np.random.default_rng(0)  # the dots' jitter: the same picture every time
-    values = []
-    for c in ctrls:
-        ms = [m for m in runs[(scn, c)] if outcome(m) == "tracking"]
-        v = [m["phases"].get(phase, {}).get("rms_position_error_m") for m in ms]
-        values.append(np.array([x * 1e3 for x in v if x is not None and np.isfinite(x)]))
-    pos = np.arange(len(ctrls))
-    filled = [(p, v) for p, v in zip(pos, values, strict=True) if len(v)]
+    pos = -np.arange(len(ctrls))  # the first controller on top
+    labels, filled = [], []
+    for p, c in zip(pos, ctrls, strict=True):
+        ms = runs[(scn, c)]
+        ok = [m for m in ms if outcome(m) == "tracking"]
+        v = [m["phases"].get(phase, {}).get("rms_position_error_m") for m in ok]
+        v = np.array([x * 1e3 for x in v if x is not None and np.isfinite(x)])
+        other = [
+            f"{sum(outcome(m) == k for m in ms)} {k}" for k in ("lost", "diverged") if any(outcome(m) == k for m in ms)
+        ]
+        labels.append(f"{c}  {len(ok)}/{len(ms)}" + (f"  median {np.median(v):.3g}" if len(v) else "  none tracking"))
+        if other:
+            labels[-1] += f"\n({', '.join(other)})"
+        if len(v):
+            filled.append((p, v, c))
     if filled:
         ax.boxplot(
-            [v for _, v in filled],
-            positions=[p for p, _ in filled],
-            widths=0.55,
+            [v for _, v, _ in filled],
+            positions=[p for p, _, _ in filled],
+            orientation="horizontal",
+            widths=0.6,
             showfliers=False,
             medianprops={"color": "black", "lw": 1.5},
             boxprops={"color": "0.35"},
             whiskerprops={"color": "0.35"},
             capprops={"color": "0.35"},
         )
-        for (p, v), c in zip(filled, [c for c, v in zip(ctrls, values, strict=True) if len(v)], strict=True):
-            ax.scatter(p + rng.uniform(-0.18, 0.18, len(v)), v, s=12, color=colors[c], alpha=0.75, zorder=3, lw=0)
-            ax.annotate(f"{np.median(v):.3g}", (p + 0.3, np.median(v)), va="center", fontsize=7.5, color="0.2")
-        lo, hi = min(v.min() for _, v in filled), max(v.max() for _, v in filled)
+        for p, v, c in filled:
+            ax.scatter(v, p + rng.uniform(-0.2, 0.2, len(v)), s=12, color=colors[c], alpha=0.75, zorder=3, lw=0)
+        lo, hi = min(v.min() for _, v, _ in filled), max(v.max() for _, v, _ in filled)
         if lo > 0 and hi / lo > 10:
-            ax.set_yscale("log")
-    else:
-        ax.text(0.5, 0.5, "no run kept tracking", transform=ax.transAxes, ha="center", va="center", color="0.3")
-    for p, c in zip(pos, ctrls, strict=True):
+            ax.set_xscale("log")
+    ax.set_yticks(pos, labels, fontsize=8)
+    for tick, c in zip(ax.get_yticklabels(), ctrls, strict=True):
         ms = runs[(scn, c)]
-        n_ok = sum(outcome(m) == "tracking" for m in ms)
-        other = ", ".join(
-            f"{k} {sum(outcome(m) == k for m in ms)}" for k in ("lost", "diverged") if any(outcome(m) == k for m in ms)
-        )
-        label = f"{n_ok}/{len(ms)} tracking" + (f"\n{other}" if other else "")
-        if n_ok == 0:
-            ax.annotate("none\ntracking", (p, 0.5), xycoords=("data", "axes fraction"), ha="center", color="firebrick")
-        ax.annotate(
-            label,
-            (p, 1.0),
-            xycoords=("data", "axes fraction"),
-            xytext=(0, 3),
-            textcoords="offset points",
-            ha="center",
-            va="bottom",
-            fontsize=8,
-            color="black" if n_ok == len(ms) else "firebrick",
-        )
-    ax.set_xticks(pos, ctrls, rotation=25 if len(ctrls) > 3 else 0, ha="right" if len(ctrls) > 3 else "center")
-    ax.set_xlim(-0.6, len(ctrls) - 0.4)
+        tick.set_color("black" if all(outcome(m) == "tracking" for m in ms) else "firebrick")
+    ax.set_ylim(pos[-1] - 0.6, 0.6)
     what = "after the event" if phase == "after" else "after the warm-up"
-    ax.set_ylabel(f"position RMS {what} [mm]")
-    ax.set_title(f"{scn}: one dot per tracking run, median in mm", fontsize=10, pad=28)
-    ax.grid(axis="y", alpha=0.3, which="both")
+    ax.set_xlabel(f"position RMS {what} [mm]")
+    ax.set_title(f"{scn}: one dot per tracking run (tracking k/n, median in mm)", fontsize=10)
+    ax.grid(axis="x", alpha=0.3, which="both")
 
 
 def _over_time(ax, ctrls: list[str], groups: list[list[dict]], colors: dict) -> None:
