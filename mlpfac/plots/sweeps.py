@@ -3,7 +3,8 @@
 
 - left, the position RMS after the event per controller (whole run after the warm-up when the
   scenario has no event): one dot per tracking run over a box (quartiles, whiskers 1.5 IQR), on a
-  log scale when the runs spread over more than a decade, the share of tracking runs above;
+  log scale when the runs spread over more than a decade; the share of tracking runs and the
+  median beside each controller's name, red when a run was lost or diverged;
 - right, the position error over time (metrics.json's RMS per 0.1 s): the median over the
   tracking runs and the band between their quartiles, the event marked.
 
