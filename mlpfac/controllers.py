@@ -15,6 +15,7 @@ import numpy as np
 from mlpfac.error_model import G_true, f_true, wrap
 from mlpfac.estimators import EKF, UKF, covariance
 from mlpfac.exceptions import ConfigError
+from mlpfac.input_model import InputModel
 from mlpfac.kernels import adaptive_step, corradini_step, kanayama_step, seeds
 from mlpfac.law import GAIN_RANGE, Law
 from mlpfac.networks import Networks
@@ -49,6 +50,10 @@ class AdaptiveConfig:
       e_k - f_nominal - G_nominal u_{k-1}. With zero output weights the scheme starts as Corradini's law.
     - ``learned_gains = true``: the law divides by the learned input gains b_v = -G_11, b_omega = -G_32
       (kept within ``GAIN_RANGE`` times T) instead of T, so a wrong actuator/wheel gain can be learned.
+    - ``input_gains = true``: learn the plant's input gains g_v, g_omega from the motion measured
+      between poses (:mod:`mlpfac.input_model`) and send u / g, so the law's u reaches the robot as
+      the kinematic model (7) assumes; ``input_P0``, ``input_forgetting``; ``detect = h > 0`` reopens
+      their covariance when a CUSUM on the normalised innovation exceeds h (a change detected).
     - ``output_weight_std``: the initial spread of the output-layer weights (``weight_std`` if unset);
       0 with ``prior`` starts from the nominal functions exactly.
     """
@@ -70,6 +75,10 @@ class AdaptiveConfig:
     cautious: float = 0.0  # weight c of the estimate covariance in the law (0: certainty equivalence)
     prior: bool = False  # learn the correction to the nominal kinematic functions
     learned_gains: bool = False  # divide by the learned input gains -G_11, -G_32 instead of T
+    input_gains: bool = False  # learn the plant's input gains g_v, g_omega from the measured motion; send u / g
+    input_P0: float = 1e-4  # noqa: N815 -- the input gains' initial (and reopened) variance
+    input_forgetting: float = 0.999  # the input gains' forgetting factor (1: none)
+    detect: float = 0.0  # CUSUM threshold on the input gains' normalised innovation that reopens their P (0: off)
 
     def __post_init__(self) -> None:
         for name in ("P0", "weight_std", "ukf_alpha"):
@@ -90,6 +99,12 @@ class AdaptiveConfig:
             raise ConfigError(
                 "cautious", f"the caution weight must be >= 0 (0: certainty equivalence), got {self.cautious}"
             )
+        if not self.input_P0 > 0:
+            raise ConfigError("input_P0", f"must be positive, got {self.input_P0}")
+        if not 0.0 < self.input_forgetting <= 1.0:
+            raise ConfigError("input_forgetting", f"must be in (0, 1] (1: none), got {self.input_forgetting}")
+        if not self.detect >= 0:
+            raise ConfigError("detect", f"the CUSUM threshold must be >= 0 (0: off), got {self.detect}")
         if self.prior and self.networks.residual:
             raise ConfigError("prior", "prior already adds e to f (f = f_nominal + NN_f); turn residual off")
 
@@ -166,12 +181,15 @@ class Adaptive:
         z0 = np.stack([self._initial_weights(g) for g in rngs])  # (B, alpha)
         B, a = z0.shape
         self.first = True
+        c = self.config
+        self.input = None
+        if c.input_gains:
+            self.input = InputModel(B, T, c.input_P0, c.input_forgetting, c.detect)
         if not self.compiled:
             self.seeds = [_NumpySeed(self, self._estimator(z0[b]), T) for b in range(B)]
             self.est = self.seeds[0].est if self.single else None  # one run: its estimator, for inspection
             self._tele = None
             return
-        c = self.config
         self.est = self._estimator(z0)  # the compiled EKF's state: z (B, alpha), P (B, alpha, alpha), C-ordered
         self.est.P = np.broadcast_to(c.P0 * np.eye(a), (B, a, a))
         Lf, LG = c.networks.L_f, c.networks.L_G
@@ -202,6 +220,8 @@ class Adaptive:
 
     def step(self, e: np.ndarray, r: np.ndarray) -> np.ndarray:
         E = e[None] if self.single else e
+        if self.input is not None:  # the input gains, from the motion measured since the last step
+            self.input.observe(E, r, self.first)
         if not self.compiled:
             u = np.stack([s.step(E[b], r, self.first) for b, s in enumerate(self.seeds)])
         else:
@@ -210,10 +230,19 @@ class Adaptive:
                 np.ascontiguousarray(E, dtype=float), float(r[3]), float(r[4]), self.first, *self._args, *self._consts
             )
         self.first = False
+        if self.input is not None:  # the command sent: u / g
+            u = self.input.command(u)
         return u[0].copy() if self.single else u
 
     def telemetry(self) -> dict[str, np.ndarray | float]:
-        """z, trace P, mean diag P, the innovation (32) and h_hat (34); per seed, (B, ...), for a batch."""
+        """z, trace P, mean diag P, the innovation (32) and h_hat (34) (and the input model's gains,
+        delay and alarms); per seed, (B, ...), for a batch."""
+        t = self._telemetry()
+        if self.input is not None:
+            t = t | {k: (v[0] if self.single else v) for k, v in self.input.telemetry().items()}
+        return t
+
+    def _telemetry(self) -> dict[str, np.ndarray | float]:
         if not self.compiled:
             per = [s.telemetry() for s in self.seeds]
             if self.single:
@@ -410,5 +439,9 @@ VARIANTS: dict[str, dict] = {
         "P_max": 1e-4,
     },
 }
+# adaptive-best with the input gains learned from the measured motion (mlpfac.input_model), re-adapted
+# when a CUSUM on their innovation detects a change ("adaptive-input"), or by forgetting alone.
+VARIANTS["adaptive-input"] = VARIANTS["adaptive-best"] | {"input_gains": True, "detect": 20.0}
+VARIANTS["adaptive-input-forget"] = VARIANTS["adaptive-best"] | {"input_gains": True}
 
 CONTROLLERS = (*VARIANTS, "corradini", "kanayama")
