@@ -53,7 +53,9 @@ class AdaptiveConfig:
     - ``input_gains = true``: learn the plant's input gains g_v, g_omega from the motion measured
       between poses (:mod:`mlpfac.input_model`) and send u / g, so the law's u reaches the robot as
       the kinematic model (7) assumes; ``input_P0``, ``input_forgetting``; ``detect = h > 0`` reopens
-      their covariance when a CUSUM on the normalised innovation exceeds h (a change detected).
+      their covariance when a CUSUM on the normalised innovation exceeds h (a change detected);
+      ``input_delay = D > 0``: find a measurement delay of up to D control steps from the commands'
+      correlation with the measured motion, and give the law the error of the pose predicted over it.
     - ``output_weight_std``: the initial spread of the output-layer weights (``weight_std`` if unset);
       0 with ``prior`` starts from the nominal functions exactly.
     """
@@ -76,6 +78,7 @@ class AdaptiveConfig:
     prior: bool = False  # learn the correction to the nominal kinematic functions
     learned_gains: bool = False  # divide by the learned input gains -G_11, -G_32 instead of T
     input_gains: bool = False  # learn the plant's input gains g_v, g_omega from the measured motion; send u / g
+    input_delay: int = 0  # D > 0: find a measurement delay of up to D steps and predict the pose over it
     input_P0: float = 1e-4  # noqa: N815 -- the input gains' initial (and reopened) variance
     input_forgetting: float = 0.999  # the input gains' forgetting factor (1: none)
     detect: float = 0.0  # CUSUM threshold on the input gains' normalised innovation that reopens their P (0: off)
@@ -99,6 +102,12 @@ class AdaptiveConfig:
             raise ConfigError(
                 "cautious", f"the caution weight must be >= 0 (0: certainty equivalence), got {self.cautious}"
             )
+        if (
+            isinstance(self.input_delay, bool)
+            or not isinstance(self.input_delay, int)
+            or not 0 <= self.input_delay <= 50
+        ):
+            raise ConfigError("input_delay", f"a whole number of control steps in 0-50, got {self.input_delay!r}")
         if not self.input_P0 > 0:
             raise ConfigError("input_P0", f"must be positive, got {self.input_P0}")
         if not 0.0 < self.input_forgetting <= 1.0:
@@ -183,8 +192,8 @@ class Adaptive:
         self.first = True
         c = self.config
         self.input = None
-        if c.input_gains:
-            self.input = InputModel(B, T, c.input_P0, c.input_forgetting, c.detect)
+        if c.input_gains or c.input_delay > 0:
+            self.input = InputModel(B, T, c.input_gains, c.input_delay, c.input_P0, c.input_forgetting, c.detect)
         if not self.compiled:
             self.seeds = [_NumpySeed(self, self._estimator(z0[b]), T) for b in range(B)]
             self.est = self.seeds[0].est if self.single else None  # one run: its estimator, for inspection
@@ -220,8 +229,8 @@ class Adaptive:
 
     def step(self, e: np.ndarray, r: np.ndarray) -> np.ndarray:
         E = e[None] if self.single else e
-        if self.input is not None:  # the input gains, from the motion measured since the last step
-            self.input.observe(E, r, self.first)
+        if self.input is not None:  # the input model's update; the error of the pose predicted over the delay
+            E = self.input.observe(E, r, self.first)
         if not self.compiled:
             u = np.stack([s.step(E[b], r, self.first) for b, s in enumerate(self.seeds)])
         else:
@@ -440,8 +449,10 @@ VARIANTS: dict[str, dict] = {
     },
 }
 # adaptive-best with the input gains learned from the measured motion (mlpfac.input_model), re-adapted
-# when a CUSUM on their innovation detects a change ("adaptive-input"), or by forgetting alone.
+# when a CUSUM on their innovation detects a change ("adaptive-input"), or by forgetting alone; and
+# with a measurement delay of up to 6 steps found and predicted over ("adaptive-input-delay").
 VARIANTS["adaptive-input"] = VARIANTS["adaptive-best"] | {"input_gains": True, "detect": 20.0}
 VARIANTS["adaptive-input-forget"] = VARIANTS["adaptive-best"] | {"input_gains": True}
+VARIANTS["adaptive-input-delay"] = VARIANTS["adaptive-input"] | {"input_delay": 6}
 
 CONTROLLERS = (*VARIANTS, "corradini", "kanayama")

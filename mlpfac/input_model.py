@@ -43,7 +43,12 @@ from mlpfac.kernels import JIT
 # columns of the per-seed state S, per channel c (v: +0, omega: +1)
 Y, U, G, P, R, CUSUM = 0, 2, 4, 6, 8, 10
 N, HOLD, ALARMS = 12, 13, 14
-WIDTH = 15
+DY, DELAY, NC = 15, 16, 17  # the last y_omega, the delay found (steps), samples in the correlations
+WIDTH = 18
+CORR_WINDOW = 200  # steps in the exponential window of the delay's correlations
+CORR_MIN = 50  # samples in the correlations before they decide
+ACCEPT = 1.0  # a lag j >= 2 is the delay when its correlation exceeds this fraction of lag 0's
+SWITCH = 1.25  # and a new choice must beat the current one's by this factor (hysteresis)
 WINDOW = 50  # steps in the exponential window of the sums: a = 1 - 1 / WINDOW
 DRIFT = 2.0  # the CUSUM's allowance: nu^2 has mean about 1 while the model holds
 R_WINDOW = 1000  # steps in the running mean of the innovation's square (the noise variance, learned)
@@ -63,14 +68,18 @@ def _pose(e, r, q):
 
 
 @njit(**JIT)
-def observe(e, r, first, hist, q_prev, S, params):
-    """Update the gains with the motion measured since the last step.
+def observe(e, r, first, hist, q_prev, S, C, e_hat, params):
+    """Update the gains (and the delay) with the motion measured since the last step; e_hat the
+    error (2) of the pose predicted over the delay (e itself when it is 0).
 
-    e (B, 3), r (>= 3,); hist (B, 2, 2) the commands sent, u_{k-1} then u_{k-2}; q_prev (B, 3) the
-    last measured pose; S (B, WIDTH) the scalars (columns above). params = (T, P0, forgetting, detect).
+    e (B, 3), r (>= 3,); hist (B, 2, H) the commands sent, newest first (H = max(2, D + 2));
+    q_prev (B, 3) the last measured pose; S (B, WIDTH) the scalars (columns above); C (B, D + 1)
+    the correlations of the delay. params = (T, P0, forgetting, detect).
     """
     T, P0, forgetting, detect = params[0], params[1], params[2], params[3]
+    D = C.shape[1] - 1
     a = 1.0 - 1.0 / WINDOW
+    ac = 1.0 - 1.0 / CORR_WINDOW
     q = np.empty(3)
     y = np.empty(2)
     for b in range(e.shape[0]):
@@ -109,42 +118,103 @@ def observe(e, r, first, hist, q_prev, S, params):
                 Sb[P], Sb[P + 1] = P0, P0
                 Sb[Y], Sb[Y + 1], Sb[U], Sb[U + 1] = 0.0, 0.0, 0.0, 0.0
                 Sb[HOLD], Sb[CUSUM], Sb[CUSUM + 1], Sb[ALARMS] = HOLDOFF, 0.0, 0.0, Sb[ALARMS] + 1.0
+                Sb[NC] = 0.0
+                for j in range(D + 1):
+                    C[b, j] = 0.0
+            if D > 0:
+                _delay(Sb, C[b], hist[b, 1], y[1], ac)
         q_prev[b, 0], q_prev[b, 1], q_prev[b, 2] = q[0], q[1], q[2]
+        d = int(Sb[DELAY])
+        if d == 0:
+            e_hat[b, 0], e_hat[b, 1], e_hat[b, 2] = e[b, 0], e[b, 1], e[b, 2]
+        else:
+            _predict(q, r, hist[b], Sb, d, T, e_hat[b])
 
 
 @njit(**JIT)
-def command(u, S, hist, out):
-    """The command sent, u / g per channel (g within GAINS), and the history pushed."""
+def _delay(Sb, C, h, y_w, ac):
+    """The delay from the correlations C_j of the omega channel's increments, Delta y_omega,k with
+    Delta u_omega,k-1-j = u_k-1-j - u_k-2-j: the closed loop's pose noise makes the commands' increments
+    nearly white, so C_j is the increment response and peaks at the delay. Lags 0 and 1 share
+    pose noise with Delta y_k (biased); a lag j >= 2 is taken when C_j exceeds ACCEPT |C_0|, after
+    CORR_MIN samples since the last alarm (which restarts them), and replaces the current choice
+    only when SWITCH times better."""
+    if Sb[N] > 1.0:
+        dy = y_w - Sb[DY]
+        for j in range(C.shape[0]):
+            C[j] = ac * C[j] + dy * (h[j] - h[j + 1])
+        Sb[NC] += 1.0
+        if Sb[NC] >= CORR_MIN:
+            cur = int(Sb[DELAY])
+            best, arg = ACCEPT * abs(C[0]), 0  # lag 0 (no delay) stands for itself
+            for j in range(2, C.shape[0]):
+                if C[j] > best:
+                    best, arg = C[j], j
+            now = C[cur] if cur > 0 else ACCEPT * abs(C[0])
+            if arg != cur and best > SWITCH * now:
+                Sb[DELAY] = arg
+    Sb[DY] = y_w
+
+
+@njit(**JIT)
+def _predict(q, r, h, Sb, d, T, out):
+    """The error (2) to r of the pose q moved over the last d commands sent (h, newest first), each a
+    unicycle step at g u: the measured pose is d steps old (a Smith predictor)."""
+    x, y, th = q[0], q[1], q[2]
+    for j in range(d - 1, -1, -1):
+        v, om = Sb[G] * h[0, j], Sb[G + 1] * h[1, j]
+        mid = th + 0.5 * T * om
+        x += T * v * math.cos(mid)
+        y += T * v * math.sin(mid)
+        th += T * om
+    c, s = math.cos(th), math.sin(th)
+    dx, dy = r[0] - x, r[1] - y
+    out[0] = c * dx + s * dy
+    out[1] = -s * dx + c * dy
+    out[2] = math.pi - ((math.pi - (r[2] - th)) % (2.0 * math.pi))
+
+
+@njit(**JIT)
+def command(u, gains, S, hist, out):
+    """The command sent, u / g per channel (g within GAINS) with ``gains`` (else u), and the history pushed."""
     lo, hi = GAINS
     for b in range(u.shape[0]):
         for c in range(2):
-            out[b, c] = u[b, c] / min(max(S[b, G + c], lo), hi)
-            hist[b, c, 1] = hist[b, c, 0]
-            hist[b, c, 0] = out[b, c]
+            out[b, c] = u[b, c] / min(max(S[b, G + c], lo), hi) if gains else u[b, c]
+            h = hist[b, c]
+            for j in range(h.shape[0] - 1, 0, -1):
+                h[j] = h[j - 1]
+            h[0] = out[b, c]
 
 
 class InputModel:
     """The batched state of the input model for B seeds, and its two steps: ``observe`` before the
     law, ``command`` after it (the command sent)."""
 
-    def __init__(self, B: int, T: float, P0: float, forgetting: float, detect: float) -> None:
-        self.hist = np.zeros((B, 2, 2))
+    def __init__(self, B: int, T: float, gains: bool, delay: int, P0: float, forgetting: float, detect: float) -> None:
+        self.gains = gains
+        self.hist = np.zeros((B, 2, max(2, delay + 2)))
+        self.C = np.zeros((B, delay + 1))
+        self.e_hat = np.zeros((B, 3))
         self.q_prev = np.zeros((B, 3))
         self.S = np.zeros((B, WIDTH))
         self.S[:, G : G + 2] = 1.0
         self.S[:, P : P + 2] = P0
         self.u = np.zeros((B, 2))
         self.params = np.array([T, P0, forgetting, detect], dtype=float)
-        observe(np.zeros((0, 3)), np.zeros(5), True, self.hist[:0], self.q_prev[:0], self.S[:0], self.params)
-        command(self.u[:0], self.S[:0], self.hist[:0], self.u[:0])  # load (or compile) now, not mid-run
+        z = (self.hist, self.q_prev, self.S, self.C, self.e_hat)  # load (or compile) now, not mid-run
+        observe(np.zeros((0, 3)), np.zeros(5), True, *(x[:0] for x in z), self.params)
+        command(self.u[:0], gains, self.S[:0], self.hist[:0], self.u[:0])
 
-    def observe(self, e: np.ndarray, r: np.ndarray, first: bool) -> None:
-        observe(np.ascontiguousarray(e, dtype=float), r, first, self.hist, self.q_prev, self.S, self.params)
+    def observe(self, e: np.ndarray, r: np.ndarray, first: bool) -> np.ndarray:
+        e = np.ascontiguousarray(e, dtype=float)
+        observe(e, r, first, self.hist, self.q_prev, self.S, self.C, self.e_hat, self.params)
+        return self.e_hat
 
     def command(self, u: np.ndarray) -> np.ndarray:
-        command(np.ascontiguousarray(u, dtype=float), self.S, self.hist, self.u)
+        command(np.ascontiguousarray(u, dtype=float), self.gains, self.S, self.hist, self.u)
         return self.u
 
     def telemetry(self) -> dict[str, np.ndarray]:
-        """Per seed: the input gains (g_v, g_omega) and the alarms so far."""
-        return {"input_gain": self.S[:, G : G + 2], "alarms": self.S[:, ALARMS]}
+        """Per seed: the input gains (g_v, g_omega), the delay found (steps) and the alarms so far."""
+        return {"input_gain": self.S[:, G : G + 2], "delay_steps": self.S[:, DELAY], "alarms": self.S[:, ALARMS]}
