@@ -202,12 +202,13 @@ class Adaptive:
         self.est = self._estimator(z0)  # the compiled EKF's state: z (B, alpha), P (B, alpha, alpha), C-ordered
         self.est.P = np.broadcast_to(c.P0 * np.eye(a), (B, a, a))
         Lf, LG = c.networks.L_f, c.networks.L_G
-        self._S = np.zeros((B, 17 + Lf + LG))  # x_f, x_G, phi_f, phi_G, u_{k-1}, e_{k-1}, nominal e_k
+        nf = c.networks.n_f
+        self._S = np.zeros((B, 11 + nf + Lf + LG))  # x_f, x_G, phi_f, phi_G, u_{k-1}, e_{k-1}, nominal e_k
         self._u, self._innovation, self._h_hat = np.zeros((B, 2)), np.zeros((B, 3)), np.zeros((B, 3))
         self._trace = np.zeros(B)
         self._H = np.zeros((B, 3, a))
         est, lim = self.est, self.law
-        ints = np.array([Lf, LG, c.networks.residual, self.prior is not None, est.Q is not None], dtype=np.int64)
+        ints = np.array([Lf, LG, c.networks.residual, self.prior is not None, est.Q is not None, nf], dtype=np.int64)
         params = np.array(
             [
                 c.networks.error_scale,
@@ -302,7 +303,7 @@ class _NumpySeed:
                 self.innovation = self.est.update(
                     y, lambda z: nets.h_and_jacobian(z, x_f, x_G, e_prev, u_prev, head if z is z_prev else None)
                 )
-        x_f, x_G = nets.inputs(e, r[3], r[4])
+        x_f, x_G = nets.inputs(e, r[3], r[4], self.prev[3] if self.prev is not None else np.zeros(2))
         z = self.est.z
         head = nets.head(z, x_f, x_G, e)
         u = self._control(e, r, x_f, x_G, head)
@@ -454,5 +455,7 @@ VARIANTS: dict[str, dict] = {
 VARIANTS["adaptive-input"] = VARIANTS["adaptive-best"] | {"input_gains": True, "detect": 20.0}
 VARIANTS["adaptive-input-forget"] = VARIANTS["adaptive-best"] | {"input_gains": True}
 VARIANTS["adaptive-input-delay"] = VARIANTS["adaptive-input"] | {"input_delay": 6}
+# the paper's scheme whose NN_f also sees the last command (the velocity state)
+VARIANTS["adaptive-velocity"] = {"networks": {"velocity_inputs": True}}
 
 CONTROLLERS = (*VARIANTS, "corradini", "kanayama")

@@ -54,6 +54,7 @@ BAD_FILES: dict[str, tuple[str | bytes, str]] = {
     "R negative": ("[controller.adaptive]\nR = -1.0\n", "R"),
     "estimator": ('[controller.adaptive]\nestimator = "pf"\n', "estimator"),
     "prior text": ('[controller.adaptive]\nprior = "yes"\n', "prior"),
+    "velocity_inputs text": ('[controller.adaptive]\nvelocity_inputs = 1\n', "velocity_inputs"),
     "input_gains text": ('[controller.adaptive]\ninput_gains = "yes"\n', "input_gains"),
     "input_delay negative": ("[controller.adaptive]\ninput_delay = -1\n", "input_delay"),
     "input_delay float": ("[controller.adaptive]\ninput_delay = 2.5\n", "input_delay"),
