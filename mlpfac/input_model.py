@@ -43,12 +43,13 @@ from mlpfac.kernels import JIT
 # columns of the per-seed state S, per channel c (v: +0, omega: +1)
 Y, U, G, P, R, CUSUM = 0, 2, 4, 6, 8, 10
 N, HOLD, ALARMS = 12, 13, 14
-DY, DELAY, NC = 15, 16, 17  # the last y_omega, the delay found (steps), samples in the correlations
-WIDTH = 18
+DY, DELAY, NC, CAND, RUN = 15, 16, 17, 18, 19  # last y_omega, delay found, samples, candidate, its run
+WIDTH = 20
 CORR_WINDOW = 200  # steps in the exponential window of the delay's correlations
-CORR_MIN = 50  # samples in the correlations before they decide
-ACCEPT = 1.0  # a lag j >= 2 is the delay when its correlation exceeds this fraction of lag 0's
+CORR_MIN = 100  # samples in the correlations before they decide
+ACCEPT = 2.0  # a lag j >= 2 is the delay when its step C_j - C_j-1 exceeds this multiple of |C_0|
 SWITCH = 1.25  # and a new choice must beat the current one's by this factor (hysteresis)
+PERSIST = 100  # steps a new choice must stay the best before it is taken
 WINDOW = 50  # steps in the exponential window of the sums: a = 1 - 1 / WINDOW
 DRIFT = 2.0  # the CUSUM's allowance: nu^2 has mean about 1 while the model holds
 R_WINDOW = 1000  # steps in the running mean of the innovation's square (the noise variance, learned)
@@ -118,7 +119,7 @@ def observe(e, r, first, hist, q_prev, S, C, e_hat, params):
                 Sb[P], Sb[P + 1] = P0, P0
                 Sb[Y], Sb[Y + 1], Sb[U], Sb[U + 1] = 0.0, 0.0, 0.0, 0.0
                 Sb[HOLD], Sb[CUSUM], Sb[CUSUM + 1], Sb[ALARMS] = HOLDOFF, 0.0, 0.0, Sb[ALARMS] + 1.0
-                Sb[NC] = 0.0
+                Sb[NC] = 0.0  # the delay's correlations start again too
                 for j in range(D + 1):
                     C[b, j] = 0.0
             if D > 0:
@@ -135,10 +136,12 @@ def observe(e, r, first, hist, q_prev, S, C, e_hat, params):
 def _delay(Sb, C, h, y_w, ac):
     """The delay from the correlations C_j of the omega channel's increments, Delta y_omega,k with
     Delta u_omega,k-1-j = u_k-1-j - u_k-2-j: the closed loop's pose noise makes the commands' increments
-    nearly white, so C_j is the increment response and peaks at the delay. Lags 0 and 1 share
-    pose noise with Delta y_k (biased); a lag j >= 2 is taken when C_j exceeds ACCEPT |C_0|, after
-    CORR_MIN samples since the last alarm (which restarts them), and replaces the current choice
-    only when SWITCH times better."""
+    nearly white, so C_j is the increment response: for a delay d it steps from negative at d - 1 to
+    positive at d (measured on the robot: C_d - C_d-1 = 2.7-5.6 |C_0| with 30 ms, at most 0.9 |C_0|
+    after the payload, actuator, friction and drive changes, whose slower response spreads over the
+    lags without a step). Lags 0 and 1 share pose noise with Delta y_k (biased); a lag j >= 2 is taken
+    when C_j - C_j-1 exceeds ACCEPT |C_0|, after CORR_MIN samples since the last alarm (which restarts
+    them), and replaces the current choice only when SWITCH times larger for PERSIST steps in a row."""
     if Sb[N] > 1.0:
         dy = y_w - Sb[DY]
         for j in range(C.shape[0]):
@@ -146,13 +149,16 @@ def _delay(Sb, C, h, y_w, ac):
         Sb[NC] += 1.0
         if Sb[NC] >= CORR_MIN:
             cur = int(Sb[DELAY])
-            best, arg = ACCEPT * abs(C[0]), 0  # lag 0 (no delay) stands for itself
+            best, arg = ACCEPT * abs(C[0]), 0  # no delay stands for itself
             for j in range(2, C.shape[0]):
-                if C[j] > best:
-                    best, arg = C[j], j
-            now = C[cur] if cur > 0 else ACCEPT * abs(C[0])
-            if arg != cur and best > SWITCH * now:
-                Sb[DELAY] = arg
+                if C[j] - C[j - 1] > best:
+                    best, arg = C[j] - C[j - 1], j
+            now = C[cur] - C[cur - 1] if cur > 0 else ACCEPT * abs(C[0])
+            cand = arg if arg != cur and best > SWITCH * now else cur
+            Sb[RUN] = Sb[RUN] + 1.0 if cand == Sb[CAND] else 0.0
+            Sb[CAND] = cand
+            if cand != cur and Sb[RUN] >= PERSIST:
+                Sb[DELAY] = cand
     Sb[DY] = y_w
 
 
