@@ -10,8 +10,7 @@ the scale alone, per channel c in {v, omega}: the input gain g_c of
 with y the velocity realised between the poses measured at k - 1 and k (the chord over T at the
 mid heading, and the heading increment over T). The newest command, u_{k-1}, is left out on
 purpose: it was computed from the pose noise n_{k-1} that y_k also holds (as -n_{k-1} / T), and in
-closed loop that correlation biases a regression on it (its gain came out 1.3 on the nominal
-robot); u_{k-2} is uncorrelated with the noise of y_k and on a smooth path carries the same gain.
+closed loop that correlation biases a regression on it upwards; u_{k-2} is uncorrelated with the noise of y_k and on a smooth path carries the same gain.
 g is estimated by recursive least squares (forgetting ``input_forgetting``, from g = 1, the
 kinematic model (7)) on exponentially windowed sums over about ``WINDOW`` steps,
 Y = sum a^m y_k-m and U = sum a^m u_k-2-m: the pose noise of Y nearly telescopes to that of the
@@ -25,8 +24,14 @@ period, when g is right.
 Re-adaptation by detection instead of forgetting alone: per channel, the normalised one-step
 innovation nu^2 = (y - g u_{k-2})^2 / r_hat (r_hat a running mean of its square) has mean about 1
 while the model holds; a CUSUM s = max(0, s + nu^2 - 2) sums its excess, and when s exceeds
-``detect`` the covariance of g is opened back to P0 and the sums start again, so g moves to the changed plant within a few
-tenths of a second. A pose held over (a measurement delay growing) is no new motion: skipped.
+``detect`` the covariance of g is opened back to P0 and the sums start again, so g moves to the
+changed plant within a few tenths of a second. A pose held over (a measurement delay growing) is no
+new motion: skipped.
+
+The delay (``input_delay = D > 0``): the measured pose may be d <= D steps old. d is found from the
+correlations of the heading-rate increments with the command increments j steps back (:func:`_delay`),
+and the law is then given the error (2) of the measured pose moved over the last d commands sent,
+a unicycle step at g u each (:func:`_predict`, a Smith predictor); with d = 0 it is given e itself.
 
 Batch-first and compiled as :mod:`mlpfac.kernels`: a seed's arithmetic does not depend on the batch.
 """
