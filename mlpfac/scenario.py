@@ -31,7 +31,10 @@ from mlpfac.networks import Networks
 from mlpfac.reference import make_reference
 
 NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._+-]*")  # a scenario's name is a folder name in runs/ and sweeps
-NO_LIMIT = {"v_max", "omega_max", "max_wheel_speed"}  # keys where inf means "no limit"
+NO_LIMIT = {"v_max", "omega_max"}  # keys where inf means "no limit" (None)
+INF_OK = NO_LIMIT | {
+    "max_wheel_speed"
+}  # keys that take inf ("no limit"; max_wheel_speed keeps it: None is the model's)
 MEMORY_SHARE = 0.8  # a run may plan to use at most this share of the memory available now
 
 TOP_KEYS = {
@@ -167,7 +170,7 @@ def load(name_or_path: str | Path) -> Scenario:
         raise ConfigError(str(path), f"not valid TOML: {err}") from None
     table.setdefault("name", path.stem)
     plant = table.get("plant")
-    if isinstance(plant, dict) and isinstance(plant.get("model"), str) and plant["model"]:
+    if isinstance(plant, dict) and isinstance(plant.get("model"), str) and plant["model"] and not plant["model"].startswith("menagerie:"):
         plant["model"] = str((path.parent / Path(plant["model"]).expanduser()).resolve())
     scn = parse(table, str(path))
     table["provenance"] = _provenance(scn)
@@ -194,9 +197,9 @@ def _check_provenance(recorded, config, where: str) -> None:
     want = recorded.get("model_sha256")
     if want is None or not hasattr(config, "path"):
         return
-    from mlpfac.plants.robot import model_fingerprint
+    from mlpfac.plants.model_file import model_fingerprint
 
-    got = model_fingerprint(config.path)
+    got = model_fingerprint(config.model)
     if got != want:
         raise ConfigError(
             f"{where} model_sha256",
@@ -250,7 +253,7 @@ def _typed(value, hint, key: str) -> bool:
         return isinstance(value, int) and not isinstance(value, bool)
     if hint is float:
         ok = isinstance(value, int | float) and not isinstance(value, bool)
-        return ok and (math.isfinite(value) or (key in NO_LIMIT and value == math.inf))
+        return ok and (math.isfinite(value) or (key in INF_OK and value == math.inf))
     if hint is str:
         return isinstance(value, str)
     return True  # nested configs (Networks) are built on their own

@@ -10,7 +10,7 @@ import mujoco
 import numpy as np
 import pytest
 
-from mlpfac.events import Event, parse_event
+from mlpfac.events import make_event, parse_event
 from mlpfac.exceptions import ConfigError
 from mlpfac.plants.mujoco import MujocoConfig, MujocoPlant
 
@@ -101,7 +101,7 @@ def test_payload_mass_is_in_the_model_and_its_dynamics_match_a_compiled_model():
     hold(plant, (0.6, 0.4), 30)
     b = plant.model.body("chassis").id
     inertia0 = plant.model.body_inertia[b].copy()
-    text = plant.apply(Event(0.3, "payload", {"mass_scale": 3.0}))
+    text = plant.apply(make_event("payload", 0.3, mass_scale=3.0))
     assert "5 -> 15 kg" in text
     assert plant.model.body_mass[b] == pytest.approx(15.0)
     np.testing.assert_allclose(plant.model.body_inertia[b], 3.0 * inertia0)
@@ -128,9 +128,9 @@ def test_payload_mass_is_in_the_model_and_its_dynamics_match_a_compiled_model():
 def test_payload_adds_mass_to_a_named_body():
     plant = make()
     w = plant.model.body("left_wheel").id
-    plant.apply(Event(0.0, "payload", {"mass_kg": 0.25, "body": "left_wheel"}))
+    plant.apply(make_event("payload", 0.0, mass_kg=0.25, body="left_wheel"))
     assert plant.model.body_mass[w] == pytest.approx(0.5)
-    plant.apply(Event(0.0, "payload", {"mass_kg": 2.0}))
+    plant.apply(make_event("payload", 0.0, mass_kg=2.0))
     assert plant.model.body("chassis").mass[0] == pytest.approx(7.0)
     plant.reset(np.zeros(3), np.random.default_rng(0))  # a new run starts from the nominal robot
     assert plant.model.body("chassis").mass[0] == pytest.approx(5.0)
@@ -142,7 +142,7 @@ def test_friction_changes_the_slip_in_a_hard_start():
     for mu in (None, 0.1):
         plant = make()
         if mu is not None:
-            assert "1 -> 0.1" in plant.apply(Event(0.0, "friction", {"mu": mu}))
+            assert "1 -> 0.1" in plant.apply(make_event("friction", 0.0, mu=mu))
             tyres = [plant.model.geom(n).id for n in ("left_tyre", "right_tyre")]
             np.testing.assert_allclose(plant.model.geom_friction[tyres, 0], mu)
         rec = hold(plant, (1.5, 0.0), 30)  # from rest to 1.5 m/s: full torque
@@ -162,7 +162,7 @@ def test_wheel_radius_scale_makes_the_robot_faster_by_the_scale():
     for scale in (1.0, 1.5):
         plant = make()
         if scale != 1.0:
-            assert "0.05 -> 0.075 m" in plant.apply(Event(0.0, "wheel_radius", {"scale": scale}))
+            assert "0.05 -> 0.075 m" in plant.apply(make_event("wheel_radius", 0.0, scale=scale))
             assert plant.model.geom("left_tyre").size[0] == pytest.approx(0.075)
             assert plant.ik_radius == pytest.approx(0.05)  # the IK keeps believing the nominal radius
         hold(plant, (0.5, 0.5), 250)
@@ -178,7 +178,7 @@ def test_weaker_force_limit_accelerates_slower(actuator):
     for force_scale in (1.0, 0.5):
         plant = make(actuator)
         if force_scale != 1.0:
-            assert "torque limit 0.6 -> 0.3 N m" in plant.apply(Event(0.0, "actuator", {"force_scale": force_scale}))
+            assert "torque limit 0.6 -> 0.3 N m" in plant.apply(make_event("actuator", 0.0, force_scale=force_scale))
         reached.append(hold(plant, (1.0, 0.0), 10)["u_true"][-1, 0])  # after 0.1 s at full torque
     assert reached[1] / reached[0] == pytest.approx(0.5, abs=0.05)
 
@@ -190,7 +190,7 @@ def test_lower_gain_follows_a_small_speed_step_slower(actuator):
         plant = make(actuator)
         hold(plant, (0.5, 0.0), 100)
         if kv_scale != 1.0:
-            plant.apply(Event(1.0, "actuator", {"kv_scale": kv_scale}))
+            plant.apply(make_event("actuator", 1.0, kv_scale=kv_scale))
             if actuator == "velocity":
                 np.testing.assert_allclose(plant.model.actuator_gainprm[:, 0], 0.5)
                 np.testing.assert_allclose(plant.model.actuator_biasprm[:, 2], -0.5)  # kv lives here too
@@ -203,7 +203,7 @@ def test_control_period_holds_each_command_longer():
     plant = make()
     rec = hold(plant, (1.0, 0.0), 150)
     dx_before = rec["pose"][-1, 0] - rec["pose"][-2, 0]
-    text = plant.apply(Event(1.5, "control_period", {"factor": 1.5}))
+    text = plant.apply(make_event("control_period", 1.5, factor=1.5))
     assert "0.01 -> 0.015 s" in text
     t0, time0 = plant.sim_time, plant.data.time
     rec = hold(plant, (1.0, 0.0), 2)
@@ -216,7 +216,7 @@ def test_control_period_holds_each_command_longer():
 def test_sensor_delay_returns_the_pose_from_n_steps_ago():
     plant = make()
     hold(plant, (0.5, 0.2), 10)
-    assert "0 -> 3 control steps" in plant.apply(Event(0.1, "sensor_delay", {"steps": 3}))
+    assert "0 -> 3 control steps" in plant.apply(make_event("sensor_delay", 0.1, steps=3))
     truth = [plant.true_pose().copy()]
     for k in range(12):
         plant.step(np.array([0.5 + 0.05 * k, math.sin(k)]))
@@ -487,7 +487,7 @@ def test_friction_event_needs_tyres_that_own_the_contact(tmp_path):
         MujocoConfig(model=write(tmp_path, text), left_actuator="lm", right_actuator="rm", site="base"), 0.01
     )
     with pytest.raises(ConfigError, match="priority"):
-        plant.check_event(Event(1.0, "friction", {"mu": 0.2}), "here")
+        plant.check_event(make_event("friction", 1.0, mu=0.2), "here")
 
 
 # --- shipped scenarios ----------------------------------------------------------------------------
@@ -525,7 +525,8 @@ def test_scenario_builds_a_plant_and_its_events_pass(path):
     assert len(events) == (0 if path.stem in ("eight-nominal", "eight-torque") else 1)
     for i, ev in enumerate(events):
         ev = dict(ev)
-        event = Event(float(ev.pop("time")), ev.pop("kind"), ev)
+        t = float(ev.pop("time"))
+        event = make_event(ev.pop("kind"), t, **ev)
         plant.check_event(event, f"{path.name} [[events]] #{i + 1}")
         assert event.time < table["duration"]
         plant.apply(event)
