@@ -170,7 +170,12 @@ def load(name_or_path: str | Path) -> Scenario:
         raise ConfigError(str(path), f"not valid TOML: {err}") from None
     table.setdefault("name", path.stem)
     plant = table.get("plant")
-    if isinstance(plant, dict) and isinstance(plant.get("model"), str) and plant["model"] and not plant["model"].startswith("menagerie:"):
+    if (
+        isinstance(plant, dict)
+        and isinstance(plant.get("model"), str)
+        and plant["model"]
+        and not plant["model"].startswith("menagerie:")
+    ):
         plant["model"] = str((path.parent / Path(plant["model"]).expanduser()).resolve())
     scn = parse(table, str(path))
     table["provenance"] = _provenance(scn)

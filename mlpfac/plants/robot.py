@@ -9,6 +9,7 @@ timestep) as :class:`mujoco.MjSpec` edits (:mod:`mlpfac.plants.edits`); the step
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -22,7 +23,7 @@ from mlpfac.plants.model_file import fingerprint, is_menagerie, load_spec, model
 
 SETTLE_S = 0.5  # seconds the robot settles on its wheels at least, at construction (the rest pose)
 SETTLE_MAX_S = 10.0  # ... and at most: then it must be at rest
-REST_SPEED = 1e-4  # at rest: no joint of the robot moves faster than this (m/s, rad/s)
+REST_SPEED = 1e-4  # at rest: the free body moves no faster than this (m/s, rad/s)
 SHAPES = {
     int(mujoco.mjtGeom.mjGEOM_BOX): "box",
     int(mujoco.mjtGeom.mjGEOM_CYLINDER): "cylinder",
@@ -170,7 +171,21 @@ class Robot:
 
 
 def read_robot(config: MujocoConfig) -> Robot:
-    """Load, check and describe the robot of ``config``; each problem a ConfigError naming its key."""
+    """Load, check and describe the robot of ``config``; each problem a ConfigError naming its key.
+
+    Read once per process for a configuration and model file (its size and time of change): the
+    plants of a sweep share it and copy what they change (the spec; events compile new models)."""
+    st = config.path.stat()
+    stamp = (st.st_mtime_ns, st.st_size)
+    try:
+        hash(config)
+    except TypeError:  # made in Python with lists: not cached
+        return _read_robot.__wrapped__(config, stamp)
+    return _read_robot(config, stamp)
+
+
+@functools.lru_cache(maxsize=4)
+def _read_robot(config: MujocoConfig, stamp: tuple[int, int]) -> Robot:
     spec, path = load_spec(config.model)
     where = config.model if is_menagerie(config.model) else str(path)
     m = _compile(spec, where)
@@ -224,7 +239,7 @@ def read_robot(config: MujocoConfig) -> Robot:
     tyres = tuple(g for b in wheel_bodies for g in _collision_geoms(m, b) if int(m.geom_type[g]) in WHEEL_SHAPES)
     dt = float(m.opt.timestep)
     d = mujoco.MjData(m)
-    _settle(m, d, dt, qpos0, ctrl0, where)
+    _settle(m, d, dt, qpos0, ctrl0, int(m.jnt_dofadr[jnt]), where)
     anchors = [d.xanchor[j].copy() for j in joints]
     sign = _wheel_signs(config, d, site, joints, anchors)
     c = [s * g for s, g in zip(sign, m.actuator_gear[list(acts), 0], strict=True)]
@@ -344,15 +359,18 @@ def _actuator_id(m: mujoco.MjModel, config: MujocoConfig, key: str, where: str) 
     return a
 
 
-def _settle(m: mujoco.MjModel, d: mujoco.MjData, dt: float, qpos: np.ndarray, ctrl: np.ndarray, where: str) -> None:
+def _settle(
+    m: mujoco.MjModel, d: mujoco.MjData, dt: float, qpos: np.ndarray, ctrl: np.ndarray, droot: int, where: str
+) -> None:
     """From the start pose and controls, let the robot settle on its wheels with zero wheel speed:
-    SETTLE_S at least, then on until no joint moves faster than REST_SPEED (checked)."""
+    SETTLE_S at least, then on until its free body moves no faster than REST_SPEED (checked; a
+    caster wheel may spin on)."""
     mujoco.mj_resetData(m, d)
     d.qpos[:], d.ctrl[:] = qpos, ctrl
     mujoco.mj_forward(m, d)
     mujoco.mj_step(m, d, nstep=int(round(SETTLE_S / dt)))
     chunk = max(1, int(round(0.1 / dt)))
-    while np.max(np.abs(d.qvel), initial=0.0) > REST_SPEED:
+    while np.max(np.abs(d.qvel[droot : droot + 6])) > REST_SPEED:
         if d.time > SETTLE_MAX_S:
             raise ConfigError(
                 where,
