@@ -333,6 +333,133 @@ def test_geometry_is_the_robot_seen_from_the_axle_midpoint():
         assert np.linalg.norm(s["quat"]) == pytest.approx(1.0)
 
 
+# --- both robots: ours and PAL TIAGo from MuJoCo Menagerie, as shipped ----------------------------
+
+TIAGO = {
+    "model": "menagerie:pal_tiago/scene_velocity",
+    "left_actuator": "wheel_left_joint_vel",
+    "right_actuator": "wheel_right_joint_vel",
+    "body": "base_link",
+    "keyframe": "home",
+    "other_actuators": "lock",
+    "tyre": "sphere",
+    "timestep": 0.0025,
+}
+TIAGO_TORQUE = {"pi_kp": 10.0, "pi_ki": 200.0}
+ROBOTS = {"diffdrive": {}, "tiago": TIAGO}
+SPEEDS = {"diffdrive": [(0.5, 0.5), (0.3, -1.5)], "tiago": [(0.3, 0.3), (0.4, 0.0), (0.15, -0.8)]}
+
+
+def robot(name: str, actuator: str = "velocity", **kw) -> MujocoPlant:
+    if name == "tiago":
+        pytest.importorskip("mujoco_menagerie")
+        kw = TIAGO_TORQUE | kw if actuator == "torque" else kw
+    plant = MujocoPlant(MujocoConfig(actuator=actuator, **(ROBOTS[name] | kw)), T)
+    plant.reset(np.zeros(3), np.random.default_rng(0))
+    return plant
+
+
+@pytest.mark.parametrize("name", ROBOTS)
+@pytest.mark.parametrize("actuator", DRIVES)
+def test_each_robot_tracks_constant_commands_within_2_percent(name, actuator):
+    plant = robot(name, actuator)
+    for u in SPEEDS[name]:
+        hold(plant, u, 200)
+        v, omega = np.mean(hold(plant, u, 50)["u_true"], axis=0)
+        assert v == pytest.approx(u[0], rel=0.02, abs=0.002)
+        assert omega == pytest.approx(u[1], rel=0.02, abs=0.004)
+    assert plant.mujoco_warnings() == {}
+    assert plant.diverged() is None
+
+
+@pytest.mark.parametrize("name", ROBOTS)
+@pytest.mark.parametrize(
+    "kind, params",
+    [
+        ("payload", {"mass_scale": 1.5}),
+        ("payload", {"mass_kg": 10.0, "body": "*"}),
+        ("friction", {"mu": 0.3}),
+        ("wheel_radius", {"scale": 1.1}),
+        ("actuator", {"kv_scale": 0.5, "force_scale": 0.5}),
+        ("control_period", {"factor": 1.5}),
+        ("sensor_delay", {"steps": 2}),
+    ],
+)
+def test_every_event_applies_to_each_robot_and_it_stays_on_its_wheels(name, kind, params):
+    plant = robot(name)
+    u = SPEEDS[name][0]
+    hold(plant, u, 100)
+    m0 = plant.model
+    mass, limit, radius = float(m0.body_subtreemass[plant.robot.root]), plant._torque_max[0], plant.real_radius
+    event = make_event(kind, 1.0, **params)
+    plant.check_event(event, "here")
+    text = plant.apply(event)
+    m = plant.model
+    if kind == "payload" and "body" in params:
+        assert float(m.body_subtreemass[plant.robot.root]) == pytest.approx(mass + 10.0)
+        assert "the whole robot" in text
+    elif kind == "payload":
+        assert float(m.body_subtreemass[plant.robot.root]) > mass
+    elif kind == "friction":
+        np.testing.assert_allclose(m.geom_friction[list(plant._tyres), 0], 0.3)
+    elif kind == "wheel_radius":
+        assert plant.real_radius == pytest.approx(1.1 * radius) and plant.ik_radius == pytest.approx(radius)
+    elif kind == "actuator":
+        assert plant._torque_max[0] == pytest.approx(0.5 * limit)
+    hold(plant, u, 150)
+    assert plant.diverged() is None, text
+    assert plant.mujoco_warnings() == {}
+
+
+@pytest.mark.parametrize("name", ROBOTS)
+def test_each_robot_is_bit_identical_for_a_seed(name):
+    runs = []
+    for _ in range(2):
+        plant = robot(name, pose_noise_std=0.001)
+        runs.append(np.array([plant.measure().copy() for _ in range(40) if plant.step(np.array([0.3, 0.2])) is None]))
+    np.testing.assert_array_equal(runs[0], runs[1])
+
+
+def test_tiago_limits_are_read_where_its_makers_declared_them():
+    """The wheels' speed limit is the servo's ctrlrange (5 rad/s), the torque limit the joints'
+    actuatorfrcrange (100 N m): defaults, applied to (v, omega) keeping the curvature."""
+    plant = robot("tiago")
+    assert plant.max_wheel_speed == pytest.approx(5.0)
+    assert plant._torque_max == pytest.approx((100.0, 100.0))
+    rec = hold(plant, (1.0, 0.5), 5)  # asks (1.0 +- 0.1) / 0.098 rad/s: scaled down by one factor
+    wl, wr = rec["wheel_cmd"][-1]
+    assert max(abs(wl), abs(wr)) == pytest.approx(5.0)
+    assert (wr - wl) / (wr + wl) == pytest.approx(0.5 * plant.ik_track / 2 / 1.0)  # omega / v kept
+    plant.apply(make_event("actuator", 0.0, force_scale=0.2))
+    assert plant._torque_max == pytest.approx((20.0, 20.0))
+    rec = hold(plant, (0.45, -2.0), 30)
+    assert np.max(np.abs(rec["torque"])) <= 20.0 + 1e-9  # as applied at the joint
+    assert MujocoPlant(MujocoConfig(**TIAGO, max_wheel_speed=math.inf), T).max_wheel_speed is None
+
+
+def test_tiago_starts_from_its_keyframe_at_rest_with_the_arm_locked_or_held():
+    locked, held = robot("tiago"), robot("tiago", other_actuators="hold")
+    assert len(locked.robot.locked) == 12 and held.robot.locked == ()
+    assert locked.model.nv == held.model.nv - 12
+    for plant in (locked, held):
+        assert plant.model.body_subtreemass[plant.robot.root] == pytest.approx(73.3, abs=0.1)
+        z = plant.data.xpos[plant.robot.root, 2]
+        assert z == pytest.approx(-0.99, abs=0.005)  # on its wheels on the floor at z = -0.99
+        assert plant.real_radius == pytest.approx(0.0983, abs=2e-4)  # from the mesh
+        assert plant.ik_track == pytest.approx(0.4044, abs=1e-4)
+    torso = held.model.joint("torso_lift_joint")
+    assert held.data.qpos[torso.qposadr[0]] == pytest.approx(0.15, abs=0.01)  # "home", not 0
+
+
+def test_tiago_geometry_is_its_meshes():
+    shapes = robot("tiago").geometry()
+    meshes = [s for s in shapes if s["type"] == "mesh"]
+    assert len(meshes) > 20 and not any(s["name"].startswith("mlpfac") for s in shapes)
+    for s in meshes:
+        assert s["vertices"].ndim == 2 and s["vertices"].shape[1] == 3 and s["faces"].shape[1] == 3
+        assert s["faces"].max() < len(s["vertices"])
+
+
 # --- your own robot -------------------------------------------------------------------------------
 
 OWN_ROBOT = """

@@ -92,6 +92,7 @@ def mesh_radius(m: mujoco.MjModel, geom: int, joint: int) -> float:
 def sphere_tyres(spec: mujoco.MjSpec, m: mujoco.MjModel, wheels, radius: float, priority: int) -> None:
     """On each wheel (joint, collision geoms): a sphere tyre of ``radius`` about the hinge's anchor,
     with the friction and contact bits of the wheel's own collision geom, which stops colliding."""
+    own = [[spec.geoms[g] for g in geoms] for _, geoms in wheels]  # before any geom is added (ids move)
     for side, (joint, geoms) in zip(("left", "right"), wheels, strict=True):
         g0 = geoms[0]
         spec.bodies[int(m.jnt_bodyid[joint])].add_geom(
@@ -107,8 +108,8 @@ def sphere_tyres(spec: mujoco.MjSpec, m: mujoco.MjModel, wheels, radius: float, 
             density=0.0,
             group=3,
         )
-        for g in geoms:
-            spec.geoms[g].contype, spec.geoms[g].conaffinity = 0, 0
+    for geom in (geom for wheel in own for geom in wheel):
+        geom.contype, geom.conaffinity = 0, 0
 
 
 def to_torque_motors(spec: mujoco.MjSpec, m: mujoco.MjModel, acts: tuple[int, int]) -> None:

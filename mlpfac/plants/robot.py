@@ -374,8 +374,8 @@ def _settle(
         if d.time > SETTLE_MAX_S:
             raise ConfigError(
                 where,
-                f"the robot does not come to rest on its wheels within {SETTLE_MAX_S:g} s (joint speeds up to "
-                f'{np.max(np.abs(d.qvel)):.2g}); lock what moves (other_actuators = "lock") or start from a keyframe',
+                f"the robot does not come to rest on its wheels within {SETTLE_MAX_S:g} s (speeds up to "
+                f'{np.max(np.abs(d.qvel[droot : droot + 6])):.2g}); lock what moves (other_actuators = "lock") or start from a keyframe',
             )
         mujoco.mj_step(m, d, nstep=chunk)
     mujoco.mj_forward(m, d)
