@@ -171,3 +171,24 @@ def test_a_tiago_config_toml_reruns_to_the_same_metrics(tmp_path):
     a, b = (json.loads((d / "metrics.json").read_text()) for d in (first, again))
     for key in ("rms_position_error_m", "max_position_error_m", "rms_heading_error_rad", "max_abs_weight"):
         assert a[key] == b[key]
+
+
+def test_tiago_is_drawn_with_its_meshes_standing_on_the_floor():
+    pytest.importorskip("mujoco_menagerie")
+    import rerun as rr
+
+    from mlpfac.log import meshes
+    from mlpfac.log.scene import robot_shapes
+
+    scn = mlpfac.load("tiago-nominal")
+    from mlpfac.factory import make_plant
+
+    shapes = make_plant(scn, np.zeros((2, 5))).geometry()
+    arches = dict(robot_shapes(shapes))
+    drawn = [a for a in arches.values() if isinstance(a, rr.Mesh3D)]
+    assert len(drawn) == sum(s["type"] == "mesh" for s in shapes) > 20
+    lift = -min(meshes.lowest_point(s) for s in shapes if s["type"] == "mesh")
+    assert min(meshes.posed_vertices(s, lift)[:, 2].min() for s in shapes if s["type"] == "mesh") == pytest.approx(0.0)
+    assert (
+        1.0 < lift + max(meshes.posed_vertices(s)[:, 2].max() for s in shapes if s["type"] == "mesh") < 1.6
+    )  # TIAGo's height
