@@ -365,7 +365,7 @@ def parse(table: dict, source: str = "<scenario>", check_model: bool = True) -> 
 
         plant_config = build(KinematicConfig, plant_table, where)
     elif plant_kind == "mujoco":
-        from mlpfac.plants.robot import MujocoConfig
+        from mlpfac.plants.config import MujocoConfig
 
         plant_config = build(MujocoConfig, plant_table, where)
     else:

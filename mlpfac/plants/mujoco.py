@@ -42,9 +42,10 @@ from mlpfac.events import (
 )
 from mlpfac.exceptions import ConfigError
 from mlpfac.ik import body_velocity_vw, wheel_speeds, wheel_speeds_lr
+from mlpfac.plants.config import MujocoConfig
 from mlpfac.plants.edits import torque_limit
 from mlpfac.plants.model_file import is_menagerie, menagerie_version
-from mlpfac.plants.robot import ROUND, MujocoConfig, read_robot, yaw
+from mlpfac.plants.robot import ROUND, read_robot, yaw
 
 DIVERGENCE_WARNINGS = ("mjWARN_BADQPOS", "mjWARN_BADQVEL", "mjWARN_BADQACC")  # MuJoCo resets the data on these
 NOISE_CHUNK = 1024  # pose-noise draws made at once: the same stream as one draw of 3 per step
