@@ -420,6 +420,13 @@ def test_each_robot_is_bit_identical_for_a_seed(name):
     np.testing.assert_array_equal(runs[0], runs[1])
 
 
+def test_smaller_wheels_that_leave_the_robot_on_its_casters_are_refused():
+    """Our robot's one caster tilts it onto smaller wheels; TIAGo's four rigid casters hold its base up."""
+    robot("diffdrive").check_event(make_event("wheel_radius", 1.0, scale=0.9), "here")
+    with pytest.raises(ConfigError, match="here scale: wheels of 0.088.* m no longer reach the floor"):
+        robot("tiago").check_event(make_event("wheel_radius", 1.0, scale=0.9), "here")
+
+
 def test_tiago_limits_are_read_where_its_makers_declared_them():
     """The wheels' speed limit is the servo's ctrlrange (5 rad/s), the torque limit the joints'
     actuatorfrcrange (100 N m): defaults, applied to (v, omega) keeping the curvature."""

@@ -317,11 +317,30 @@ class MujocoPlant:
                     f"the tyre geoms need a priority above the floor's ({floor}) for their friction to be the "
                     'contact\'s: give them one in the model, or set tyre = "sphere" in [plant]',
                 )
-        elif isinstance(event, WheelRadius) and any(int(self.model.geom_type[g]) not in ROUND for g in self._tyres):
-            raise ConfigError(
-                where,
-                'the wheels collide through meshes, which this event cannot resize: set tyre = "sphere" in [plant]',
-            )
+        elif isinstance(event, WheelRadius):
+            if any(int(self.model.geom_type[g]) not in ROUND for g in self._tyres):
+                raise ConfigError(
+                    where,
+                    'the wheels collide through meshes, which this event cannot resize: set tyre = "sphere" in [plant]',
+                )
+            if event.scale < 1 and not self._wheels_reach_floor(event.scale):
+                raise ConfigError(
+                    f"{where} scale",
+                    f"wheels of {event.scale * self.robot.real_radius:g} m no longer reach the floor: the robot "
+                    "stands on its other contacts (casters), and could not drive",
+                )
+
+    def _wheels_reach_floor(self, scale: float) -> bool:
+        """Whether both tyres, scaled, still touch the floor once the robot has settled at rest."""
+        spec = self._spec_nominal.copy()
+        for g in self._tyres:
+            spec.geoms[g].size[0] *= scale
+        m = spec.compile()
+        d = mujoco.MjData(m)
+        d.qpos[:], d.ctrl[:] = self._qpos_rest, self.robot.ctrl_rest
+        mujoco.mj_step(m, d, nstep=int(round(0.5 / self._dt)))
+        touching = {int(g) for c in d.contact[: d.ncon] for g in c.geom}
+        return all(g in touching for g in self._tyres)
 
     def _payload_bodies(self, event: Payload, where: str) -> list[int]:
         """The bodies a payload event scales: the root body, a named body, or the whole robot ("*")."""
