@@ -74,7 +74,9 @@ class Robot:
         n = period / self.dt
         if round(n) < 1 or abs(n - round(n)) > 1e-6 * n:
             raise ConfigError(
-                where, f"{period:g} s is not a whole number of physics steps of {self.dt:g} s (the model's timestep)"
+                where,
+                f"{period:g} s is not a whole number of physics steps of {self.dt:g} s (the model's timestep; "
+                "[plant] timestep can set another)",
             )
         return int(round(n))
 
