@@ -142,13 +142,14 @@ def scenario_names() -> list[str]:
     return sorted(p.stem for p in shipped_dir().glob("*.toml"))
 
 
-def load(name_or_path: str | Path) -> Scenario:
+def load(name_or_path: str | Path, build: bool = True) -> Scenario:
     """A scenario by name (``paper`` -> the shipped paper.toml) or by path to a TOML file.
 
     Relative paths in the file (``[plant] model``) are taken from the file's own folder. The plant
     is built once here, so that a robot or an event it cannot apply is an error before anything
     runs, and what it simulates is recorded in the table's ``[provenance]`` (config.toml). A file
     that already has ``[provenance]`` (a run's config.toml) must simulate the same compiled model.
+    ``build=False`` reads and checks the file alone (a listing), without building the plant.
     """
     path = Path(name_or_path)
     if path.suffix != ".toml":
@@ -178,6 +179,8 @@ def load(name_or_path: str | Path) -> Scenario:
     ):
         plant["model"] = str((path.parent / Path(plant["model"]).expanduser()).resolve())
     scn = parse(table, str(path))
+    if not build:  # the file's data only (a listing): no robot is read, none downloaded
+        return scn
     table["provenance"] = _provenance(scn)
     return dataclasses.replace(scn, table=table)
 

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from mlpfac.exceptions import ConfigError
-from mlpfac.plants.model_file import model_path, shipped_model
+from mlpfac.plants.model_file import is_menagerie, menagerie_name, model_path, shipped_model
 
 LIMITS = ("wheel_radius", "track", "max_wheel_speed", "timestep")
 
@@ -80,7 +80,10 @@ class MujocoConfig:
         if isinstance(ki, bool) or not isinstance(ki, int | float) or not math.isfinite(ki) or ki < 0:
             raise ConfigError("pi_ki", f"must be a number >= 0, got {ki!r}")
         self.noise_std()
-        model_path(self.model)
+        if is_menagerie(self.model):  # resolved (perhaps downloaded) when the robot is read, not here
+            menagerie_name(self.model)
+        else:
+            model_path(self.model)
 
     @property
     def path(self) -> Path:

@@ -31,6 +31,16 @@ def is_menagerie(model: str) -> bool:
     return model.startswith(MENAGERIE)
 
 
+def menagerie_name(model: str) -> tuple[str, str]:
+    """(robot, entry point) of ``"menagerie:ROBOT/ENTRY"`` (entry "" for the robot's default scene)."""
+    robot, _, entry = model[len(MENAGERIE) :].partition("/")
+    if not robot:
+        raise ConfigError(
+            "model", f"expected 'menagerie:ROBOT/ENTRY' (e.g. menagerie:pal_tiago/scene_velocity), got {model!r}"
+        )
+    return robot, entry
+
+
 def model_path(model: str) -> Path:
     """The MJCF file ``model`` names (a Menagerie robot is resolved, and downloaded if need be)."""
     if not is_menagerie(model):
@@ -38,11 +48,7 @@ def model_path(model: str) -> Path:
         if not path.is_file():
             raise ConfigError(str(path), "MJCF model file not found")
         return path
-    robot, _, entry = model[len(MENAGERIE) :].partition("/")
-    if not robot:
-        raise ConfigError(
-            "model", f"expected 'menagerie:ROBOT/ENTRY' (e.g. menagerie:pal_tiago/scene_velocity), got {model!r}"
-        )
+    robot, entry = menagerie_name(model)
     try:
         import mujoco_menagerie as mm
     except ImportError:
