@@ -111,7 +111,7 @@ def cmd_list() -> int:
     names = scenario_names()
     width = max(map(len, names), default=0)
     for name in names:
-        scn = load(name)
+        scn = load(name, build=False)
         print(f"{name:<{width}}  {scn.plant_kind:<9}  {scn.description}")
     print(f"\ncontrollers: {', '.join(CONTROLLERS)}")
     return 0

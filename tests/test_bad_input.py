@@ -86,6 +86,20 @@ BAD_FILES: dict[str, tuple[str | bytes, str]] = {
     "pose noise negative": ('[plant]\nkind = "mujoco"\npose_noise_std = -0.001\n', "pose_noise_std"),
     "provenance of another model": ('[plant]\nkind = "mujoco"\n[provenance]\nmodel_sha256 = "0"\n', "model_sha256"),
     "provenance a string": ('provenance = "x"\n', "provenance"),
+    "pose body name": (ROBOT + 'site = "axle_mid"\nbody = "chassis"\n', "[plant] body"),
+    "pose body missing": (ROBOT + 'body = "nosuch"\n', "[plant] body"),
+    "frame offset short": (ROBOT + "frame_offset = [0.0, 0.1]\n", "frame_offset"),
+    "keyframe missing": (ROBOT + 'keyframe = "home"\n', "[plant] keyframe"),
+    "other actuators": (ROBOT + 'other_actuators = "drop"\n', "other_actuators"),
+    "tyre shape": (ROBOT + 'tyre = "tank"\n', "[plant] tyre"),
+    "timestep negative": (ROBOT + "timestep = -0.002\n", "[plant] timestep"),
+    "timestep not dividing T": (ROBOT + "timestep = 0.003\n", "[plant] T"),
+    "max wheel speed zero": (ROBOT + "max_wheel_speed = 0.0\n", "max_wheel_speed"),
+    "menagerie no robot": ('[plant]\nkind = "mujoco"\nmodel = "menagerie:"\n', "menagerie:ROBOT/ENTRY"),
+    "menagerie robot unknown": ('[plant]\nkind = "mujoco"\nmodel = "menagerie:pal_tiagoo/scene"\n', "pal_tiago"),
+    "menagerie entry unknown": ('[plant]\nkind = "mujoco"\nmodel = "menagerie:pal_tiago/scene_fast"\n', "scene_velocity"),
+    "payload on every body of the kinematic": (MINIMAL + '[[events]]\ntime = 0.2\nkind = "payload"\nmass_kg = 2.0\nbody = "*"\n', "kinematic plant cannot"),
+    "payload mass and scale": (ROBOT + '[[events]]\ntime = 0.2\nkind = "payload"\nmass_kg = 2.0\nmass_scale = 2.0\n', "either"),
 }  # fmt: skip
 
 
