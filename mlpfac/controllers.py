@@ -411,4 +411,4 @@ VARIANTS: dict[str, dict] = {
     },
 }
 
-CONTROLLERS = (*VARIANTS, "corradini", "kanayama")
+CONTROLLERS = (*VARIANTS, "corradini", "kanayama", "oracle")  # oracle: mlpfac/oracle.py
