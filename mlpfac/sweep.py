@@ -74,6 +74,7 @@ from mlpfac.sweeps.folders import (  # noqa: F401
     metrics_problem,
     write_result,
 )
+from mlpfac.sweeps.paired import paired_rows, summary
 from mlpfac.sweeps.plan import MAX_RUNS, Job, check_writable, parse_controllers, parse_seeds, plan  # noqa: F401
 from mlpfac.sweeps.tables import (  # noqa: F401
     COMPARE_COLUMNS,
@@ -81,6 +82,7 @@ from mlpfac.sweeps.tables import (  # noqa: F401
     SWEEP_COLUMNS,
     aggregate,
     markdown,
+    write_paired,
     write_tables,
 )
 from mlpfac.sweeps.worker import rrd_is_whole, run_task  # noqa: F401
@@ -219,8 +221,9 @@ def _run_cli(args: argparse.Namespace, stem: str, columns) -> int:
                 "duration": args.duration,
                 "runs": len(jobs),
             }
+            prows = paired_rows(jobs, oc.metrics)
             try:
-                paths = write_tables(args.out, stem, rows, columns, meta)
+                paths = write_tables(args.out, stem, rows, columns, meta) + write_paired(args.out, prows, meta)
             except OSError as err:
                 raise OutputError(
                     f"{_oserror(err, str(args.out))}; every run folder is whole, resume with: {cmd}"
@@ -229,6 +232,7 @@ def _run_cli(args: argparse.Namespace, stem: str, columns) -> int:
         if client is not None:
             client.close()
     print(markdown(rows, columns), end="")
+    print("\n" + summary(prows), end="")
     redo = sum(oc.redo.values())
     why = "; ".join(f"{k} {v}" for k, v in oc.redo.items())
     print(
