@@ -86,6 +86,7 @@ def test_shipped_paper_scenario_batches_bit_identically():
         "adaptive-ukf",
         "adaptive-cautious",
         "adaptive-gains",
+        "oracle",
     ],
 )
 def test_every_variant_batches_bit_identically(controller):
