@@ -25,8 +25,9 @@ only what the nominal design would need to be redone for the changed robot:
   kinematic plant (7), an Euler map, the unicycle is exact to O(T^2) per step.
 - **payload, friction, weak actuator**: nothing. The law (35) has no parameter that mass, friction
   or actuator strength change; the oracle is the nominal law, bit for bit Corradini's. Its
-  post-event error in the same run is the bound (README, "Beyond the paper": the same law on the
-  robot changed from t = 0 measures the same to the printed digit).
+  post-event error in the same run is the bound (the same law on the robot changed from t = 0
+  measures the same over that window within noise: ``sims/oracle_from_start.py``, README "Beyond
+  the paper").
 """
 
 from __future__ import annotations

@@ -29,11 +29,14 @@ the command line and the engine's API (every name below is importable from here)
    fresh interpreters with one BLAS thread each that die with the sweep (``PR_SET_PDEATHSIG``
    and a thread watching the parent), so a killed sweep leaves no worker behind.
 3. **Aggregate** (:func:`aggregate`): per scenario, controller and phase ("before" / "after" the
-   first event; only "before" when the scenario has no event).
+   first event; only "before" when the scenario has no event); and **pair** (:func:`paired_rows`,
+   :mod:`mlpfac.sweeps.paired`): per seed against Corradini's law, the oracle and the controller's
+   own run without the event, in paired.csv / .md / .json and summary.md.
 
-How diverged runs enter the statistics: the position / heading RMS statistics (mean, median,
-95 % confidence interval of the mean, Student t) are over the **bounded runs only** (status
-"ok"); next to them stands the bounded share k/n. The worst seed is the diverged run that
+How runs enter the statistics: each run is tracking, lost or diverged (``outcome`` in
+metrics.json, :func:`mlpfac.runner.outcome`); the position / heading RMS statistics (mean, median,
+95 % confidence interval of the mean, Student t) are over the runs that finished (tracking or lost;
+status "ok"), next to the three counts. The worst seed is the diverged run that
 diverged first (fewest steps, then lowest seed) if any diverged, else the bounded run with the
 largest position RMS in that phase. A run that raised an exception (a bug, not a divergence)
 leaves ``error.txt`` and no metrics.json; it is reported, left out of the table, and re-run on

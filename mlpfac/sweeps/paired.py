@@ -96,7 +96,7 @@ def twins(jobs: list[Job]) -> dict[str, str]:
     return out
 
 
-def _median(xs: list[float]) -> float | None:
+def median(xs: list[float]) -> float | None:
     s = sorted(xs)
     n = len(s)
     if not n:
@@ -123,16 +123,16 @@ def paired_rows(jobs: list[Job], metrics: dict[tuple, dict]) -> list[dict]:
             row[how] = sum(m is not None and outcome(m) == how for m in ms)
         done = [m for m in ms if m is not None]
         row["phase"] = last_phase(done[0]) if done else None
-        row["pos_rms_m_median"] = _median([v for v in x if v is not None and math.isfinite(v)])
+        row["pos_rms_m_median"] = median([v for v in x if v is not None and math.isfinite(v)])
         refs = {r: [_rms(metrics.get((scn, r, s))) for s in ss] for r in REFERENCES}
-        row["x_oracle_median"] = _median(_ratios(x, refs["oracle"]))
-        row["oracle_pos_rms_m_median"] = _median([v for v in refs["oracle"] if v is not None and math.isfinite(v)])
+        row["x_oracle_median"] = median(_ratios(x, refs["oracle"]))
+        row["oracle_pos_rms_m_median"] = median([v for v in refs["oracle"] if v is not None and math.isfinite(v)])
         for r in REFERENCES:
             row[f"wins_vs_{r}"], row[f"pairs_vs_{r}"], row[f"p_vs_{r}"] = compare(x, refs[r])
         cost = _event_cost(metrics, scn, ctrl, ss, twin.get(scn), x)
         base = _event_cost(metrics, scn, "corradini", ss, twin.get(scn), refs["corradini"])
         row["no_event_twin"] = twin.get(scn)
-        row["event_cost_median"] = _median([c for c in cost if c is not None and math.isfinite(c)])
+        row["event_cost_median"] = median([c for c in cost if c is not None and math.isfinite(c)])
         row["wins_cost_vs_corradini"], row["pairs_cost_vs_corradini"], row["p_cost_vs_corradini"] = compare(cost, base)
         rows.append(row)
     return rows

@@ -9,7 +9,7 @@ from pathlib import Path
 
 from mlpfac.outputs import write_atomic
 from mlpfac.sweeps.folders import PHASES
-from mlpfac.sweeps.paired import PAIRED_COLUMNS, outcome, summary
+from mlpfac.sweeps.paired import PAIRED_COLUMNS, median, outcome, summary
 from mlpfac.sweeps.plan import Job
 
 
@@ -24,14 +24,6 @@ def _ci95(xs: list[float]) -> tuple[float | None, float | None]:
     sd = math.sqrt(math.fsum((x - mean) ** 2 for x in xs) / (n - 1))
     half = float(t.ppf(0.975, n - 1)) * sd / math.sqrt(n)
     return mean - half, mean + half
-
-
-def _median(xs: list[float]) -> float | None:
-    if not xs:
-        return None
-    s = sorted(xs)
-    n = len(s)
-    return s[n // 2] if n % 2 else 0.5 * (s[n // 2 - 1] + s[n // 2])
 
 
 def aggregate(jobs: list[Job], metrics: dict[tuple, dict]) -> list[dict]:
@@ -66,11 +58,11 @@ def aggregate(jobs: list[Job], metrics: dict[tuple, dict]) -> list[dict]:
                 lo, hi = _ci95(xs)
                 row |= {
                     f"{name}_mean": math.fsum(xs) / len(xs) if xs else None,
-                    f"{name}_median": _median(xs),
+                    f"{name}_median": median(xs),
                     f"{name}_ci_lo": lo,
                     f"{name}_ci_hi": hi,
                 }
-            row["max_err_m_median"] = _median(mx)
+            row["max_err_m_median"] = median(mx)
             row["max_err_m_max"] = max(mx) if mx else None
             weights = [m["max_abs_weight"] for m in ms if m.get("max_abs_weight") is not None]
             row["max_abs_weight"] = max(weights) if weights else None  # over every run, diverged ones too
