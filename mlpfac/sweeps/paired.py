@@ -199,7 +199,8 @@ def summary(rows: list[dict]) -> str:
             return "-"
         text = _mm(r["pos_rms_m_median"])
         if r["controller"] != "oracle" and r["x_oracle_median"] is not None:
-            text += f" ({r['x_oracle_median']:.2g}x)"
+            x = r["x_oracle_median"]
+            text += f" ({x:.2g}x)" if x < 10 else f" ({x:.0f}x)"
         if r["tracking"] != r["runs"]:
             text += f" {r['tracking']}/{r['lost']}/{r['diverged']}"
         return text
