@@ -216,3 +216,14 @@ def test_paired_rows_on_a_sweep_plan():
     assert (a["wins_vs_corradini"], a["pairs_vs_corradini"], a["wins_vs_oracle"]) == (2, 2, 0)
     assert a["wins_cost_vs_corradini"] == 2  # 0.29x against corradini's 32x
     assert rows["eight-torque", "adaptive"]["event_cost_median"] is None
+
+
+@pytest.mark.parametrize("limit", [None, 30.0, 5.0])
+def test_dividing_by_the_radius_scale_is_the_ik_given_the_true_radius(limit):
+    """The nominal IK on u / s gives the wheel speeds of the IK told the true radius s r, limit included."""
+    from mlpfac.ik import wheel_speeds
+
+    u, s, r, track = np.array([0.9, 1.7]), 1.5, 0.05, 0.3
+    np.testing.assert_allclose(
+        wheel_speeds(*(u / s), r, track, limit), wheel_speeds(*u, s * r, track, limit), rtol=1e-15
+    )
