@@ -257,6 +257,11 @@ def _print_summary(m: dict, out: Path) -> None:
     print(
         f"{m['scenario']} / {m['controller']} / seed {m['seed']}: {m['status']}"
         + (f" ({m['reason']})" if m["reason"] else "")
+        + (
+            f", {m['outcome']} (lost: a phase's position RMS beyond {m['lost_threshold_m']:.3g} m)"
+            if m["status"] == "ok"
+            else ""
+        )
     )
     for ev in m["events"]:
         print(f"  event at {ev['time']:g} s: {ev['text']}")

@@ -458,4 +458,4 @@ VARIANTS["adaptive-input-delay"] = VARIANTS["adaptive-input"] | {"input_delay": 
 # the paper's scheme whose NN_f also sees the last command (the velocity state)
 VARIANTS["adaptive-velocity"] = {"networks": {"velocity_inputs": True}}
 
-CONTROLLERS = (*VARIANTS, "corradini", "kanayama")
+CONTROLLERS = (*VARIANTS, "corradini", "kanayama", "oracle")  # oracle: mlpfac/oracle.py

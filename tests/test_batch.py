@@ -88,6 +88,7 @@ def test_shipped_paper_scenario_batches_bit_identically():
         "adaptive-gains",
         "adaptive-input",
         "adaptive-input-delay",
+        "oracle",
     ],
 )
 def test_every_variant_batches_bit_identically(controller):
