@@ -124,7 +124,7 @@ def cmd_list() -> int:
     names = scenario_names()
     width = max(map(len, names), default=0)
     for name in names:
-        scn = load(name)
+        scn = load(name, build=False)
         print(f"{name:<{width}}  {scn.plant_kind:<9}  {scn.description}")
     print(f"\ncontrollers: {', '.join(CONTROLLERS)}")
     return 0
@@ -299,6 +299,11 @@ def _print_summary(m: dict, out: Path) -> None:
     print(
         f"{m['scenario']} / {m['controller']} / seed {m['seed']}: {m['status']}"
         + (f" ({m['reason']})" if m["reason"] else "")
+        + (
+            f", {m['outcome']} (lost: a phase's position RMS beyond {m['lost_threshold_m']:.3g} m)"
+            if m["status"] == "ok"
+            else ""
+        )
     )
     for ev in m["events"]:
         print(f"  event at {ev['time']:g} s: {ev['text']}")

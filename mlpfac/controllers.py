@@ -15,6 +15,7 @@ import numpy as np
 from mlpfac.error_model import G_true, f_true, wrap
 from mlpfac.estimators import EKF, UKF, covariance
 from mlpfac.exceptions import ConfigError
+from mlpfac.input_model import InputModel
 from mlpfac.kernels import adaptive_step, corradini_step, kanayama_step, seeds
 from mlpfac.law import GAIN_RANGE, Law
 from mlpfac.networks import Networks
@@ -49,6 +50,12 @@ class AdaptiveConfig:
       e_k - f_nominal - G_nominal u_{k-1}. With zero output weights the scheme starts as Corradini's law.
     - ``learned_gains = true``: the law divides by the learned input gains b_v = -G_11, b_omega = -G_32
       (kept within ``GAIN_RANGE`` times T) instead of T, so a wrong actuator/wheel gain can be learned.
+    - ``input_gains = true``: learn the plant's input gains g_v, g_omega from the motion measured
+      between poses (:mod:`mlpfac.input_model`) and send u / g, so the law's u reaches the robot as
+      the kinematic model (7) assumes; ``input_P0``, ``input_forgetting``; ``detect = h > 0`` reopens
+      their covariance when a CUSUM on the normalised innovation exceeds h (a change detected);
+      ``input_delay = D > 0``: find a measurement delay of up to D control steps from the commands'
+      correlation with the measured motion, and give the law the error of the pose predicted over it.
     - ``output_weight_std``: the initial spread of the output-layer weights (``weight_std`` if unset);
       0 with ``prior`` starts from the nominal functions exactly.
     """
@@ -70,6 +77,11 @@ class AdaptiveConfig:
     cautious: float = 0.0  # weight c of the estimate covariance in the law (0: certainty equivalence)
     prior: bool = False  # learn the correction to the nominal kinematic functions
     learned_gains: bool = False  # divide by the learned input gains -G_11, -G_32 instead of T
+    input_gains: bool = False  # learn the plant's input gains g_v, g_omega from the measured motion; send u / g
+    input_delay: int = 0  # D > 0: find a measurement delay of up to D steps and predict the pose over it
+    input_P0: float = 1e-4  # noqa: N815 -- the input gains' initial (and reopened) variance
+    input_forgetting: float = 0.999  # the input gains' forgetting factor (1: none)
+    detect: float = 0.0  # CUSUM threshold on the input gains' normalised innovation that reopens their P (0: off)
 
     def __post_init__(self) -> None:
         for name in ("P0", "weight_std", "ukf_alpha"):
@@ -90,6 +102,18 @@ class AdaptiveConfig:
             raise ConfigError(
                 "cautious", f"the caution weight must be >= 0 (0: certainty equivalence), got {self.cautious}"
             )
+        if (
+            isinstance(self.input_delay, bool)
+            or not isinstance(self.input_delay, int)
+            or not 0 <= self.input_delay <= 50
+        ):
+            raise ConfigError("input_delay", f"a whole number of control steps in 0-50, got {self.input_delay!r}")
+        if not self.input_P0 > 0:
+            raise ConfigError("input_P0", f"must be positive, got {self.input_P0}")
+        if not 0.0 < self.input_forgetting <= 1.0:
+            raise ConfigError("input_forgetting", f"must be in (0, 1] (1: none), got {self.input_forgetting}")
+        if not self.detect >= 0:
+            raise ConfigError("detect", f"the CUSUM threshold must be >= 0 (0: off), got {self.detect}")
         if self.prior and self.networks.residual:
             raise ConfigError("prior", "prior already adds e to f (f = f_nominal + NN_f); turn residual off")
 
@@ -166,21 +190,25 @@ class Adaptive:
         z0 = np.stack([self._initial_weights(g) for g in rngs])  # (B, alpha)
         B, a = z0.shape
         self.first = True
+        c = self.config
+        self.input = None
+        if c.input_gains or c.input_delay > 0:
+            self.input = InputModel(B, T, c.input_gains, c.input_delay, c.input_P0, c.input_forgetting, c.detect)
         if not self.compiled:
             self.seeds = [_NumpySeed(self, self._estimator(z0[b]), T) for b in range(B)]
             self.est = self.seeds[0].est if self.single else None  # one run: its estimator, for inspection
             self._tele = None
             return
-        c = self.config
         self.est = self._estimator(z0)  # the compiled EKF's state: z (B, alpha), P (B, alpha, alpha), C-ordered
         self.est.P = np.broadcast_to(c.P0 * np.eye(a), (B, a, a))
         Lf, LG = c.networks.L_f, c.networks.L_G
-        self._S = np.zeros((B, 17 + Lf + LG))  # x_f, x_G, phi_f, phi_G, u_{k-1}, e_{k-1}, nominal e_k
+        nf = c.networks.n_f
+        self._S = np.zeros((B, 11 + nf + Lf + LG))  # x_f, x_G, phi_f, phi_G, u_{k-1}, e_{k-1}, nominal e_k
         self._u, self._innovation, self._h_hat = np.zeros((B, 2)), np.zeros((B, 3)), np.zeros((B, 3))
         self._trace = np.zeros(B)
         self._H = np.zeros((B, 3, a))
         est, lim = self.est, self.law
-        ints = np.array([Lf, LG, c.networks.residual, self.prior is not None, est.Q is not None], dtype=np.int64)
+        ints = np.array([Lf, LG, c.networks.residual, self.prior is not None, est.Q is not None, nf], dtype=np.int64)
         params = np.array(
             [
                 c.networks.error_scale,
@@ -202,6 +230,8 @@ class Adaptive:
 
     def step(self, e: np.ndarray, r: np.ndarray) -> np.ndarray:
         E = e[None] if self.single else e
+        if self.input is not None:  # the input model's update; the error of the pose predicted over the delay
+            E = self.input.observe(E, r, self.first)
         if not self.compiled:
             u = np.stack([s.step(E[b], r, self.first) for b, s in enumerate(self.seeds)])
         else:
@@ -210,10 +240,19 @@ class Adaptive:
                 np.ascontiguousarray(E, dtype=float), float(r[3]), float(r[4]), self.first, *self._args, *self._consts
             )
         self.first = False
+        if self.input is not None:  # the command sent: u / g
+            u = self.input.command(u)
         return u[0].copy() if self.single else u
 
     def telemetry(self) -> dict[str, np.ndarray | float]:
-        """z, trace P, mean diag P, the innovation (32) and h_hat (34); per seed, (B, ...), for a batch."""
+        """z, trace P, mean diag P, the innovation (32) and h_hat (34) (and the input model's gains,
+        delay and alarms); per seed, (B, ...), for a batch."""
+        t = self._telemetry()
+        if self.input is not None:
+            t = t | {k: (v[0] if self.single else v) for k, v in self.input.telemetry().items()}
+        return t
+
+    def _telemetry(self) -> dict[str, np.ndarray | float]:
         if not self.compiled:
             per = [s.telemetry() for s in self.seeds]
             if self.single:
@@ -264,7 +303,7 @@ class _NumpySeed:
                 self.innovation = self.est.update(
                     y, lambda z: nets.h_and_jacobian(z, x_f, x_G, e_prev, u_prev, head if z is z_prev else None)
                 )
-        x_f, x_G = nets.inputs(e, r[3], r[4])
+        x_f, x_G = nets.inputs(e, r[3], r[4], self.prev[3] if self.prev is not None else np.zeros(2))
         z = self.est.z
         head = nets.head(z, x_f, x_G, e)
         u = self._control(e, r, x_f, x_G, head)
@@ -410,5 +449,13 @@ VARIANTS: dict[str, dict] = {
         "P_max": 1e-4,
     },
 }
+# adaptive-best with the input gains learned from the measured motion (mlpfac.input_model), re-adapted
+# when a CUSUM on their innovation detects a change ("adaptive-input"), or by forgetting alone; and
+# with a measurement delay of up to 6 steps found and predicted over ("adaptive-input-delay").
+VARIANTS["adaptive-input"] = VARIANTS["adaptive-best"] | {"input_gains": True, "detect": 20.0}
+VARIANTS["adaptive-input-forget"] = VARIANTS["adaptive-best"] | {"input_gains": True}
+VARIANTS["adaptive-input-delay"] = VARIANTS["adaptive-input"] | {"input_delay": 6}
+# the paper's scheme whose NN_f also sees the last command (the velocity state)
+VARIANTS["adaptive-velocity"] = {"networks": {"velocity_inputs": True}}
 
-CONTROLLERS = (*VARIANTS, "corradini", "kanayama")
+CONTROLLERS = (*VARIANTS, "corradini", "kanayama", "oracle")  # oracle: mlpfac/oracle.py

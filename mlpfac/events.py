@@ -1,16 +1,19 @@
 """Events: changes of the plant at a time of the run, never told to the controller.
 
-Each event kind names its parameters, their types and ranges here, once; a scenario's
-``[[events]]`` table is checked against them when the scenario is parsed, on every plant, before
+Each event kind is a frozen dataclass here, once: its parameters, their types and ranges, checked
+by the event itself when it is made, which is when the scenario is parsed, on every plant, before
 anything runs. What a plant can apply (a body that exists, a period that is a whole number of
-physics steps) is the plant's own check, also made before the first step.
+physics steps) is the plant's own check, also made before the first step; a plant dispatches on
+the event's class. The one delay line of every plant (what ``sensor_delay`` changes) is here too.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections import deque
 from dataclasses import dataclass, field
+from typing import ClassVar
 
 from mlpfac.exceptions import ConfigError
 
@@ -41,42 +44,126 @@ class Param:
         return value
 
 
-SCALE = Param(float, positive=True)
-EVENT_PARAMS: dict[str, dict[str, Param]] = {
-    # chassis mass (and inertia) scaled, or mass added: one of mass_scale / mass_kg; on the root body or `body`
-    "payload": {
-        "mass_scale": Param(float, required=False, positive=True),
-        "mass_kg": Param(float, required=False, positive=True),
-        "body": Param(str, required=False),
-    },
-    "friction": {"mu": SCALE},  # tyre/floor sliding friction set to mu
-    "wheel_radius": {"scale": SCALE},  # real wheel radius scaled while the IK keeps the nominal one
-    # wheel drive weakened: servo gain and/or torque limit scaled (at least one)
-    "actuator": {
-        "kv_scale": Param(float, required=False, positive=True),
-        "force_scale": Param(float, required=False, positive=True),
-    },
-    "control_period": {"factor": SCALE},  # the plant holds each command factor * T
-    "sensor_delay": {"steps": Param(int, minimum=0)},  # the measured pose is `steps` control steps old
-}
-EVENT_KINDS = tuple(EVENT_PARAMS)
+def _param(kind: type, required: bool = True, **limits):
+    """A dataclass field checked by ``Param(kind, required, **limits)`` when the event is made."""
+    p = Param(kind, required, **limits)
+    return field(metadata={"param": p}) if required else field(default=None, metadata={"param": p})
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Event:
-    """A change of the plant at ``time`` seconds (controller clock), unknown to the controller."""
+    """A change of the plant at ``time`` seconds (controller clock), unknown to the controller.
 
+    Subclasses, one per kind, name their parameters as fields; each field is checked when the
+    event is made (``where`` of a ConfigError is the parameter's name)."""
+
+    kind: ClassVar[str] = ""
     time: float
-    kind: str
-    params: dict[str, float | int | str] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        t = self.time
+        if isinstance(t, bool) or not isinstance(t, int | float) or not math.isfinite(t) or t < 0:
+            raise ConfigError("time", f"an event needs a finite time >= 0 s, got {t!r}")
+        for f in dataclasses.fields(self):
+            p = f.metadata.get("param")
+            value = getattr(self, f.name)
+            if p is None or value is None:
+                continue
+            value = p.check(value, f.name)
+            object.__setattr__(self, f.name, float(value) if p.kind is float else value)
+        self.validate()
+
+    def validate(self) -> None:
+        """Checks between parameters (a subclass's own)."""
+
+    @property
+    def params(self) -> dict[str, float | int | str]:
+        """The parameters given (None: not given), by name."""
+        return {
+            f.name: getattr(self, f.name)
+            for f in dataclasses.fields(self)
+            if f.name != "time" and getattr(self, f.name) is not None
+        }
 
     def describe(self) -> str:
         args = ", ".join(f"{k}={v}" for k, v in sorted(self.params.items()))
         return f"{self.kind}({args}) at {self.time:g} s"
 
 
+@dataclass(frozen=True, kw_only=True)
+class Payload(Event):
+    """Mass (and inertia) scaled by ``mass_scale``, or ``mass_kg`` added, spread like the mass it
+    joins: on the robot's root body by default, on a named ``body``, or on every body of the robot
+    (``body = "*"``)."""
+
+    kind: ClassVar[str] = "payload"
+    mass_scale: float | None = _param(float, required=False, positive=True)
+    mass_kg: float | None = _param(float, required=False, positive=True)
+    body: str | None = _param(str, required=False)
+
+    def validate(self) -> None:
+        if (self.mass_scale is None) == (self.mass_kg is None):
+            raise ConfigError("", "a payload event takes either 'mass_scale' or 'mass_kg' (not both, not neither)")
+
+
+@dataclass(frozen=True, kw_only=True)
+class Friction(Event):
+    """Tyre/floor sliding friction set to ``mu``."""
+
+    kind: ClassVar[str] = "friction"
+    mu: float = _param(float, positive=True)
+
+
+@dataclass(frozen=True, kw_only=True)
+class WheelRadius(Event):
+    """Real wheel radius scaled by ``scale`` while the IK keeps the nominal one."""
+
+    kind: ClassVar[str] = "wheel_radius"
+    scale: float = _param(float, positive=True)
+
+
+@dataclass(frozen=True, kw_only=True)
+class Actuator(Event):
+    """Wheel drive weakened: servo gain (``kv_scale``) and/or torque limit (``force_scale``) scaled."""
+
+    kind: ClassVar[str] = "actuator"
+    kv_scale: float | None = _param(float, required=False, positive=True)
+    force_scale: float | None = _param(float, required=False, positive=True)
+
+    def validate(self) -> None:
+        if self.kv_scale is None and self.force_scale is None:
+            raise ConfigError("", "an actuator event needs 'kv_scale' and/or 'force_scale'")
+
+
+@dataclass(frozen=True, kw_only=True)
+class ControlPeriod(Event):
+    """The plant holds each command ``factor`` T."""
+
+    kind: ClassVar[str] = "control_period"
+    factor: float = _param(float, positive=True)
+
+
+@dataclass(frozen=True, kw_only=True)
+class SensorDelay(Event):
+    """The measured pose is ``steps`` control steps old."""
+
+    kind: ClassVar[str] = "sensor_delay"
+    steps: int = _param(int, minimum=0)
+
+
+EVENTS: dict[str, type[Event]] = {
+    cls.kind: cls for cls in (Payload, Friction, WheelRadius, Actuator, ControlPeriod, SensorDelay)
+}
+EVENT_KINDS = tuple(EVENTS)
+
+
+def make_event(kind: str, time: float, **params) -> Event:
+    """The event of ``kind`` at ``time`` with ``params`` (checked as a scenario's would be)."""
+    return EVENTS[kind](time=time, **params)
+
+
 def parse_event(table, duration: float, where: str) -> Event:
-    """An ``[[events]]`` table -> an :class:`Event`, every parameter checked; ``where`` names it in errors."""
+    """An ``[[events]]`` table -> its event, every parameter checked; ``where`` names it in errors."""
     if not isinstance(table, dict):
         raise ConfigError(where, f"expected a table (time, kind and parameters), got {table!r}")
     params = dict(table)
@@ -88,21 +175,20 @@ def parse_event(table, duration: float, where: str) -> Event:
             f"{where} time", f"the event at {t:g} s would never happen: the run lasts {duration:g} s (duration)"
         )
     kind = params.pop("kind", None)
-    spec = EVENT_PARAMS.get(kind) if isinstance(kind, str) else None
-    if spec is None:
+    cls = EVENTS.get(kind) if isinstance(kind, str) else None
+    if cls is None:
         raise ConfigError(f"{where} kind", f"unknown event kind {kind!r}; choose one of {', '.join(EVENT_KINDS)}")
-    for key, value in params.items():
-        if key not in spec:
-            raise ConfigError(f"{where} {key}", f"not a parameter of a {kind!r} event (it takes {', '.join(spec)})")
-        params[key] = spec[key].check(value, f"{where} {key}")
-    for key, p in spec.items():
+    fields = {f.name: f.metadata["param"] for f in dataclasses.fields(cls) if f.name != "time"}
+    for key in params:
+        if key not in fields:
+            raise ConfigError(f"{where} {key}", f"not a parameter of a {kind!r} event (it takes {', '.join(fields)})")
+    for key, p in fields.items():
         if p.required and key not in params:
             raise ConfigError(f"{where} {key}", f"a {kind!r} event needs {key!r}")
-    if kind == "payload" and ("mass_scale" in params) == ("mass_kg" in params):
-        raise ConfigError(where, "a payload event takes either 'mass_scale' or 'mass_kg' (not both, not neither)")
-    if kind == "actuator" and not params:
-        raise ConfigError(where, "an actuator event needs 'kv_scale' and/or 'force_scale'")
-    return Event(float(t), kind, params)
+    try:
+        return cls(time=float(t), **params)
+    except ConfigError as err:
+        raise ConfigError(f"{where} {err.where}".rstrip(), err.what) from None
 
 
 class DelayLine:

@@ -15,11 +15,13 @@ import numpy as np
 
 from mlpfac.controllers import VARIANTS, Adaptive, Corradini, Kanayama
 from mlpfac.exceptions import ConfigError
+from mlpfac.oracle import Oracle, told
 from mlpfac.scenario import Scenario
 
 
 def make_controller(scn: Scenario):
-    """The scenario's controller: a named variant of the adaptive scheme, Corradini's or Kanayama's law."""
+    """The scenario's controller: a named variant of the adaptive scheme, Corradini's or Kanayama's law,
+    or the oracle (the law told the scenario's events, :mod:`mlpfac.oracle`)."""
     if scn.controller in VARIANTS:
         over = dict(VARIANTS[scn.controller])
         nets = dataclasses.replace(scn.adaptive.networks, **over.pop("networks", {}))
@@ -28,6 +30,8 @@ def make_controller(scn: Scenario):
         return ctrl
     if scn.controller == "corradini":
         return Corradini(scn.law, scn.T)
+    if scn.controller == "oracle":  # the one controller told the scenario's events
+        return Oracle(scn.law, scn.T, [told(ev) for ev in scn.events], scn.plant_kind == "kinematic")
     return Kanayama(scn.law, scn.kanayama, scn.T)
 
 

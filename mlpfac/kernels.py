@@ -10,7 +10,7 @@ else in numba's user-wide cache, ``~/.cache/numba`` or ``$NUMBA_CACHE_DIR``). Wi
 ``error_model="numpy"`` a division by zero gives inf or NaN as numpy does: a diverging run is
 detected by the runner, not by an exception here.
 
-Weight layout (16)-(18), as :mod:`mlpfac.networks`: z = [W_f (3, L_f), S_f (L_f, 6), W_G (3, 2, L_G),
+Weight layout (16)-(18), as :mod:`mlpfac.networks`: z = [W_f (3, L_f), S_f (L_f, n_f), W_G (3, 2, L_G),
 S_G (L_G, 3)], row-major blocks.
 """
 
@@ -41,14 +41,15 @@ def _sigmoid(a):
 
 @njit(**JIT)
 def _hidden(z, Lf, LG, xf, xG, phif, phiG):
-    """(10)-(11): phi_f (L_f,), phi_G (L_G,) at weights z (alpha,) and inputs x_f (6,), x_G (3,)."""
+    """(10)-(11): phi_f (L_f,), phi_G (L_G,) at weights z (alpha,) and inputs x_f (n_f,), x_G (3,)."""
+    nf = xf.shape[0]
     o = 3 * Lf
     for i in range(Lf):
         a = 0.0
-        for m in range(6):
-            a += z[o + 6 * i + m] * xf[m]
+        for m in range(nf):
+            a += z[o + nf * i + m] * xf[m]
         phif[i] = _sigmoid(a)
-    o = 9 * Lf + 6 * LG
+    o = (3 + nf) * Lf + 6 * LG
     for i in range(LG):
         a = 0.0
         for m in range(3):
@@ -57,14 +58,14 @@ def _hidden(z, Lf, LG, xf, xG, phif, phiG):
 
 
 @njit(**JIT)
-def _f_G(z, Lf, LG, phif, phiG, f, G):
-    """(14)-(15): NN_f (3,) and NN_G (3, 2) from the hidden layers (without the residual e)."""
+def _f_G(z, Lf, LG, nf, phif, phiG, f, G):
+    """(14)-(15): NN_f (3,) and NN_G (3, 2) from the hidden layers (without the residual e); n_f inputs of NN_f."""
     for j in range(3):
         a = 0.0
         for i in range(Lf):
             a += z[j * Lf + i] * phif[i]
         f[j] = a
-    o = 9 * Lf
+    o = (3 + nf) * Lf
     for j in range(3):
         for n in range(2):
             a = 0.0
@@ -76,7 +77,7 @@ def _f_G(z, Lf, LG, phif, phiG, f, G):
 @njit(**JIT)
 def _jacobian(z, Lf, LG, xf, xG, phif, phiG, u, H):
     """nabla_h (3, alpha), (19)-(24), at the hidden layers phi_f, phi_G of (z, x_f, x_G); H is all written."""
-    alpha = H.shape[1]
+    alpha, nf = H.shape[1], xf.shape[0]
     for j in range(3):
         for c in range(alpha):
             H[j, c] = 0.0
@@ -86,9 +87,9 @@ def _jacobian(z, Lf, LG, xf, xG, phif, phiG, u, H):
         for j in range(3):
             H[j, j * Lf + i] = phif[i]  # (21)
             w = z[j * Lf + i] * d
-            for m in range(6):
-                H[j, o + 6 * i + m] = w * xf[m]  # (22)
-    o2 = 9 * Lf
+            for m in range(nf):
+                H[j, o + nf * i + m] = w * xf[m]  # (22)
+    o2 = (3 + nf) * Lf
     o3 = o2 + 6 * LG
     for i in range(LG):
         d = phiG[i] * (1.0 - phiG[i])
@@ -223,13 +224,13 @@ def adaptive_step(e, v_r, omega_r, first, z, P, S, H, u, innov, h_hat, trace, in
     law computed at z_k the step before (same weights, same inputs). Then the inputs (8)-(9), the
     networks at the new z, h_hat (34) (plus the nominal f, G (5)-(6) with ``prior``), the law (35).
 
-    State per seed, updated in place: z (B, alpha), P (B, alpha, alpha) and S (B, 17 + L_f + L_G) =
-    [x_f (6), x_G (3), phi_f (L_f), phi_G (L_G), u_{k-1} (2), e_{k-1} (3), e_nom (3)].
+    State per seed, updated in place: z (B, alpha), P (B, alpha, alpha) and S (B, 11 + n_f + L_f + L_G) =
+    [x_f (n_f), x_G (3), phi_f (L_f), phi_G (L_G), u_{k-1} (2), e_{k-1} (3), e_nom (3)].
     Out: u, innov (32), h_hat (34), trace (trace P); H (B, 3, alpha) the Jacobian of the update.
-    ints = (L_f, L_G, residual, prior, has_Q); params = (c, T, lambda_1..3, v_max, omega_max,
+    ints = (L_f, L_G, residual, prior, has_Q, n_f) (n_f = 8: x_f ends with u_{k-1}); params = (c, T, lambda_1..3, v_max, omega_max,
     forgetting, P_max) with c the input scale on the errors.
     """
-    Lf, LG, residual, prior, has_Q = ints[0], ints[1], ints[2] != 0, ints[3] != 0, ints[4] != 0
+    Lf, LG, residual, prior, has_Q, nf = ints[0], ints[1], ints[2] != 0, ints[3] != 0, ints[4] != 0, ints[5]
     c, T, l1, l2, l3, v_max, omega_max, forgetting, P_max = (
         params[0], params[1], params[2], params[3], params[4], params[5], params[6], params[7], params[8],
     )  # fmt: skip
@@ -238,13 +239,13 @@ def adaptive_step(e, v_r, omega_r, first, z, P, S, H, u, innov, h_hat, trace, in
     W = np.empty((3, a))
     f = np.empty(3)
     G = np.empty((3, 2))
-    o = 9 + Lf + LG
+    o = nf + 3 + Lf + LG
     for b in range(B):
         zb, eb, Sb = z[b], e[b], S[b]
-        xb, gb, phif, phiG = Sb[0:6], Sb[6:9], Sb[9 : 9 + Lf], Sb[9 + Lf : o]
+        xb, gb, phif, phiG = Sb[0:nf], Sb[nf : nf + 3], Sb[nf + 3 : nf + 3 + Lf], Sb[nf + 3 + Lf : o]
         u_prev, e_prev, e_nom = Sb[o : o + 2], Sb[o + 2 : o + 5], Sb[o + 5 : o + 8]
         if not first:
-            _f_G(zb, Lf, LG, phif, phiG, f, G)
+            _f_G(zb, Lf, LG, nf, phif, phiG, f, G)
             for j in range(3):
                 hj = f[j] + (G[j, 0] * u_prev[0] + G[j, 1] * u_prev[1])  # (26)
                 if residual:
@@ -262,9 +263,11 @@ def adaptive_step(e, v_r, omega_r, first, z, P, S, H, u, innov, h_hat, trace, in
         # (8)-(9)
         xb[0], xb[1], xb[2] = c * eb[0], c * eb[1], c * eb[2]
         xb[3], xb[4], xb[5] = v_r, omega_r, 1.0
+        if nf == 8:  # the velocity state: the last command
+            xb[6], xb[7] = u_prev[0], u_prev[1]
         gb[0], gb[1], gb[2] = xb[0], xb[1], 1.0
         _hidden(zb, Lf, LG, xb, gb, phif, phiG)
-        _f_G(zb, Lf, LG, phif, phiG, f, G)
+        _f_G(zb, Lf, LG, nf, phif, phiG, f, G)
         if residual:
             for j in range(3):
                 f[j] += eb[j]
@@ -294,7 +297,7 @@ def networks_h_jacobian(z, xf, xG, e, u, Lf, LG, residual, h, H):
     G = np.empty((3, 2))
     for b in range(z.shape[0]):
         _hidden(z[b], Lf, LG, xf[b], xG[b], phif, phiG)
-        _f_G(z[b], Lf, LG, phif, phiG, f, G)
+        _f_G(z[b], Lf, LG, xf.shape[1], phif, phiG, f, G)
         for j in range(3):
             h[b, j] = f[j] + (G[j, 0] * u[b, 0] + G[j, 1] * u[b, 1]) + (e[b, j] if residual else 0.0)
         _jacobian(z[b], Lf, LG, xf[b], xG[b], phif, phiG, u[b], H[b])

@@ -31,12 +31,16 @@ class Networks:
 
     ``error_scale`` multiplies the error inputs so they are O(1) like v_r and omega_r;
     ``residual`` makes NN_f estimate the increment f - e instead of f (then f_hat = e + NN_f).
+    ``velocity_inputs`` appends the last command u_{k-1} to x_f (8): on a robot with actuator and
+    inertia dynamics the velocity the robot has is a function of the commands before, and the one-step
+    map is f(e, v_r, omega_r, u_{k-1}) + G u_k; n_f = 8.
     """
 
     L_f: int = 18
     L_G: int = 1
     error_scale: float = 20.0  # the paper's inputs as printed: 1
     residual: bool = False
+    velocity_inputs: bool = False  # NN_f also sees the last command u_{k-1} = (v, omega): the velocity state
 
     def __post_init__(self) -> None:
         if self.L_f < 1 or self.L_G < 1:
@@ -45,35 +49,46 @@ class Networks:
             raise ConfigError("networks", f"error_scale must be positive (got {self.error_scale})")
 
     @property
+    def n_f(self) -> int:
+        """Inputs of NN_f: e1, e2, e3, v_r, omega_r, bias (and v, omega of u_{k-1} with ``velocity_inputs``)."""
+        return N_F + 2 if self.velocity_inputs else N_F
+
+    @property
     def alpha(self) -> int:
         """Total number of weights."""
-        return 3 * self.L_f + self.L_f * N_F + 6 * self.L_G + self.L_G * N_G
+        return 3 * self.L_f + self.L_f * self.n_f + 6 * self.L_G + self.L_G * N_G
 
     def split(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Views of z as W_f (..., 3, L_f), S_f (..., L_f, n_f), W_G (..., 3, 2, L_G), S_G (..., L_G, n_G)."""
         Lf, LG = self.L_f, self.L_G
         b = z.shape[:-1]
         i1 = 3 * Lf
-        i2 = i1 + Lf * N_F
+        i2 = i1 + Lf * self.n_f
         i3 = i2 + 6 * LG
         return (
             z[..., :i1].reshape(*b, 3, Lf),
-            z[..., i1:i2].reshape(*b, Lf, N_F),
+            z[..., i1:i2].reshape(*b, Lf, self.n_f),
             z[..., i2:i3].reshape(*b, 3, 2, LG),
             z[..., i3:].reshape(*b, LG, N_G),
         )
 
-    def inputs(self, e: np.ndarray, v_r, omega_r) -> tuple[np.ndarray, np.ndarray]:
-        """Eqs. (8)-(9): x_f (..., 6) and x_G (..., 3) from e (..., 3) and the reference velocities."""
+    def inputs(self, e: np.ndarray, v_r, omega_r, u_prev: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Eqs. (8)-(9): x_f (..., n_f) and x_G (..., 3) from e (..., 3) and the reference velocities
+        (and the last command u_prev (..., 2) with ``velocity_inputs``)."""
         c = self.error_scale
         if np.ndim(e) == 1:  # one run: build the two short vectors directly
             ce1, ce2 = c * e[0], c * e[1]
-            return np.array([ce1, ce2, c * e[2], v_r, omega_r, 1.0]), np.array([ce1, ce2, 1.0])
+            x_f = [ce1, ce2, c * e[2], v_r, omega_r, 1.0]
+            if self.velocity_inputs:
+                x_f += [u_prev[0], u_prev[1]]
+            return np.array(x_f), np.array([ce1, ce2, 1.0])
         ce = c * np.asarray(e, dtype=float)
         one = np.ones(ce.shape[:-1])
         x_f = np.concatenate(
             [ce, np.stack([np.broadcast_to(v_r, one.shape), np.broadcast_to(omega_r, one.shape), one], -1)], -1
         )
+        if self.velocity_inputs:
+            x_f = np.concatenate([x_f, np.broadcast_to(u_prev, (*one.shape, 2))], -1)
         x_G = np.stack([ce[..., 0], ce[..., 1], one], -1)
         return x_f, x_G
 
@@ -124,7 +139,7 @@ class Networks:
         Lf, LG = self.L_f, self.L_G
         b = z.shape[:-1]
         Gu = np.einsum("...jni,...i,...n->...j", W_G, phi_G, u)
-        i2 = 3 * Lf + Lf * N_F
+        i2 = 3 * Lf + Lf * self.n_f
         gamma = u[..., :, None] * phi_G[..., None, :]  # (..., 2, L_G): d (G u)_j / d w_jn = phi_G u_n (23)
         sigma = np.einsum("...jni,...n->...ji", W_G, u)  # sigma_{j,i} = sum_n w_{jn,i} u_n
         dphi_G = phi_G * (1.0 - phi_G)
@@ -150,7 +165,7 @@ class Networks:
         Lf, LG = self.L_f, self.L_G
         b = z.shape[:-1]
         G = np.einsum("...jni,...i->...jn", W_G, phi_G)
-        i2 = 3 * Lf + Lf * N_F
+        i2 = 3 * Lf + Lf * self.n_f
         df = self._nabla_f(W_f, phi_f, x_f, b)  # (21)-(22)
         dG = np.zeros((*b, 3, 2, self.alpha))
         eye6 = np.eye(6).reshape(3, 2, 3, 2)
@@ -169,15 +184,15 @@ class Networks:
             out[..., j, j * Lf : (j + 1) * Lf] = phi_f
         # (22): d f_j / d s_fi = w_{j,i} phi_fi (1 - phi_fi) x_f
         dphi_f = phi_f * (1.0 - phi_f)
-        out[..., :, 3 * Lf : 3 * Lf + Lf * N_F] = (
+        out[..., :, 3 * Lf : 3 * Lf + Lf * self.n_f] = (
             (W_f * dphi_f[..., None, :])[..., :, :, None] * x_f[..., None, None, :]
-        ).reshape(*b, 3, Lf * N_F)
+        ).reshape(*b, 3, Lf * self.n_f)
         return out
 
     def output_mask(self) -> np.ndarray:
         """True for the output-layer weights w_j (14) and w_jn (15), False for the hidden s_fi, s_Gi. (alpha,)"""
         m = np.zeros(self.alpha, dtype=bool)
-        i2 = 3 * self.L_f + self.L_f * N_F
+        i2 = 3 * self.L_f + self.L_f * self.n_f
         m[: 3 * self.L_f] = True
         m[i2 : i2 + 6 * self.L_G] = True
         return m
@@ -185,7 +200,7 @@ class Networks:
     def labels(self) -> list[str]:
         """A name for each weight, ``network/layer/name_index``, in the order of z."""
         out = [f"NN_f/output/w{j + 1}_{i}" for j in range(3) for i in range(self.L_f)]
-        out += [f"NN_f/hidden/s{i + 1}_{m}" for i in range(self.L_f) for m in range(N_F)]
+        out += [f"NN_f/hidden/s{i + 1}_{m}" for i in range(self.L_f) for m in range(self.n_f)]
         out += [f"NN_G/output/w{j + 1}{n + 1}_{i}" for j in range(3) for n in range(2) for i in range(self.L_G)]
         out += [f"NN_G/hidden/s{i + 1}_{m}" for i in range(self.L_G) for m in range(N_G)]
         return out

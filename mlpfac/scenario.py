@@ -31,7 +31,10 @@ from mlpfac.networks import Networks
 from mlpfac.reference import make_reference
 
 NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._+-]*")  # a scenario's name is a folder name in runs/ and sweeps
-NO_LIMIT = {"v_max", "omega_max", "max_wheel_speed"}  # keys where inf means "no limit"
+NO_LIMIT = {"v_max", "omega_max"}  # keys where inf means "no limit" (None)
+INF_OK = NO_LIMIT | {
+    "max_wheel_speed"
+}  # keys that take inf ("no limit"; max_wheel_speed keeps it: None is the model's)
 MEMORY_SHARE = 0.8  # a run may plan to use at most this share of the memory available now
 
 TOP_KEYS = {
@@ -139,13 +142,14 @@ def scenario_names() -> list[str]:
     return sorted(p.stem for p in shipped_dir().glob("*.toml"))
 
 
-def load(name_or_path: str | Path) -> Scenario:
+def load(name_or_path: str | Path, build: bool = True) -> Scenario:
     """A scenario by name (``paper`` -> the shipped paper.toml) or by path to a TOML file.
 
     Relative paths in the file (``[plant] model``) are taken from the file's own folder. The plant
     is built once here, so that a robot or an event it cannot apply is an error before anything
     runs, and what it simulates is recorded in the table's ``[provenance]`` (config.toml). A file
     that already has ``[provenance]`` (a run's config.toml) must simulate the same compiled model.
+    ``build=False`` reads and checks the file alone (a listing), without building the plant.
     """
     path = Path(name_or_path)
     if path.suffix != ".toml":
@@ -167,9 +171,16 @@ def load(name_or_path: str | Path) -> Scenario:
         raise ConfigError(str(path), f"not valid TOML: {err}") from None
     table.setdefault("name", path.stem)
     plant = table.get("plant")
-    if isinstance(plant, dict) and isinstance(plant.get("model"), str) and plant["model"]:
+    if (
+        isinstance(plant, dict)
+        and isinstance(plant.get("model"), str)
+        and plant["model"]
+        and not plant["model"].startswith("menagerie:")
+    ):
         plant["model"] = str((path.parent / Path(plant["model"]).expanduser()).resolve())
     scn = parse(table, str(path))
+    if not build:  # the file's data only (a listing): no robot is read, none downloaded
+        return scn
     table["provenance"] = _provenance(scn)
     return dataclasses.replace(scn, table=table)
 
@@ -194,9 +205,9 @@ def _check_provenance(recorded, config, where: str) -> None:
     want = recorded.get("model_sha256")
     if want is None or not hasattr(config, "path"):
         return
-    from mlpfac.plants.robot import model_fingerprint
+    from mlpfac.plants.model_file import model_fingerprint
 
-    got = model_fingerprint(config.path)
+    got = model_fingerprint(config.model)
     if got != want:
         raise ConfigError(
             f"{where} model_sha256",
@@ -250,7 +261,7 @@ def _typed(value, hint, key: str) -> bool:
         return isinstance(value, int) and not isinstance(value, bool)
     if hint is float:
         ok = isinstance(value, int | float) and not isinstance(value, bool)
-        return ok and (math.isfinite(value) or (key in NO_LIMIT and value == math.inf))
+        return ok and (math.isfinite(value) or (key in INF_OK and value == math.inf))
     if hint is str:
         return isinstance(value, str)
     return True  # nested configs (Networks) are built on their own
@@ -357,7 +368,7 @@ def parse(table: dict, source: str = "<scenario>", check_model: bool = True) -> 
 
         plant_config = build(KinematicConfig, plant_table, where)
     elif plant_kind == "mujoco":
-        from mlpfac.plants.robot import MujocoConfig
+        from mlpfac.plants.config import MujocoConfig
 
         plant_config = build(MujocoConfig, plant_table, where)
     else:

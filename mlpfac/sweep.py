@@ -29,11 +29,14 @@ the command line and the engine's API (every name below is importable from here)
    fresh interpreters with one BLAS thread each that die with the sweep (``PR_SET_PDEATHSIG``
    and a thread watching the parent), so a killed sweep leaves no worker behind.
 3. **Aggregate** (:func:`aggregate`): per scenario, controller and phase ("before" / "after" the
-   first event; only "before" when the scenario has no event).
+   first event; only "before" when the scenario has no event); and **pair** (:func:`paired_rows`,
+   :mod:`mlpfac.sweeps.paired`): per seed against Corradini's law, the oracle and the controller's
+   own run without the event, in paired.csv / .md / .json and summary.md.
 
-How diverged runs enter the statistics: the position / heading RMS statistics (mean, median,
-95 % confidence interval of the mean, Student t) are over the **bounded runs only** (status
-"ok"); next to them stands the bounded share k/n. The worst seed is the diverged run that
+How runs enter the statistics: each run is tracking, lost or diverged (``outcome`` in
+metrics.json, :func:`mlpfac.runner.outcome`); the position / heading RMS statistics (mean, median,
+95 % confidence interval of the mean, Student t) are over the runs that finished (tracking or lost;
+status "ok"), next to the three counts. The worst seed is the diverged run that
 diverged first (fewest steps, then lowest seed) if any diverged, else the bounded run with the
 largest position RMS in that phase. A run that raised an exception (a bug, not a divergence)
 leaves ``error.txt`` and no metrics.json; it is reported, left out of the table, and re-run on
@@ -74,6 +77,7 @@ from mlpfac.sweeps.folders import (  # noqa: F401
     metrics_problem,
     write_result,
 )
+from mlpfac.sweeps.paired import paired_rows, summary
 from mlpfac.sweeps.plan import MAX_RUNS, Job, check_writable, parse_controllers, parse_seeds, plan  # noqa: F401
 from mlpfac.sweeps.tables import (  # noqa: F401
     COMPARE_COLUMNS,
@@ -81,6 +85,7 @@ from mlpfac.sweeps.tables import (  # noqa: F401
     SWEEP_COLUMNS,
     aggregate,
     markdown,
+    write_paired,
     write_tables,
 )
 from mlpfac.sweeps.worker import rrd_is_whole, run_task  # noqa: F401
@@ -219,8 +224,9 @@ def _run_cli(args: argparse.Namespace, stem: str, columns) -> int:
                 "duration": args.duration,
                 "runs": len(jobs),
             }
+            prows = paired_rows(jobs, oc.metrics)
             try:
-                paths = write_tables(args.out, stem, rows, columns, meta)
+                paths = write_tables(args.out, stem, rows, columns, meta) + write_paired(args.out, prows, meta)
                 from mlpfac.plots import sweep_plots
 
                 paths += sweep_plots(args.out, (stem,))  # <stem>.png beside the table
@@ -232,6 +238,7 @@ def _run_cli(args: argparse.Namespace, stem: str, columns) -> int:
         if client is not None:
             client.close()
     print(markdown(rows, columns), end="")
+    print("\n" + summary(prows), end="")
     redo = sum(oc.redo.values())
     why = "; ".join(f"{k} {v}" for k, v in oc.redo.items())
     print(

@@ -3,7 +3,9 @@ record, logging it the way the runner does, and reading an .rrd back."""
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -12,6 +14,12 @@ from mlpfac.error_model import h_true, tracking_error
 from mlpfac.networks import Networks
 from mlpfac.record import RunRecord
 from mlpfac.reference import Eight, sample
+
+# The Menagerie robots (tiago-* scenarios) come from the local Menagerie root beside the repository
+# when there is one, as in CI, unless MENAGERIE_ROOT names another.
+_MENAGERIE = Path(__file__).resolve().parents[2] / "shared" / "menagerie"
+if _MENAGERIE.is_dir():
+    os.environ.setdefault("MENAGERIE_ROOT", str(_MENAGERIE))
 
 GEOMETRY = [
     {

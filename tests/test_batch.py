@@ -86,6 +86,9 @@ def test_shipped_paper_scenario_batches_bit_identically():
         "adaptive-ukf",
         "adaptive-cautious",
         "adaptive-gains",
+        "adaptive-input",
+        "adaptive-input-delay",
+        "oracle",
     ],
 )
 def test_every_variant_batches_bit_identically(controller):
@@ -125,3 +128,17 @@ def test_a_seed_in_a_batch_of_64_is_its_run_alone_to_the_last_bit():
     for b in (0, 17, 63):
         same_run(recs[b], run(scns[b]))
         same_run(recs[b], run_batch([scns[b]])[0])
+
+
+def test_adaptive_input_delay_batches_bit_identically_on_the_mujoco_robot():
+    """The sensor delay moved early: the alarm, the delay found and the predictor run in the batch."""
+    t = copy.deepcopy(load("eight-sensor-delay").table)
+    t["events"][0]["time"] = 1.2
+    scns = [
+        parse(t, "eight-sensor-delay").with_overrides(controller="adaptive-input-delay", seed=s, duration=2.5)
+        for s in range(3)
+    ]
+    recs = run_batch(scns)
+    assert max(r.ctrl["alarms"][r.n - 1] for r in recs) >= 1
+    for a, s in zip(recs, scns, strict=True):
+        same_run(a, run(s))

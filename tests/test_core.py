@@ -10,14 +10,16 @@ from mlpfac.law import Law
 from mlpfac.networks import Networks
 from mlpfac.reference import Circle, Eight, Lemniscate, Line, sample
 
+NETS = [Networks(), Networks(L_f=5, L_G=3, error_scale=20.0), Networks(residual=True), Networks(velocity_inputs=True)]
 
-@pytest.mark.parametrize("nets", [Networks(), Networks(L_f=5, L_G=3, error_scale=20.0), Networks(residual=True)])
+
+@pytest.mark.parametrize("nets", NETS)
 def test_jacobian_matches_central_differences(nets):
     rng = np.random.default_rng(1)
     z = rng.normal(0, 1.0, nets.alpha)
     e = rng.normal(0, 0.1, 3)
     u = np.array([0.8, -0.6])
-    x_f, x_G = nets.inputs(e, 0.9, 0.3)
+    x_f, x_G = nets.inputs(e, 0.9, 0.3, np.array([0.7, -0.4]))
     h, H = nets.h_and_jacobian(z, x_f, x_G, e, u)
     assert H.shape == (3, nets.alpha)
     np.testing.assert_allclose(h, nets.h(z, x_f, x_G, e, u), rtol=1e-14, atol=1e-15)
@@ -40,6 +42,13 @@ def test_weight_count_and_layout():
     assert S_f[0, 0] == 54  # s_f1 after the output weights
     assert W_G[0, 1, 0] == 163 and S_G[0, 0] == 168  # w_12, then s_G1 (17)
     assert len(set(nets.labels())) == nets.alpha
+    vel = Networks(velocity_inputs=True)
+    assert vel.n_f == 8 and vel.alpha == 207  # 3*18 + 18*8 + 6*1 + 1*3
+    assert len(set(vel.labels())) == vel.alpha
+    x_f, _ = vel.inputs(np.array([0.01, 0.02, 0.03]), 0.9, 0.3, np.array([0.7, -0.4]))
+    np.testing.assert_array_equal(x_f, [0.2, 0.4, 0.6, 0.9, 0.3, 1.0, 0.7, -0.4])
+    X_f, _ = vel.inputs(np.full((2, 3), 0.01), 0.9, 0.3, np.array([[0.7, -0.4], [0.1, 0.2]]))
+    np.testing.assert_array_equal(X_f[:, 6:], [[0.7, -0.4], [0.1, 0.2]])
 
 
 def test_batched_networks_equal_single():
@@ -199,14 +208,14 @@ def test_ekf_covariance_stays_symmetric_positive_definite_over_a_long_run():
     assert np.all(np.isfinite(ekf.z))
 
 
-@pytest.mark.parametrize("nets", [Networks(), Networks(L_f=5, L_G=3, error_scale=20.0), Networks(residual=True)])
+@pytest.mark.parametrize("nets", NETS)
 def test_compiled_networks_equal_the_numpy_ones(nets):
     from mlpfac.kernels import networks_h_jacobian
 
     rng = np.random.default_rng(7)
     B = 4
     z, e, u = rng.normal(0, 1.0, (B, nets.alpha)), rng.normal(0, 0.1, (B, 3)), rng.normal(size=(B, 2))
-    x_f, x_G = nets.inputs(e, 0.9, 0.3)
+    x_f, x_G = nets.inputs(e, 0.9, 0.3, rng.normal(size=(B, 2)))
     h, H = np.empty((B, 3)), np.empty((B, 3, nets.alpha))
     networks_h_jacobian(z, x_f, x_G, e, u, nets.L_f, nets.L_G, nets.residual, h, H)
     h_ref, H_ref = nets.h_and_jacobian(z, x_f, x_G, e, u)

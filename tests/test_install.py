@@ -69,5 +69,8 @@ def test_a_fresh_install_lists_and_runs_every_shipped_scenario(wheel, tmp_path):
     assert [line.split()[0] for line in listed.stdout.splitlines()[: len(shipped)]] == shipped
     for name in shipped:
         res = mlpfac("run", name, "--duration", "0.3", "--no-plot", "--out", f"runs/{name}")
+        if name.startswith("tiago-"):  # a Menagerie robot: the wheel alone lacks the package, and says so
+            assert res.returncode == 2 and "pip install 'mlpfac[menagerie]'" in res.stderr, (name, res.stderr)
+            continue
         assert res.returncode == (1 if name == "paper-faithful" else 0), (name, res.stderr)
         assert (work / "runs" / name / "metrics.json").is_file() and (work / "runs" / name / "run.rrd").is_file()

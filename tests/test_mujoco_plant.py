@@ -10,7 +10,7 @@ import mujoco
 import numpy as np
 import pytest
 
-from mlpfac.events import Event, parse_event
+from mlpfac.events import make_event, parse_event
 from mlpfac.exceptions import ConfigError
 from mlpfac.plants.mujoco import MujocoConfig, MujocoPlant
 
@@ -101,7 +101,7 @@ def test_payload_mass_is_in_the_model_and_its_dynamics_match_a_compiled_model():
     hold(plant, (0.6, 0.4), 30)
     b = plant.model.body("chassis").id
     inertia0 = plant.model.body_inertia[b].copy()
-    text = plant.apply(Event(0.3, "payload", {"mass_scale": 3.0}))
+    text = plant.apply(make_event("payload", 0.3, mass_scale=3.0))
     assert "5 -> 15 kg" in text
     assert plant.model.body_mass[b] == pytest.approx(15.0)
     np.testing.assert_allclose(plant.model.body_inertia[b], 3.0 * inertia0)
@@ -128,9 +128,9 @@ def test_payload_mass_is_in_the_model_and_its_dynamics_match_a_compiled_model():
 def test_payload_adds_mass_to_a_named_body():
     plant = make()
     w = plant.model.body("left_wheel").id
-    plant.apply(Event(0.0, "payload", {"mass_kg": 0.25, "body": "left_wheel"}))
+    plant.apply(make_event("payload", 0.0, mass_kg=0.25, body="left_wheel"))
     assert plant.model.body_mass[w] == pytest.approx(0.5)
-    plant.apply(Event(0.0, "payload", {"mass_kg": 2.0}))
+    plant.apply(make_event("payload", 0.0, mass_kg=2.0))
     assert plant.model.body("chassis").mass[0] == pytest.approx(7.0)
     plant.reset(np.zeros(3), np.random.default_rng(0))  # a new run starts from the nominal robot
     assert plant.model.body("chassis").mass[0] == pytest.approx(5.0)
@@ -142,7 +142,7 @@ def test_friction_changes_the_slip_in_a_hard_start():
     for mu in (None, 0.1):
         plant = make()
         if mu is not None:
-            assert "1 -> 0.1" in plant.apply(Event(0.0, "friction", {"mu": mu}))
+            assert "1 -> 0.1" in plant.apply(make_event("friction", 0.0, mu=mu))
             tyres = [plant.model.geom(n).id for n in ("left_tyre", "right_tyre")]
             np.testing.assert_allclose(plant.model.geom_friction[tyres, 0], mu)
         rec = hold(plant, (1.5, 0.0), 30)  # from rest to 1.5 m/s: full torque
@@ -162,7 +162,7 @@ def test_wheel_radius_scale_makes_the_robot_faster_by_the_scale():
     for scale in (1.0, 1.5):
         plant = make()
         if scale != 1.0:
-            assert "0.05 -> 0.075 m" in plant.apply(Event(0.0, "wheel_radius", {"scale": scale}))
+            assert "0.05 -> 0.075 m" in plant.apply(make_event("wheel_radius", 0.0, scale=scale))
             assert plant.model.geom("left_tyre").size[0] == pytest.approx(0.075)
             assert plant.ik_radius == pytest.approx(0.05)  # the IK keeps believing the nominal radius
         hold(plant, (0.5, 0.5), 250)
@@ -178,7 +178,7 @@ def test_weaker_force_limit_accelerates_slower(actuator):
     for force_scale in (1.0, 0.5):
         plant = make(actuator)
         if force_scale != 1.0:
-            assert "torque limit 0.6 -> 0.3 N m" in plant.apply(Event(0.0, "actuator", {"force_scale": force_scale}))
+            assert "torque limit 0.6 -> 0.3 N m" in plant.apply(make_event("actuator", 0.0, force_scale=force_scale))
         reached.append(hold(plant, (1.0, 0.0), 10)["u_true"][-1, 0])  # after 0.1 s at full torque
     assert reached[1] / reached[0] == pytest.approx(0.5, abs=0.05)
 
@@ -190,7 +190,7 @@ def test_lower_gain_follows_a_small_speed_step_slower(actuator):
         plant = make(actuator)
         hold(plant, (0.5, 0.0), 100)
         if kv_scale != 1.0:
-            plant.apply(Event(1.0, "actuator", {"kv_scale": kv_scale}))
+            plant.apply(make_event("actuator", 1.0, kv_scale=kv_scale))
             if actuator == "velocity":
                 np.testing.assert_allclose(plant.model.actuator_gainprm[:, 0], 0.5)
                 np.testing.assert_allclose(plant.model.actuator_biasprm[:, 2], -0.5)  # kv lives here too
@@ -203,7 +203,7 @@ def test_control_period_holds_each_command_longer():
     plant = make()
     rec = hold(plant, (1.0, 0.0), 150)
     dx_before = rec["pose"][-1, 0] - rec["pose"][-2, 0]
-    text = plant.apply(Event(1.5, "control_period", {"factor": 1.5}))
+    text = plant.apply(make_event("control_period", 1.5, factor=1.5))
     assert "0.01 -> 0.015 s" in text
     t0, time0 = plant.sim_time, plant.data.time
     rec = hold(plant, (1.0, 0.0), 2)
@@ -216,7 +216,7 @@ def test_control_period_holds_each_command_longer():
 def test_sensor_delay_returns_the_pose_from_n_steps_ago():
     plant = make()
     hold(plant, (0.5, 0.2), 10)
-    assert "0 -> 3 control steps" in plant.apply(Event(0.1, "sensor_delay", {"steps": 3}))
+    assert "0 -> 3 control steps" in plant.apply(make_event("sensor_delay", 0.1, steps=3))
     truth = [plant.true_pose().copy()]
     for k in range(12):
         plant.step(np.array([0.5 + 0.05 * k, math.sin(k)]))
@@ -331,6 +331,140 @@ def test_geometry_is_the_robot_seen_from_the_axle_midpoint():
     for s in shapes.values():
         assert len(s["quat"]) == 4 and len(s["rgba"]) == 4
         assert np.linalg.norm(s["quat"]) == pytest.approx(1.0)
+
+
+# --- both robots: ours and PAL TIAGo from MuJoCo Menagerie, as shipped ----------------------------
+
+TIAGO = {
+    "model": "menagerie:pal_tiago/scene_velocity",
+    "left_actuator": "wheel_left_joint_vel",
+    "right_actuator": "wheel_right_joint_vel",
+    "body": "base_link",
+    "keyframe": "home",
+    "other_actuators": "lock",
+    "tyre": "sphere",
+    "timestep": 0.0025,
+}
+TIAGO_TORQUE = {"pi_kp": 10.0, "pi_ki": 200.0}
+ROBOTS = {"diffdrive": {}, "tiago": TIAGO}
+SPEEDS = {"diffdrive": [(0.5, 0.5), (0.3, -1.5)], "tiago": [(0.3, 0.3), (0.4, 0.0), (0.15, -0.8)]}
+
+
+def robot(name: str, actuator: str = "velocity", **kw) -> MujocoPlant:
+    if name == "tiago":
+        pytest.importorskip("mujoco_menagerie")
+        kw = TIAGO_TORQUE | kw if actuator == "torque" else kw
+    plant = MujocoPlant(MujocoConfig(actuator=actuator, **(ROBOTS[name] | kw)), T)
+    plant.reset(np.zeros(3), np.random.default_rng(0))
+    return plant
+
+
+@pytest.mark.parametrize("name", ROBOTS)
+@pytest.mark.parametrize("actuator", DRIVES)
+def test_each_robot_tracks_constant_commands_within_2_percent(name, actuator):
+    plant = robot(name, actuator)
+    for u in SPEEDS[name]:
+        hold(plant, u, 200)
+        v, omega = np.mean(hold(plant, u, 50)["u_true"], axis=0)
+        assert v == pytest.approx(u[0], rel=0.02, abs=0.002)
+        assert omega == pytest.approx(u[1], rel=0.02, abs=0.004)
+    assert plant.mujoco_warnings() == {}
+    assert plant.diverged() is None
+
+
+@pytest.mark.parametrize("name", ROBOTS)
+@pytest.mark.parametrize(
+    "kind, params",
+    [
+        ("payload", {"mass_scale": 1.5}),
+        ("payload", {"mass_kg": 10.0, "body": "*"}),
+        ("friction", {"mu": 0.3}),
+        ("wheel_radius", {"scale": 1.1}),
+        ("actuator", {"kv_scale": 0.5, "force_scale": 0.5}),
+        ("control_period", {"factor": 1.5}),
+        ("sensor_delay", {"steps": 2}),
+    ],
+)
+def test_every_event_applies_to_each_robot_and_it_stays_on_its_wheels(name, kind, params):
+    plant = robot(name)
+    u = SPEEDS[name][0]
+    hold(plant, u, 100)
+    m0 = plant.model
+    mass, limit, radius = float(m0.body_subtreemass[plant.robot.root]), plant._torque_max[0], plant.real_radius
+    event = make_event(kind, 1.0, **params)
+    plant.check_event(event, "here")
+    text = plant.apply(event)
+    m = plant.model
+    if kind == "payload" and "body" in params:
+        assert float(m.body_subtreemass[plant.robot.root]) == pytest.approx(mass + 10.0)
+        assert "the whole robot" in text
+    elif kind == "payload":
+        assert float(m.body_subtreemass[plant.robot.root]) > mass
+    elif kind == "friction":
+        np.testing.assert_allclose(m.geom_friction[list(plant._tyres), 0], 0.3)
+    elif kind == "wheel_radius":
+        assert plant.real_radius == pytest.approx(1.1 * radius) and plant.ik_radius == pytest.approx(radius)
+    elif kind == "actuator":
+        assert plant._torque_max[0] == pytest.approx(0.5 * limit)
+    hold(plant, u, 150)
+    assert plant.diverged() is None, text
+    assert plant.mujoco_warnings() == {}
+
+
+@pytest.mark.parametrize("name", ROBOTS)
+def test_each_robot_is_bit_identical_for_a_seed(name):
+    runs = []
+    for _ in range(2):
+        plant = robot(name, pose_noise_std=0.001)
+        runs.append(np.array([plant.measure().copy() for _ in range(40) if plant.step(np.array([0.3, 0.2])) is None]))
+    np.testing.assert_array_equal(runs[0], runs[1])
+
+
+def test_smaller_wheels_that_leave_the_robot_on_its_casters_are_refused():
+    """Our robot's one caster tilts it onto smaller wheels; TIAGo's four rigid casters hold its base up."""
+    robot("diffdrive").check_event(make_event("wheel_radius", 1.0, scale=0.9), "here")
+    with pytest.raises(ConfigError, match="here scale: wheels of 0.088.* m no longer reach the floor"):
+        robot("tiago").check_event(make_event("wheel_radius", 1.0, scale=0.9), "here")
+
+
+def test_tiago_limits_are_read_where_its_makers_declared_them():
+    """The wheels' speed limit is the servo's ctrlrange (5 rad/s), the torque limit the joints'
+    actuatorfrcrange (100 N m): defaults, applied to (v, omega) keeping the curvature."""
+    plant = robot("tiago")
+    assert plant.max_wheel_speed == pytest.approx(5.0)
+    assert plant._torque_max == pytest.approx((100.0, 100.0))
+    rec = hold(plant, (1.0, 0.5), 5)  # asks (1.0 +- 0.1) / 0.098 rad/s: scaled down by one factor
+    wl, wr = rec["wheel_cmd"][-1]
+    assert max(abs(wl), abs(wr)) == pytest.approx(5.0)
+    assert (wr - wl) / (wr + wl) == pytest.approx(0.5 * plant.ik_track / 2 / 1.0)  # omega / v kept
+    plant.apply(make_event("actuator", 0.0, force_scale=0.2))
+    assert plant._torque_max == pytest.approx((20.0, 20.0))
+    rec = hold(plant, (0.45, -2.0), 30)
+    assert np.max(np.abs(rec["torque"])) <= 20.0 + 1e-9  # as applied at the joint
+    assert MujocoPlant(MujocoConfig(**TIAGO, max_wheel_speed=math.inf), T).max_wheel_speed is None
+
+
+def test_tiago_starts_from_its_keyframe_at_rest_with_the_arm_locked_or_held():
+    locked, held = robot("tiago"), robot("tiago", other_actuators="hold")
+    assert len(locked.robot.locked) == 12 and held.robot.locked == ()
+    assert locked.model.nv == held.model.nv - 12
+    for plant in (locked, held):
+        assert plant.model.body_subtreemass[plant.robot.root] == pytest.approx(73.3, abs=0.1)
+        z = plant.data.xpos[plant.robot.root, 2]
+        assert z == pytest.approx(-0.99, abs=0.005)  # on its wheels on the floor at z = -0.99
+        assert plant.real_radius == pytest.approx(0.0983, abs=2e-4)  # from the mesh
+        assert plant.ik_track == pytest.approx(0.4044, abs=1e-4)
+    torso = held.model.joint("torso_lift_joint")
+    assert held.data.qpos[torso.qposadr[0]] == pytest.approx(0.15, abs=0.01)  # "home", not 0
+
+
+def test_tiago_geometry_is_its_meshes():
+    shapes = robot("tiago").geometry()
+    meshes = [s for s in shapes if s["type"] == "mesh"]
+    assert len(meshes) > 20 and not any(s["name"].startswith("mlpfac") for s in shapes)
+    for s in meshes:
+        assert s["vertices"].ndim == 2 and s["vertices"].shape[1] == 3 and s["faces"].shape[1] == 3
+        assert s["faces"].max() < len(s["vertices"])
 
 
 # --- your own robot -------------------------------------------------------------------------------
@@ -487,7 +621,7 @@ def test_friction_event_needs_tyres_that_own_the_contact(tmp_path):
         MujocoConfig(model=write(tmp_path, text), left_actuator="lm", right_actuator="rm", site="base"), 0.01
     )
     with pytest.raises(ConfigError, match="priority"):
-        plant.check_event(Event(1.0, "friction", {"mu": 0.2}), "here")
+        plant.check_event(make_event("friction", 1.0, mu=0.2), "here")
 
 
 # --- shipped scenarios ----------------------------------------------------------------------------
@@ -525,7 +659,8 @@ def test_scenario_builds_a_plant_and_its_events_pass(path):
     assert len(events) == (0 if path.stem in ("eight-nominal", "eight-torque") else 1)
     for i, ev in enumerate(events):
         ev = dict(ev)
-        event = Event(float(ev.pop("time")), ev.pop("kind"), ev)
+        t = float(ev.pop("time"))
+        event = make_event(ev.pop("kind"), t, **ev)
         plant.check_event(event, f"{path.name} [[events]] #{i + 1}")
         assert event.time < table["duration"]
         plant.apply(event)

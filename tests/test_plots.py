@@ -1,16 +1,15 @@
-"""The pictures: Figure 1's panels per controller, the error series metrics.json keeps, the sweep
+"""The pictures: Figure 1's panels per controller, the sweep
 plots beside the tables (made by `mlpfac sweep` and again by `mlpfac plot`), and the colours."""
 
 from __future__ import annotations
 
 import json
 
-import numpy as np
 import pytest
 
 from mlpfac.cli import main
 from mlpfac.plots import controller_colors, figure1, outcome
-from mlpfac.runner import error_series, metrics, run
+from mlpfac.runner import run
 from mlpfac.scenario import load
 
 
@@ -37,23 +36,6 @@ def test_figure1_leaves_out_the_panels_that_do_not_apply(tmp_path, short_runs):
     assert all((tmp_path / f).stat().st_size > 20_000 for f in ("a.png", "k.png", "c.png", "n.png"))
 
 
-def test_the_error_series_is_the_rms_of_each_tenth_of_a_second(short_runs):
-    rec = short_runs["adaptive"]
-    s = error_series(rec)
-    pos = np.hypot(rec.e_true[: rec.n, 0], rec.e_true[: rec.n, 1])
-    assert s["dt_s"] == pytest.approx(0.1) and len(s["position_error_m"]) == -(-rec.n // 10)
-    for i in (0, 7, len(s["position_error_m"]) - 1):
-        assert s["position_error_m"][i] == pytest.approx(np.sqrt(np.mean(pos[10 * i : 10 * i + 10] ** 2)), abs=1e-6)
-    assert metrics(rec)["series"] == s
-
-
-def test_a_diverged_run_keeps_its_series_up_to_where_it_stopped():
-    rec = run(load("paper-faithful"))  # diverges within a few steps
-    assert rec.status == "diverged"
-    s = error_series(rec)
-    assert len(s["position_error_m"]) == -(-rec.n // 10) and all(x is None or x >= 0 for x in s["position_error_m"])
-
-
 def test_outcome_reads_the_newer_field_and_falls_back_to_status():
     assert outcome({"status": "ok"}) == "tracking" and outcome({"status": "diverged"}) == "diverged"
     assert outcome({"status": "ok", "outcome": "lost"}) == "lost"
@@ -76,7 +58,7 @@ def test_sweep_writes_its_plot_and_plot_draws_it_again(tmp_path, capsys):
     first = (out / "sweep.png").stat().st_size
     assert first > 30_000
     m = json.loads((out / "paper" / "adaptive" / "seed-0000" / "metrics.json").read_text())
-    assert len(m["series"]["position_error_m"]) == 30
+    assert len(m["position_ms_bins"]["m2"]) == 30 and m["outcome"] == "tracking"
     (out / "sweep.png").unlink()
     assert main(["plot", str(out)]) == 0
     assert (out / "sweep.png").stat().st_size == first  # the same picture from the folders alone

@@ -22,7 +22,7 @@ def test_the_shipped_scenarios_are_there():
 
 
 @pytest.mark.parametrize("name", SCENARIOS)
-@pytest.mark.parametrize("controller", ["adaptive", "corradini", "kanayama"])
+@pytest.mark.parametrize("controller", ["adaptive", "corradini", "kanayama", "oracle"])
 def test_every_scenario_runs_briefly_and_applies_its_events(name, controller):
     table = copy.deepcopy(load(name).table)
     table["duration"] = 0.8

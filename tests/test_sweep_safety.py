@@ -257,14 +257,6 @@ CORRUPTIONS = {
         ),
         "metrics.json not valid",
     ),
-    "metrics.json series wrong": (
-        lambda d: (d / "metrics.json").write_text(
-            json.dumps(
-                json.loads((d / "metrics.json").read_text()) | {"series": {"dt_s": 0.1, "position_error_m": "x"}}
-            )
-        ),
-        "metrics.json not valid",
-    ),
     "config.toml deleted": (lambda d: (d / "config.toml").unlink(), "config.toml missing"),
 }
 

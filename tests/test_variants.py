@@ -36,7 +36,7 @@ class PaperStep:
         if self.prev is not None:
             x_f, x_G, e_prev, u_prev = self.prev
             self.ekf.update(e, lambda z: nets.h_and_jacobian(z, x_f, x_G, e_prev, u_prev))
-        x_f, x_G = nets.inputs(e, r[3], r[4])
+        x_f, x_G = nets.inputs(e, r[3], r[4], self.prev[3] if self.prev is not None else np.zeros(2))
         f_hat, G_hat = nets.forward(self.ekf.z, x_f, x_G, e)
         h_hat = np.array([G_hat[0, 1], f_hat[0] - e[0], f_hat[2] - e[2]])
         u = self.law.control(e, h_hat, r[3], self.T)
@@ -63,6 +63,7 @@ def drive(ctrl, steps=300, seed=21):
         AdaptiveConfig(
             networks=Networks(error_scale=20.0), P0=1.0, R=1e-4, forgetting=0.999, P_max=2.0, output_weight_std=None
         ),
+        AdaptiveConfig(networks=Networks(velocity_inputs=True), output_weight_std=None),  # x_f ends with u_{k-1}
     ],
 )
 def test_default_options_are_the_paper_scheme(base):

@@ -13,6 +13,7 @@ from collections.abc import Sequence
 import numpy as np
 import rerun as rr
 
+from mlpfac.log import meshes
 from mlpfac.log.schema import PATH_COLOR, REF_COLOR, ROBOT_COLOR, entity_part
 from mlpfac.log.series import time_index
 from mlpfac.record import RunRecord
@@ -162,6 +163,8 @@ def robot_shapes(geometry: Sequence[dict]) -> list[tuple[str, object]]:
             )
         elif kind == "sphere":
             arch = rr.Ellipsoids3D(half_sizes=[[size[0]] * 3], centers=pos, colors=color, fill_mode="solid")
+        elif kind == "mesh":
+            arch = meshes.mesh_archetype(g, lift, color[0])
         else:
             arch = rr.TextLog(f"geom {name!r}: type {kind!r} is not drawn", level="WARN")
         out.append((name, arch))
@@ -181,6 +184,8 @@ def _lowest_point(g: dict) -> float:
         extent = c * h + (r if kind == "capsule" else r * np.sqrt(max(0.0, 1.0 - c * c)))
     elif kind == "sphere":
         extent = float(size[0])
+    elif kind == "mesh":
+        return meshes.lowest_point(g)
     else:
         return np.inf
     return float(g.get("pos", [0.0, 0.0, 0.0])[2]) - extent

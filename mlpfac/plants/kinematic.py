@@ -13,7 +13,7 @@ import numpy as np
 
 from mlpfac.error_model import pose_from_error, tracking_error
 from mlpfac.estimators import covariance
-from mlpfac.events import DelayLine, Event
+from mlpfac.events import ControlPeriod, DelayLine, Event, SensorDelay
 from mlpfac.exceptions import ConfigError
 from mlpfac.kernels import kinematic_step, seeds
 
@@ -88,10 +88,11 @@ class KinematicPlant:
             )
 
     def apply(self, event: Event) -> str:
-        if event.kind == "control_period":
-            old, self.T_p = self.T_p, float(event.params["factor"]) * self.T
+        if isinstance(event, ControlPeriod):
+            old, self.T_p = self.T_p, event.factor * self.T
             return f"plant sampling interval {old:g} -> {self.T_p:g} s (controller keeps T = {self.T:g} s)"
-        return self.history.delay(int(event.params["steps"]))
+        assert isinstance(event, SensorDelay)
+        return self.history.delay(event.steps)
 
     def telemetry(self) -> dict[str, np.ndarray | float]:
         """``u_meas`` (the command, held exactly) and ``h_true`` (34) at the step's start; (B, ...) for a batch."""

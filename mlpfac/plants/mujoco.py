@@ -29,10 +29,23 @@ import math
 import mujoco
 import numpy as np
 
-from mlpfac.events import EVENT_KINDS, DelayLine, Event
+from mlpfac.events import (
+    EVENT_KINDS,
+    Actuator,
+    ControlPeriod,
+    DelayLine,
+    Event,
+    Friction,
+    Payload,
+    SensorDelay,
+    WheelRadius,
+)
 from mlpfac.exceptions import ConfigError
 from mlpfac.ik import body_velocity_vw, wheel_speeds, wheel_speeds_lr
-from mlpfac.plants.robot import ROUND, MujocoConfig, read_robot, yaw
+from mlpfac.plants.config import MujocoConfig
+from mlpfac.plants.edits import torque_limit
+from mlpfac.plants.model_file import is_menagerie, menagerie_version
+from mlpfac.plants.robot import ROUND, read_robot, yaw
 
 DIVERGENCE_WARNINGS = ("mjWARN_BADQPOS", "mjWARN_BADQVEL", "mjWARN_BADQACC")  # MuJoCo resets the data on these
 NOISE_CHUNK = 1024  # pose-noise draws made at once: the same stream as one draw of 3 per step
@@ -64,6 +77,8 @@ class MujocoPlant:
         self.ik_radius = config.wheel_radius if config.wheel_radius is not None else r.real_radius
         self.ik_track = config.track if config.track is not None else r.real_track
         self._sign, self._act_per_wheel = r.sign, r.act_per_wheel
+        limit = config.max_wheel_speed if config.max_wheel_speed is not None else r.max_wheel_speed
+        self.max_wheel_speed = None if limit is None or math.isinf(limit) else float(limit)
         self._geometry = r.geometry
         self._noise = config.noise_std()
         self._torque_max = self._force_limits()
@@ -84,11 +99,12 @@ class MujocoPlant:
             self._spec = self._spec_nominal.copy()
             self.model = self._spec.compile()
             self.data = mujoco.MjData(self.model)
-            self.real_radius = max(float(self.model.geom_size[g, 0]) for g in self._tyres)
+            self.real_radius = self.robot.real_radius
             self._changed = False
         m, d = self.model, self.data
         mujoco.mj_resetData(m, d)
         d.qpos[:] = self._qpos_rest
+        d.ctrl[:] = self.robot.ctrl_rest
         # Turn the rest pose about the vertical through the site, then move the site to (x0, y0).
         p_site, yaw_site = self._site_rest
         turn = float(q0[2]) - yaw_site
@@ -150,7 +166,7 @@ class MujocoPlant:
         return self._history.read()
 
     def step(self, u: np.ndarray) -> None:
-        wl, wr = wheel_speeds_lr(float(u[0]), float(u[1]), self.ik_radius, self.ik_track, self.config.max_wheel_speed)
+        wl, wr = wheel_speeds_lr(float(u[0]), float(u[1]), self.ik_radius, self.ik_track, self.max_wheel_speed)
         self._wheel_cmd = (wl, wr)
         m, d, n = self.model, self.data, self._n
         if self.config.actuator == "velocity":
@@ -214,13 +230,9 @@ class MujocoPlant:
 
     def _force_limits(self) -> tuple[float, float]:
         """Largest forward wheel torque of each drive (N m at the joint), inf when not limited."""
-        m = self.model
-        out = []
-        for a, c in zip(self._acts, self._act_per_wheel, strict=True):
-            limited = m.actuator_ctrllimited[a] if self.config.actuator == "torque" else m.actuator_forcelimited[a]
-            lo, hi = m.actuator_ctrlrange[a] if self.config.actuator == "torque" else m.actuator_forcerange[a]
-            out.append(min(-lo, hi) * abs(c) if limited else math.inf)
-        return out[0], out[1]
+        torque = self.config.actuator == "torque"
+        tl, tr = (torque_limit(self.model, a, c, torque) for a, c in zip(self._acts, self._act_per_wheel, strict=True))
+        return tl, tr
 
     def telemetry(self) -> dict[str, np.ndarray | float]:
         """``u_meas`` (2,) (v, omega) from the measured wheel speeds through the nominal FK;
@@ -229,10 +241,10 @@ class MujocoPlant:
         wheel torques in N m (forward positive). The arrays are the plant's own, overwritten by the
         next call: copy what you keep."""
         m, d, t = self.model, self.data, self._tele
-        qvel, force, (dl, dr), (al, ar) = d.qvel, d.actuator_force, self._dofs, self._acts
+        qvel, qfrc, (dl, dr) = d.qvel, d.qfrc_actuator, self._dofs
         wl, wr = self._sign[0] * qvel[dl], self._sign[1] * qvel[dr]
         t["wheel_meas"][:] = wl, wr
-        t["torque"][:] = self._act_per_wheel[0] * force[al], self._act_per_wheel[1] * force[ar]
+        t["torque"][:] = self._sign[0] * qfrc[dl], self._sign[1] * qfrc[dr]  # as applied: joint limits included
         vel = self._vel  # (angular, linear) in the world frame
         mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_SITE, self._site, vel, 0)
         th = self._theta
@@ -267,8 +279,8 @@ class MujocoPlant:
         """What is simulated, for config.toml: the model file and the hash of the compiled model, and
         the geometry, limits and timing read from it."""
         m, (tl, tr) = self.model, self._torque_max
-        return {
-            "model": str(self.config.path),
+        out = {
+            "model": self.config.model if is_menagerie(self.config.model) else str(self.config.path),
             "model_sha256": self.robot.sha256,
             "mujoco": mujoco.__version__,
             "timestep_s": float(m.opt.timestep),
@@ -277,86 +289,128 @@ class MujocoPlant:
             "track_m": self._real_track,
             "ik_wheel_radius_m": float(self.ik_radius),
             "ik_track_m": float(self.ik_track),
+            "max_wheel_speed_rad_s": self.max_wheel_speed if self.max_wheel_speed is not None else "none",
             "torque_limit_Nm": [float(tl), float(tr)] if math.isfinite(tl + tr) else "none",
             "mass_kg": float(m.body_subtreemass[self._root]),
         }
+        if is_menagerie(self.config.model):
+            out |= {"model_file": str(self.config.path), "mujoco_menagerie": menagerie_version()}
+        if self.robot.locked:
+            out["locked_joints"] = list(self.robot.locked)
+        return out
 
     # --- events ----------------------------------------------------------------------------------
 
     def check_event(self, event: Event, where: str) -> None:
         """What this robot needs to apply ``event`` (its parameters were checked when it was parsed)."""
-        kind, params = event.kind, event.params
-        if kind == "control_period":
-            self._substeps(float(params["factor"]) * self.T, f"{where} factor")
-        elif kind == "payload":
-            self._payload_body(params, where)
-        elif kind == "friction":
+        if isinstance(event, ControlPeriod):
+            self._substeps(event.factor * self.T, f"{where} factor")
+        elif isinstance(event, Payload):
+            self._payload_bodies(event, where)
+        elif isinstance(event, Friction):
             m = self.model
             others = [g for g in range(m.ngeom) if m.body_rootid[m.geom_bodyid[g]] != self._root]
             floor = max((int(m.geom_priority[g]) for g in others), default=-1)
             if any(m.geom_priority[g] <= floor for g in self._tyres):
                 raise ConfigError(
                     where,
-                    f"the tyre geoms need a priority above the floor's ({floor}) for their friction to be the contact's",
+                    f"the tyre geoms need a priority above the floor's ({floor}) for their friction to be the "
+                    'contact\'s: give them one in the model, or set tyre = "sphere" in [plant]',
+                )
+        elif isinstance(event, WheelRadius):
+            if any(int(self.model.geom_type[g]) not in ROUND for g in self._tyres):
+                raise ConfigError(
+                    where,
+                    'the wheels collide through meshes, which this event cannot resize: set tyre = "sphere" in [plant]',
+                )
+            if event.scale < 1 and not self._wheels_reach_floor(event.scale):
+                raise ConfigError(
+                    f"{where} scale",
+                    f"wheels of {event.scale * self.robot.real_radius:g} m no longer reach the floor: the robot "
+                    "stands on its other contacts (casters), and could not drive",
                 )
 
-    def _payload_body(self, params: dict, where: str) -> int:
-        if "body" not in params:
-            return self._root
-        name = params["body"]
-        b = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_BODY, str(name))
-        if b <= 0 or self.model.body_rootid[b] != self._root:
-            raise ConfigError(f"{where} body", f"no body named {name!r} on the robot in {self._where}")
-        if self.model.body_mass[b] <= 0:
-            raise ConfigError(f"{where} body", f"body {name!r} has no mass to scale")
-        return b
+    def _wheels_reach_floor(self, scale: float) -> bool:
+        """Whether both tyres, scaled, still touch the floor once the robot has settled at rest."""
+        spec = self._spec_nominal.copy()
+        for g in self._tyres:
+            spec.geoms[g].size[0] *= scale
+        m = spec.compile()
+        d = mujoco.MjData(m)
+        d.qpos[:], d.ctrl[:] = self._qpos_rest, self.robot.ctrl_rest
+        mujoco.mj_step(m, d, nstep=int(round(0.5 / self._dt)))
+        touching = {int(g) for c in d.contact[: d.ncon] for g in c.geom}
+        return all(g in touching for g in self._tyres)
+
+    def _payload_bodies(self, event: Payload, where: str) -> list[int]:
+        """The bodies a payload event scales: the root body, a named body, or the whole robot ("*")."""
+        m = self.model
+        if event.body is None:
+            return [self._root]
+        if event.body == "*":
+            return [b for b in range(1, m.nbody) if m.body_rootid[b] == self._root and m.body_mass[b] > 0]
+        b = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, event.body)
+        if b <= 0 or m.body_rootid[b] != self._root:
+            raise ConfigError(f"{where} body", f"no body named {event.body!r} on the robot in {self._where}")
+        if m.body_mass[b] <= 0:
+            raise ConfigError(f"{where} body", f"body {event.body!r} has no mass to scale")
+        return [b]
 
     def apply(self, event: Event) -> str:
         self.check_event(event, event.kind)
-        p, m = event.params, self.model
-        if event.kind == "control_period":
-            old, self._n = self._n, self._substeps(float(p["factor"]) * self.T, "factor")
+        m = self.model
+        if isinstance(event, ControlPeriod):
+            old, self._n = self._n, self._substeps(event.factor * self.T, "factor")
             return f"plant holds each command {old * self._dt:g} -> {self._n * self._dt:g} s ({self._n} physics steps; controller keeps T = {self.T:g} s)"
-        if event.kind == "sensor_delay":
-            return self._history.delay(int(p["steps"]))
+        if isinstance(event, SensorDelay):
+            return self._history.delay(event.steps)
         spec = self._spec
-        if event.kind == "payload":
-            b = self._payload_body(p, "")
-            mass = float(m.body_mass[b])
-            k = float(p["mass_scale"]) if "mass_scale" in p else (mass + float(p["mass_kg"])) / mass
-            body = spec.bodies[b]
-            body.explicitinertial = True  # pin the compiled inertial (it may have come from geoms), then scale it
-            body.mass, body.ipos, body.iquat = k * mass, m.body_ipos[b].copy(), m.body_iquat[b].copy()
-            body.inertia, body.fullinertia[0] = k * m.body_inertia[b], math.nan
+        if isinstance(event, Payload):
+            bodies = self._payload_bodies(event, "")
+            mass = float(sum(m.body_mass[b] for b in bodies))
+            k = event.mass_scale if event.mass_scale is not None else (mass + event.mass_kg) / mass
+            for b in bodies:
+                body = spec.bodies[b]
+                body.explicitinertial = True  # pin the compiled inertial (it may have come from geoms), then scale it
+                body.mass, body.ipos, body.iquat = (
+                    k * float(m.body_mass[b]),
+                    m.body_ipos[b].copy(),
+                    m.body_iquat[b].copy(),
+                )
+                body.inertia, body.fullinertia[0] = k * m.body_inertia[b], math.nan
             self._recompile()
-            name = m.body(b).name or f"body {b}"
-            return f"{name} mass {mass:g} -> {self.model.body_mass[b]:g} kg (inertia x{k:g})"
-        if event.kind == "friction":
+            name = "the whole robot" if event.body == "*" else m.body(bodies[0]).name or f"body {bodies[0]}"
+            new = float(sum(self.model.body_mass[b] for b in bodies))
+            return f"{name} mass {mass:g} -> {new:g} kg (inertia x{k:g}; robot {float(self.model.body_subtreemass[self._root]):g} kg)"
+        if isinstance(event, Friction):
             old = float(m.geom_friction[self._tyres[0], 0])
             for g in self._tyres:
-                spec.geoms[g].friction[0] = float(p["mu"])
+                spec.geoms[g].friction[0] = event.mu
             self._recompile()
-            return f"tyre/floor sliding friction {old:g} -> {float(p['mu']):g}"
-        if event.kind == "wheel_radius":
-            k = float(p["scale"])
-            for b in self._wheel_bodies:
+            return f"tyre/floor sliding friction {old:g} -> {event.mu:g}"
+        if isinstance(event, WheelRadius):
+            k = event.scale
+            for b in self._wheel_bodies:  # the tyres and the round visual wheels
                 for geom in spec.bodies[b].geoms:
                     if int(geom.type) in ROUND:
                         geom.size[0] *= k
             old = self.real_radius
             self.real_radius = k * old
             self._recompile()
-            lift = self.real_radius - old  # stand the robot on its new wheels (the caster end then settles)
+            lift = self.real_radius - old  # stand the robot on its new wheels (the casters then settle)
             self.data.qpos[self._qroot + 2] += lift
             self._z_rest += lift
             mujoco.mj_forward(self.model, self.data)
             return f"real wheel radius {old:g} -> {self.real_radius:g} m (the IK keeps {self.ik_radius:g} m)"
-        # actuator
-        kv, fs = float(p.get("kv_scale", 1.0)), float(p.get("force_scale", 1.0))
+        assert isinstance(event, Actuator)
+        kv = event.kv_scale if event.kv_scale is not None else 1.0
+        fs = event.force_scale if event.force_scale is not None else 1.0
         old_limit = self._torque_max[0]
         for a in self._acts:
             act = spec.actuators[a]
             act.forcerange = fs * np.asarray(act.forcerange)
+            joint = spec.joints[int(m.actuator_trnid[a, 0])]
+            joint.actfrcrange = fs * np.asarray(joint.actfrcrange)
             if self.config.actuator == "velocity":
                 act.gainprm[0] *= kv
                 act.biasprm[2] *= kv

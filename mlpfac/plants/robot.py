@@ -1,111 +1,38 @@
 """A differential-drive robot as its MJCF model describes it: which actuators drive which wheels,
 where the pose is measured, the wheel radius and track, the drive's limits and the rest pose.
 
-:func:`read_robot` reads (and checks) all of it once from a :class:`MujocoConfig`; the stepping plant
+:func:`read_robot` reads (and checks) all of it once from a :class:`MujocoConfig`, making what the
+model does not say itself (a pose frame on a body, sphere tyres on mesh wheels, locked arms, a
+timestep) as :class:`mujoco.MjSpec` edits (:mod:`mlpfac.plants.edits`); the stepping plant
 (:class:`mlpfac.plants.mujoco.MujocoPlant`) drives the robot it describes. Nothing here steps a run.
 """
 
 from __future__ import annotations
 
-import hashlib
-import importlib.resources
+import functools
 import math
-from dataclasses import dataclass, field
-from pathlib import Path
+from dataclasses import dataclass
 
 import mujoco
 import numpy as np
 
 from mlpfac.exceptions import ConfigError
+from mlpfac.plants import edits
+from mlpfac.plants.config import MujocoConfig
+from mlpfac.plants.model_file import fingerprint, is_menagerie, load_spec
 
-SETTLE_S = 0.5  # seconds the robot settles on its wheels at construction (the rest pose)
+SETTLE_S = 0.5  # seconds the robot settles on its wheels at least, at construction (the rest pose)
+SETTLE_MAX_S = 10.0  # ... and at most: then it must be at rest
+REST_SPEED = 1e-4  # at rest: the free body moves no faster than this (m/s, rad/s)
 SHAPES = {
     int(mujoco.mjtGeom.mjGEOM_BOX): "box",
     int(mujoco.mjtGeom.mjGEOM_CYLINDER): "cylinder",
     int(mujoco.mjtGeom.mjGEOM_SPHERE): "sphere",
+    edits.MESH: "mesh",
 }
-SIZE_LEN = {"box": 3, "cylinder": 2, "sphere": 1}
+SIZE_LEN = {"box": 3, "cylinder": 2, "sphere": 1, "mesh": 0}
 ROUND = (int(mujoco.mjtGeom.mjGEOM_SPHERE), int(mujoco.mjtGeom.mjGEOM_CYLINDER))  # wheel shapes: size[0] is the radius
-
-
-def _positive(name: str, value, optional: bool = False) -> None:
-    if optional and value is None:
-        return
-    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value) or value <= 0:
-        raise ConfigError(name, f"must be a positive number, got {value!r}")
-
-
-def shipped_model() -> str:
-    """The shipped robot's scene (models/scene.xml, installed as package data mlpfac.models)."""
-    return str(importlib.resources.files("mlpfac.models") / "scene.xml")
-
-
-def model_fingerprint(path: Path) -> str:
-    """sha256 of the compiled model (MuJoCo's binary MJB): what is simulated, included files and
-    meshes too. Compiled afresh each time: a file that changed is never mistaken for the old one."""
-    try:
-        model = mujoco.MjSpec.from_file(str(path)).compile()
-    except ValueError as err:
-        raise ConfigError(str(path), f"MuJoCo cannot load the model: {err}") from None
-    return _fingerprint(model)
-
-
-def _fingerprint(model: mujoco.MjModel) -> str:
-    buf = np.empty(mujoco.mj_sizeModel(model), np.uint8)
-    mujoco.mj_saveModel(model, None, buf)
-    return hashlib.sha256(buf.tobytes()).hexdigest()
-
-
-@dataclass(frozen=True)
-class MujocoConfig:
-    """The robot and its drive. Defaults are the shipped robot (models/README.md)."""
-
-    model: str = field(default_factory=shipped_model)  # MJCF file; a scenario file resolves it from its folder
-    actuator: str = "velocity"  # "velocity": the model's velocity servos; "torque": torque motors + PI here
-    left_actuator: str = "left_wheel"  # velocity servo (<velocity kv forcerange>) on the left wheel's hinge
-    right_actuator: str = "right_wheel"
-    site: str = "axle_mid"  # on the axle midpoint, x axis forward: the pose is measured here
-    wheel_radius: float | None = None  # radius the IK believes (m); None: read from the model
-    track: float | None = None  # wheel separation the IK believes (m); None: read from the model
-    max_wheel_speed: float | None = None  # rad/s; faster commands are scaled down keeping the curvature
-    pose_noise_std: float | tuple[float, ...] = 0.0  # std of Gaussian noise on (x, y, theta): scalar or 3
-    pi_kp: float = 0.5  # torque drive: PI proportional gain, N m per rad/s of wheel-speed error
-    pi_ki: float = 10.0  # torque drive: PI integral gain, N m per rad of integrated error
-
-    def __post_init__(self) -> None:
-        if self.actuator not in ("velocity", "torque"):
-            raise ConfigError("actuator", f"choose 'velocity' or 'torque', got {self.actuator!r}")
-        for name in ("model", "left_actuator", "right_actuator", "site"):
-            if not isinstance(getattr(self, name), str) or not getattr(self, name):
-                raise ConfigError(name, f"expected a non-empty name, got {getattr(self, name)!r}")
-        for name in ("wheel_radius", "track", "max_wheel_speed"):
-            _positive(name, getattr(self, name), optional=True)
-        _positive("pi_kp", self.pi_kp)
-        ki = self.pi_ki
-        if isinstance(ki, bool) or not isinstance(ki, int | float) or not math.isfinite(ki) or ki < 0:
-            raise ConfigError("pi_ki", f"must be a number >= 0, got {ki!r}")
-        self.noise_std()
-        if not self.path.is_file():
-            raise ConfigError(str(self.path), "MJCF model file not found")
-
-    @property
-    def path(self) -> Path:
-        """The model file (a scenario file's relative path was resolved from its folder when it was loaded)."""
-        return Path(self.model).absolute()
-
-    def noise_std(self) -> np.ndarray | None:
-        """(3,) standard deviations of the pose noise, or None when there is none."""
-        try:
-            std = np.broadcast_to(np.asarray(self.pose_noise_std, dtype=float), (3,))
-        except (TypeError, ValueError):
-            raise ConfigError(
-                "pose_noise_std", f"expected a number or 3 numbers, got {self.pose_noise_std!r}"
-            ) from None
-        if not np.all(np.isfinite(std)) or np.any(std < 0):
-            raise ConfigError(
-                "pose_noise_std", f"standard deviations must be finite and >= 0, got {self.pose_noise_std!r}"
-            )
-        return std.copy() if np.any(std > 0) else None
+WHEEL_SHAPES = (*ROUND, edits.MESH)
 
 
 @dataclass(frozen=True)
@@ -130,74 +57,111 @@ class Robot:
     droot: int  # dof address of the free joint
     dofs: tuple[int, int]  # wheel joints' dof addresses
     wheel_bodies: tuple[int, int]
-    tyres: tuple[int, ...]  # the wheels' round collision geoms
+    tyres: tuple[int, ...]  # the wheels' collision geoms (sphere, cylinder or mesh)
     qpos_rest: np.ndarray
+    ctrl_rest: np.ndarray  # the controls at rest: the keyframe's (0 without one), the wheels' 0
     site_rest: tuple[np.ndarray, float]  # site position and heading at rest
     real_radius: float
     real_track: float
     sign: tuple[float, float]
     act_per_wheel: tuple[float, float]
     geometry: list[dict]  # visual shapes relative to the site frame
+    max_wheel_speed: float | None  # the model's limit on the wheel speed (rad/s, a servo's ctrlrange), or None
+    locked: tuple[str, ...] = ()  # joints fixed at the keyframe (other_actuators = "lock")
 
     def substeps(self, period: float, where: str) -> int:
         """Physics steps in ``period`` seconds; a ConfigError unless it is a whole number of them."""
         n = period / self.dt
         if round(n) < 1 or abs(n - round(n)) > 1e-6 * n:
             raise ConfigError(
-                where, f"{period:g} s is not a whole number of physics steps of {self.dt:g} s (the model's timestep)"
+                where,
+                f"{period:g} s is not a whole number of physics steps of {self.dt:g} s (the model's timestep; "
+                "[plant] timestep can set another)",
             )
         return int(round(n))
 
 
 def read_robot(config: MujocoConfig) -> Robot:
-    """Load, check and describe the robot of ``config``; each problem a ConfigError naming its key."""
-    where = str(config.path)
+    """Load, check and describe the robot of ``config``; each problem a ConfigError naming its key.
+
+    Read once per process for a configuration and model file (its size and time of change): the
+    plants of a sweep share it and copy what they change (the spec; events compile new models)."""
+    st = config.path.stat()
+    stamp = (st.st_mtime_ns, st.st_size)
     try:
-        spec = mujoco.MjSpec.from_file(where)
-        m = spec.compile()
-    except ValueError as err:
-        raise ConfigError(where, f"MuJoCo cannot load the model: {err}") from None
-    sha256 = _fingerprint(m)
+        hash(config)
+    except TypeError:  # made in Python with lists: not cached
+        return _read_robot.__wrapped__(config, stamp)
+    return _read_robot(config, stamp)
+
+
+@functools.lru_cache(maxsize=4)
+def _read_robot(config: MujocoConfig, stamp: tuple[int, int]) -> Robot:
+    spec, path = load_spec(config.model)
+    where = config.model if is_menagerie(config.model) else str(path)
+    m = _compile(spec, where)
+    sha256 = fingerprint(m)
     acts = (_actuator_id(m, config, "left_actuator", where), _actuator_id(m, config, "right_actuator", where))
     if acts[0] == acts[1]:
         raise ConfigError(
             "right_actuator", f"left and right wheels need two actuators, both are {config.left_actuator!r}"
         )
+    qpos0, ctrl0 = _keyframe(m, config, where)
+    names = [m.actuator(a).name for a in acts]
+    locked: list[str] = []
+    if config.other_actuators == "lock":
+        m_full = m
+        locked = edits.lock_other_joints(spec, m, qpos0, acts)
+        m = _compile(spec, where)
+        qpos0 = edits.by_name(m_full, qpos0, m, "qpos", m.qpos0)
+        ctrl0 = edits.by_name(m_full, ctrl0, m, "ctrl", np.zeros(m.nu))
+        acts = tuple(mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_ACTUATOR, n) for n in names)
+    if config.timestep is not None:
+        spec.option.timestep = float(config.timestep)
+    site = _pose_frame(spec, m, config, where)
+    joints = [int(m.actuator_trnid[a, 0]) for a in acts]
+    wheels = [(j, _collision_geoms(m, int(m.jnt_bodyid[j]))) for j in joints]
+    for key, (_, geoms) in zip(("left_actuator", "right_actuator"), wheels, strict=True):
+        if not any(int(m.geom_type[g]) in WHEEL_SHAPES for g in geoms):
+            raise ConfigError(
+                key,
+                f"the body moved by {getattr(config, key)!r} has no sphere, cylinder or mesh collision geom (the wheel)",
+            )
+    root0 = int(m.body_rootid[m.jnt_bodyid[joints[0]]])
+    drawn = [g for g in range(m.ngeom) if m.body_rootid[m.geom_bodyid[g]] == root0]
+    visual_only = any(m.geom_contype[g] == 0 and m.geom_conaffinity[g] == 0 for g in drawn)
+    if config.tyre == "sphere":
+        radius = config.wheel_radius or max(_radius(m, g, j) for j, geoms in wheels for g in geoms)
+        edits.sphere_tyres(spec, m, wheels, radius, _floor_priority(m, root0) + 1)
+    wheel_speed = _speed_limits(m, acts)
     if config.actuator == "torque":
-        _to_torque_motors(spec, m, acts)
-        m = spec.compile()
-    site = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, config.site)
-    if site < 0:
-        raise ConfigError(
-            "site", f"no site named {config.site!r} in {where} ({_names(m, mujoco.mjtObj.mjOBJ_SITE, m.nsite)})"
-        )
+        edits.to_torque_motors(spec, m, acts)
+    if site is None or config.tyre == "sphere" or config.actuator == "torque" or config.timestep is not None:
+        m = _compile(spec, where)
+    site = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, edits.POSE_SITE if site is None else m.site(site).name)
     root = int(m.body_rootid[m.site_bodyid[site]])
     jnt = int(m.body_jntadr[root])
     if jnt < 0 or int(m.jnt_type[jnt]) != mujoco.mjtJoint.mjJNT_FREE:
+        kind, name = config.frame
         raise ConfigError(
-            "site", f"the body tree of site {config.site!r} must hang from a <freejoint/> (a robot free to drive)"
+            kind, f"the body tree of {kind} {name!r} must hang from a <freejoint/> (a robot free to drive)"
         )
-    joints = [int(m.actuator_trnid[a, 0]) for a in acts]
     wheel_bodies = tuple(int(m.jnt_bodyid[j]) for j in joints)
-    tyres = tuple(g for b in wheel_bodies for g in _collision_geoms(m, b) if int(m.geom_type[g]) in ROUND)
-    for key, b in zip(("left_actuator", "right_actuator"), wheel_bodies, strict=True):
-        if not any(m.geom_bodyid[g] == b for g in tyres):
-            raise ConfigError(
-                key, f"the body moved by {getattr(config, key)!r} has no sphere or cylinder collision geom (the wheel)"
-            )
+    tyres = tuple(g for b in wheel_bodies for g in _collision_geoms(m, b) if int(m.geom_type[g]) in WHEEL_SHAPES)
     dt = float(m.opt.timestep)
     d = mujoco.MjData(m)
-    _settle(m, d, dt)
+    _settle(m, d, dt, qpos0, ctrl0, int(m.jnt_dofadr[jnt]), where)
     anchors = [d.xanchor[j].copy() for j in joints]
     sign = _wheel_signs(config, d, site, joints, anchors)
     c = [s * g for s, g in zip(sign, m.actuator_gear[list(acts), 0], strict=True)]
+    limit = [w / abs(ci) for w, ci in zip(wheel_speed, c, strict=True) if w is not None]
     return Robot(
         where=where,
         sha256=sha256,
         spec=spec,
         model=m,
         dt=dt,
-        acts=acts,
+        acts=(acts[0], acts[1]),
         site=site,
         root=root,
         qroot=int(m.jnt_qposadr[jnt]),
@@ -206,13 +170,78 @@ def read_robot(config: MujocoConfig) -> Robot:
         wheel_bodies=(wheel_bodies[0], wheel_bodies[1]),
         tyres=tyres,
         qpos_rest=d.qpos.copy(),
+        ctrl_rest=d.ctrl.copy(),
         site_rest=(d.site_xpos[site].copy(), yaw(d.site_xmat[site])),
-        real_radius=max(float(m.geom_size[g, 0]) for g in tyres),
+        real_radius=max(_radius(m, g, int(m.body_jntadr[m.geom_bodyid[g]])) for g in tyres),
         real_track=float(np.linalg.norm(anchors[1] - anchors[0])),
         sign=sign,
         act_per_wheel=(float(c[0]), float(c[1])),
-        geometry=_static_geometry(m, d, site, root),
+        geometry=_static_geometry(m, d, site, root, visual_only),
+        max_wheel_speed=min(limit) if limit else None,
+        locked=tuple(locked),
     )
+
+
+def _compile(spec: mujoco.MjSpec, where: str) -> mujoco.MjModel:
+    try:
+        return spec.compile()
+    except ValueError as err:
+        raise ConfigError(where, f"MuJoCo cannot load the model: {err}") from None
+
+
+def _keyframe(m: mujoco.MjModel, config: MujocoConfig, where: str) -> tuple[np.ndarray, np.ndarray]:
+    """The start pose and controls: the named keyframe's, or the model's default pose and zero."""
+    if config.keyframe is None:
+        return m.qpos0.copy(), np.zeros(m.nu)
+    k = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_KEY, config.keyframe)
+    if k < 0:
+        raise ConfigError(
+            "keyframe",
+            f"no keyframe named {config.keyframe!r} in {where} ({_names(m, mujoco.mjtObj.mjOBJ_KEY, m.nkey)})",
+        )
+    return m.key_qpos[k].copy(), m.key_ctrl[k].copy()
+
+
+def _pose_frame(spec: mujoco.MjSpec, m: mujoco.MjModel, config: MujocoConfig, where: str) -> int | None:
+    """The pose frame's site id, or None when a site is added for it (a body, or an offset)."""
+    kind, name = config.frame
+    offset = np.asarray(config.frame_offset, dtype=float)
+    if kind == "body":
+        b = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, name)
+        if b <= 0:
+            raise ConfigError(
+                "body", f"no body named {name!r} in {where} ({_names(m, mujoco.mjtObj.mjOBJ_BODY, m.nbody)})"
+            )
+        edits.add_pose_site(spec, b, offset, np.array([1.0, 0.0, 0.0, 0.0]))
+        return None
+    site = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, name)
+    if site < 0:
+        raise ConfigError(
+            "site",
+            f"no site named {name!r} in {where} ({_names(m, mujoco.mjtObj.mjOBJ_SITE, m.nsite)}); a body's frame can be named instead (body = ...)",
+        )
+    if not np.any(offset):
+        return site
+    edits.add_pose_site(spec, *edits.offset_from_site(m, site, offset))
+    return None
+
+
+def _radius(m: mujoco.MjModel, g: int, joint: int) -> float:
+    """A wheel geom's radius: a sphere's or cylinder's size, a mesh's reach from the hinge axis."""
+    return float(m.geom_size[g, 0]) if int(m.geom_type[g]) in ROUND else edits.mesh_radius(m, g, joint)
+
+
+def _floor_priority(m: mujoco.MjModel, root: int) -> int:
+    """The highest contact priority of the geoms that are not the robot's (the floor's)."""
+    return max((int(m.geom_priority[g]) for g in range(m.ngeom) if m.body_rootid[m.geom_bodyid[g]] != root), default=0)
+
+
+def _speed_limits(m: mujoco.MjModel, acts) -> list[float | None]:
+    """Each velocity servo's control limit (actuator units; a wheel speed once divided by gear and sign)."""
+    return [
+        float(min(-m.actuator_ctrlrange[a, 0], m.actuator_ctrlrange[a, 1])) if m.actuator_ctrllimited[a] else None
+        for a in acts
+    ]
 
 
 def _actuator_id(m: mujoco.MjModel, config: MujocoConfig, key: str, where: str) -> int:
@@ -241,11 +270,25 @@ def _actuator_id(m: mujoco.MjModel, config: MujocoConfig, key: str, where: str) 
     return a
 
 
-def _settle(m: mujoco.MjModel, d: mujoco.MjData, dt: float) -> None:
-    """From the model's initial pose, let the robot settle on its wheels with zero wheel speed."""
+def _settle(
+    m: mujoco.MjModel, d: mujoco.MjData, dt: float, qpos: np.ndarray, ctrl: np.ndarray, droot: int, where: str
+) -> None:
+    """From the start pose and controls, let the robot settle on its wheels with zero wheel speed:
+    SETTLE_S at least, then on until its free body moves no faster than REST_SPEED (checked; a
+    caster wheel may spin on)."""
     mujoco.mj_resetData(m, d)
+    d.qpos[:], d.ctrl[:] = qpos, ctrl
     mujoco.mj_forward(m, d)
     mujoco.mj_step(m, d, nstep=int(round(SETTLE_S / dt)))
+    chunk = max(1, int(round(0.1 / dt)))
+    while np.max(np.abs(d.qvel[droot : droot + 6])) > REST_SPEED:
+        if d.time > SETTLE_MAX_S:
+            raise ConfigError(
+                where,
+                f"the robot does not come to rest on its wheels within {SETTLE_MAX_S:g} s (speeds up to "
+                f'{np.max(np.abs(d.qvel[droot : droot + 6])):.2g}); lock what moves (other_actuators = "lock") or start from a keyframe',
+            )
+        mujoco.mj_step(m, d, nstep=chunk)
     mujoco.mj_forward(m, d)
 
 
@@ -267,37 +310,38 @@ def _wheel_signs(
     return signs[0], signs[1]
 
 
-def _static_geometry(m: mujoco.MjModel, d: mujoco.MjData, site: int, root: int) -> list[dict]:
-    """Visual geoms (contype = conaffinity = 0) of the robot, posed relative to the site frame."""
+def _static_geometry(m: mujoco.MjModel, d: mujoco.MjData, site: int, root: int, visual_only: bool) -> list[dict]:
+    """Visual geoms (contype = conaffinity = 0) of the robot, posed relative to the site frame; all
+    of its geoms when its model has no visual ones (the tyres added here are never drawn). A mesh
+    carries its vertices and triangles."""
     ps, Rs = d.site_xpos[site], d.site_xmat[site].reshape(3, 3)
-    robot = [g for g in range(m.ngeom) if m.body_rootid[m.geom_bodyid[g]] == root and int(m.geom_type[g]) in SHAPES]
-    visual = [g for g in robot if m.geom_contype[g] == 0 and m.geom_conaffinity[g] == 0] or robot
+    robot = [
+        g
+        for g in range(m.ngeom)
+        if m.body_rootid[m.geom_bodyid[g]] == root
+        and int(m.geom_type[g]) in SHAPES
+        and not m.geom(g).name.startswith(edits.TYRE)
+    ]
+    if visual_only:
+        robot = [g for g in robot if m.geom_contype[g] == 0 and m.geom_conaffinity[g] == 0]
     shapes = []
-    for g in visual:
+    for g in robot:
         kind = SHAPES[int(m.geom_type[g])]
         quat = np.empty(4)
         mujoco.mju_mat2Quat(quat, (Rs.T @ d.geom_xmat[g].reshape(3, 3)).ravel())
         rgba = m.mat_rgba[m.geom_matid[g]] if m.geom_matid[g] >= 0 else m.geom_rgba[g]
-        shapes.append({
+        shape = {
             "name": m.geom(g).name or f"geom{g}",
             "type": kind,
             "size": [round(float(x), 9) for x in m.geom_size[g, : SIZE_LEN[kind]]],
             "pos": [round(float(x), 9) for x in Rs.T @ (d.geom_xpos[g] - ps)],
             "quat": [round(float(x), 9) for x in quat],
             "rgba": [round(float(x), 6) for x in rgba],
-        })  # fmt: skip
+        }
+        if kind == "mesh":
+            shape |= edits.mesh_shape(m, g)
+        shapes.append(shape)
     return shapes
-
-
-def _to_torque_motors(spec: mujoco.MjSpec, m: mujoco.MjModel, acts: tuple[int, int]) -> None:
-    """Turn the velocity servos into torque motors (force = ctrl) limited to the same force range."""
-    for a in acts:
-        act = spec.actuators[a]
-        act.gaintype, act.biastype = mujoco.mjtGain.mjGAIN_FIXED, mujoco.mjtBias.mjBIAS_NONE
-        act.gainprm = [1.0] + [0.0] * 9
-        act.biasprm = [0.0] * 10
-        if m.actuator_forcelimited[a]:
-            act.ctrllimited, act.ctrlrange = mujoco.mjtLimited.mjLIMITED_TRUE, m.actuator_forcerange[a].copy()
 
 
 def _collision_geoms(m: mujoco.MjModel, body: int) -> list[int]:

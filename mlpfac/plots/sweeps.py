@@ -5,8 +5,9 @@
   scenario has no event): one dot per tracking run over a box (quartiles, whiskers 1.5 IQR), on a
   log scale when the runs spread over more than a decade; the share of tracking runs and the
   median beside each controller's name, red when a run was lost or diverged;
-- right, the position error over time (metrics.json's RMS per 0.1 s): the median over the
-  tracking runs and the band between their quartiles, the event marked.
+- right, the position error over time (the RMS per 0.1 s, from metrics.json's mean square per
+  bin, ``position_ms_bins``): the median over the tracking runs and the band between their
+  quartiles, the event marked.
 
 Everything is read from the run folders (``<scenario>/<controller>/seed-*/metrics.json``), so the
 plots can be made again from a finished sweep with ``mlpfac plot DIR``.
@@ -103,6 +104,16 @@ def draw(path: Path, pairs: list[tuple[str, str]], runs: dict) -> Path:
     return path
 
 
+def _rms_bins(m: dict) -> tuple[float, np.ndarray] | None:
+    """(bin width [s], position RMS per bin [m]) from metrics.json's ``position_ms_bins``; None
+    for a run that has none."""
+    bins = m.get("position_ms_bins")
+    if not isinstance(bins, dict) or not isinstance(bins.get("m2"), list):
+        return None
+    m2 = np.array([np.nan if x is None else x for x in bins["m2"]], dtype=float)
+    return float(bins["bin_steps"]) * float(m["T"]), np.sqrt(m2)
+
+
 def _row_height(controllers: int) -> float:
     return max(3.4, 0.38 * controllers + 1.3)
 
@@ -175,16 +186,16 @@ def _over_time(ax, ctrls: list[str], groups: list[list[dict]], colors: dict) -> 
     warm = max((m.get("excluded_s", [0, 0])[1] for ms in groups for m in ms), default=0.0)
     spans, missing, peak = [], 0, 0.0
     for c, ms in zip(ctrls, groups, strict=True):
-        series = [m["series"] for m in ms if outcome(m) == "tracking" and isinstance(m.get("series"), dict)]
-        missing += sum(outcome(m) == "tracking" and not isinstance(m.get("series"), dict) for m in ms)
+        series = [_rms_bins(m) for m in ms if outcome(m) == "tracking"]
+        missing += sum(s is None for s in series)
+        series = [s for s in series if s is not None]
         if not series:
             ax.plot([], [], color=colors[c], label=f"{c} (no tracking run)")
             continue
-        dt = float(series[0]["dt_s"])
-        width = max(len(s["position_error_m"]) for s in series)
+        dt = series[0][0]
+        width = max(len(v) for _, v in series)
         arr = np.full((len(series), width), np.nan)
-        for i, s in enumerate(series):
-            v = np.array([np.nan if x is None else x for x in s["position_error_m"]], dtype=float)
+        for i, (_, v) in enumerate(series):
             arr[i, : len(v)] = v * 1e3
         t = (np.arange(width) + 0.5) * dt
         with warnings.catch_warnings():
@@ -195,7 +206,7 @@ def _over_time(ax, ctrls: list[str], groups: list[list[dict]], colors: dict) -> 
         spans.append(q3[np.isfinite(q3) & (t >= warm)])
         peak = max(peak, float(np.nanmax(q3, initial=0.0)))
     if not spans:
-        ax.text(0.5, 0.5, "no error series in these runs' metrics.json", transform=ax.transAxes, ha="center")
+        ax.text(0.5, 0.5, "no position_ms_bins in these runs' metrics.json", transform=ax.transAxes, ha="center")
         return
     vals = np.concatenate(spans)
     vals = vals[vals > 0]

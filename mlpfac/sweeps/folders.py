@@ -76,13 +76,6 @@ def metrics_problem(m, job: Job) -> str | None:
         return "not valid"
     if not isinstance(m.get("events"), list) or not (m.get("reason") is None or isinstance(m.get("reason"), str)):
         return "not valid"
-    series = m.get("series", {"dt_s": 1.0, "position_error_m": []})  # older runs have none
-    if not (
-        isinstance(series, dict) and _number(series.get("dt_s")) and isinstance(series.get("position_error_m"), list)
-    ):
-        return "not valid"
-    if not all(_number_or_none(x) for x in series["position_error_m"]):
-        return "not valid"
     phases = m.get("phases")
     if not isinstance(phases, dict) or "before" not in phases or not set(phases) <= set(PHASES):
         return "not valid"

@@ -9,6 +9,7 @@ from pathlib import Path
 
 from mlpfac.outputs import write_atomic
 from mlpfac.sweeps.folders import PHASES
+from mlpfac.sweeps.paired import PAIRED_COLUMNS, median, outcome, summary
 from mlpfac.sweeps.plan import Job
 
 
@@ -23,14 +24,6 @@ def _ci95(xs: list[float]) -> tuple[float | None, float | None]:
     sd = math.sqrt(math.fsum((x - mean) ** 2 for x in xs) / (n - 1))
     half = float(t.ppf(0.975, n - 1)) * sd / math.sqrt(n)
     return mean - half, mean + half
-
-
-def _median(xs: list[float]) -> float | None:
-    if not xs:
-        return None
-    s = sorted(xs)
-    n = len(s)
-    return s[n // 2] if n % 2 else 0.5 * (s[n // 2 - 1] + s[n // 2])
 
 
 def aggregate(jobs: list[Job], metrics: dict[tuple, dict]) -> list[dict]:
@@ -59,16 +52,17 @@ def aggregate(jobs: list[Job], metrics: dict[tuple, dict]) -> list[dict]:
                 scored = [(m["phases"][phase]["rms_position_error_m"] or -1.0, -m["seed"], m) for m in ok]
                 worst = max(scored, key=lambda s: s[:2])[2] if scored else None
             row = {"scenario": scn, "controller": ctrl, "phase": phase, "runs": n, "bounded": len(ok)}
+            row |= {how: sum(outcome(m) == how for m in ms) for how in ("tracking", "lost", "diverged")}
             row["bounded_share"] = len(ok) / n if n else None
             for name, xs in (("pos_rms_m", pos), ("heading_rms_rad", head)):
                 lo, hi = _ci95(xs)
                 row |= {
                     f"{name}_mean": math.fsum(xs) / len(xs) if xs else None,
-                    f"{name}_median": _median(xs),
+                    f"{name}_median": median(xs),
                     f"{name}_ci_lo": lo,
                     f"{name}_ci_hi": hi,
                 }
-            row["max_err_m_median"] = _median(mx)
+            row["max_err_m_median"] = median(mx)
             row["max_err_m_max"] = max(mx) if mx else None
             weights = [m["max_abs_weight"] for m in ms if m.get("max_abs_weight") is not None]
             row["max_abs_weight"] = max(weights) if weights else None  # over every run, diverged ones too
@@ -90,7 +84,7 @@ SWEEP_COLUMNS: list[tuple[str, Callable[[dict], str]]] = [
     ("scenario", lambda r: r["scenario"]),
     ("controller", lambda r: r["controller"]),
     ("phase", lambda r: r["phase"]),
-    ("bounded", lambda r: f"{r['bounded']}/{r['runs']}"),
+    ("tracking / lost / diverged", lambda r: f"{r['tracking']} / {r['lost']} / {r['diverged']}"),
     ("pos RMS mean [mm]", lambda r: _f(r["pos_rms_m_mean"], 1e3)),
     ("pos RMS median [mm]", lambda r: _f(r["pos_rms_m_median"], 1e3)),
     ("pos RMS 95% CI [mm]", lambda r: _ci(r["pos_rms_m_ci_lo"], r["pos_rms_m_ci_hi"], 1e3)),
@@ -115,11 +109,11 @@ COMPARE_COLUMNS: list[tuple[str, Callable[[dict], str]]] = [
     ("pos RMS median [mm]", lambda r: _f(r["pos_rms_m_median"], 1e3)),
     ("max error [mm]", lambda r: _f(r["max_err_m_max"], 1e3)),
     ("heading RMS median [mrad]", lambda r: _f(r["heading_rms_rad_median"], 1e3)),
-    ("status", lambda r: f"bounded {r['bounded']}/{r['runs']}"),
+    ("tracking / lost / diverged", lambda r: f"{r['tracking']} / {r['lost']} / {r['diverged']}"),
 ]
 
 CSV_FIELDS = [
-    "scenario", "controller", "phase", "runs", "bounded", "bounded_share",
+    "scenario", "controller", "phase", "runs", "bounded", "bounded_share", "tracking", "lost", "diverged",
     "pos_rms_m_mean", "pos_rms_m_median", "pos_rms_m_ci_lo", "pos_rms_m_ci_hi",
     "heading_rms_rad_mean", "heading_rms_rad_median", "heading_rms_rad_ci_lo", "heading_rms_rad_ci_hi",
     "max_err_m_median", "max_err_m_max", "max_abs_weight", "worst_seed", "worst_status",
@@ -145,11 +139,50 @@ def write_tables(out: Path, stem: str, rows: list[dict], columns, meta: dict) ->
         w.writerow({k: ("" if r[k] is None else r[k]) for k in CSV_FIELDS})
     paths = [out / f"{stem}.csv", out / f"{stem}.md", out / f"{stem}.json"]
     note = (
-        "\nStatistics over bounded runs (status ok); 95 % CI of the mean (Student t). Worst seed: the "
-        "first to diverge if any diverged, else the largest position RMS; re-run it alone with "
-        "`mlpfac run SCENARIO --controller C --seed S`.\n"
+        "\nStatistics over the runs that finished (tracking or lost; not over diverged ones); 95 % CI of "
+        "the mean (Student t). Tracking: every phase's position RMS within 5 % of the path's size (0.2 m on "
+        "the 4 m figure of eight); lost: beyond it; diverged: stopped (non-finite, beyond divergence_m, "
+        "flipped). Worst seed: the first to diverge if any diverged, else the largest position RMS; re-run "
+        "it alone with `mlpfac run SCENARIO --controller C --seed S`.\n"
     )
     write_atomic(paths[0], buf.getvalue())
     write_atomic(paths[1], markdown(rows, columns) + note)
     write_atomic(paths[2], json.dumps({"meta": meta, "rows": rows}, indent=2) + "\n")
     return paths
+
+
+PAIRED_FIELDS = [
+    "scenario", "controller", "phase", "runs", "tracking", "lost", "diverged", "pos_rms_m_median",
+    "oracle_pos_rms_m_median", "x_oracle_median", "no_event_twin", "event_cost_median",
+    "wins_vs_corradini", "pairs_vs_corradini", "p_vs_corradini", "wins_cost_vs_corradini",
+    "pairs_cost_vs_corradini", "p_cost_vs_corradini", "wins_vs_oracle", "pairs_vs_oracle", "p_vs_oracle",
+]  # fmt: skip
+
+
+def write_paired(out: Path, rows: list[dict], meta: dict) -> list[Path]:
+    """paired.csv / .md / .json (per seed against Corradini's law, the oracle and the run without the
+    event: :mod:`mlpfac.sweeps.paired`) and summary.md (controllers x scenarios)."""
+    import csv
+    import io
+
+    from mlpfac.sweeps import paired
+
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=PAIRED_FIELDS, lineterminator="\n")
+    w.writeheader()
+    for r in rows:
+        w.writerow({k: ("" if r[k] is None else r[k]) for k in PAIRED_FIELDS})
+    note = "\n" + " ".join(" ".join((paired.__doc__ or "").split("\n\n")[1:]).split()) + "\n"
+    paths = [out / "paired.csv", out / "paired.md", out / "paired.json", out / "summary.md"]
+    write_atomic(paths[0], buf.getvalue())
+    write_atomic(paths[1], markdown(rows, PAIRED_COLUMNS) + note)
+    write_atomic(paths[2], json.dumps({"meta": meta, "rows": rows}, indent=2) + "\n")
+    write_atomic(paths[3], summary(rows) + SUMMARY_NOTE)
+    return paths
+
+
+SUMMARY_NOTE = (
+    "\nMedian position RMS [mm] over the seeds, after the event (over the whole run after the warm-up "
+    "where there is none), over the runs that finished; (k x): the median over seeds of the ratio to "
+    "the oracle on the same seed; t/l/d: tracking / lost / diverged, where not every run tracked.\n"
+)

@@ -1,0 +1,78 @@
+"""What does a real robot cost? PAL TIAGo (MuJoCo Menagerie) base-only against the full robot, and
+our small robot beside them: bare physics (``mj_step``) and one control step of the plant.
+
+    MENAGERIE_ROOT=../shared/menagerie python benchmarks/bench_tiago.py
+    python benchmarks/bench_tiago.py --steps 2000 --repeats 7
+
+"Base-only" is the tiago-* scenarios' robot: arm, head, torso and gripper locked at the "home"
+keyframe (``other_actuators = "lock"``: their joints removed with MjSpec, the bodies rigid on the
+base); "full" holds them with their own servos (``other_actuators = "hold"``, 28 DOF). Each figure
+is the median of ``--repeats`` timings (CPU clock of this process) of ``--steps`` control steps
+driving (0.3 m/s, 0.3 rad/s), in us per step; physics is ``mj_step`` of the same model as often.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+
+import mujoco
+import numpy as np
+
+from mlpfac.plants.mujoco import MujocoConfig, MujocoPlant
+
+TIAGO = {
+    "model": "menagerie:pal_tiago/scene_velocity",
+    "left_actuator": "wheel_left_joint_vel",
+    "right_actuator": "wheel_right_joint_vel",
+    "body": "base_link",
+    "keyframe": "home",
+    "tyre": "sphere",
+    "timestep": 0.0025,
+}
+ROBOTS = {
+    "diffdrive": {},
+    "tiago base-only": TIAGO | {"other_actuators": "lock"},
+    "tiago full": TIAGO | {"other_actuators": "hold"},
+}
+
+
+def timed(fn, repeats: int) -> float:
+    out = []
+    for _ in range(repeats):
+        t0 = time.process_time()
+        fn()
+        out.append(time.process_time() - t0)
+    return statistics.median(out)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--steps", type=int, default=1000, help="control steps per timing (default 1000)")
+    ap.add_argument("--repeats", type=int, default=5, help="timings per figure; the median is kept (default 5)")
+    args = ap.parse_args()
+    u = np.array([0.3, 0.3])
+    print(f"{'robot':18} {'nv':>3} {'ngeom':>5} {'mj_step us':>11} {'control step us':>16} {'substeps':>8}")
+    for name, kw in ROBOTS.items():
+        plant = MujocoPlant(MujocoConfig(**kw), 0.01)
+        m = plant.model
+
+        def control(plant=plant):
+            for _ in range(args.steps):
+                plant.step(u)
+
+        def physics(m=m, n=plant.n_substeps, q=plant.robot.qpos_rest):
+            d = mujoco.MjData(m)
+            d.qpos[:] = q
+            mujoco.mj_step(m, d, nstep=args.steps * n)
+
+        plant.reset(np.zeros(3), np.random.default_rng(0))  # a run in progress: each timing drives on
+
+        step = timed(control, args.repeats) / args.steps * 1e6
+        phys = timed(physics, args.repeats) / (args.steps * plant.n_substeps) * 1e6
+        print(f"{name:18} {m.nv:3d} {m.ngeom:5d} {phys:11.1f} {step:16.1f} {plant.n_substeps:8d}")
+
+
+if __name__ == "__main__":
+    main()

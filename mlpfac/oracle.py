@@ -1,0 +1,138 @@
+"""The oracle: the law (35) told every change of the plant, the bound beside each adaptive result.
+
+It is the one controller that reads the scenario's events (through :func:`told`), and it is told
+only what the nominal design would need to be redone for the changed robot:
+
+- **wheel radius x s**: the IK given the true radius. The robot's body velocity is s times the
+  commanded one (v = s r w, omega = s r (w_r - w_l) / track with w from the nominal IK), so the
+  input gain G of (5)-(6) is s G while f is unchanged; since the IK is linear the oracle sends the
+  nominal (35) divided by s. A wheel-speed limit sees the same wheel speeds either way:
+  (u / s) / r_nominal = u / r_true.
+- **control period x c** (the robot holds each command c T while the reference and the
+  controller keep T): the one-step map (4)-(6) keeps f(e, v_r, omega_r) at T (the reference moves
+  T v_r per step) and its input gain becomes c G(e, T) = G(e, c T). Redesigning (35) for it,
+  omega = (h5 + k2 e2 + k3 e3) / (c T) with h5 = T omega_r, and
+  v = (k1 e1 + h1' omega + h2) / (c T) with h1' = c T e2 and h2 = T v_r cos e3, the gains (36) on
+  T v_r as before; this is exactly the nominal (35) divided by c (its omega is c times the one
+  sent, so its h1 omega = T e2 c omega = h1' omega), not c T put everywhere. The limits |v|, |omega|
+  bound the velocity the robot drives, the one sent here; the nominal law runs with limits x c.
+  On the kinematic plant (7) the change is T -> c T in f and G alike, and there the oracle is (35)
+  with c T everywhere.
+- **sensor delay of d steps**: an exact unicycle predictor. The measured pose (rebuilt from e and
+  r_k) is the pose of ``age`` steps ago, age following the plant's delay line (0, 1, ..., d after the
+  event); it is moved forward through the commands actually sent over those steps, each held for its
+  period at the velocity it produces, and (35) acts on the error of the predicted pose. On the
+  kinematic plant (7), an Euler map, the unicycle is exact to O(T^2) per step.
+- **payload, friction, weak actuator**: nothing. The law (35) has no parameter that mass, friction
+  or actuator strength change; the oracle is the nominal law, bit for bit Corradini's. Its
+  post-event error in the same run is the bound (the same law on the robot changed from t = 0
+  measures the same over that window within noise: ``sims/oracle_from_start.py``, README "Beyond
+  the paper").
+"""
+
+from __future__ import annotations
+
+from collections import deque
+
+import numpy as np
+
+from mlpfac.events import DelayLine
+from mlpfac.kernels import corradini_step, seeds, tracking_errors
+from mlpfac.law import Law
+
+GAIN_KINDS = ("wheel_radius", "control_period")
+
+
+def told(event) -> tuple[float, str, float]:
+    """An event as the oracle is told it: time, kind, and the one number the law needs (1 if none)."""
+    key = {"wheel_radius": "scale", "control_period": "factor", "sensor_delay": "steps"}.get(event.kind)
+    return float(event.time), event.kind, float(event.params[key]) if key else 1.0
+
+
+class Oracle:
+    """The law (35) with the nominal functions, told the changes ``changes`` = [:func:`told` (event)].
+
+    One interface with the other controllers: one run (``reset`` with one Generator) or B seeds.
+    Before the first event it sends Corradini's commands to the last bit.
+    """
+
+    name = "oracle"
+    labels: dict[str, list[str]] = {"h_hat": ["h1", "h2", "h5"]}
+
+    def __init__(self, law: Law, T: float, changes: list[tuple[float, str, float]], kinematic: bool) -> None:
+        self.T = float(T)
+        self.law = law
+        self.changes = sorted(changes, key=lambda c: c[0])
+        self.kinematic = kinematic
+        self._limits = (
+            np.inf if law.v_max is None else float(law.v_max),
+            np.inf if law.omega_max is None else float(law.omega_max),
+        )
+        self._depth = max([int(v) for _, kind, v in self.changes if kind == "sensor_delay"], default=0)
+
+    def reset(self, rng) -> None:
+        rngs, self.single = seeds(rng)
+        B = len(rngs)
+        self.k, self.pending = 0, list(self.changes)
+        self.radius, self.hold = 1.0, 1.0  # the robot drives radius x the command, held hold x T
+        self.pose_step = DelayLine(0)  # which step's pose the plant's measurement is
+        self.sent: deque = deque(maxlen=max(self._depth, 1))  # (velocity driven (B, 2), seconds) per step
+        self._h, self._u = np.zeros((B, 3)), np.zeros((B, 2))
+        self._q, self._e = np.zeros((B, 3)), np.zeros((B, 3))
+        self._tele = {"h_hat": self._h[0] if self.single else self._h}
+        corradini_step(np.zeros((0, 3)), 1.0, 0.0, self.T, *self.law.lambdas, *self._limits, self._h[:0], self._u[:0])
+
+    def _apply(self, kind: str, value: float) -> None:
+        if kind == "wheel_radius":
+            self.radius *= value
+        elif kind == "control_period":
+            self.hold = value
+        elif kind == "sensor_delay":
+            self.pose_step.delay(int(value))
+
+    def step(self, e: np.ndarray, r: np.ndarray) -> np.ndarray:
+        E = e[None] if self.single else e
+        k, T = self.k, self.T
+        if k > 0:
+            self.pose_step.push(k)
+        while self.pending and self.pending[0][0] <= k * T + 1e-9:  # the runner's rule for an event's step
+            _, kind, value = self.pending.pop(0)
+            self._apply(kind, value)
+        age = k - self.pose_step.read()
+        if age > 0:
+            E = self._predict(E, r, list(self.sent)[-age:])
+        if self.kinematic:  # model (7): c T in f and G alike
+            T_law, c = self.hold * T, 1.0
+        else:
+            T_law, c = T, self.hold
+        v_max, omega_max = self._limits
+        corradini_step(
+            E, float(r[3]), float(r[4]), T_law, *self.law.lambdas, c * v_max, c * omega_max, self._h, self._u
+        )
+        gain = c * self.radius
+        if gain != 1.0:
+            self._u /= gain
+        if self._depth:
+            self.sent.append((self._u * self.radius, self.hold * T))
+        self.k += 1
+        return self._u[0].copy() if self.single else self._u
+
+    def _predict(self, E: np.ndarray, r: np.ndarray, sent: list) -> np.ndarray:
+        """The error (2) to r of the pose the measured one reaches through ``sent``: exact unicycle arcs."""
+        th = r[2] - E[:, 2]
+        c, s = np.cos(th), np.sin(th)
+        x, y = r[0] - (c * E[:, 0] - s * E[:, 1]), r[1] - (s * E[:, 0] + c * E[:, 1])
+        for u, dt in sent:
+            half = 0.5 * u[:, 1] * dt
+            ds = u[:, 0] * dt * np.sinc(half / np.pi)  # chord of the arc: v dt sin(half) / half
+            x, y, th = x + ds * np.cos(th + half), y + ds * np.sin(th + half), th + 2.0 * half
+        self._q[:, 0], self._q[:, 1], self._q[:, 2] = x, y, th
+        tracking_errors(self._q, r, self._e)
+        return self._e
+
+    @property
+    def h_hat(self) -> np.ndarray:
+        return self._h[0] if self.single else self._h
+
+    def telemetry(self) -> dict[str, np.ndarray | float]:
+        return self._tele

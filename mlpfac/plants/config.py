@@ -1,0 +1,111 @@
+"""The ``[plant]`` table of a MuJoCo scenario: which robot, which of its parts, what the plant adds.
+
+Plain, validated data (:class:`MujocoConfig`); :func:`mlpfac.plants.robot.read_robot` reads the
+robot it names.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from mlpfac.exceptions import ConfigError
+from mlpfac.plants.model_file import is_menagerie, menagerie_name, model_path, shipped_model
+
+LIMITS = ("wheel_radius", "track", "max_wheel_speed", "timestep")
+
+
+def _positive(name: str, value, optional: bool = False, inf: bool = False) -> None:
+    if optional and value is None:
+        return
+    if inf and value == math.inf:
+        return
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value) or value <= 0:
+        raise ConfigError(name, f"must be a positive number, got {value!r}")
+
+
+@dataclass(frozen=True)
+class MujocoConfig:
+    """The robot and its drive. Defaults are the shipped robot (models/README.md)."""
+
+    model: str = field(
+        default_factory=shipped_model
+    )  # MJCF file (from the scenario's folder) or "menagerie:ROBOT/ENTRY"
+    actuator: str = "velocity"  # "velocity": the model's velocity servos; "torque": torque motors + PI here
+    left_actuator: str = "left_wheel"  # velocity servo (<velocity kv forcerange>) on the left wheel's hinge
+    right_actuator: str = "right_wheel"
+    site: str | None = None  # the pose frame: a site on the axle midpoint, x forward ("axle_mid" unless body is given)
+    body: str | None = None  # ... or a body's frame instead of a site
+    frame_offset: tuple[float, float, float] = (
+        0.0,
+        0.0,
+        0.0,
+    )  # the pose frame moved by this, in the site's/body's axes (m)
+    keyframe: str | None = None  # start from this keyframe of the model (None: the model's default pose)
+    other_actuators: str = "hold"  # "hold": keep the keyframe's controls; "lock": fix their joints at the keyframe
+    tyre: str = "model"  # "model": the wheels' own collision geoms; "sphere": a sphere tyre on each wheel
+    timestep: float | None = None  # physics timestep (s); None: the model's
+    wheel_radius: float | None = None  # radius the IK believes (m); None: read from the model
+    track: float | None = None  # wheel separation the IK believes (m); None: read from the model
+    max_wheel_speed: float | None = None  # rad/s, kept by scaling (v, omega); None: the model's; inf: none
+    pose_noise_std: float | tuple[float, ...] = 0.0  # std of Gaussian noise on (x, y, theta): scalar or 3
+    pi_kp: float = 0.5  # torque drive: PI proportional gain, N m per rad/s of wheel-speed error
+    pi_ki: float = 10.0  # torque drive: PI integral gain, N m per rad of integrated error
+
+    def __post_init__(self) -> None:
+        choices = {"actuator": ("velocity", "torque"), "other_actuators": ("hold", "lock"), "tyre": ("model", "sphere")}
+        for name, allowed in choices.items():
+            if getattr(self, name) not in allowed:
+                raise ConfigError(name, f"choose {' or '.join(map(repr, allowed))}, got {getattr(self, name)!r}")
+        for name in ("model", "left_actuator", "right_actuator", "site", "body", "keyframe"):
+            value = getattr(self, name)
+            if (value is not None or name in ("model", "left_actuator", "right_actuator")) and (
+                not isinstance(value, str) or not value
+            ):
+                raise ConfigError(name, f"expected a non-empty name, got {value!r}")
+        if self.site is not None and self.body is not None:
+            raise ConfigError(
+                "body", f"the pose frame is a site or a body, not both (site {self.site!r}, body {self.body!r})"
+            )
+        off = np.asarray(self.frame_offset, dtype=float)
+        if off.shape != (3,) or not np.all(np.isfinite(off)):
+            raise ConfigError("frame_offset", f"expected three finite numbers (m), got {self.frame_offset!r}")
+        for name in LIMITS:
+            _positive(name, getattr(self, name), optional=True, inf=name == "max_wheel_speed")
+        _positive("pi_kp", self.pi_kp)
+        ki = self.pi_ki
+        if isinstance(ki, bool) or not isinstance(ki, int | float) or not math.isfinite(ki) or ki < 0:
+            raise ConfigError("pi_ki", f"must be a number >= 0, got {ki!r}")
+        self.noise_std()
+        if is_menagerie(self.model):  # resolved (perhaps downloaded) when the robot is read, not here
+            menagerie_name(self.model)
+        else:
+            model_path(self.model)
+
+    @property
+    def path(self) -> Path:
+        """The model file (a scenario file's relative path was resolved from its folder when it was
+        loaded; a Menagerie robot is resolved by mujoco-menagerie)."""
+        return model_path(self.model)
+
+    @property
+    def frame(self) -> tuple[str, str]:
+        """("site" or "body", name) of the pose frame."""
+        return ("body", self.body) if self.body is not None else ("site", self.site or "axle_mid")
+
+    def noise_std(self) -> np.ndarray | None:
+        """(3,) standard deviations of the pose noise, or None when there is none."""
+        try:
+            std = np.broadcast_to(np.asarray(self.pose_noise_std, dtype=float), (3,))
+        except (TypeError, ValueError):
+            raise ConfigError(
+                "pose_noise_std", f"expected a number or 3 numbers, got {self.pose_noise_std!r}"
+            ) from None
+        if not np.all(np.isfinite(std)) or np.any(std < 0):
+            raise ConfigError(
+                "pose_noise_std", f"standard deviations must be finite and >= 0, got {self.pose_noise_std!r}"
+            )
+        return std.copy() if np.any(std > 0) else None

@@ -1,0 +1,151 @@
+"""What the plant needs of a robot beyond its files, made as :class:`mujoco.MjSpec` edits (the files
+are never changed): a pose frame on a body or at an offset from a site, round tyres on mesh
+wheels, the robot's other actuated joints locked at their start pose, the wheel drive turned into
+torque motors, and the geometry read from meshes (wheel radius, the viewer's shapes).
+"""
+
+from __future__ import annotations
+
+import math
+
+import mujoco
+import numpy as np
+
+POSE_SITE = "mlpfac_pose"  # the site added where the pose is measured (a body, or a site with an offset)
+TYRE = "mlpfac_tyre"  # the sphere tyres added to mesh wheels (tyre = "sphere")
+MESH = int(mujoco.mjtGeom.mjGEOM_MESH)
+
+
+def add_pose_site(spec: mujoco.MjSpec, body: int, pos: np.ndarray, quat: np.ndarray) -> None:
+    """A site on ``body`` at ``pos``, ``quat`` (body frame): the frame where the pose is measured."""
+    spec.bodies[body].add_site(name=POSE_SITE, pos=pos, quat=quat)
+
+
+def offset_from_site(m: mujoco.MjModel, site: int, offset) -> tuple[int, np.ndarray, np.ndarray]:
+    """Body, position and orientation of a frame ``offset`` (in the site's axes) from ``site``."""
+    R = np.empty(9)
+    mujoco.mju_quat2Mat(R, m.site_quat[site])
+    return int(m.site_bodyid[site]), m.site_pos[site] + R.reshape(3, 3) @ np.asarray(offset, float), m.site_quat[site]
+
+
+def lock_other_joints(spec: mujoco.MjSpec, m: mujoco.MjModel, qpos: np.ndarray, keep: tuple[int, ...]) -> list[str]:
+    """Fix every joint moved by an actuator not in ``keep`` at its pose in ``qpos`` and remove those
+    actuators (and the keyframes, whose sizes no longer fit); the locked bodies become rigid parts
+    of their parents (fused when the model compiles with ``fusestatic``). Returns the joints' names."""
+    d = mujoco.MjData(m)
+    d.qpos[:] = qpos
+    mujoco.mj_kinematics(m, d)
+    acts = [a for a in range(m.nu) if a not in keep and int(m.actuator_trntype[a]) == mujoco.mjtTrn.mjTRN_JOINT]
+    bodies = sorted({int(m.jnt_bodyid[m.actuator_trnid[a, 0]]) for a in acts})
+    locked = []
+    for b in bodies:
+        p = int(m.body_parentid[b])
+        Rp = d.xmat[p].reshape(3, 3)
+        qp_inv, q = np.empty(4), np.empty(4)
+        mujoco.mju_negQuat(qp_inv, d.xquat[p])
+        mujoco.mju_mulQuat(q, qp_inv, d.xquat[b])
+        body = spec.bodies[b]
+        body.alt.type = mujoco.mjtOrientation.mjORIENTATION_QUAT
+        body.pos, body.quat = Rp.T @ (d.xpos[b] - d.xpos[p]), q
+        for j in list(body.joints):
+            locked.append(j.name or f"joint of body {b}")
+            spec.delete(j)
+    for a in [spec.actuators[a] for a in acts]:
+        spec.delete(a)
+    for key in list(spec.keys):
+        spec.delete(key)
+    return locked
+
+
+def by_name(m_from: mujoco.MjModel, values: np.ndarray, m_to: mujoco.MjModel, obj: str, default: np.ndarray):
+    """Values per joint (obj = "qpos") or actuator ("ctrl") of one model moved to another by name."""
+    out = default.copy()
+    if obj == "ctrl":
+        for a in range(m_to.nu):
+            b = mujoco.mj_name2id(m_from, mujoco.mjtObj.mjOBJ_ACTUATOR, m_to.actuator(a).name)
+            if m_to.actuator(a).name and b >= 0:
+                out[a] = values[b]
+        return out
+    width = {0: 7, 1: 4, 2: 1, 3: 1}
+    for j in range(m_to.njnt):
+        name = m_to.joint(j).name
+        i = mujoco.mj_name2id(m_from, mujoco.mjtObj.mjOBJ_JOINT, name) if name else -1
+        if i >= 0:
+            n = width[int(m_to.jnt_type[j])]
+            out[m_to.jnt_qposadr[j] : m_to.jnt_qposadr[j] + n] = values[
+                m_from.jnt_qposadr[i] : m_from.jnt_qposadr[i] + n
+            ]
+    return out
+
+
+def mesh_radius(m: mujoco.MjModel, geom: int, joint: int) -> float:
+    """Largest distance of a mesh geom's vertices from its body's hinge axis: the wheel's radius."""
+    mesh = int(m.geom_dataid[geom])
+    verts = m.mesh_vert[m.mesh_vertadr[mesh] : m.mesh_vertadr[mesh] + m.mesh_vertnum[mesh]]
+    R = np.empty(9)
+    mujoco.mju_quat2Mat(R, m.geom_quat[geom])
+    p = verts @ R.reshape(3, 3).T + m.geom_pos[geom] - m.jnt_pos[joint]
+    a = m.jnt_axis[joint] / np.linalg.norm(m.jnt_axis[joint])
+    return float(np.sqrt(np.max(np.sum(p * p, axis=1) - (p @ a) ** 2)))
+
+
+def sphere_tyres(spec: mujoco.MjSpec, m: mujoco.MjModel, wheels, radius: float, priority: int) -> None:
+    """On each wheel (joint, collision geoms): a sphere tyre of ``radius`` about the hinge's anchor,
+    with the friction and contact bits of the wheel's own collision geom, which stops colliding."""
+    own = [[spec.geoms[g] for g in geoms] for _, geoms in wheels]  # before any geom is added (ids move)
+    for side, (joint, geoms) in zip(("left", "right"), wheels, strict=True):
+        g0 = geoms[0]
+        spec.bodies[int(m.jnt_bodyid[joint])].add_geom(
+            name=f"{TYRE}_{side}",
+            type=mujoco.mjtGeom.mjGEOM_SPHERE,
+            size=[radius, 0.0, 0.0],
+            pos=m.jnt_pos[joint].copy(),
+            friction=m.geom_friction[g0].copy(),
+            condim=int(m.geom_condim[g0]),
+            contype=int(m.geom_contype[g0]),
+            conaffinity=int(m.geom_conaffinity[g0]),
+            priority=priority,
+            density=0.0,
+            group=3,
+        )
+    for geom in (geom for wheel in own for geom in wheel):
+        geom.contype, geom.conaffinity = 0, 0
+
+
+def to_torque_motors(spec: mujoco.MjSpec, m: mujoco.MjModel, acts: tuple[int, int]) -> None:
+    """Turn the velocity servos into torque motors (force = ctrl) limited to the same force range
+    (a servo's control range is a speed, not a torque: it is dropped)."""
+    for a in acts:
+        act = spec.actuators[a]
+        act.gaintype, act.biastype = mujoco.mjtGain.mjGAIN_FIXED, mujoco.mjtBias.mjBIAS_NONE
+        act.gainprm = [1.0] + [0.0] * 9
+        act.biasprm = [0.0] * 10
+        if m.actuator_forcelimited[a]:
+            act.ctrllimited, act.ctrlrange = mujoco.mjtLimited.mjLIMITED_TRUE, m.actuator_forcerange[a].copy()
+        else:
+            act.ctrllimited = mujoco.mjtLimited.mjLIMITED_FALSE
+
+
+def torque_limit(m: mujoco.MjModel, a: int, c: float, torque_drive: bool) -> float:
+    """Largest forward wheel torque (N m at the joint) of drive ``a`` (``c`` actuator units per
+    joint unit), wherever the model limits it: the actuator's force (or, for the torque drive, its
+    control) range, and the joint's ``actuatorfrcrange``; inf when nothing limits it."""
+    limited = m.actuator_ctrllimited[a] if torque_drive else m.actuator_forcelimited[a]
+    lo, hi = m.actuator_ctrlrange[a] if torque_drive else m.actuator_forcerange[a]
+    out = min(-lo, hi) * abs(c) if limited else math.inf
+    j = int(m.actuator_trnid[a, 0])
+    if m.jnt_actfrclimited[j]:
+        out = min(out, float(min(-m.jnt_actfrcrange[j, 0], m.jnt_actfrcrange[j, 1])))
+    return out
+
+
+def mesh_shape(m: mujoco.MjModel, g: int) -> dict:
+    """A mesh geom's vertices (V, 3) float32 and triangles (F, 3) int32, in the geom's frame."""
+    mesh = int(m.geom_dataid[g])
+    v0, nv = int(m.mesh_vertadr[mesh]), int(m.mesh_vertnum[mesh])
+    f0, nf = int(m.mesh_faceadr[mesh]), int(m.mesh_facenum[mesh])
+    return {
+        "mesh": m.mesh(mesh).name or f"mesh{mesh}",
+        "vertices": m.mesh_vert[v0 : v0 + nv].astype(np.float32),
+        "faces": m.mesh_face[f0 : f0 + nf].astype(np.int32),
+    }

@@ -1,0 +1,210 @@
+"""Paired comparisons per seed: each run against the Corradini law's and the oracle's on the same
+scenario and seed, and against its own run without the event.
+
+The figure compared is the position RMS of the last phase ("after" the event; the whole run after
+the warm-up when there is none). Per scenario and controller:
+
+- **x oracle**: the median over seeds of the run's RMS / the oracle's (same scenario and seed);
+- **event cost**: the median over seeds of the run's RMS after the event / the same controller's
+  RMS on the same seed over the same window of its twin without the event (the scenario of the
+  sweep equal to this one but for its events: ``eight-nominal`` for every ``eight-*`` but
+  ``eight-torque``). 1 means the event cost this controller nothing; a controller that is simply
+  better everywhere does not get a lower cost from that edge;
+- **wins / n, p**: on how many seeds the run is better (strictly lower) than the reference, and the
+  two-sided Wilcoxon signed-rank test of the paired differences (scipy), against Corradini's law
+  and the oracle on the RMS, and against Corradini's law on the event cost. A run that diverged
+  counts as worse than any finished one (a loss, and the largest rank); a pair with a run missing
+  is left out; a pair of equal figures is no win (and is dropped by the test, as Wilcoxon's rule).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+from mlpfac.sweeps.plan import Job
+
+REFERENCES = ("corradini", "oracle")
+TWIN_IGNORES = ("name", "description", "events", "seed")  # what a scenario's twin without the event may differ in
+
+
+def window_rms(m: dict, start_s: float, end_s: float) -> float | None:
+    """Position RMS over [start_s, end_s) from the run's 0.1 s bins (None: no bins, or no whole bin)."""
+    bins = m.get("position_ms_bins")
+    if not bins or m.get("status") != "ok":
+        return None
+    w, ms, T = bins["bin_steps"], bins["m2"], m["T"]
+    lo, hi = round(start_s / T), min(round(end_s / T), m["steps"])
+    total = count = 0.0
+    for i, x in enumerate(ms):
+        a, b = i * w, min((i + 1) * w, m["steps"])
+        if a >= lo and a < hi:
+            total += x * (b - a)
+            count += b - a
+    return math.sqrt(total / count) if count else None
+
+
+def wilcoxon(x: list[float], y: list[float]) -> float | None:
+    """Two-sided Wilcoxon signed-rank p of the differences x - y (scipy); None when all are zero."""
+    d = [a - b for a, b in zip(x, y, strict=True) if a != b]
+    if not d:
+        return None
+    from scipy.stats import wilcoxon as test
+
+    return float(test(d).pvalue)
+
+
+def last_phase(m: dict) -> str:
+    ph = m["phases"]
+    return "after" if "after" in ph and ph["after"]["end_s"] > ph["after"]["start_s"] else "before"
+
+
+def _rms(m: dict | None) -> float | None:
+    """The compared figure: the last phase's position RMS; inf for a run that diverged; None if missing."""
+    if m is None:
+        return None
+    if m["status"] != "ok":
+        return math.inf
+    x = m["phases"][last_phase(m)]["rms_position_error_m"]
+    return math.inf if x is None else x
+
+
+def compare(x: list[float | None], y: list[float | None]) -> tuple[int, int, float | None]:
+    """(wins of x, pairs, Wilcoxon p) over the seeds where both are known; inf is worse than any number."""
+    pairs = [(a, b) for a, b in zip(x, y, strict=True) if a is not None and b is not None and a == a and b == b]
+    if not pairs:
+        return 0, 0, None
+    finite = [abs(v) for p in pairs for v in p if math.isfinite(v)]
+    big = 2.0 * max(finite, default=0.0) + 1.0  # beyond any finite |difference|: the largest rank
+    xs = [a if math.isfinite(a) else big for a, _ in pairs]
+    ys = [b if math.isfinite(b) else big for _, b in pairs]
+    wins = sum(a < b for a, b in pairs)
+    return wins, len(pairs), wilcoxon(xs, ys)
+
+
+def twins(jobs: list[Job]) -> dict[str, str]:
+    """Each scenario with events -> the scenario of the plan that is the same without them."""
+    tables: dict[str, dict] = {}
+    for j in jobs:
+        tables.setdefault(j.scenario, {k: v for k, v in j.table.items() if k not in TWIN_IGNORES and k != "controller"})
+    plain = [s for s, t in tables.items() if not any(j.table.get("events") for j in jobs if j.scenario == s)]
+    out = {}
+    for s, t in tables.items():
+        match = [p for p in plain if tables[p] == t]
+        if s not in plain and match:
+            out[s] = match[0]
+    return out
+
+
+def median(xs: list[float]) -> float | None:
+    s = sorted(xs)
+    n = len(s)
+    if not n:
+        return None
+    return s[n // 2] if n % 2 else 0.5 * (s[n // 2 - 1] + s[n // 2])
+
+
+def _ratios(x: list[float | None], y: list[float | None]) -> list[float]:
+    return [a / b for a, b in zip(x, y, strict=True) if a is not None and b and math.isfinite(a) and math.isfinite(b)]
+
+
+def paired_rows(jobs: list[Job], metrics: dict[tuple, dict]) -> list[dict]:
+    """One row per scenario and controller (plan order): the paired figures of the module's docstring."""
+    seeds: dict[tuple[str, str], list[int]] = {}
+    for j in jobs:
+        seeds.setdefault((j.scenario, j.controller), []).append(j.seed)
+    twin = twins(jobs)
+    rows = []
+    for (scn, ctrl), ss in seeds.items():
+        ms = [metrics.get((scn, ctrl, s)) for s in ss]
+        x = [_rms(m) for m in ms]
+        row: dict = {"scenario": scn, "controller": ctrl, "runs": sum(m is not None for m in ms)}
+        for how in ("tracking", "lost", "diverged"):
+            row[how] = sum(m is not None and outcome(m) == how for m in ms)
+        done = [m for m in ms if m is not None]
+        row["phase"] = last_phase(done[0]) if done else None
+        row["pos_rms_m_median"] = median([v for v in x if v is not None and math.isfinite(v)])
+        refs = {r: [_rms(metrics.get((scn, r, s))) for s in ss] for r in REFERENCES}
+        row["x_oracle_median"] = median(_ratios(x, refs["oracle"]))
+        row["oracle_pos_rms_m_median"] = median([v for v in refs["oracle"] if v is not None and math.isfinite(v)])
+        for r in REFERENCES:
+            row[f"wins_vs_{r}"], row[f"pairs_vs_{r}"], row[f"p_vs_{r}"] = compare(x, refs[r])
+        cost = _event_cost(metrics, scn, ctrl, ss, twin.get(scn), x)
+        base = _event_cost(metrics, scn, "corradini", ss, twin.get(scn), refs["corradini"])
+        row["no_event_twin"] = twin.get(scn)
+        row["event_cost_median"] = median([c for c in cost if c is not None and math.isfinite(c)])
+        row["wins_cost_vs_corradini"], row["pairs_cost_vs_corradini"], row["p_cost_vs_corradini"] = compare(cost, base)
+        rows.append(row)
+    return rows
+
+
+def _event_cost(metrics, scn, ctrl, seeds, twin, x) -> list[float | None]:
+    """Per seed: RMS after the event / the same controller's RMS over that window without the event."""
+    if twin is None:
+        return [None] * len(seeds)
+    out: list[float | None] = []
+    for s, a in zip(seeds, x, strict=True):
+        m, t = metrics.get((scn, ctrl, s)), metrics.get((twin, ctrl, s))
+        if a is None or m is None or t is None:
+            out.append(None)
+            continue
+        ph = m["phases"].get("after")
+        b = window_rms(t, ph["start_s"], ph["end_s"]) if ph else None
+        out.append(math.inf if not math.isfinite(a) else (a / b if b else None))
+    return out
+
+
+def outcome(m: dict) -> str:
+    """tracking / lost / diverged (metrics written before outcomes were recorded: finished = tracking)."""
+    return m.get("outcome") or ("tracking" if m["status"] == "ok" else "diverged")
+
+
+def _p(p: float | None) -> str:
+    return "-" if p is None else (f"{p:.2g}" if p >= 1e-3 else f"{p:.0e}")
+
+
+def _mm(x: float | None) -> str:
+    return "-" if x is None else f"{x * 1e3:.2f}"
+
+
+def _x(x: float | None) -> str:
+    return "-" if x is None else f"{x:.2f}x"
+
+
+PAIRED_COLUMNS: list[tuple[str, Callable[[dict], str]]] = [
+    ("scenario", lambda r: r["scenario"]),
+    ("controller", lambda r: r["controller"]),
+    ("tracking / lost / diverged", lambda r: f"{r['tracking']} / {r['lost']} / {r['diverged']}"),
+    ("pos RMS median [mm]", lambda r: _mm(r["pos_rms_m_median"])),
+    ("oracle [mm]", lambda r: _mm(r["oracle_pos_rms_m_median"])),
+    ("x oracle", lambda r: _x(r["x_oracle_median"])),
+    ("event cost", lambda r: _x(r["event_cost_median"])),
+    ("wins vs corradini", lambda r: f"{r['wins_vs_corradini']}/{r['pairs_vs_corradini']}"),
+    ("p vs corradini", lambda r: _p(r["p_vs_corradini"])),
+    ("cost wins vs corradini", lambda r: f"{r['wins_cost_vs_corradini']}/{r['pairs_cost_vs_corradini']}"),
+    ("p (cost)", lambda r: _p(r["p_cost_vs_corradini"])),
+    ("wins vs oracle", lambda r: f"{r['wins_vs_oracle']}/{r['pairs_vs_oracle']}"),
+    ("p vs oracle", lambda r: _p(r["p_vs_oracle"])),
+]
+
+
+def summary(rows: list[dict]) -> str:
+    """Controllers x scenarios: the median RMS [mm] with x oracle, and tracking/lost/diverged unless all tracked."""
+    scns = list(dict.fromkeys(r["scenario"] for r in rows))
+    ctrls = list(dict.fromkeys(r["controller"] for r in rows))
+    cell = {(r["scenario"], r["controller"]): r for r in rows}
+
+    def fmt(r: dict | None) -> str:
+        if r is None or not r["runs"]:
+            return "-"
+        text = _mm(r["pos_rms_m_median"])
+        if r["controller"] != "oracle" and r["x_oracle_median"] is not None:
+            x = r["x_oracle_median"]
+            text += f" ({x:.2g}x)" if x < 10 else f" ({x:.0f}x)"
+        if r["tracking"] != r["runs"]:
+            text += f" {r['tracking']}/{r['lost']}/{r['diverged']}"
+        return text
+
+    lines = ["| controller | " + " | ".join(scns) + " |", "|---|" + "---:|" * len(scns)]
+    lines += [f"| `{c}` | " + " | ".join(fmt(cell.get((s, c))) for s in scns) + " |" for c in ctrls]
+    return "\n".join(lines) + "\n"

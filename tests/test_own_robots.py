@@ -1,0 +1,194 @@
+"""Robots nobody here has seen, from a TOML alone; Menagerie robots when the package or the files are
+missing; a TIAGo run's config.toml re-runs to the same metrics."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import mlpfac
+from mlpfac.cli import main
+
+# A third robot: other names, a 0.12 m wheel on a 0.5 m track, a 4 ms timestep, no site (the pose
+# frame is a body, moved to the axle by an offset), a keyframe with a mast up, a mast servo held at
+# it or locked, the wheels' speed limited by ctrlrange and their torque on the joints.
+WHEEL = " ".join(
+    f"{0.12 * math.cos(a):.5f} {y} {0.12 * math.sin(a):.5f}"
+    for a in np.linspace(0, 2 * math.pi, 24, endpoint=False)
+    for y in (-0.02, 0.02)
+)
+THIRD = f"""
+<mujoco model="third">
+  <compiler autolimits="true"/>
+  <option timestep="0.004" integrator="implicitfast"/>
+  <asset><mesh name="rim" vertex="{WHEEL}"/></asset>
+  <worldbody>
+    <geom name="ground" type="plane" size="0 0 0.05"/>
+    <body name="hull" pos="0 0 0.3">
+      <freejoint name="free"/>
+      <inertial pos="0.05 0 0.1" mass="20" diaginertia="0.4 0.5 0.6"/>
+      <geom type="box" size="0.3 0.2 0.08" pos="0.05 0 0.15" contype="0" conaffinity="0"/>
+      <geom type="sphere" size="0.04" pos="0.32 0 0.04" condim="1" priority="2"/>
+      <geom type="sphere" size="0.04" pos="-0.22 0 0.04" condim="1" priority="2"/>
+      <body name="mast" pos="0 0 0.25">
+        <joint name="mast_lift" type="slide" axis="0 0 1" range="0 0.3" damping="200"/>
+        <inertial pos="0 0 0.2" mass="4" diaginertia="0.05 0.05 0.01"/>
+        <geom type="cylinder" size="0.03 0.2" pos="0 0 0.2" contype="0" conaffinity="0"/>
+      </body>
+      <body name="port" pos="0 0.25 0.12">
+        <joint name="port_axle" axis="0 1 0" actuatorfrcrange="-8 8"/>
+        <inertial pos="0 0 0" mass="1" diaginertia="0.004 0.007 0.004"/>
+        <geom type="WHEEL_TYPE" WHEEL_SHAPE priority="2"/>
+      </body>
+      <body name="starboard" pos="0 -0.25 0.12">
+        <joint name="starboard_axle" axis="0 -1 0" actuatorfrcrange="-8 8"/>
+        <inertial pos="0 0 0" mass="1" diaginertia="0.004 0.007 0.004"/>
+        <geom type="WHEEL_TYPE" WHEEL_SHAPE priority="2"/>
+      </body>
+    </body>
+  </worldbody>
+  <actuator>
+    <velocity name="drive_port" joint="port_axle" kv="20" ctrlrange="-6 6"/>
+    <velocity name="drive_starboard" joint="starboard_axle" kv="20" ctrlrange="-6 6"/>
+    <position name="mast_servo" joint="mast_lift" kp="5000"/>
+  </actuator>
+  <keyframe><key name="ready" qpos="0 0 0.005 1 0 0 0 0.2 0 0" ctrl="0 0 0.2"/></keyframe>
+</mujoco>
+"""
+SHAPES = {"mesh": ("mesh", 'mesh="rim"'), "cylinder": ("cylinder", 'size="0.12 0.02" zaxis="0 1 0"')}
+TOML = """duration = 8.0
+T = 0.02
+[reference]
+kind = "eight"
+wx = 0.1
+wy = 0.2
+[plant]
+kind = "mujoco"
+model = "third.xml"
+left_actuator = "drive_port"
+right_actuator = "drive_starboard"
+body = "hull"
+frame_offset = [0.0, 0.0, 0.12]
+keyframe = "ready"
+other_actuators = "{others}"
+tyre = "{tyre}"
+pose_noise_std = 0.001
+[controller]
+name = "kanayama"
+v_max = 0.7
+[[events]]
+time = 4.0
+kind = "payload"
+mass_kg = 10.0
+body = "*"
+[[events]]
+time = 5.0
+kind = "friction"
+mu = 0.5
+"""
+
+
+@pytest.mark.parametrize(
+    "shape, tyre, others", [("mesh", "sphere", "lock"), ("cylinder", "model", "hold")], ids=["mesh", "cylinder"]
+)
+def test_a_third_robot_runs_from_a_toml_alone(tmp_path, shape, tyre, others):
+    kind, attrs = SHAPES[shape]
+    (tmp_path / "third.xml").write_text(THIRD.replace("WHEEL_TYPE", kind).replace("WHEEL_SHAPE", attrs))
+    (tmp_path / "third.toml").write_text(TOML.format(others=others, tyre=tyre))
+    scn = mlpfac.load(tmp_path / "third.toml")
+    prov = scn.table["provenance"]
+    assert prov["wheel_radius_m"] == pytest.approx(0.12, rel=1e-3) and prov["track_m"] == pytest.approx(0.5)
+    assert prov["timestep_s"] == 0.004 and prov["substeps"] == 5
+    assert prov["max_wheel_speed_rad_s"] == 6.0 and prov["torque_limit_Nm"] == [8.0, 8.0]
+    assert ("locked_joints" in prov) == (others == "lock")
+    rec = mlpfac.run(scn)
+    m = mlpfac.metrics(rec)
+    assert rec.status == "ok", rec.reason
+    assert [e["kind"] for e in rec.events] == ["payload", "friction"] and "the whole robot" in rec.events[0]["text"]
+    assert m["rms_position_error_m"] < 0.05
+    assert np.max(np.abs(rec.plant["wheel_cmd"])) <= 6.0 + 1e-12
+    assert np.max(np.abs(rec.plant["torque"])) <= 8.0 + 1e-9
+
+
+def test_a_wheel_radius_event_on_mesh_tyres_is_refused_in_one_line(tmp_path, capsys):
+    kind, attrs = SHAPES["mesh"]
+    (tmp_path / "third.xml").write_text(THIRD.replace("WHEEL_TYPE", kind).replace("WHEEL_SHAPE", attrs))
+    text = TOML.format(others="hold", tyre="model") + '[[events]]\ntime = 6.0\nkind = "wheel_radius"\nscale = 1.1\n'
+    (tmp_path / "third.toml").write_text(text)
+    assert main(["run", str(tmp_path / "third.toml"), "--no-log", "--no-plot", "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "[[events]] #3" in err and 'tyre = "sphere"' in err, err
+
+
+def _run_tiago(env: dict, tmp_path: Path) -> subprocess.CompletedProcess:
+    argv = [sys.executable, "-m", "mlpfac.cli", "run", "tiago-nominal", "--duration", "0.1", "--no-log"]
+    return subprocess.run(
+        [*argv, "--no-plot", "--out", str(tmp_path / "out")], capture_output=True, text=True, env=env, timeout=120
+    )
+
+
+def test_tiago_without_its_files_says_so_in_one_line(tmp_path):
+    """MENAGERIE_ROOT at an empty folder, or no root and a download that cannot happen (a base URL
+    that does not exist: nothing waits on a network): exit 2, one line saying how to fix it."""
+    pytest.importorskip("mujoco_menagerie")
+    env = {k: v for k, v in os.environ.items() if k != "MENAGERIE_ROOT"}
+    (tmp_path / "empty").mkdir()
+    for extra in (
+        {"MENAGERIE_ROOT": str(tmp_path / "empty")},
+        {"MENAGERIE_BASE_URL": (tmp_path / "nowhere").as_uri(), "MENAGERIE_CACHE_DIR": str(tmp_path / "cache")},
+    ):
+        proc = _run_tiago(env | extra, tmp_path)
+        assert proc.returncode == 2, proc.stderr
+        err = proc.stderr.strip()
+        assert len(err.splitlines()) == 1 and "Traceback" not in err, err
+        assert "menagerie:pal_tiago/scene_velocity" in err and "set MENAGERIE_ROOT" in err, err
+        assert not (tmp_path / "out").exists()
+
+
+def test_tiago_without_the_package_says_how_to_install_it(tmp_path):
+    (tmp_path / "mujoco_menagerie.py").write_text("raise ImportError('not installed')\n")
+    env = os.environ | {"PYTHONPATH": os.pathsep.join([str(tmp_path), os.environ.get("PYTHONPATH", "")])}
+    proc = _run_tiago(env, tmp_path)
+    assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1, proc.stderr
+    assert "pip install 'mlpfac[menagerie]'" in proc.stderr
+
+
+def test_a_tiago_config_toml_reruns_to_the_same_metrics(tmp_path):
+    pytest.importorskip("mujoco_menagerie")
+    first, again = tmp_path / "a", tmp_path / "b"
+    common = ["--duration", "3", "--no-log", "--no-plot", "--controller", "adaptive"]
+    assert main(["run", "tiago-nominal", *common, "--out", str(first)]) == 0
+    config = (first / "config.toml").read_text()
+    assert 'model = "menagerie:pal_tiago/scene_velocity"' in config and "model_sha256" in config
+    assert main(["run", str(first / "config.toml"), *common, "--out", str(again)]) == 0
+    a, b = (json.loads((d / "metrics.json").read_text()) for d in (first, again))
+    for key in ("rms_position_error_m", "max_position_error_m", "rms_heading_error_rad", "max_abs_weight"):
+        assert a[key] == b[key]
+
+
+def test_tiago_is_drawn_with_its_meshes_standing_on_the_floor():
+    pytest.importorskip("mujoco_menagerie")
+    import rerun as rr
+
+    from mlpfac.log import meshes
+    from mlpfac.log.scene import robot_shapes
+
+    scn = mlpfac.load("tiago-nominal")
+    from mlpfac.factory import make_plant
+
+    shapes = make_plant(scn, np.zeros((2, 5))).geometry()
+    arches = dict(robot_shapes(shapes))
+    drawn = [a for a in arches.values() if isinstance(a, rr.Mesh3D)]
+    assert len(drawn) == sum(s["type"] == "mesh" for s in shapes) > 20
+    lift = -min(meshes.lowest_point(s) for s in shapes if s["type"] == "mesh")
+    assert min(meshes.posed_vertices(s, lift)[:, 2].min() for s in shapes if s["type"] == "mesh") == pytest.approx(0.0)
+    assert (
+        1.0 < lift + max(meshes.posed_vertices(s)[:, 2].max() for s in shapes if s["type"] == "mesh") < 1.6
+    )  # TIAGo's height
