@@ -36,17 +36,24 @@ from collections import deque
 
 import numpy as np
 
-from mlpfac.events import DelayLine
+from mlpfac.events import ControlPeriod, DelayLine, Event, SensorDelay, WheelRadius
 from mlpfac.kernels import corradini_step, seeds, tracking_errors
 from mlpfac.law import Law
 
 GAIN_KINDS = ("wheel_radius", "control_period")
 
 
-def told(event) -> tuple[float, str, float]:
+def told(event: Event) -> tuple[float, str, float]:
     """An event as the oracle is told it: time, kind, and the one number the law needs (1 if none)."""
-    key = {"wheel_radius": "scale", "control_period": "factor", "sensor_delay": "steps"}.get(event.kind)
-    return float(event.time), event.kind, float(event.params[key]) if key else 1.0
+    if isinstance(event, WheelRadius):
+        number = event.scale
+    elif isinstance(event, ControlPeriod):
+        number = event.factor
+    elif isinstance(event, SensorDelay):
+        number = event.steps
+    else:
+        number = 1.0
+    return float(event.time), event.kind, float(number)
 
 
 class Oracle:

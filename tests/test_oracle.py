@@ -9,7 +9,7 @@ import pytest
 from scipy.stats import wilcoxon as scipy_wilcoxon
 
 from mlpfac.error_model import G_true, f_true
-from mlpfac.events import Event
+from mlpfac.events import make_event
 from mlpfac.factory import make_controller
 from mlpfac.law import Law
 from mlpfac.oracle import Oracle, told
@@ -39,9 +39,9 @@ R = np.array([0.3, -0.2, 0.7, 0.9, 0.4])
 
 
 def test_told_reads_the_number_each_kind_needs():
-    assert told(Event(12.5, "wheel_radius", {"scale": 1.5})) == (12.5, "wheel_radius", 1.5)
-    assert told(Event(1.0, "sensor_delay", {"steps": 3})) == (1.0, "sensor_delay", 3.0)
-    assert told(Event(2.0, "payload", {"mass_scale": 3.0})) == (2.0, "payload", 1.0)
+    assert told(make_event("wheel_radius", 12.5, scale=1.5)) == (12.5, "wheel_radius", 1.5)
+    assert told(make_event("sensor_delay", 1.0, steps=3)) == (1.0, "sensor_delay", 3.0)
+    assert told(make_event("payload", 2.0, mass_scale=3.0)) == (2.0, "payload", 1.0)
 
 
 def test_wheel_radius_oracle_sends_the_nominal_command_divided_by_the_scale():
