@@ -263,3 +263,26 @@ def test_web_viewer_renders_a_comparison(tmp_path: Path, runs) -> None:
         ),
     )
     _keep(png, "viewer-compare.png")
+
+
+@pytest.mark.skipif(CHROMIUM is None, reason="no chromium binary (Debian: apt-get install chromium)")
+def test_web_viewer_renders_tiago_from_its_meshes(tmp_path: Path) -> None:
+    """A short run of PAL TIAGo (MuJoCo Menagerie, base-only): the robot drawn from its own meshes,
+    the paths and the error plots in the same default layout. Kept as docs/tiago-viewer.png."""
+    pytest.importorskip("mujoco_menagerie")
+    from mlpfac.cli import main
+    from mlpfac.log import PATH_COLOR, REF_COLOR
+    from mlpfac.log.schema import EVENT_COLOR
+    from mlpfac.scenario import load, to_toml
+
+    table = copy.deepcopy(load("tiago-wheel-radius").table)
+    table["duration"], table["events"][0]["time"] = 8.0, 4.0
+    table["description"] = table["description"].replace("at 15 s", "at 4 s")
+    (tmp_path / "tiago.toml").write_text(to_toml(table))
+    assert main(["run", str(tmp_path / "tiago.toml"), "--out", str(tmp_path / "tiago"), "--no-plot"]) == 0
+    png = render(
+        tmp_path / "tiago" / "run.rrd",
+        tmp_path,
+        lambda img: _shows(img, {"reference path": REF_COLOR, "driven path": PATH_COLOR}, {"event marks": EVENT_COLOR}),
+    )
+    _keep(png, "tiago-viewer.png")
