@@ -463,3 +463,27 @@ def test_runs_compared_in_one_recording_take_their_controllers_colours(tmp_path,
     assert colors == [(r << 24) | (g << 16) | (b << 8) | 255]
     assert "kanayama-s4** (green)" in about_texts(out)[0][0]
     assert main(["view", str(tmp_path / "adaptive"), str(tmp_path / "kanayama"), "--save", str(tmp_path)]) == 2
+
+
+def test_a_recording_that_cannot_be_closed_is_an_error_not_a_hang(monkeypatch):
+    """rerun's disconnect never returns when its file cannot be written (seen on a full disk): the
+    sink gives up after CLOSE_TIMEOUT_S with an OSError, so the run fails instead of hanging."""
+    import threading
+
+    from mlpfac.log import recorder
+
+    class Stuck:
+        def __init__(self) -> None:
+            self.release = threading.Event()
+
+        def disconnect(self) -> None:
+            self.release.wait()
+
+    stuck = Stuck()
+    sink = recorder.RerunSink(stuck, "stuck", serving=False, viewer_url=None)
+    monkeypatch.setattr(recorder, "CLOSE_TIMEOUT_S", 0.2)
+    try:
+        with pytest.raises(OSError, match="could not be closed within 0.2 s"):
+            sink.close()
+    finally:
+        stuck.release.set()

@@ -9,6 +9,7 @@ The runner drives a sink (made by :func:`mlpfac.log.make_sink`)::
 
 from __future__ import annotations
 
+import threading
 import time
 from collections.abc import Sequence
 
@@ -25,6 +26,7 @@ from mlpfac.record import RunRecord
 APPLICATION_ID = "mlpfac"
 BATCH_ROWS = 1000  # flush() sends once this many rows are pending ...
 BATCH_SECONDS = 1.0  # ... or this much wall time has passed since the last send
+CLOSE_TIMEOUT_S = 10.0  # rerun's disconnect never returns when its file cannot be written (a full disk)
 STATUS_LEVEL = {"ok": "INFO", "interrupted": "WARN", "diverged": "ERROR"}
 
 
@@ -120,10 +122,24 @@ class RerunSink:
         """Flush and close every output: the file gets its footer, connections and servers stop."""
         if not self.closed:
             self.closed = True
-            self.rec.disconnect()
+            failed: list[BaseException] = []
+
+            def disconnect() -> None:
+                try:
+                    self.rec.disconnect()
+                except BaseException as err:  # noqa: BLE001 - reported below, in the caller's thread
+                    failed.append(err)
+
+            closer = threading.Thread(target=disconnect, name="mlpfac-rerun-close", daemon=True)
+            closer.start()
+            closer.join(CLOSE_TIMEOUT_S)
             if self.server is not None and self.server.poll() is None:
                 self.server.terminate()
                 self.server.wait()
+            if closer.is_alive():
+                raise OSError(f"the recording could not be closed within {CLOSE_TIMEOUT_S:g} s (was the disk full?)")
+            if failed:
+                raise failed[0]
 
     def wait(self) -> None:
         """When serving: keep the web viewer up until Ctrl-C, then close. Otherwise return at once."""

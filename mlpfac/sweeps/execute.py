@@ -18,6 +18,7 @@ from mlpfac.sweeps.worker import _worker_init, run_task
 
 TMP_DIR = ".tmp"  # OUT/.tmp: recordings being made; removed when the sweep ends and when the next one starts
 BLAS_THREAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
+EXIT_GRACE_S = 15.0  # how long a finished worker may take to exit before it is killed
 
 
 class WorkerLostError(MlpfacError):
@@ -244,7 +245,11 @@ def _pool_results(
                 if nxt is not None:
                     submit(nxt)
                 yield res
-        pool.shutdown()
+        pool.shutdown(wait=False)
+        for p in set(mp.active_children()) - before:  # a worker whose recording hung cannot exit cleanly
+            p.join(EXIT_GRACE_S)
+            if p.is_alive():
+                p.kill()
     except BaseException:  # also GeneratorExit: the consumer stopped
         for f in pending:
             f.cancel()
