@@ -14,6 +14,7 @@ driving (0.3 m/s, 0.3 rad/s), in us per step; physics is ``mj_step`` of the same
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import statistics
 import time
 
@@ -21,20 +22,13 @@ import mujoco
 import numpy as np
 
 from mlpfac.plants.mujoco import MujocoConfig, MujocoPlant
+from mlpfac.scenario import load
 
-TIAGO = {
-    "model": "menagerie:pal_tiago/scene_velocity",
-    "left_actuator": "wheel_left_joint_vel",
-    "right_actuator": "wheel_right_joint_vel",
-    "body": "base_link",
-    "keyframe": "home",
-    "tyre": "sphere",
-    "timestep": 0.0025,
-}
+TIAGO = dataclasses.replace(load("tiago-nominal").plant_config, pose_noise_std=0.0)  # the tiago-* robot
 ROBOTS = {
-    "diffdrive": {},
-    "tiago base-only": TIAGO | {"other_actuators": "lock"},
-    "tiago full": TIAGO | {"other_actuators": "hold"},
+    "diffdrive": MujocoConfig(),
+    "tiago base-only": TIAGO,  # other_actuators = "lock", as the scenarios
+    "tiago full": dataclasses.replace(TIAGO, other_actuators="hold"),
 }
 
 
@@ -54,8 +48,8 @@ def main() -> None:
     args = ap.parse_args()
     u = np.array([0.3, 0.3])
     print(f"{'robot':18} {'nv':>3} {'ngeom':>5} {'mj_step us':>11} {'control step us':>16} {'substeps':>8}")
-    for name, kw in ROBOTS.items():
-        plant = MujocoPlant(MujocoConfig(**kw), 0.01)
+    for name, config in ROBOTS.items():
+        plant = MujocoPlant(config, 0.01)
         m = plant.model
 
         def control(plant=plant):
