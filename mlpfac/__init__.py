@@ -25,7 +25,7 @@ _WHERE = {
     "scenario_names": "mlpfac.scenario",
     "Scenario": "mlpfac.scenario",
     "run": "mlpfac.runner",
-    "metrics": "mlpfac.runner",
+    "metrics": "mlpfac.run_metrics",
     "RunRecord": "mlpfac.record",
     "CONTROLLERS": "mlpfac.controllers",
     "ConfigError": "mlpfac.exceptions",
@@ -49,7 +49,8 @@ if TYPE_CHECKING:
     from mlpfac.controllers import CONTROLLERS
     from mlpfac.exceptions import ConfigError, MlpfacError
     from mlpfac.record import RunRecord
-    from mlpfac.runner import metrics, run
+    from mlpfac.run_metrics import metrics
+    from mlpfac.runner import run
     from mlpfac.scenario import Scenario, load, parse, scenario_names
 
 

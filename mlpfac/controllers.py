@@ -16,7 +16,7 @@ from mlpfac.error_model import G_true, f_true, wrap
 from mlpfac.estimators import EKF, UKF, covariance
 from mlpfac.exceptions import ConfigError
 from mlpfac.input_model import InputModel
-from mlpfac.kernels import adaptive_step, corradini_step, kanayama_step, seeds
+from mlpfac.kernels import CORRADINI, KANAYAMA, adaptive_step, corradini_step, kanayama_step, seeds
 from mlpfac.law import GAIN_RANGE, Law
 from mlpfac.networks import Networks
 
@@ -380,6 +380,10 @@ class Corradini:
     def telemetry(self) -> dict[str, np.ndarray | float]:
         return self._tele
 
+    def law_kernel(self) -> tuple[int, np.ndarray]:
+        """The law for the compiled closed loop: (its number, its constants) (:func:`mlpfac.kernels.law_step`)."""
+        return CORRADINI, np.array([self.T, *self.law.lambdas, *self._limits], dtype=float)
+
 
 @dataclass(frozen=True)
 class KanayamaGains:
@@ -424,6 +428,10 @@ class Kanayama:
 
     def telemetry(self) -> dict[str, np.ndarray | float]:
         return self._tele
+
+    def law_kernel(self) -> tuple[int, np.ndarray]:
+        """The law for the compiled closed loop: (its number, its constants) (:func:`mlpfac.kernels.law_step`)."""
+        return KANAYAMA, np.array(self._consts, dtype=float)
 
 
 # Named variants of the adaptive controller: AdaptiveConfig fields (and Networks fields under

@@ -11,9 +11,11 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections import deque
 from dataclasses import dataclass, field
 from typing import ClassVar
+
+import numpy as np
+from numba import njit
 
 from mlpfac.exceptions import ConfigError
 
@@ -193,22 +195,46 @@ def parse_event(table, duration: float, where: str) -> Event:
 
 class DelayLine:
     """What a ``sensor_delay`` event changes: the measurement is the one taken ``steps`` control
-    steps ago (0: the newest). Every plant keeps its measurements in one."""
+    steps ago (0: the newest). Every plant keeps its measurements in one: ``hist[:fill[0]]``, oldest
+    first, at most ``steps + 1`` of them (arrays, so that a compiled plant step pushes as
+    :meth:`push` does)."""
 
     def __init__(self, first) -> None:
-        self._q: deque = deque([first], maxlen=1)
+        first = np.asarray(first)
+        self.hist = np.empty((1, *first.shape), dtype=first.dtype)
+        self.hist[0] = first
+        self.fill = np.ones(1, dtype=np.int64)
 
     def push(self, measurement) -> None:
-        self._q.append(measurement)
+        h = self.hist
+        delay_push(h, self.fill, h.dtype.type(measurement) if h.ndim == 1 else np.asarray(measurement, dtype=h.dtype))
 
     def read(self):
-        return self._q[0]
+        """The oldest measurement held (a copy; a number for a line of numbers)."""
+        return self.hist[0].item() if self.hist.ndim == 1 else self.hist[0].copy()
 
     @property
     def steps(self) -> int:
-        return self._q.maxlen - 1
+        return len(self.hist) - 1
 
     def delay(self, steps: int) -> str:
-        """Set the delay; keeps what it holds (a longer delay repeats the oldest until it fills)."""
-        old, self._q = self.steps, deque(self._q, maxlen=steps + 1)
+        """Set the delay; keeps what it holds, newest last (a longer delay repeats the oldest until it fills)."""
+        old, n = self.steps, int(self.fill[0])
+        keep = min(n, steps + 1)
+        hist = np.empty((steps + 1, *self.hist.shape[1:]), dtype=self.hist.dtype)
+        hist[:keep] = self.hist[n - keep : n]
+        self.hist, self.fill[0] = hist, keep
         return f"sensor delay {old} -> {steps} control steps"
+
+
+@njit(cache=True)
+def delay_push(hist: np.ndarray, fill: np.ndarray, x) -> None:
+    """Append x to a delay line (see :class:`DelayLine`): the oldest row drops out when it is full."""
+    n, cap = fill[0], hist.shape[0]
+    if n < cap:
+        hist[n] = x
+        fill[0] = n + 1
+    else:
+        for i in range(cap - 1):
+            hist[i] = hist[i + 1]
+        hist[cap - 1] = x

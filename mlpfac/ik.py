@@ -15,7 +15,10 @@ and its inverse
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
+from numba import njit
 
 
 def wheel_speeds(
@@ -27,21 +30,20 @@ def wheel_speeds(
     by the same factor s = max_wheel_speed / max(|w_l|, |w_r|) < 1, so the path curvature
     omega / v (the ratio w_r / w_l) is kept and only the speed along the path drops.
     """
-    return np.array(wheel_speeds_lr(v, omega, radius, track, max_wheel_speed))
+    limit = math.inf if max_wheel_speed is None else float(max_wheel_speed)
+    return np.array(wheel_speeds_lr(float(v), float(omega), float(radius), float(track), limit))
 
 
-def wheel_speeds_lr(
-    v: float, omega: float, radius: float, track: float, max_wheel_speed: float | None = None
-) -> tuple[float, float]:
-    """:func:`wheel_speeds` as two Python floats (a plant's per-step path, without an array)."""
+@njit(cache=True)
+def wheel_speeds_lr(v: float, omega: float, radius: float, track: float, max_wheel_speed: float) -> tuple[float, float]:
+    """:func:`wheel_speeds` as two floats, compiled (the plant's control step calls it); no limit: inf."""
     half = 0.5 * omega * track
     w_l = (v - half) / radius
     w_r = (v + half) / radius
-    if max_wheel_speed is not None:
-        peak = max(abs(w_l), abs(w_r))
-        if peak > max_wheel_speed:
-            s = max_wheel_speed / peak
-            w_l, w_r = s * w_l, s * w_r
+    peak = max(abs(w_l), abs(w_r))
+    if peak > max_wheel_speed:
+        s = max_wheel_speed / peak
+        w_l, w_r = s * w_l, s * w_r
     return w_l, w_r
 
 
@@ -50,9 +52,10 @@ def body_velocity(wheel_lr: np.ndarray, radius: float, track: float) -> np.ndarr
 
     v = radius (w_l + w_r) / 2, omega = radius (w_r - w_l) / track.
     """
-    return np.array(body_velocity_vw(float(wheel_lr[0]), float(wheel_lr[1]), radius, track))
+    return np.array(body_velocity_vw(float(wheel_lr[0]), float(wheel_lr[1]), float(radius), float(track)))
 
 
+@njit(cache=True)
 def body_velocity_vw(w_l: float, w_r: float, radius: float, track: float) -> tuple[float, float]:
-    """:func:`body_velocity` as two Python floats."""
+    """:func:`body_velocity` as two floats, compiled."""
     return 0.5 * radius * (w_l + w_r), radius * (w_r - w_l) / track

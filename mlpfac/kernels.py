@@ -366,3 +366,17 @@ def bad_seeds(q, u, e_true, z, limit, bad):
         bad[b] = not (math.isfinite(s) and x <= limit)
         n += bad[b]
     return n
+
+
+KANAYAMA, CORRADINI = 1, 2  # the laws the compiled closed loop runs (mlpfac.segment), by number
+
+
+@njit(**JIT)
+def law_step(law, c, e, v_r, omega_r, u, tele):
+    """One step of a law given by number, for B seeds: :func:`kanayama_step` with c = (Kx, Ky,
+    Ktheta, v_max, omega_max) or :func:`corradini_step` with c = (T, lambda_1..3, v_max, omega_max)
+    and its h_hat in ``tele`` (B, 3)."""
+    if law == KANAYAMA:
+        kanayama_step(e, v_r, omega_r, c[0], c[1], c[2], c[3], c[4], u)
+    else:
+        corradini_step(e, v_r, omega_r, c[0], c[1], c[2], c[3], c[4], c[5], tele, u)

@@ -125,7 +125,7 @@ def write_run_folder(out: Path, config: str, metrics: dict, rrd: bytes | None = 
 
 def write_run(out: Path, scn, rec) -> dict:
     """The folder of one run from the command line (run.rrd is written by its sink). Returns the metrics."""
-    from mlpfac.runner import metrics
+    from mlpfac.run_metrics import metrics
     from mlpfac.scenario import to_toml
 
     m = metrics(rec)

@@ -1,4 +1,4 @@
-"""The closed loop: reference -> error (2) -> controller -> plant, one run -> a RunRecord; metrics."""
+"""The closed loop: reference -> error (2) -> controller -> plant, one run or a batch of seeds -> RunRecords."""
 
 from __future__ import annotations
 
@@ -14,10 +14,9 @@ from mlpfac.outputs import Terminated
 from mlpfac.record import RunRecord
 from mlpfac.reference import sample
 from mlpfac.scenario import Scenario
+from mlpfac.segment import BAD, segment
 
 FLUSH_EVERY = 250  # steps between sends to a log sink
-LOST_FRACTION = 0.05  # a finished run is "lost" when a phase's position RMS exceeds this share of the path's size
-BIN_S = 0.1  # seconds per bin of the position error's mean square in metrics.json (any window of whole bins)
 
 
 def seeded_generators(seed: int) -> tuple[np.random.Generator, np.random.Generator]:
@@ -113,6 +112,9 @@ def run(
     ``sink`` (see :mod:`mlpfac.log`) receives the record every ``FLUSH_EVERY`` steps and at the end,
     also after a divergence, a Ctrl-C or a SIGTERM (the reason says "interrupted" or "terminated").
     ``built``: from :func:`build`, used once (the plant and the controller keep state).
+    ``on_step(k)`` is called after every step k; the loop then goes step by step in Python. Without
+    it, a MuJoCo plant with Kanayama's or Corradini's law runs compiled from one event or flush to
+    the next (:mod:`mlpfac.segment`), to the same bits.
     A run is the closed loop of :func:`run_batch` with one seed (B = 1).
     """
     built = built or build(scn)
@@ -185,19 +187,40 @@ def _loop(scns, ref, plant, ctrl, sink, on_step, full: bool) -> list[RunRecord]:
     stopped: dict[int, int] = {}  # seed -> the step its record ends at
     tracking_errors(e[:0], ref[0], e[:0])  # load (or compile) the loop's kernels before it starts
     bad_seeds(e[:0], np.zeros((0, 2)), e[:0], no_z[:0], 1.0, bad[:0])
+    compiled = listed and on_step is None and _compiled(plant, ctrl)
+    if compiled:  # the closed loop compiled between events (mlpfac.segment)
+        ctele = _allocate(ctrl_store, ctrl.telemetry(), recs, "ctrl", B, N, full)
+        ptele = _allocate(
+            plant_store, {k: v[None] for k, v in plant.plants[0].telemetry().items()}, recs, "plant", B, N, True
+        )
+        law = ctrl.law_kernel()
+        segment(0, 0, ref, *law, 1.0, pose[0], pose[0], pose[0], pose[0], u_all[0], ctele[0], ptele[0],
+                np.zeros((0, 3)), plant.plants[0].kernel_args())  # fmt: skip
     wall0 = time.perf_counter()
     if sink is not None:
         sink.begin(rec0, geometry=plant.plants[0].geometry() if listed else plant.geometry(), ref_path=ref[:N])
     k = 0
     try:
-        for k in range(N):
-            if pending and pending[0].time <= k * T + 1e-9:
-                t = k * T
-                while pending and pending[0].time <= t + 1e-9:
-                    ev = pending.pop(0)
-                    text = plant.apply(ev)
-                    for b in live:
-                        recs[b].events.append({"time": t, "kind": ev.kind, "params": dict(ev.params), "text": text})
+        while compiled and k < N and live:
+            _apply_due(pending, k, T, plant, recs, live)
+            k1 = min(N, (k // FLUSH_EVERY + 1) * FLUSH_EVERY)
+            if pending:  # up to the next event
+                k1 = next((j for j in range(k + 1, k1) if pending[0].time <= j * T + 1e-9), k1)
+            for b in list(live):
+                p = plant.plants[b]
+                end, why = segment(k, k1, ref, *law, base.divergence_m, pose[b], pose_meas[b], e_all[b], e_true[b],
+                                   u_all[b], ctele[b], ptele[b], p.draws(k1 - k), p.kernel_args())  # fmt: skip
+                recs[b].n = min(end + 1, k1)
+                if why == BAD:
+                    reason = _diverged(pose[b, end], u_all[b, end], e_true[b, end], None, base.divergence_m)
+                    _stop(recs, b, reason, end * T, live, plant, ctrl, listed, stopped, end)
+                elif why:
+                    _stop(recs, b, p.why(why), end * T, live, plant, ctrl, listed, stopped, end + 1)
+            k = k1
+            if live and sink is not None and k % FLUSH_EVERY == 0:
+                sink.flush(rec0, k)
+        for k in range(N if not compiled else 0):
+            _apply_due(pending, k, T, plant, recs, live)
             q, q_meas, r = plant.true_pose(), plant.measure(), ref[k]
             tracking_errors(q_meas, r, e)
             u = ctrl.step(e, r)
@@ -256,15 +279,35 @@ def _loop(scns, ref, plant, ctrl, sink, on_step, full: bool) -> list[RunRecord]:
     return recs
 
 
-def _allocate(store: dict, tele: dict, recs: list[RunRecord], which: str, B: int, N: int, full: bool) -> None:
-    """Per-seed telemetry arrays (B, N, ...), each record's rows a view of its seed's."""
-    for key, val in tele.items():
-        shape = np.shape(val)[1:]
-        if key == "z" and not full:
-            shape = (1,)
-        store[key] = np.full((B, N, *shape), np.nan)
+def _compiled(plant: PlantList, ctrl) -> bool:
+    """Whether the closed loop can run compiled: every plant has a compiled step, the law is a kernel."""
+    return hasattr(ctrl, "law_kernel") and all(hasattr(p, "kernel_args") for p in plant.plants)
+
+
+def _apply_due(pending: list, k: int, T: float, plant, recs: list[RunRecord], live: list[int]) -> None:
+    """Apply the events due at step k (time <= k T), each recorded in the live seeds' records."""
+    t = k * T
+    while pending and pending[0].time <= t + 1e-9:
+        ev = pending.pop(0)
+        text = plant.apply(ev)
+        for b in live:
+            recs[b].events.append({"time": t, "kind": ev.kind, "params": dict(ev.params), "text": text})
+
+
+def _allocate(store: dict, tele: dict, recs: list[RunRecord], which: str, B: int, N: int, full: bool) -> np.ndarray:
+    """Per-seed telemetry arrays (B, N, ...), each record's rows a view of its seed's; all of them
+    columns of one (B, N, W) array, which is returned (what a compiled step writes a row of)."""
+    shapes = {key: (1,) if key == "z" and not full else np.shape(val)[1:] for key, val in tele.items()}
+    widths = [int(np.prod(shape)) for shape in shapes.values()]
+    packed = np.full((B, N, sum(widths)), np.nan)
+    lo = 0
+    for (key, shape), w in zip(shapes.items(), widths, strict=True):
+        store[key] = packed[:, :, lo : lo + w].reshape(B, N, *shape)
+        assert np.shares_memory(store[key], packed)
+        lo += w
         for b, rec in enumerate(recs):
             getattr(rec, which)[key] = store[key][b]
+    return packed
 
 
 def _stop(recs, b, reason, t, live, plant, ctrl, listed, stopped, plant_rows) -> None:
@@ -303,88 +346,3 @@ def _diverged(q: np.ndarray, u: np.ndarray, e_true: np.ndarray, z: np.ndarray | 
     if not err <= limit_m:
         return f"position error {err:.3g} m beyond {limit_m:g} m"
     return None
-
-
-def _stats(rec: RunRecord, lo: int, hi: int) -> dict:
-    e = rec.e_true[lo:hi]
-    if len(e) == 0:
-        return {
-            "start_s": lo * rec.T,
-            "end_s": hi * rec.T,
-            "rms_position_error_m": None,
-            "max_position_error_m": None,
-            "rms_heading_error_rad": None,
-        }
-    pos = np.hypot(e[:, 0], e[:, 1])
-    return {
-        "start_s": lo * rec.T,
-        "end_s": hi * rec.T,
-        "rms_position_error_m": float(np.sqrt(np.mean(pos**2))),
-        "max_position_error_m": float(np.max(pos)),
-        "rms_heading_error_rad": float(np.sqrt(np.mean(e[:, 2] ** 2))),
-    }
-
-
-def phase_bounds(rec: RunRecord) -> dict[str, tuple[int, int]]:
-    """Step ranges of the phases: "before" the first event (after the warm-up) and "after" it.
-
-    A scenario without events has only "before": the whole run after the warm-up.
-    """
-    N = len(rec.t)
-    w = min(int(round(rec.warmup_s / rec.T)), N)
-    if rec.split_s is None:
-        return {"before": (w, N)}
-    split = min(max(int(round(rec.split_s / rec.T)), w), N)
-    return {"before": (w, split), "after": (split, N)}
-
-
-def metrics(rec: RunRecord) -> dict:
-    """The run's figures: whole-run and per-phase position/heading RMS, weights, P, timing, status."""
-    n = rec.n
-    out = {
-        "status": rec.status,
-        "reason": rec.reason,
-        "scenario": rec.scenario,
-        "controller": rec.controller,
-        "seed": rec.seed,
-        "T": rec.T,
-        "steps": n,
-    }
-    whole = _stats(rec, 0, n)
-    out.update({k: whole[k] for k in ("rms_position_error_m", "max_position_error_m", "rms_heading_error_rad")})
-    phases = {}
-    for name, (lo, hi) in phase_bounds(rec).items():
-        phases[name] = _stats(rec, lo, min(hi, n)) | {"start_s": lo * rec.T, "end_s": hi * rec.T}
-    out["phases"] = phases
-    out["excluded_s"] = [0.0, min(rec.warmup_s, len(rec.t) * rec.T)]
-    z = rec.ctrl.get("z")
-    out["max_abs_weight"] = float(np.max(np.abs(z[:n]))) if z is not None and n else None
-    P = rec.ctrl.get("mean_diag_P")
-    out["mean_diag_P_final"] = float(P[n - 1]) if P is not None and n else None
-    out["events"] = [{k: ev[k] for k in ("time", "kind", "params", "text")} for ev in rec.events]
-    out["sim_time_s"] = rec.sim_time_s
-    out["wall_time_s"] = rec.wall_time_s
-    out |= outcome(rec, phases)
-    w = max(1, int(round(BIN_S / rec.T)))
-    pos2 = np.sum(rec.e_true[:n, :2] ** 2, axis=1)
-    out["position_ms_bins"] = {
-        "bin_steps": w,
-        "m2": [float(np.mean(pos2[i : i + w])) for i in range(0, n, w)],
-    }
-    return out
-
-
-def outcome(rec: RunRecord, phases: dict) -> dict:
-    """Whether the run tracked: "diverged" (stopped: non-finite, beyond ``divergence_m``, flipped),
-    "lost" (finished, but some phase's position RMS exceeds LOST_FRACTION of the path's size, the
-    larger side of the reference's bounding box: 0.2 m on the 4 m figure of eight), else "tracking";
-    "interrupted" when it did not end."""
-    xy = rec.ref[:, :2]
-    size = float(np.max(np.max(xy, axis=0) - np.min(xy, axis=0)))
-    limit = LOST_FRACTION * size
-    if rec.status != "ok":
-        how = rec.status
-    else:
-        rms = [p["rms_position_error_m"] for p in phases.values() if p["rms_position_error_m"] is not None]
-        how = "lost" if any(x > limit for x in rms) else "tracking"
-    return {"outcome": how, "path_size_m": size, "lost_threshold_m": limit}

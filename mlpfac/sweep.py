@@ -15,7 +15,7 @@ the command line and the engine's API (every name below is importable from here)
 
        DIR/<scenario>/<controller>/seed-0003/config.toml    the scenario as resolved
        DIR/<scenario>/<controller>/seed-0003/run.rrd        only with save_rrd
-       DIR/<scenario>/<controller>/seed-0003/metrics.json   = runner.metrics(rec), written last
+       DIR/<scenario>/<controller>/seed-0003/metrics.json   = run_metrics.metrics(rec), written last
 
    Each file goes through a temporary file and ``os.replace``; metrics.json comes last, so a
    folder with metrics.json is whole. A run counts as done (:func:`check_done`) when config.toml
@@ -34,7 +34,7 @@ the command line and the engine's API (every name below is importable from here)
    own run without the event, in paired.csv / .md / .json and summary.md.
 
 How runs enter the statistics: each run is tracking, lost or diverged (``outcome`` in
-metrics.json, :func:`mlpfac.runner.outcome`); the position / heading RMS statistics (mean, median,
+metrics.json, :func:`mlpfac.run_metrics.outcome`); the position / heading RMS statistics (mean, median,
 95 % confidence interval of the mean, Student t) are over the runs that finished (tracking or lost;
 status "ok"), next to the three counts. The worst seed is the diverged run that
 diverged first (fewest steps, then lowest seed) if any diverged, else the bounded run with the

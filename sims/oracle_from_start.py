@@ -15,7 +15,8 @@ import copy
 from concurrent.futures import ProcessPoolExecutor
 from statistics import median
 
-from mlpfac.runner import metrics, run
+from mlpfac.run_metrics import metrics
+from mlpfac.runner import run
 from mlpfac.scenario import load, parse
 from mlpfac.sweeps.paired import compare, window_rms
 

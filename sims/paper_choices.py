@@ -15,7 +15,8 @@ from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 
-from mlpfac.runner import metrics, run
+from mlpfac.run_metrics import metrics
+from mlpfac.runner import run
 from mlpfac.scenario import load, parse
 
 # (label, controller-table changes, adaptive-table changes)

@@ -5,7 +5,8 @@ import copy
 import numpy as np
 import pytest
 
-from mlpfac.runner import metrics, run, run_batch
+from mlpfac.run_metrics import metrics
+from mlpfac.runner import run, run_batch
 from mlpfac.scenario import load, parse
 
 ARRAYS = ("pose", "pose_meas", "e", "e_true", "u", "ref")

@@ -446,7 +446,7 @@ def test_runs_compared_in_one_recording_take_their_controllers_colours(tmp_path,
 
     from mlpfac.cli import main
     from mlpfac.plots import controller_colors
-    from mlpfac.runner import metrics
+    from mlpfac.run_metrics import metrics
 
     for ctrl, seed in (("adaptive", 3), ("kanayama", 4)):
         rec = make_record(N=600, seed=seed)

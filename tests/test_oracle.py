@@ -14,7 +14,8 @@ from mlpfac.factory import make_controller
 from mlpfac.law import Law
 from mlpfac.oracle import Oracle, told
 from mlpfac.record import RunRecord
-from mlpfac.runner import LOST_FRACTION, metrics, outcome, run
+from mlpfac.run_metrics import LOST_FRACTION, metrics, outcome
+from mlpfac.runner import run
 from mlpfac.scenario import load
 from mlpfac.sweeps.paired import compare, paired_rows, twins, wilcoxon, window_rms
 from mlpfac.sweeps.plan import plan

@@ -6,7 +6,8 @@ import math
 import numpy as np
 import pytest
 
-from mlpfac.runner import metrics, run
+from mlpfac.run_metrics import metrics
+from mlpfac.runner import run
 from mlpfac.scenario import load, parse
 
 

@@ -8,7 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mlpfac.runner import metrics, run
+from mlpfac.run_metrics import metrics
+from mlpfac.runner import run
 from mlpfac.scenario import load, parse, scenario_names
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -13,7 +13,8 @@ from mlpfac.factory import make_controller
 from mlpfac.law import Law
 from mlpfac.networks import Networks
 from mlpfac.reference import Eight, sample
-from mlpfac.runner import metrics, run
+from mlpfac.run_metrics import metrics
+from mlpfac.runner import run
 from mlpfac.scenario import load, parse
 
 T = 0.01

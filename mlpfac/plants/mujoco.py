@@ -41,14 +41,16 @@ from mlpfac.events import (
     WheelRadius,
 )
 from mlpfac.exceptions import ConfigError
-from mlpfac.ik import body_velocity_vw, wheel_speeds, wheel_speeds_lr
+from mlpfac.ik import wheel_speeds
+from mlpfac.plants import compiled as K  # noqa: N812 - the kernel's layout constants, K.F_DT ...
 from mlpfac.plants.config import MujocoConfig
 from mlpfac.plants.edits import torque_limit
 from mlpfac.plants.model_file import is_menagerie, menagerie_version
-from mlpfac.plants.robot import ROUND, read_robot, yaw
+from mlpfac.plants.robot import ROUND, read_robot
 
 DIVERGENCE_WARNINGS = ("mjWARN_BADQPOS", "mjWARN_BADQVEL", "mjWARN_BADQACC")  # MuJoCo resets the data on these
 NOISE_CHUNK = 1024  # pose-noise draws made at once: the same stream as one draw of 3 per step
+NO_DRAW = np.zeros(3)
 
 
 class MujocoPlant:
@@ -83,6 +85,16 @@ class MujocoPlant:
         self._noise = config.noise_std()
         self._torque_max = self._force_limits()
         self._changed = False
+        self.ints = np.zeros(K.N_INTS, dtype=np.int64)
+        self.ints[[K.I_AL, K.I_AR, K.I_DL, K.I_DR, K.I_SITE]] = (*r.acts, *r.dofs, r.site)
+        self.ints[K.I_TORQUE] = config.actuator == "torque"
+        self.ints[K.I_NOISE] = self._noise is not None
+        self.fl = np.zeros(K.N_FL)
+        self.fl[[K.F_CL, K.F_CR, K.F_SL, K.F_SR]] = (*r.act_per_wheel, *r.sign)
+        self.fl[[K.F_IK_R, K.F_IK_TRACK, K.F_DT]] = self.ik_radius, self.ik_track, self._dt
+        self.fl[K.F_WMAX] = math.inf if self.max_wheel_speed is None else self.max_wheel_speed
+        if self._noise is not None:
+            self.fl[K.F_STD : K.F_STD + 3] = self._noise
 
     def _substeps(self, period: float, where: str) -> int:
         return self.robot.substeps(period, where)
@@ -124,28 +136,59 @@ class MujocoPlant:
         self._z_rest = float(d.site_xpos[self._site, 2])
 
         self.rng = rng
-        self.sim_time = 0.0
         self._n = self.n_substeps
         self._kp, self._ki = float(self.config.pi_kp), float(self.config.pi_ki)
         self._torque_max = self._force_limits()
-        self._integral = (0.0, 0.0)
-        self._theta = float(q0[2])
-        self._views()
+        ints, fl = self.ints, self.fl
+        ints[K.I_NSUB] = self._n
+        fl[[K.F_KP, K.F_KI, K.F_TLMAX, K.F_TRMAX]] = self._kp, self._ki, *self._torque_max
+        fl[[K.F_RADIUS, K.F_ZREST]] = self.real_radius, self._z_rest
+        self.st = np.zeros(K.N_ST)
+        self.st[K.S_THETA] = float(q0[2])
         self._noise_left = 0
-        self._pose = self._read_pose()
-        self._wheel_cmd = (0.0, 0.0)
-        self._history = DelayLine(self._noisy(self._pose))
+        self._history = DelayLine(np.zeros(3))
+        self._views()
+        K.read_pose(self._site_xpos, self._site_xmat, self.st)
+        self._history.fill[0] = 0  # the first measurement, as every later one
+        K.measure(ints, fl, self.st, self.draws(1)[0], self._history.hist, self._history.fill)
 
     def _views(self) -> None:
-        """Views into the current data that the per-step path reads (made again when the data change)."""
-        d = self.data
-        self._site_xpos, self._site_xmat, self._root_xmat = (
-            d.site_xpos[self._site],
-            d.site_xmat[self._site],
-            d.xmat[self._root],
-        )
-        self._vel = np.empty(6)  # mj_objectVelocity's output
-        self._tele = {key: np.zeros(2) for key in ("u_meas", "u_true", "wheel_cmd", "wheel_meas", "torque")}
+        """What the compiled step reads and writes: the current model and data (their addresses and
+        views into them, made again when an event replaces them), the robot's arrays, the delay line."""
+        self._site_xpos, self._site_xmat = self.data.site_xpos[self._site], self.data.site_xmat[self._site]
+        self.tele = np.zeros(K.N_TELE)
+        self._tele = {key: self.tele[2 * i : 2 * i + 2] for i, key in enumerate(K.TELEMETRY)}
+        self._pack()
+
+    def _pack(self) -> None:
+        m, d = self.model, self.data
+        self._args = (m._address, d._address, d.ctrl, d.qvel, d.qpos, d.qfrc_actuator, self._site_xpos,
+                      self._site_xmat, d.xmat[self._root], self.ints, self.fl, self.st, self._history.hist,
+                      self._history.fill, np.empty(6))  # fmt: skip
+
+    def kernel_args(self) -> tuple:
+        """The robot as :func:`mlpfac.plants.compiled.plant_step` takes it (valid until the next event)."""
+        return self._args
+
+    @property
+    def sim_time(self) -> float:
+        return float(self.st[K.S_TIME])
+
+    def draws(self, n: int) -> np.ndarray:
+        """The next n pose-noise draws (n, 3) of the plant's stream (zeros without noise)."""
+        if self._noise is None:
+            return np.zeros((n, 3))
+        out = np.empty((n, 3))
+        i = 0
+        while i < n:
+            if not self._noise_left:  # NOISE_CHUNK steps' draws at once: the values one draw per step gives
+                self._noise_draws, self._noise_left = self.rng.standard_normal((NOISE_CHUNK, 3)), NOISE_CHUNK
+            j = NOISE_CHUNK - self._noise_left
+            take = min(n - i, self._noise_left)
+            out[i : i + take] = self._noise_draws[j : j + take]
+            self._noise_left -= take
+            i += take
+        return out
 
     def _set_velocity(self, v: float, omega: float, theta: float) -> None:
         """Body velocity (v, omega) at the site, the wheels rolling to match it."""
@@ -160,73 +203,15 @@ class MujocoPlant:
         mujoco.mj_forward(m, d)
 
     def true_pose(self) -> np.ndarray:
-        return self._pose
+        return self.st[K.S_POSE : K.S_POSE + 3].copy()
 
     def measure(self) -> np.ndarray:
         return self._history.read()
 
     def step(self, u: np.ndarray) -> None:
-        wl, wr = wheel_speeds_lr(float(u[0]), float(u[1]), self.ik_radius, self.ik_track, self.max_wheel_speed)
-        self._wheel_cmd = (wl, wr)
-        m, d, n = self.model, self.data, self._n
-        if self.config.actuator == "velocity":
-            al, ar = self._acts
-            ctrl = d.ctrl
-            ctrl[al] = self._act_per_wheel[0] * wl
-            ctrl[ar] = self._act_per_wheel[1] * wr
-            mujoco.mj_step2(m, d)
-            if n > 1:
-                mujoco.mj_step(m, d, nstep=n - 1)
-            mujoco.mj_step1(m, d)
-        else:
-            self._pi_steps(wl, wr, n)
-        self.sim_time += n * self._dt
-        self._pose = self._read_pose()
-        self._history.push(self._noisy(self._pose))
-
-    def _pi_steps(self, wl: float, wr: float, n: int) -> None:
-        """n physics steps of the discrete wheel-speed PI loop (torque drive).
-
-        tau = kp e + ki I, e = w_cmd - w, clamped to the torque limit; I integrates e only while
-        tau is not clamped (conditional integration, so I does not wind up while saturated).
-        """
-        m, d = self.model, self.data
-        qvel, ctrl = d.qvel, d.ctrl
-        (dl, dr), (al, ar), (sl, sr) = self._dofs, self._acts, self._sign
-        (cl, cr), (tl_max, tr_max) = self._act_per_wheel, self._torque_max
-        kp, ki, dt = self._kp, self._ki, self._dt
-        il, ir = self._integral
-        for _ in range(n):
-            el = wl - sl * qvel[dl]
-            er = wr - sr * qvel[dr]
-            tl = kp * el + ki * (il + el * dt)
-            tr = kp * er + ki * (ir + er * dt)
-            if -tl_max <= tl <= tl_max:
-                il += el * dt
-            else:
-                tl = math.copysign(tl_max, tl)
-            if -tr_max <= tr <= tr_max:
-                ir += er * dt
-            else:
-                tr = math.copysign(tr_max, tr)
-            ctrl[al] = tl / cl
-            ctrl[ar] = tr / cr
-            mujoco.mj_step2(m, d)
-            mujoco.mj_step1(m, d)
-        self._integral = (il, ir)
-
-    def _read_pose(self) -> np.ndarray:
-        p = self._site_xpos
-        self._theta += math.remainder(yaw(self._site_xmat) - self._theta, 2.0 * math.pi)  # unwrapped
-        return np.array([p[0], p[1], self._theta])
-
-    def _noisy(self, pose: np.ndarray) -> np.ndarray:
-        if self._noise is None:
-            return pose
-        if not self._noise_left:  # the next NOISE_CHUNK steps' draws: the values one draw per step gives
-            self._noise_draws, self._noise_left = self.rng.standard_normal((NOISE_CHUNK, 3)), NOISE_CHUNK
-        self._noise_left -= 1
-        return pose + self._noise * self._noise_draws[NOISE_CHUNK - 1 - self._noise_left]
+        """One control step (:func:`mlpfac.plants.compiled.plant_step`)."""
+        draw = self.draws(1)[0] if self._noise is not None else NO_DRAW
+        K.plant_step(float(u[0]), float(u[1]), draw, self.tele, self._args)
 
     def _force_limits(self) -> tuple[float, float]:
         """Largest forward wheel torque of each drive (N m at the joint), inf when not limited."""
@@ -238,37 +223,31 @@ class MujocoPlant:
         """``u_meas`` (2,) (v, omega) from the measured wheel speeds through the nominal FK;
         ``u_true`` (2,) (v, omega) of the axle midpoint (differs from u_meas by slip and radius);
         ``wheel_cmd``, ``wheel_meas`` (2,) left/right in rad/s (forward positive); ``torque`` (2,)
-        wheel torques in N m (forward positive). The arrays are the plant's own, overwritten by the
-        next call: copy what you keep."""
-        m, d, t = self.model, self.data, self._tele
-        qvel, qfrc, (dl, dr) = d.qvel, d.qfrc_actuator, self._dofs
-        wl, wr = self._sign[0] * qvel[dl], self._sign[1] * qvel[dr]
-        t["wheel_meas"][:] = wl, wr
-        t["torque"][:] = self._sign[0] * qfrc[dl], self._sign[1] * qfrc[dr]  # as applied: joint limits included
-        vel = self._vel  # (angular, linear) in the world frame
-        mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_SITE, self._site, vel, 0)
-        th = self._theta
-        t["u_true"][:] = vel[3] * math.cos(th) + vel[4] * math.sin(th), vel[2]
-        t["u_meas"][:] = body_velocity_vw(float(wl), float(wr), self.ik_radius, self.ik_track)
-        t["wheel_cmd"][:] = self._wheel_cmd
-        return t
+        wheel torques in N m (forward positive), of the last step. The arrays are the plant's own,
+        overwritten by the next step: copy what you keep."""
+        return self._tele
 
     def mujoco_warnings(self) -> dict[str, int]:
         """MuJoCo's warning counters that are not zero, by name (``{}`` when all is well)."""
         return {mujoco.mjtWarning(i).name: int(w.number) for i, w in enumerate(self.data.warning) if w.number}
 
     def diverged(self) -> str | None:
-        d = self.data
-        if abs(d.time - self.sim_time) > 0.5 * self._dt:  # MuJoCo resets the data (time too) on a bad state
-            bad = [w for w in DIVERGENCE_WARNINGS if d.warning[getattr(mujoco.mjtWarning, w)].number]
+        """Why the robot's state is not one to go on from (:func:`mlpfac.plants.compiled.diverged`), or None."""
+        mp, dp, _, qvel, qpos, _, site_xpos, _, root_xmat, _, fl, st = self._args[:12]
+        return self.why(K.diverged(mp, dp, qpos, qvel, site_xpos, root_xmat, fl, st))
+
+    def why(self, code: int) -> str | None:
+        """The words for a divergence code of the compiled step, with the current state's numbers."""
+        if code == K.RESET:
+            bad = [w for w in DIVERGENCE_WARNINGS if self.data.warning[getattr(mujoco.mjtWarning, w)].number]
             return f"MuJoCo {' '.join(bad) or 'reset'}: the simulation became unstable and was reset"
-        if not math.isfinite(d.qpos.sum() + d.qvel.sum()):
+        if code == K.NOT_FINITE:
             return "non-finite MuJoCo state"
-        lift = float(self._site_xpos[2]) - self._z_rest
-        if lift > 0.5 * self.real_radius:
+        if code == K.LIFTED:
+            lift = float(self._site_xpos[2]) - self.fl[K.F_ZREST]
             return f"the robot left the floor (axle {lift * 1e3:.0f} mm above its rest height)"
-        up = float(self._root_xmat[8])  # world z component of the chassis z axis
-        if up < 0.5:
+        if code == K.TIPPED:
+            up = float(self.data.xmat[self._root][8])  # world z component of the chassis z axis
             return f"the robot tipped over (chassis up axis {math.degrees(math.acos(max(-1.0, up))):.0f} deg from vertical)"
         return None
 
@@ -361,9 +340,12 @@ class MujocoPlant:
         m = self.model
         if isinstance(event, ControlPeriod):
             old, self._n = self._n, self._substeps(event.factor * self.T, "factor")
+            self.ints[K.I_NSUB] = self._n
             return f"plant holds each command {old * self._dt:g} -> {self._n * self._dt:g} s ({self._n} physics steps; controller keeps T = {self.T:g} s)"
         if isinstance(event, SensorDelay):
-            return self._history.delay(event.steps)
+            text = self._history.delay(event.steps)
+            self._pack()
+            return text
         spec = self._spec
         if isinstance(event, Payload):
             bodies = self._payload_bodies(event, "")
@@ -400,6 +382,7 @@ class MujocoPlant:
             lift = self.real_radius - old  # stand the robot on its new wheels (the casters then settle)
             self.data.qpos[self._qroot + 2] += lift
             self._z_rest += lift
+            self.fl[[K.F_RADIUS, K.F_ZREST]] = self.real_radius, self._z_rest
             mujoco.mj_forward(self.model, self.data)
             return f"real wheel radius {old:g} -> {self.real_radius:g} m (the IK keeps {self.ik_radius:g} m)"
         assert isinstance(event, Actuator)
@@ -418,12 +401,14 @@ class MujocoPlant:
                 act.ctrlrange = fs * np.asarray(act.ctrlrange)
         self._recompile()
         self._torque_max = self._force_limits()
+        self.fl[[K.F_TLMAX, K.F_TRMAX]] = self._torque_max
         if self.config.actuator == "velocity":
             old_kv = float(m.actuator_gainprm[self._acts[0], 0])
             gains = f"servo kv {old_kv:g} -> {float(self.model.actuator_gainprm[self._acts[0], 0]):g} N m s/rad"
         else:
             gains = f"PI gains ({self._kp:g}, {self._ki:g}) -> ({kv * self._kp:g}, {kv * self._ki:g})"
             self._kp, self._ki = kv * self._kp, kv * self._ki
+            self.fl[[K.F_KP, K.F_KI]] = self._kp, self._ki
         return f"wheel drive weakened: {gains}, torque limit {old_limit:g} -> {self._torque_max[0]:g} N m"
 
     def _recompile(self) -> None:

@@ -1,0 +1,199 @@
+"""The MuJoCo plant's control step, compiled: wheel commands in, physics, pose, noise, telemetry and
+the divergence test out, with MuJoCo's own C functions called from the kernel (no Python per step).
+
+:class:`~mlpfac.plants.mujoco.MujocoPlant` steps through :func:`plant_step` one control step at a
+time, and the compiled closed loop (:mod:`mlpfac.segment`) runs it for many steps in one call: one
+implementation of the step either way. The C functions are the ones the ``mujoco`` package's
+bindings call (``mj_step``, ``mj_step1``, ``mj_step2``, ``mj_objectVelocity``, ``mj_getState``),
+from the library the package ships, so a compiled step gives the bindings' bits; the kernels name
+them (numba ``ExternalFunction``), so they are compiled once and cached like the others.
+
+MuJoCo reports a fatal engine error (an arena too small for the model, say) through
+``mju_user_error``. Inside the bindings it becomes ``mujoco.FatalError``; a C call from a kernel
+cannot raise, so the handler installed here prints one line naming the error and ends the process
+with exit status 1 (MuJoCo's own handler would wait for Enter on a terminal).
+
+Layout of the per-robot arrays (indices below): ``ints`` (int64) and ``fl`` (float64) hold what the
+robot is, ``st`` (float64) what changes every step.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import glob
+import math
+import os
+import sys
+
+import llvmlite.binding as llvm
+import mujoco
+import numpy as np
+from numba import njit, types
+
+from mlpfac.events import delay_push
+from mlpfac.ik import body_velocity_vw, wheel_speeds_lr
+
+JIT = {"cache": True, "error_model": "numpy"}
+
+# ints
+I_AL, I_AR, I_DL, I_DR, I_SITE, I_NSUB, I_TORQUE, I_NOISE = range(8)
+N_INTS = 8
+# fl
+F_CL, F_CR, F_SL, F_SR, F_IK_R, F_IK_TRACK, F_WMAX, F_DT, F_KP, F_KI, F_TLMAX, F_TRMAX, F_RADIUS, F_ZREST = range(14)
+F_STD = 14  # three pose-noise standard deviations
+N_FL = 17
+# st: the unwrapped heading, simulated time, the PI integrals, the true pose (x, y, theta)
+S_THETA, S_TIME, S_IL, S_IR = range(4)
+S_POSE = 4
+N_ST = 7
+# one row of telemetry: u_meas, u_true, wheel_cmd, wheel_meas, torque (two each)
+TELEMETRY = ("u_meas", "u_true", "wheel_cmd", "wheel_meas", "torque")
+N_TELE = 2 * len(TELEMETRY)
+# why a step diverged (0: it did not)
+RESET, NOT_FINITE, LIFTED, TIPPED = 1, 2, 3, 4
+STATE_TIME = int(mujoco.mjtState.mjSTATE_TIME)
+OBJ_SITE = int(mujoco.mjtObj.mjOBJ_SITE)
+
+
+def _library() -> str:
+    here = os.path.dirname(mujoco.__file__)
+    names = [
+        n for pat in ("libmujoco.so*", "libmujoco*.dylib", "mujoco.dll") for n in glob.glob(os.path.join(here, pat))
+    ]
+    if not names:
+        raise ImportError(f"mlpfac: the MuJoCo library was not found beside the mujoco package in {here}")
+    return sorted(names)[-1]
+
+
+_LIB_PATH = _library()
+_LIB = ctypes.CDLL(_LIB_PATH)
+llvm.load_library_permanently(_LIB_PATH)  # the kernels call its functions by name (so numba can cache them)
+_P = types.intp  # pointers are passed as addresses (MjModel._address, ndarray.ctypes.data)
+mj_step = types.ExternalFunction("mj_step", types.void(_P, _P))
+mj_step1 = types.ExternalFunction("mj_step1", types.void(_P, _P))
+mj_step2 = types.ExternalFunction("mj_step2", types.void(_P, _P))
+mj_objectVelocity = types.ExternalFunction(  # noqa: N816 - MuJoCo's name
+    "mj_objectVelocity", types.void(_P, _P, types.int32, types.int32, _P, types.int32)
+)
+mj_getState = types.ExternalFunction(  # noqa: N816 - MuJoCo's name
+    "mj_getState", types.void(_P, _P, _P, types.uint32)
+)
+_remainder = types.ExternalFunction("remainder", types.float64(types.float64, types.float64))  # IEEE remainder, exact
+
+
+@ctypes.CFUNCTYPE(None, ctypes.c_char_p)
+def _fatal(msg: bytes) -> None:
+    text = " ".join(msg.decode(errors="replace").split())  # one line
+    sys.stderr.write(f"error: MuJoCo: {text} (a fatal engine error in a compiled step)\n")
+    sys.stderr.flush()
+    os._exit(1)
+
+
+ctypes.c_void_p.in_dll(_LIB, "mju_user_error").value = ctypes.cast(_fatal, ctypes.c_void_p).value
+
+
+@njit(**JIT)
+def _physics(mp, dp, ctrl, qvel, ints, fl, st, wl, wr):
+    """One control period: the wheel commands held for n physics steps, each ``mj_step2`` (actuation,
+    integration) then ``mj_step1`` (the new state's positions, velocities, sensors). The velocity
+    servos are MuJoCo's; the torque drive is a discrete wheel-speed PI loop evaluated every physics
+    step: tau = kp e + ki I, clamped to the torque limit, I integrating e only while tau is not
+    clamped (no wind-up)."""
+    n, al, ar, dl, dr = ints[I_NSUB], ints[I_AL], ints[I_AR], ints[I_DL], ints[I_DR]
+    cl, cr = fl[F_CL], fl[F_CR]
+    if ints[I_TORQUE] == 0:
+        ctrl[al] = cl * wl
+        ctrl[ar] = cr * wr
+        mj_step2(mp, dp)
+        for _ in range(n - 1):
+            mj_step(mp, dp)
+        mj_step1(mp, dp)
+    else:
+        sl, sr, kp, ki, dt = fl[F_SL], fl[F_SR], fl[F_KP], fl[F_KI], fl[F_DT]
+        tl_max, tr_max = fl[F_TLMAX], fl[F_TRMAX]
+        il, ir = st[S_IL], st[S_IR]
+        for _ in range(n):
+            el = wl - sl * qvel[dl]
+            er = wr - sr * qvel[dr]
+            tl = kp * el + ki * (il + el * dt)
+            tr = kp * er + ki * (ir + er * dt)
+            if -tl_max <= tl <= tl_max:
+                il += el * dt
+            else:
+                tl = math.copysign(tl_max, tl)
+            if -tr_max <= tr <= tr_max:
+                ir += er * dt
+            else:
+                tr = math.copysign(tr_max, tr)
+            ctrl[al] = tl / cl
+            ctrl[ar] = tr / cr
+            mj_step2(mp, dp)
+            mj_step1(mp, dp)
+        st[S_IL], st[S_IR] = il, ir
+    st[S_TIME] += n * fl[F_DT]
+
+
+@njit(**JIT)
+def read_pose(site_xpos, site_xmat, st):
+    """The pose (x, y, theta) at the site into st, theta the heading atan2(R10, R00) unwrapped across steps."""
+    th = st[S_THETA]
+    th += _remainder(math.atan2(site_xmat[3], site_xmat[0]) - th, 2.0 * math.pi)
+    st[S_THETA] = th
+    st[S_POSE], st[S_POSE + 1], st[S_POSE + 2] = site_xpos[0], site_xpos[1], th
+
+
+@njit(**JIT)
+def measure(ints, fl, st, draw, hist, fill):
+    """The true pose plus noise (std * one standard normal draw per coordinate), into the delay line."""
+    m = np.empty(3)
+    for j in range(3):
+        m[j] = st[S_POSE + j]
+        if ints[I_NOISE]:
+            m[j] = m[j] + fl[F_STD + j] * draw[j]
+    delay_push(hist, fill, m)
+
+
+@njit(**JIT)
+def plant_step(u0, u1, draw, tele, robot):
+    """One control step of the robot for the command u = (v, omega): the IK (wheel speeds the nominal
+    radius and track give, scaled together under the wheel-speed limit), the physics, the pose and
+    its measurement (noise ``draw`` (3,) of standard normals), the telemetry row ``tele`` (see
+    TELEMETRY). ``robot``: :meth:`MujocoPlant.kernel_args`. Returns why it diverged (0: it did not)."""
+    mp, dp, ctrl, qvel, qpos, qfrc, site_xpos, site_xmat, root_xmat, ints, fl, st, hist, fill, vel = robot
+    wl, wr = wheel_speeds_lr(u0, u1, fl[F_IK_R], fl[F_IK_TRACK], fl[F_WMAX])
+    _physics(mp, dp, ctrl, qvel, ints, fl, st, wl, wr)
+    read_pose(site_xpos, site_xmat, st)
+    measure(ints, fl, st, draw, hist, fill)
+    dl, dr, sl, sr = ints[I_DL], ints[I_DR], fl[F_SL], fl[F_SR]
+    ml, mr = sl * qvel[dl], sr * qvel[dr]
+    mj_objectVelocity(mp, dp, OBJ_SITE, ints[I_SITE], vel.ctypes.data, 0)  # (angular, linear), world frame
+    th = st[S_THETA]
+    tele[0], tele[1] = body_velocity_vw(ml, mr, fl[F_IK_R], fl[F_IK_TRACK])
+    tele[2], tele[3] = vel[3] * math.cos(th) + vel[4] * math.sin(th), vel[2]
+    tele[4], tele[5] = wl, wr
+    tele[6], tele[7] = ml, mr
+    tele[8], tele[9] = sl * qfrc[dl], sr * qfrc[dr]  # as applied: joint limits included
+    return diverged(mp, dp, qpos, qvel, site_xpos, root_xmat, fl, st)
+
+
+@njit(**JIT)
+def diverged(mp, dp, qpos, qvel, site_xpos, root_xmat, fl, st):
+    """RESET when MuJoCo reset the data on a bad state (its time no longer ours), NOT_FINITE, LIFTED
+    when the axle rose half a wheel radius above its rest height, TIPPED when the chassis' up axis is
+    more than 60 deg from vertical; 0 when none."""
+    t = np.empty(1)
+    mj_getState(mp, dp, t.ctypes.data, STATE_TIME)
+    if abs(t[0] - st[S_TIME]) > 0.5 * fl[F_DT]:
+        return RESET
+    s = 0.0
+    for x in qpos:
+        s += x
+    for x in qvel:
+        s += x
+    if not math.isfinite(s):
+        return NOT_FINITE
+    if site_xpos[2] - fl[F_ZREST] > 0.5 * fl[F_RADIUS]:
+        return LIFTED
+    if root_xmat[8] < 0.5:
+        return TIPPED
+    return 0

@@ -1,0 +1,47 @@
+"""The closed loop compiled between events: many control steps of one seed in one kernel call.
+
+For a plant with a compiled control step (the MuJoCo robot, :mod:`mlpfac.plants.compiled`) and a
+controller whose law is a kernel (Kanayama, Corradini: :func:`mlpfac.kernels.law_step`), the
+runner steps each seed from one event (or sink flush) to the next with :func:`segment`. Every
+step is the runner's step, made of the same kernels the step-by-step loop calls with B = 1:
+error (2) of the measured pose, the law, error of the true pose, the record's rows, the runner's
+divergence test, the plant's step; so a seed's record is bit for bit the one the step-by-step loop
+gives (tests/test_segment.py).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from mlpfac.kernels import bad_seeds, law_step, tracking_errors
+from mlpfac.plants.compiled import S_POSE, plant_step
+
+BAD = -1  # the runner's test stopped the seed (a plant's own reasons are its codes, > 0)
+
+
+@njit(cache=True, error_model="numpy")
+def segment(k0, k1, ref, law, c, limit, pose, pose_meas, e, e_true, u, ctele, ptele, draws, robot):
+    """Steps k0 .. k1 - 1 of one seed. Records (N, ...) are written at row k; ``ctele``, ``ptele``
+    (N, W) the controller's and the plant's telemetry rows; ``draws`` (k1 - k0, 3) the plant's
+    noise; ``robot`` :meth:`~mlpfac.plants.mujoco.MujocoPlant.kernel_args`.
+
+    Returns (k, why): (k1, 0) when every step ran, else the step k at which the seed stopped and
+    why (BAD: the runner's test, after the law; > 0: the plant's code, after the plant's step)."""
+    st, hist = robot[11], robot[12]
+    q, qm, ek, etk = np.empty((1, 3)), np.empty((1, 3)), np.empty((1, 3)), np.empty((1, 3))
+    uk, no_z, bad = np.empty((1, 2)), np.empty((1, 0)), np.zeros(1, dtype=np.bool_)
+    for k in range(k0, k1):
+        r = ref[k]
+        for j in range(3):
+            q[0, j], qm[0, j] = st[S_POSE + j], hist[0, j]
+        tracking_errors(qm, r, ek)
+        law_step(law, c, ek, r[3], r[4], uk, ctele[k : k + 1])
+        tracking_errors(q, r, etk)
+        pose[k], pose_meas[k], e[k], e_true[k], u[k] = q[0], qm[0], ek[0], etk[0], uk[0]
+        if bad_seeds(q, uk, etk, no_z, limit, bad):
+            return k, BAD
+        why = plant_step(uk[0, 0], uk[0, 1], draws[k - k0], ptele[k], robot)
+        if why:
+            return k, why
+    return k1, 0

@@ -1,0 +1,150 @@
+"""The compiled closed loop (mlpfac.segment) and the compiled plant step (mlpfac.plants.compiled):
+the same records, to the bit, as the step-by-step loop; divergence stops at the same step for the
+same reason; MuJoCo's fatal errors end the process with one line."""
+
+from __future__ import annotations
+
+import dataclasses
+import subprocess
+import sys
+import textwrap
+
+import numpy as np
+import pytest
+
+from mlpfac.events import DelayLine
+from mlpfac.factory import make_plant
+from mlpfac.plants import compiled
+from mlpfac.reference import sample
+from mlpfac.runner import run, run_batch
+from mlpfac.scenario import load
+
+
+def _arrays(rec) -> dict[str, np.ndarray]:
+    out = {name: getattr(rec, name) for name in ("pose", "pose_meas", "e", "e_true", "u")}
+    out |= {f"ctrl.{k}": v for k, v in rec.ctrl.items()} | {f"plant.{k}": v for k, v in rec.plant.items()}
+    return out
+
+
+def _same(a, b) -> None:
+    assert (a.status, a.reason, a.n) == (b.status, b.reason, b.n)
+    assert [e["text"] for e in a.events] == [e["text"] for e in b.events]
+    A, B = _arrays(a), _arrays(b)
+    assert A.keys() == B.keys()
+    for key in A:
+        np.testing.assert_array_equal(A[key], B[key], err_msg=key)
+
+
+def _short(name: str, controller: str, duration: float = 4.0):
+    scn = load(name).with_overrides(controller=controller)
+    t = scn.events[0].time if scn.events else 0.0
+    return scn.with_overrides(duration=min(scn.duration, t + duration))
+
+
+@pytest.mark.parametrize(
+    "name", ["eight-payload", "eight-torque", "eight-sensor-delay", "eight-control-period", "eight-wheel-radius"]
+)
+@pytest.mark.parametrize("controller", ["kanayama", "corradini"])
+def test_compiled_loop_is_the_step_by_step_loop(name, controller):
+    scn = _short(name, controller)
+    compiled_rec = run(scn)
+    stepwise = run(scn, on_step=lambda k: None)  # on_step: the loop goes step by step in Python
+    _same(compiled_rec, stepwise)
+    assert compiled_rec.n == scn.steps and compiled_rec.status == "ok"
+    assert np.isfinite(compiled_rec.plant["u_true"]).all()
+
+
+def test_a_seed_stopped_by_the_runner_stops_at_the_same_step():
+    scn = dataclasses.replace(_short("eight-nominal", "kanayama"), divergence_m=0.002)
+    a, b = run(scn), run(scn, on_step=lambda k: None)
+    assert a.status == "diverged" and "position error" in a.reason
+    _same(a, b)
+    assert np.isnan(a.pose[a.n :]).all() and np.isnan(a.plant["torque"][a.n - 1 :]).all()
+
+
+def test_batch_with_a_stopped_seed_equals_each_seed_alone():
+    scn = _short("eight-payload", "corradini")
+    scns = [dataclasses.replace(scn.with_overrides(seed=s), divergence_m=0.0022) for s in range(4)]
+    recs = run_batch(scns)
+    assert {r.status for r in recs} == {"ok", "diverged"}  # the limit stops some seeds, not all
+    for r, s in zip(recs, scns, strict=True):
+        alone = run(s)
+        assert (r.status, r.reason, r.n) == (alone.status, alone.reason, alone.n)
+        np.testing.assert_array_equal(r.e_true, alone.e_true)
+        np.testing.assert_array_equal(r.plant["wheel_meas"], alone.plant["wheel_meas"])
+
+
+def test_the_plant_divergence_codes_read_the_state():
+    scn = load("eight-nominal")
+    ref = sample(scn.reference, np.arange(scn.steps + 1) * scn.T)
+    plant = make_plant(scn, ref)
+    q0, u0 = scn.initial_state(ref)
+    plant.reset(q0, np.random.default_rng(0), u0)
+    args = plant.kernel_args()
+    mp, dp, _, qvel, qpos, _, site_xpos, _, root_xmat, _, fl, st = args[:12]
+
+    def code() -> int:
+        return compiled.diverged(mp, dp, qpos, qvel, site_xpos, root_xmat, fl, st)
+
+    assert code() == 0 and plant.diverged() is None
+    st[compiled.S_TIME] += 1.0  # MuJoCo's time no longer ours: it reset the data
+    assert code() == compiled.RESET and "reset" in plant.why(code())
+    st[compiled.S_TIME] -= 1.0
+    site_xpos[2] += plant.real_radius  # the axle a wheel radius up
+    assert code() == compiled.LIFTED and "left the floor" in plant.why(code())
+    site_xpos[2] -= plant.real_radius
+    qvel[0] = np.nan
+    assert code() == compiled.NOT_FINITE and plant.why(code()) == "non-finite MuJoCo state"
+
+
+def test_delay_line_keeps_the_newest_and_repeats_the_oldest():
+    line = DelayLine(np.array([0.0, 0.0, 0.0]))
+    for k in range(1, 4):
+        line.push(np.full(3, float(k)))
+    assert line.read()[0] == 3.0 and line.steps == 0
+    line.delay(2)  # longer: keeps what it holds, the oldest repeated until it fills
+    assert line.read()[0] == 3.0
+    line.push(np.full(3, 4.0))
+    line.push(np.full(3, 5.0))
+    assert line.read()[0] == 3.0
+    line.push(np.full(3, 6.0))
+    assert line.read()[0] == 4.0
+    line.delay(0)  # shorter: the newest
+    assert line.read()[0] == 6.0
+    ints = DelayLine(0)
+    ints.delay(1)
+    ints.push(1)
+    ints.push(2)
+    assert ints.read() == 1 and isinstance(ints.read(), int)
+
+
+def test_a_fatal_mujoco_error_in_a_compiled_step_is_one_line_and_exit_1():
+    script = textwrap.dedent(
+        """
+        import mujoco
+        from numba import njit
+        from mlpfac.plants import compiled
+        bodies = "".join(f'<body pos="0 0 {i * 0.01}"><freejoint/><geom size=".1"/></body>' for i in range(20))
+        m = mujoco.MjModel.from_xml_string(f'<mujoco><size memory="20K"/><worldbody>{bodies}</worldbody></mujoco>')
+        d = mujoco.MjData(m)
+        try:
+            mujoco.mj_step(m, mujoco.MjData(m))
+            raise SystemExit(3)  # this MuJoCo fits the contacts in the arena: nothing to test
+        except mujoco.FatalError:
+            pass  # the bindings still raise (their own handler comes first)
+
+        @njit
+        def step(mp, dp):
+            compiled.mj_step(mp, dp)
+
+        step(m._address, d._address)
+        print("returned")
+        """
+    )
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=300)
+    if out.returncode == 3:
+        pytest.skip("this MuJoCo does not overflow the arena of the test model")
+    assert out.returncode == 1, out.stderr
+    lines = out.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: MuJoCo: mj_stackAlloc"), out.stderr
+    assert "returned" not in out.stdout
