@@ -1,16 +1,17 @@
 """A differential-drive robot simulated by MuJoCo, as a plant (see :mod:`mlpfac.plants.base`).
 
 What the robot is (actuators, wheels, site, radius, track, rest pose) is read once from its model
-by :func:`mlpfac.plants.robot.read_robot`; this module steps it, from :meth:`MujocoPlant.reset` on.
+by :func:`mlpfac.plants.robot.read_robot`; this module resets it, applies events and reads what it
+did; its control step is compiled (:func:`mlpfac.plants.compiled.plant_step`, one call a step).
 The controller's u = (v, omega) is turned into wheel speeds by the inverse kinematics
 (:func:`mlpfac.ik.wheel_speeds`) with the wheel radius and track the IK *believes* (the
 nominal ones), and held for one control period of ``n_substeps`` physics steps,
 ``control_dt = n_substeps * model.opt.timestep``. Two wheel drives:
 
 - ``actuator = "velocity"``: the model's velocity servos (force = kv (w_cmd - w), clamped to the
-  force range), integrated implicitly by MuJoCo (``implicitfast``); no Python per physics step.
+  force range), integrated implicitly by MuJoCo (``implicitfast``).
 - ``actuator = "torque"``: the same actuators turned into torque motors with the same force limit,
-  driven by a discrete wheel-speed PI loop evaluated here once per physics step.
+  driven by a discrete wheel-speed PI loop evaluated once per physics step.
 
 The pose (x, y, theta) is read at a site on the axle midpoint (``axle_mid``); theta is unwrapped
 across steps. Events edit the model's :class:`mujoco.MjSpec` and recompile it keeping the state
