@@ -13,7 +13,8 @@ import dataclasses
 
 import numpy as np
 
-from mlpfac.controllers import VARIANTS, Adaptive, Corradini, Kanayama
+from mlpfac.adaptive import VARIANTS, Adaptive
+from mlpfac.controllers import Corradini, Kanayama
 from mlpfac.exceptions import ConfigError
 from mlpfac.oracle import Oracle, told
 from mlpfac.scenario import Scenario

@@ -22,7 +22,8 @@ from typing import Any
 
 import numpy as np
 
-from mlpfac.controllers import CONTROLLERS, VARIANTS, AdaptiveConfig, KanayamaGains
+from mlpfac.adaptive import VARIANTS, AdaptiveConfig
+from mlpfac.controllers import CONTROLLERS, KanayamaGains
 from mlpfac.error_model import pose_from_error
 from mlpfac.events import Event, parse_event
 from mlpfac.exceptions import ConfigError

@@ -4,7 +4,7 @@ and the covariance of (h1, h2, h5, b_v, b_omega) it is fed from P_k."""
 import numpy as np
 import pytest
 
-from mlpfac.controllers import Adaptive, AdaptiveConfig
+from mlpfac.adaptive import Adaptive, AdaptiveConfig
 from mlpfac.law import Law
 from mlpfac.networks import Networks
 

@@ -6,7 +6,8 @@ import dataclasses
 import numpy as np
 import pytest
 
-from mlpfac.controllers import CONTROLLERS, VARIANTS, Adaptive, AdaptiveConfig, Corradini
+from mlpfac.adaptive import VARIANTS, Adaptive, AdaptiveConfig
+from mlpfac.controllers import CONTROLLERS, Corradini
 from mlpfac.estimators import EKF, UKF, covariance
 from mlpfac.exceptions import ConfigError
 from mlpfac.factory import make_controller
