@@ -4,6 +4,7 @@ record, logging it the way the runner does, and reading an .rrd back."""
 from __future__ import annotations
 
 import os
+import signal
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -20,6 +21,12 @@ from mlpfac.reference import Eight, sample
 _MENAGERIE = Path(__file__).resolve().parents[2] / "shared" / "menagerie"
 if _MENAGERIE.is_dir():
     os.environ.setdefault("MENAGERIE_ROOT", str(_MENAGERIE))
+
+# A suite started in the background of a non-interactive shell (nohup, `cmd &`) inherits SIGINT
+# ignored, and so would every run it starts: the Ctrl-C tests need Python's own handler here, and
+# the default in the processes they start (a caught signal is reset to the default by exec).
+if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 GEOMETRY = [
     {
