@@ -201,69 +201,71 @@ def _loop(scns, ref, plant, ctrl, sink, on_step, full: bool) -> list[RunRecord]:
         sink.begin(rec0, geometry=plant.plants[0].geometry() if listed else plant.geometry(), ref_path=ref[:N])
     k = 0
     try:
-        while compiled and k < N and live:
-            _apply_due(pending, k, T, plant, recs, live)
-            k1 = min(N, (k // FLUSH_EVERY + 1) * FLUSH_EVERY)
-            if pending:  # up to the next event
-                k1 = next((j for j in range(k + 1, k1) if pending[0].time <= j * T + 1e-9), k1)
-            for b in list(live):
-                p = plant.plants[b]
-                end, why = segment(k, k1, ref, *law, base.divergence_m, pose[b], pose_meas[b], e_all[b], e_true[b],
-                                   u_all[b], ctele[b], ptele[b], p.draws(k1 - k), p.kernel_args())  # fmt: skip
-                recs[b].n = min(end + 1, k1)
-                if why == BAD:
-                    reason = _diverged(pose[b, end], u_all[b, end], e_true[b, end], None, base.divergence_m)
-                    _stop(recs, b, reason, end * T, live, plant, ctrl, listed, stopped, end)
-                elif why:
-                    _stop(recs, b, p.why(why), end * T, live, plant, ctrl, listed, stopped, end + 1)
-            k = k1
-            if live and sink is not None and k % FLUSH_EVERY == 0:
-                sink.flush(rec0, k)
-        for k in range(N if not compiled else 0):
-            _apply_due(pending, k, T, plant, recs, live)
-            q, q_meas, r = plant.true_pose(), plant.measure(), ref[k]
-            tracking_errors(q_meas, r, e)
-            u = ctrl.step(e, r)
-            tracking_errors(q, r, et)
-            pose[:, k], pose_meas[:, k], e_all[:, k], e_true[:, k], u_all[:, k] = q, q_meas, e, et, u
-            tele = ctrl.telemetry()
-            if not ctrl_store:
-                _allocate(ctrl_store, tele, recs, "ctrl", B, N, full)
-            z = tele.get("z")
-            for key, val in tele.items():
-                if key == "z" and not full:
-                    ctrl_store[key][:, k, 0] = np.max(np.abs(val), axis=-1)
+        if compiled:
+            while k < N and live:
+                _apply_due(pending, k, T, plant, recs, live)
+                k1 = min(N, (k // FLUSH_EVERY + 1) * FLUSH_EVERY)
+                if pending:  # up to the next event
+                    k1 = next((j for j in range(k + 1, k1) if pending[0].time <= j * T + 1e-9), k1)
+                for b in list(live):
+                    p = plant.plants[b]
+                    end, why = segment(k, k1, ref, *law, base.divergence_m, pose[b], pose_meas[b], e_all[b], e_true[b],
+                                       u_all[b], ctele[b], ptele[b], p.draws(k1 - k), p.kernel_args())  # fmt: skip
+                    recs[b].n = min(end + 1, k1)
+                    if why == BAD:
+                        reason = _diverged(pose[b, end], u_all[b, end], e_true[b, end], None, base.divergence_m)
+                        _stop(recs, b, reason, end * T, live, plant, ctrl, listed, stopped, end)
+                    elif why:
+                        _stop(recs, b, p.why(why), end * T, live, plant, ctrl, listed, stopped, end + 1)
+                k = k1
+                if live and sink is not None and k % FLUSH_EVERY == 0:
+                    sink.flush(rec0, k)
+        else:
+            for k in range(N):
+                _apply_due(pending, k, T, plant, recs, live)
+                q, q_meas, r = plant.true_pose(), plant.measure(), ref[k]
+                tracking_errors(q_meas, r, e)
+                u = ctrl.step(e, r)
+                tracking_errors(q, r, et)
+                pose[:, k], pose_meas[:, k], e_all[:, k], e_true[:, k], u_all[:, k] = q, q_meas, e, et, u
+                tele = ctrl.telemetry()
+                if not ctrl_store:
+                    _allocate(ctrl_store, tele, recs, "ctrl", B, N, full)
+                z = tele.get("z")
+                for key, val in tele.items():
+                    if key == "z" and not full:
+                        ctrl_store[key][:, k, 0] = np.max(np.abs(val), axis=-1)
+                    else:
+                        ctrl_store[key][:, k] = val
+                for b in live:
+                    recs[b].n = k + 1
+                if bad_seeds(q, u, et, no_z if z is None else z, base.divergence_m, bad):
+                    for b in [b for b in live if bad[b]]:
+                        why = _diverged(q[b], u[b], et[b], None if z is None else z[b], base.divergence_m)
+                        _stop(recs, b, why, k * T, live, plant, ctrl, listed, stopped, k)
+                    if not live:
+                        break
+                plant.step(u)
+                if listed:
+                    plant.put_telemetry(plant_store, recs, k)
                 else:
-                    ctrl_store[key][:, k] = val
-            for b in live:
-                recs[b].n = k + 1
-            if bad_seeds(q, u, et, no_z if z is None else z, base.divergence_m, bad):
-                for b in [b for b in live if bad[b]]:
-                    why = _diverged(q[b], u[b], et[b], None if z is None else z[b], base.divergence_m)
-                    _stop(recs, b, why, k * T, live, plant, ctrl, listed, stopped, k)
-                if not live:
-                    break
-            plant.step(u)
-            if listed:
-                plant.put_telemetry(plant_store, recs, k)
-            else:
-                ptele = plant.telemetry()
-                if not plant_store:
-                    _allocate(plant_store, ptele, recs, "plant", B, N, True)
-                for key, val in ptele.items():
-                    plant_store[key][:, k] = val
-            reasons = plant.diverged()
-            if isinstance(reasons, str) or reasons is None:
-                reasons = [reasons]
-            if any(x is not None for x in reasons):
-                for b in [b for b in live if reasons[b] is not None]:
-                    _stop(recs, b, reasons[b], k * T, live, plant, ctrl, listed, stopped, k + 1)
-                if not live:
-                    break
-            if on_step is not None:
-                on_step(k)
-            if sink is not None and (k + 1) % FLUSH_EVERY == 0:
-                sink.flush(rec0, k + 1)
+                    ptele = plant.telemetry()
+                    if not plant_store:
+                        _allocate(plant_store, ptele, recs, "plant", B, N, True)
+                    for key, val in ptele.items():
+                        plant_store[key][:, k] = val
+                reasons = plant.diverged()
+                if isinstance(reasons, str) or reasons is None:
+                    reasons = [reasons]
+                if any(x is not None for x in reasons):
+                    for b in [b for b in live if reasons[b] is not None]:
+                        _stop(recs, b, reasons[b], k * T, live, plant, ctrl, listed, stopped, k + 1)
+                    if not live:
+                        break
+                if on_step is not None:
+                    on_step(k)
+                if sink is not None and (k + 1) % FLUSH_EVERY == 0:
+                    sink.flush(rec0, k + 1)
     except KeyboardInterrupt as err:
         how = "terminated by SIGTERM" if isinstance(err, Terminated) else "interrupted"
         for b in live:

@@ -28,7 +28,7 @@ def segment(k0, k1, ref, law, c, limit, pose, pose_meas, e, e_true, u, ctele, pt
 
     Returns (k, why): (k1, 0) when every step ran, else the step k at which the seed stopped and
     why (BAD: the runner's test, after the law; > 0: the plant's code, after the plant's step)."""
-    st, hist = robot[11], robot[12]
+    st, hist = robot.st, robot.hist
     q, qm, ek, etk = np.empty((1, 3)), np.empty((1, 3)), np.empty((1, 3)), np.empty((1, 3))
     uk, no_z, bad = np.empty((1, 2)), np.empty((1, 0)), np.zeros(1, dtype=np.bool_)
     for k in range(k0, k1):

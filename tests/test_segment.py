@@ -80,11 +80,11 @@ def test_the_plant_divergence_codes_read_the_state():
     plant = make_plant(scn, ref)
     q0, u0 = scn.initial_state(ref)
     plant.reset(q0, np.random.default_rng(0), u0)
-    args = plant.kernel_args()
-    mp, dp, _, qvel, qpos, _, site_xpos, _, root_xmat, _, fl, st = args[:12]
+    robot = plant.kernel_args()
+    st, site_xpos, qvel = robot.st, robot.site_xpos, robot.qvel
 
     def code() -> int:
-        return compiled.diverged(mp, dp, qpos, qvel, site_xpos, root_xmat, fl, st)
+        return compiled.diverged(robot)
 
     assert code() == 0 and plant.diverged() is None
     st[compiled.S_TIME] += 1.0  # MuJoCo's time no longer ours: it reset the data

@@ -24,6 +24,7 @@ import glob
 import math
 import os
 import sys
+from typing import NamedTuple
 
 import llvmlite.binding as llvm
 import mujoco
@@ -32,6 +33,7 @@ from numba import njit, types
 
 from mlpfac.events import delay_push
 from mlpfac.ik import body_velocity_vw, wheel_speeds_lr
+from mlpfac.plants.robot import yaw
 
 JIT = {"cache": True, "error_model": "numpy"}
 
@@ -53,6 +55,28 @@ N_TELE = 2 * len(TELEMETRY)
 RESET, NOT_FINITE, LIFTED, TIPPED = 1, 2, 3, 4
 STATE_TIME = int(mujoco.mjtState.mjSTATE_TIME)
 OBJ_SITE = int(mujoco.mjtObj.mjOBJ_SITE)
+
+
+class Robot(NamedTuple):
+    """What the compiled step reads and writes of one robot: the addresses of the current MjModel and
+    MjData, views into the data, the robot's arrays, the delay line and a work array (valid until
+    an event replaces the model or the delay line)."""
+
+    mp: int
+    dp: int
+    ctrl: np.ndarray
+    qvel: np.ndarray
+    qpos: np.ndarray
+    qfrc: np.ndarray  # qfrc_actuator
+    site_xpos: np.ndarray
+    site_xmat: np.ndarray
+    root_xmat: np.ndarray
+    ints: np.ndarray
+    fl: np.ndarray
+    st: np.ndarray
+    hist: np.ndarray
+    fill: np.ndarray
+    vel: np.ndarray  # (6,) mj_objectVelocity's output
 
 
 def _library() -> str:
@@ -137,7 +161,7 @@ def _physics(mp, dp, ctrl, qvel, ints, fl, st, wl, wr):
 def read_pose(site_xpos, site_xmat, st):
     """The pose (x, y, theta) at the site into st, theta the heading atan2(R10, R00) unwrapped across steps."""
     th = st[S_THETA]
-    th += _remainder(math.atan2(site_xmat[3], site_xmat[0]) - th, 2.0 * math.pi)
+    th += _remainder(yaw(site_xmat) - th, 2.0 * math.pi)
     st[S_THETA] = th
     st[S_POSE], st[S_POSE + 1], st[S_POSE + 2] = site_xpos[0], site_xpos[1], th
 
@@ -158,42 +182,43 @@ def plant_step(u0, u1, draw, tele, robot):
     """One control step of the robot for the command u = (v, omega): the IK (wheel speeds the nominal
     radius and track give, scaled together under the wheel-speed limit), the physics, the pose and
     its measurement (noise ``draw`` (3,) of standard normals), the telemetry row ``tele`` (see
-    TELEMETRY). ``robot``: :meth:`MujocoPlant.kernel_args`. Returns why it diverged (0: it did not)."""
-    mp, dp, ctrl, qvel, qpos, qfrc, site_xpos, site_xmat, root_xmat, ints, fl, st, hist, fill, vel = robot
+    TELEMETRY). Returns why it diverged (0: it did not)."""
+    ints, fl, st, qvel, vel = robot.ints, robot.fl, robot.st, robot.qvel, robot.vel
     wl, wr = wheel_speeds_lr(u0, u1, fl[F_IK_R], fl[F_IK_TRACK], fl[F_WMAX])
-    _physics(mp, dp, ctrl, qvel, ints, fl, st, wl, wr)
-    read_pose(site_xpos, site_xmat, st)
-    measure(ints, fl, st, draw, hist, fill)
+    _physics(robot.mp, robot.dp, robot.ctrl, qvel, ints, fl, st, wl, wr)
+    read_pose(robot.site_xpos, robot.site_xmat, st)
+    measure(ints, fl, st, draw, robot.hist, robot.fill)
     dl, dr, sl, sr = ints[I_DL], ints[I_DR], fl[F_SL], fl[F_SR]
     ml, mr = sl * qvel[dl], sr * qvel[dr]
-    mj_objectVelocity(mp, dp, OBJ_SITE, ints[I_SITE], vel.ctypes.data, 0)  # (angular, linear), world frame
+    mj_objectVelocity(robot.mp, robot.dp, OBJ_SITE, ints[I_SITE], vel.ctypes.data, 0)  # (angular, linear), world
     th = st[S_THETA]
     tele[0], tele[1] = body_velocity_vw(ml, mr, fl[F_IK_R], fl[F_IK_TRACK])
     tele[2], tele[3] = vel[3] * math.cos(th) + vel[4] * math.sin(th), vel[2]
     tele[4], tele[5] = wl, wr
     tele[6], tele[7] = ml, mr
-    tele[8], tele[9] = sl * qfrc[dl], sr * qfrc[dr]  # as applied: joint limits included
-    return diverged(mp, dp, qpos, qvel, site_xpos, root_xmat, fl, st)
+    tele[8], tele[9] = sl * robot.qfrc[dl], sr * robot.qfrc[dr]  # as applied: joint limits included
+    return diverged(robot)
 
 
 @njit(**JIT)
-def diverged(mp, dp, qpos, qvel, site_xpos, root_xmat, fl, st):
+def diverged(robot):
     """RESET when MuJoCo reset the data on a bad state (its time no longer ours), NOT_FINITE, LIFTED
     when the axle rose half a wheel radius above its rest height, TIPPED when the chassis' up axis is
     more than 60 deg from vertical; 0 when none."""
+    fl, st = robot.fl, robot.st
     t = np.empty(1)
-    mj_getState(mp, dp, t.ctypes.data, STATE_TIME)
+    mj_getState(robot.mp, robot.dp, t.ctypes.data, STATE_TIME)
     if abs(t[0] - st[S_TIME]) > 0.5 * fl[F_DT]:
         return RESET
     s = 0.0
-    for x in qpos:
+    for x in robot.qpos:
         s += x
-    for x in qvel:
+    for x in robot.qvel:
         s += x
     if not math.isfinite(s):
         return NOT_FINITE
-    if site_xpos[2] - fl[F_ZREST] > 0.5 * fl[F_RADIUS]:
+    if robot.site_xpos[2] - fl[F_ZREST] > 0.5 * fl[F_RADIUS]:
         return LIFTED
-    if root_xmat[8] < 0.5:
+    if robot.root_xmat[8] < 0.5:
         return TIPPED
     return 0

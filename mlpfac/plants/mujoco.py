@@ -40,7 +40,19 @@ from mlpfac.plants.robot import read_robot
 
 DIVERGENCE_WARNINGS = ("mjWARN_BADQPOS", "mjWARN_BADQVEL", "mjWARN_BADQACC")  # MuJoCo resets the data on these
 NOISE_CHUNK = 1024  # pose-noise draws made at once: the same stream as one draw of 3 per step
-NO_DRAW = np.zeros(3)
+
+
+class _Kept:
+    """A plant attribute kept in one of the compiled step's arrays (``fl`` or ``ints``), its one copy."""
+
+    def __init__(self, array: str, index: int, kind: type = float) -> None:
+        self.array, self.index, self.kind = array, index, kind
+
+    def __get__(self, plant, owner=None):
+        return self if plant is None else self.kind(getattr(plant, self.array)[self.index])
+
+    def __set__(self, plant, value) -> None:
+        getattr(plant, self.array)[self.index] = value
 
 
 class MujocoPlant(MujocoEvents):
@@ -51,11 +63,16 @@ class MujocoPlant(MujocoEvents):
     """
 
     supported_events = frozenset(EVENT_KINDS)
+    # what the compiled step reads and events change: real wheel radius, axle height at rest, PI
+    # gains, physics steps per control step
+    real_radius, _z_rest = _Kept("fl", K.F_RADIUS), _Kept("fl", K.F_ZREST)
+    _kp, _ki, _n = _Kept("fl", K.F_KP), _Kept("fl", K.F_KI), _Kept("ints", K.I_NSUB, int)
 
     def __init__(self, config: MujocoConfig, T: float) -> None:
         self.config = config
         self.T = float(T)
         self.robot = r = read_robot(config)
+        self.ints, self.fl = np.zeros(K.N_INTS, dtype=np.int64), np.zeros(K.N_FL)
         self._where = r.where
         self._spec_nominal, self._spec = r.spec, r.spec.copy()
         self.model, self.data = r.model, mujoco.MjData(r.model)
@@ -75,11 +92,9 @@ class MujocoPlant(MujocoEvents):
         self._noise = config.noise_std()
         self._torque_max = self._force_limits()
         self._changed = False
-        self.ints = np.zeros(K.N_INTS, dtype=np.int64)
         self.ints[[K.I_AL, K.I_AR, K.I_DL, K.I_DR, K.I_SITE]] = (*r.acts, *r.dofs, r.site)
         self.ints[K.I_TORQUE] = config.actuator == "torque"
         self.ints[K.I_NOISE] = self._noise is not None
-        self.fl = np.zeros(K.N_FL)
         self.fl[[K.F_CL, K.F_CR, K.F_SL, K.F_SR]] = (*r.act_per_wheel, *r.sign)
         self.fl[[K.F_IK_R, K.F_IK_TRACK, K.F_DT]] = self.ik_radius, self.ik_track, self._dt
         self.fl[K.F_WMAX] = math.inf if self.max_wheel_speed is None else self.max_wheel_speed
@@ -129,18 +144,13 @@ class MujocoPlant(MujocoEvents):
         self._n = self.n_substeps
         self._kp, self._ki = float(self.config.pi_kp), float(self.config.pi_ki)
         self._torque_max = self._force_limits()
-        ints, fl = self.ints, self.fl
-        ints[K.I_NSUB] = self._n
-        fl[[K.F_KP, K.F_KI, K.F_TLMAX, K.F_TRMAX]] = self._kp, self._ki, *self._torque_max
-        fl[[K.F_RADIUS, K.F_ZREST]] = self.real_radius, self._z_rest
         self.st = np.zeros(K.N_ST)
         self.st[K.S_THETA] = float(q0[2])
         self._noise_left = 0
-        self._history = DelayLine(np.zeros(3))
+        self._history = DelayLine(np.zeros(3))  # one row, which the first measurement replaces
         self._views()
         K.read_pose(self._site_xpos, self._site_xmat, self.st)
-        self._history.fill[0] = 0  # the first measurement, as every later one
-        K.measure(ints, fl, self.st, self.draws(1)[0], self._history.hist, self._history.fill)
+        K.measure(self.ints, self.fl, self.st, self.draws(1)[0], self._history.hist, self._history.fill)
 
     def _views(self) -> None:
         """What the compiled step reads and writes: the current model and data (their addresses and
@@ -152,13 +162,21 @@ class MujocoPlant(MujocoEvents):
 
     def _pack(self) -> None:
         m, d = self.model, self.data
-        self._args = (m._address, d._address, d.ctrl, d.qvel, d.qpos, d.qfrc_actuator, self._site_xpos,
-                      self._site_xmat, d.xmat[self._root], self.ints, self.fl, self.st, self._history.hist,
-                      self._history.fill, np.empty(6))  # fmt: skip
+        self._args = K.Robot(m._address, d._address, d.ctrl, d.qvel, d.qpos, d.qfrc_actuator, self._site_xpos,
+                             self._site_xmat, d.xmat[self._root], self.ints, self.fl, self.st, self._history.hist,
+                             self._history.fill, np.empty(6))  # fmt: skip
 
-    def kernel_args(self) -> tuple:
+    def kernel_args(self) -> K.Robot:
         """The robot as :func:`mlpfac.plants.compiled.plant_step` takes it (valid until the next event)."""
         return self._args
+
+    @property
+    def _torque_max(self) -> tuple[float, float]:
+        return float(self.fl[K.F_TLMAX]), float(self.fl[K.F_TRMAX])
+
+    @_torque_max.setter
+    def _torque_max(self, limits: tuple[float, float]) -> None:
+        self.fl[[K.F_TLMAX, K.F_TRMAX]] = limits
 
     @property
     def sim_time(self) -> float:
@@ -200,8 +218,7 @@ class MujocoPlant(MujocoEvents):
 
     def step(self, u: np.ndarray) -> None:
         """One control step (:func:`mlpfac.plants.compiled.plant_step`)."""
-        draw = self.draws(1)[0] if self._noise is not None else NO_DRAW
-        K.plant_step(float(u[0]), float(u[1]), draw, self.tele, self._args)
+        K.plant_step(float(u[0]), float(u[1]), self.draws(1)[0], self.tele, self._args)
 
     def _force_limits(self) -> tuple[float, float]:
         """Largest forward wheel torque of each drive (N m at the joint), inf when not limited."""
@@ -223,8 +240,7 @@ class MujocoPlant(MujocoEvents):
 
     def diverged(self) -> str | None:
         """Why the robot's state is not one to go on from (:func:`mlpfac.plants.compiled.diverged`), or None."""
-        mp, dp, _, qvel, qpos, _, site_xpos, _, root_xmat, _, fl, st = self._args[:12]
-        return self.why(K.diverged(mp, dp, qpos, qvel, site_xpos, root_xmat, fl, st))
+        return self.why(K.diverged(self._args))
 
     def why(self, code: int) -> str | None:
         """The words for a divergence code of the compiled step, with the current state's numbers."""
@@ -234,7 +250,7 @@ class MujocoPlant(MujocoEvents):
         if code == K.NOT_FINITE:
             return "non-finite MuJoCo state"
         if code == K.LIFTED:
-            lift = float(self._site_xpos[2]) - self.fl[K.F_ZREST]
+            lift = float(self._site_xpos[2]) - self._z_rest
             return f"the robot left the floor (axle {lift * 1e3:.0f} mm above its rest height)"
         if code == K.TIPPED:
             up = float(self.data.xmat[self._root][8])  # world z component of the chassis z axis

@@ -14,7 +14,6 @@ import numpy as np
 
 from mlpfac.events import Actuator, ControlPeriod, Event, Friction, Payload, SensorDelay, WheelRadius
 from mlpfac.exceptions import ConfigError
-from mlpfac.plants import compiled as K  # noqa: N812 - the kernel's layout constants, K.F_DT ...
 from mlpfac.plants.robot import ROUND
 
 
@@ -81,7 +80,6 @@ class MujocoEvents:
         m = self.model
         if isinstance(event, ControlPeriod):
             old, self._n = self._n, self._substeps(event.factor * self.T, "factor")
-            self.ints[K.I_NSUB] = self._n
             return f"plant holds each command {old * self._dt:g} -> {self._n * self._dt:g} s ({self._n} physics steps; controller keeps T = {self.T:g} s)"
         if isinstance(event, SensorDelay):
             text = self._history.delay(event.steps)
@@ -123,7 +121,6 @@ class MujocoEvents:
             lift = self.real_radius - old  # stand the robot on its new wheels (the casters then settle)
             self.data.qpos[self._qroot + 2] += lift
             self._z_rest += lift
-            self.fl[[K.F_RADIUS, K.F_ZREST]] = self.real_radius, self._z_rest
             mujoco.mj_forward(self.model, self.data)
             return f"real wheel radius {old:g} -> {self.real_radius:g} m (the IK keeps {self.ik_radius:g} m)"
         assert isinstance(event, Actuator)
@@ -142,14 +139,12 @@ class MujocoEvents:
                 act.ctrlrange = fs * np.asarray(act.ctrlrange)
         self._recompile()
         self._torque_max = self._force_limits()
-        self.fl[[K.F_TLMAX, K.F_TRMAX]] = self._torque_max
         if self.config.actuator == "velocity":
             old_kv = float(m.actuator_gainprm[self._acts[0], 0])
             gains = f"servo kv {old_kv:g} -> {float(self.model.actuator_gainprm[self._acts[0], 0]):g} N m s/rad"
         else:
             gains = f"PI gains ({self._kp:g}, {self._ki:g}) -> ({kv * self._kp:g}, {kv * self._ki:g})"
             self._kp, self._ki = kv * self._kp, kv * self._ki
-            self.fl[[K.F_KP, K.F_KI]] = self._kp, self._ki
         return f"wheel drive weakened: {gains}, torque limit {old_limit:g} -> {self._torque_max[0]:g} N m"
 
     def _recompile(self) -> None:

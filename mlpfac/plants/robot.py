@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import mujoco
 import numpy as np
+from numba import njit
 
 from mlpfac.exceptions import ConfigError
 from mlpfac.plants import edits
@@ -353,6 +354,7 @@ def _names(m: mujoco.MjModel, obj: mujoco.mjtObj, n: int) -> str:
     return "it has: " + ", ".join(repr(x) for x in names if x) if any(names) else "it has none with a name"
 
 
+@njit(cache=True)
 def yaw(xmat: np.ndarray) -> float:
     """Heading of a frame: the angle of its x axis projected on the floor, atan2(R[1, 0], R[0, 0])."""
     return math.atan2(xmat[3], xmat[0])
