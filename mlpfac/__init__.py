@@ -24,7 +24,9 @@ _WHERE = {
     "parse": "mlpfac.scenario",
     "scenario_names": "mlpfac.scenario",
     "Scenario": "mlpfac.scenario",
-    "run": "mlpfac.runner",
+    "run": "mlpfac.api",
+    "sweep": "mlpfac.api",
+    "PluginError": "mlpfac.exceptions",
     "metrics": "mlpfac.run_metrics",
     "RunRecord": "mlpfac.record",
     "CONTROLLERS": "mlpfac.controllers",
@@ -35,6 +37,7 @@ __all__ = [
     "CONTROLLERS",
     "ConfigError",
     "MlpfacError",
+    "PluginError",
     "RunRecord",
     "Scenario",
     "__version__",
@@ -43,14 +46,15 @@ __all__ = [
     "parse",
     "run",
     "scenario_names",
+    "sweep",
 ]
 
 if TYPE_CHECKING:
+    from mlpfac.api import run, sweep
     from mlpfac.controllers import CONTROLLERS
-    from mlpfac.exceptions import ConfigError, MlpfacError
+    from mlpfac.exceptions import ConfigError, MlpfacError, PluginError
     from mlpfac.record import RunRecord
     from mlpfac.run_metrics import metrics
-    from mlpfac.runner import run
     from mlpfac.scenario import Scenario, load, parse, scenario_names
 
 

@@ -12,6 +12,7 @@ import os
 import sys
 from pathlib import Path
 
+EXIT_FAILED = 1  # a run diverged, or a user's controller raised
 EXIT_BAD_INPUT = 2
 EXIT_INTERRUPTED = 130  # Ctrl-C (SIGINT)
 EXIT_TERMINATED = 143  # SIGTERM: handled like Ctrl-C
@@ -52,7 +53,11 @@ def build_parser() -> argparse.ArgumentParser:
         description="Run one scenario and write metrics.json, config.toml, figure1.png and run.rrd.",
     )
     p.add_argument("scenario", help="a shipped scenario name (see `mlpfac list`) or a path to a .toml file")
-    p.add_argument("--controller", help="override the scenario's controller (adaptive, corradini, kanayama, ...)")
+    p.add_argument(
+        "--controller",
+        help="override the scenario's controller: a shipped one (adaptive, corradini, kanayama, oracle, ...), "
+        "path/to/file.py:Class, package.module:Class, or an installed one (see `mlpfac list`)",
+    )
     p.add_argument("--seed", type=int, help="override the scenario's seed")
     p.add_argument("--duration", type=float, help="override the duration in seconds")
     p.add_argument("--out", type=Path, help="output folder (default runs/SCENARIO-CONTROLLER-sSEED)")
@@ -60,9 +65,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-plot", action="store_true", help="skip figure1.png")
     _sink_args(p)
 
-    sub.add_parser("list", help="list the shipped scenarios and controllers")
+    sub.add_parser("list", help="list the shipped scenarios, and the controllers shipped and installed")
 
-    from mlpfac import sweep
+    from mlpfac.sweeps import cli as sweep
 
     sweep.add_compare_arguments(sub.add_parser("compare", help="controllers x scenarios x seeds -> a per-phase table"))
     sweep.add_sweep_arguments(sub.add_parser("sweep", help="Monte Carlo sweep -> mean, median, 95 %% CI per phase"))
@@ -89,7 +94,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    from mlpfac.exceptions import MlpfacError
+    from mlpfac.exceptions import MlpfacError, PluginError
     from mlpfac.outputs import Terminated, handle_sigterm
 
     handle_sigterm()
@@ -103,12 +108,15 @@ def main(argv: list[str] | None = None) -> int:
             return cmd_view(args)
         if args.command == "plot":
             return cmd_plot(args)
-        from mlpfac import sweep
+        from mlpfac.sweeps import cli as sweep
 
         return sweep.run_compare_cli(args) if args.command == "compare" else sweep.run_sweep_cli(args)
     except MlpfacError as err:
         print(f"mlpfac: error: {err}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    except PluginError as err:  # the user's controller raised: its traceback, not ours
+        print(err.report(), end="", file=sys.stderr)
+        return EXIT_FAILED
     except KeyboardInterrupt as err:
         print("mlpfac: terminated" if isinstance(err, Terminated) else "mlpfac: interrupted", file=sys.stderr)
         return EXIT_TERMINATED if isinstance(err, Terminated) else EXIT_INTERRUPTED
@@ -119,6 +127,7 @@ def main(argv: list[str] | None = None) -> int:
 
 def cmd_list() -> int:
     from mlpfac.controllers import CONTROLLERS
+    from mlpfac.plugins import entry_points
     from mlpfac.scenario import load, scenario_names
 
     names = scenario_names()
@@ -127,6 +136,13 @@ def cmd_list() -> int:
         scn = load(name, build=False)
         print(f"{name:<{width}}  {scn.plant_kind:<9}  {scn.description}")
     print(f"\ncontrollers: {', '.join(CONTROLLERS)}")
+    installed = entry_points()
+    if installed:
+        print("installed controllers (entry-point group mlpfac.controllers):")
+        width = max(map(len, installed))
+        for name, (target, dist) in sorted(installed.items()):
+            print(f"  {name:<{width}}  {target}  (from {dist})")
+    print("your own: --controller path/to/file.py:Class or package.module:Class")
     return 0
 
 
@@ -191,6 +207,7 @@ def _run_staged(args: argparse.Namespace, scn, out: Path, built, baseline) -> in
     """Under the locks of --out (and --save): run into the stages, then put them in place."""
     from contextlib import nullcontext
 
+    from mlpfac.exceptions import PluginError
     from mlpfac.outputs import Stage, folder_lock, holds_finished_run
 
     with (
@@ -210,9 +227,11 @@ def _run_staged(args: argparse.Namespace, scn, out: Path, built, baseline) -> in
                 from mlpfac.log.sinks import check_recording
 
                 check_recording(rrd_path, rrd_shown)
-        except BaseException:
+        except BaseException as err:
             if sink is not None:
                 sink.close()  # a web viewer started for --serve stops with the run
+            if isinstance(err, PluginError):
+                _keep_error(folder, out, scn, err, held[0])
             raise
         if rec.status == "interrupted" and any(held):  # the stage is removed on leaving the block
             if sink is not None:
@@ -228,6 +247,21 @@ def _run_staged(args: argparse.Namespace, scn, out: Path, built, baseline) -> in
         print("serving the recording; Ctrl-C stops the web viewer", flush=True)
         sink.wait()
     return {"ok": 0, "diverged": 1}.get(rec.status) if rec.status != "interrupted" else _interrupt_code(rec)
+
+
+def _keep_error(folder, out: Path, scn, err, held: bool) -> None:
+    """A run whose controller raised: its folder holds error.txt and config.toml (and what was
+    recorded), unless --out holds a finished run, which is kept."""
+    from mlpfac.outputs import write_atomic
+    from mlpfac.scenario import to_toml
+
+    if held:
+        print(f"mlpfac: {out} kept the earlier run; this one failed", file=sys.stderr)
+        return
+    write_atomic(folder.path / "config.toml", to_toml(scn.table))
+    write_atomic(folder.path / "error.txt", err.report())
+    folder.commit()
+    print(f"mlpfac: the run failed; its traceback is in {out / 'error.txt'}", file=sys.stderr)
 
 
 def _interrupt_code(rec) -> int:

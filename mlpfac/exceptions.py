@@ -17,3 +17,33 @@ class ConfigError(MlpfacError, ValueError):
 
     def __reduce__(self):  # picklable, so an error raised in a worker process reaches the parent
         return (type(self), (self.where, self.what))
+
+
+class PluginError(Exception):
+    """A user's controller raised in its own code: that run fails (exit 1). ``traceback`` is the
+    controller's part of the traceback (frames in mlpfac's own files left out)."""
+
+    def __init__(self, controller: str, what: str, err: BaseException | None = None, traceback: str = "") -> None:
+        self.controller, self.what = controller, what
+        self.text = f"controller {controller!r} raised in {what}" + (f": {type(err).__name__}: {err}" if err else "")
+        self.traceback = traceback or (_user_traceback(err) if err is not None else "")
+        super().__init__(self.text)
+
+    def __reduce__(self):  # picklable, so it reaches the parent of a worker process
+        return (type(self), (self.controller, self.what, None, self.traceback), {"text": self.text, "args": self.args})
+
+    def report(self) -> str:
+        """The message and the controller's traceback: what stderr and error.txt get."""
+        return f"{self.traceback.rstrip()}\n{self.text}\n" if self.traceback else f"{self.text}\n"
+
+
+def _user_traceback(err: BaseException) -> str:
+    import traceback
+    from pathlib import Path
+
+    ours = str(Path(__file__).resolve().parent)
+    frames = [
+        f for f in traceback.extract_tb(err.__traceback__) if not str(Path(f.filename).resolve()).startswith(ours)
+    ]
+    lines = ["Traceback (most recent call last, the controller's own code):\n", *traceback.format_list(frames)]
+    return "".join(lines + traceback.format_exception_only(err))

@@ -17,12 +17,16 @@ from mlpfac.adaptive import VARIANTS, Adaptive
 from mlpfac.controllers import Corradini, Kanayama
 from mlpfac.exceptions import ConfigError
 from mlpfac.oracle import Oracle, told
+from mlpfac.plugins import PluginController
 from mlpfac.scenario import Scenario
 
 
-def make_controller(scn: Scenario):
+def make_controller(scn: Scenario, instance: object | None = None):
     """The scenario's controller: a named variant of the adaptive scheme, Corradini's or Kanayama's law,
-    or the oracle (the law told the scenario's events, :mod:`mlpfac.oracle`)."""
+    the oracle (the law told the scenario's events, :mod:`mlpfac.oracle`), or a user's own
+    (:mod:`mlpfac.plugins`; ``instance``: an object of it, made by the caller, runs one seed)."""
+    if scn.plugin is not None:
+        return PluginController(scn.plugin, scn.T, instance)
     if scn.controller in VARIANTS:
         over = dict(VARIANTS[scn.controller])
         nets = dataclasses.replace(scn.adaptive.networks, **over.pop("networks", {}))

@@ -136,7 +136,7 @@ def write_run(out: Path, scn, rec) -> dict:
 # ----------------------------------------------------------------------------------------------
 # A run folder (or file) written beside its target, then renamed into place
 
-RUN_FILES = ("config.toml", "metrics.json", "figure1.png", "run.rrd")
+RUN_FILES = ("config.toml", "metrics.json", "figure1.png", "run.rrd", "error.txt")
 
 
 def check_run_folder(out: Path, what: str = "--out") -> None:

@@ -34,11 +34,12 @@ class Built:
     ctrl: object
 
 
-def build(scn: Scenario) -> Built:
+def build(scn: Scenario, instance: object | None = None) -> Built:
     """Sample the reference, build the plant and the controller: what can fail (a bad model, a
-    missing actuator) fails here, before a run writes or sends anything."""
+    missing actuator) fails here, before a run writes or sends anything. ``instance``: an object of
+    the scenario's plug-in controller to run (:func:`mlpfac.factory.make_controller`)."""
     ref = sample(scn.reference, np.arange(scn.steps + 1) * scn.T)  # (N + 1, 5)
-    return Built(ref, make_plant(scn, ref), make_controller(scn))
+    return Built(ref, make_plant(scn, ref), make_controller(scn, instance))
 
 
 class PlantList:
@@ -241,7 +242,9 @@ def _loop(scns, ref, plant, ctrl, sink, on_step, full: bool) -> list[RunRecord]:
                     recs[b].n = k + 1
                 if bad_seeds(q, u, et, no_z if z is None else z, base.divergence_m, bad):
                     for b in [b for b in live if bad[b]]:
-                        why = _diverged(q[b], u[b], et[b], None if z is None else z[b], base.divergence_m)
+                        why = getattr(ctrl, "why", {}).get(b) or _diverged(
+                            q[b], u[b], et[b], None if z is None else z[b], base.divergence_m
+                        )
                         _stop(recs, b, why, k * T, live, plant, ctrl, listed, stopped, k)
                     if not live:
                         break

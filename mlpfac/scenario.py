@@ -23,12 +23,13 @@ from typing import Any
 import numpy as np
 
 from mlpfac.adaptive import VARIANTS, AdaptiveConfig
-from mlpfac.controllers import CONTROLLERS, KanayamaGains
+from mlpfac.controllers import KanayamaGains
 from mlpfac.error_model import pose_from_error
 from mlpfac.events import Event, parse_event
 from mlpfac.exceptions import ConfigError
 from mlpfac.law import Law
 from mlpfac.networks import Networks
+from mlpfac.plugins import Plugin, absolute_spec, is_plugin_spec, resolve
 from mlpfac.reference import make_reference
 
 NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._+-]*")  # a scenario's name is a folder name in runs/ and sweeps
@@ -53,7 +54,7 @@ TOP_KEYS = {
     "events",
     "provenance",
 }
-CONTROLLER_KEYS = {"name", "lambdas", "v_max", "omega_max", "adaptive", "kanayama"}
+CONTROLLER_KEYS = {"name", "lambdas", "v_max", "omega_max", "adaptive", "kanayama", "params"}
 NETWORK_KEYS = {f.name for f in dataclasses.fields(Networks)}
 ADAPTIVE_KEYS = {f.name for f in dataclasses.fields(AdaptiveConfig)} - {"networks"} | NETWORK_KEYS
 
@@ -82,23 +83,33 @@ class Scenario:
     events: tuple[Event, ...]
     table: dict
     dropped_events: tuple[float, ...] = ()  # times of the file's events a shorter --duration left out
+    plugin: Plugin | None = None  # a user's controller (mlpfac.plugins); None: a shipped one
 
     @property
     def steps(self) -> int:
         return int(round(self.duration / self.T))
 
     def with_overrides(
-        self, controller: str | None = None, seed: int | None = None, duration: float | None = None
+        self,
+        controller: str | None = None,
+        seed: int | None = None,
+        duration: float | None = None,
+        flag: str = "--controller",
     ) -> Scenario:
         """The same scenario with the command line's --controller, --seed, --duration applied; a bad
-        value is a ConfigError naming the flag, not the file."""
+        value is a ConfigError naming the flag, not the file. A plug-in's ``file.py:Class`` is taken
+        from the current folder; another controller than the file's drops its ``[controller.params]``."""
         table = copy.deepcopy(self.table)
         if controller is not None:
-            if controller not in CONTROLLERS:
-                raise ConfigError(
-                    "--controller", f"unknown controller {controller!r}; choose one of {', '.join(CONTROLLERS)}"
-                )
-            table.setdefault("controller", {})["name"] = controller
+            if not isinstance(controller, str) or not controller:
+                raise ConfigError(flag, f"expected a controller's name, got {controller!r}")
+            controller = absolute_spec(controller, Path.cwd())
+            ctrl = table.setdefault("controller", {})
+            if ctrl.get("name", "adaptive") != controller:
+                ctrl.pop("params", None)
+                ctrl["name"] = controller
+            if is_plugin_spec(controller):  # checked here, so that an error names the flag
+                _plugin(ctrl, self.T, flag, self.source)
         if seed is not None:
             if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
                 raise ConfigError("--seed", f"expected a whole number >= 0, got {seed!r}")
@@ -171,6 +182,9 @@ def load(name_or_path: str | Path, build: bool = True) -> Scenario:
     except tomllib.TOMLDecodeError as err:
         raise ConfigError(str(path), f"not valid TOML: {err}") from None
     table.setdefault("name", path.stem)
+    ctrl = table.get("controller")
+    if isinstance(ctrl, dict) and isinstance(ctrl.get("name"), str):  # file.py:Class, from the file's folder
+        ctrl["name"] = absolute_spec(ctrl["name"], path.parent)
     plant = table.get("plant")
     if (
         isinstance(plant, dict)
@@ -196,6 +210,8 @@ def _provenance(scn: Scenario) -> dict:
     out = {"mlpfac": __version__, "numpy": np.__version__}
     if hasattr(plant, "provenance"):
         out |= plant.provenance()
+    if scn.plugin is not None:
+        out["controller"] = scn.plugin.provenance()
     return out
 
 
@@ -381,8 +397,17 @@ def parse(table: dict, source: str = "<scenario>", check_model: bool = True) -> 
     where = f"{source} [controller]"
     _check_keys(ctrl, CONTROLLER_KEYS, where)
     name_c = ctrl.get("name", "adaptive")
-    if name_c not in CONTROLLERS:
-        raise ConfigError(f"{where} name", f"unknown controller {name_c!r}; choose one of {', '.join(CONTROLLERS)}")
+    if not isinstance(name_c, str) or not name_c:
+        raise ConfigError(f"{where} name", f"expected a controller's name, got {name_c!r}")
+    plugin = None
+    if is_plugin_spec(name_c):
+        plugin = _plugin(ctrl, T, f"{where} name", source)
+        name_c = plugin.name
+        table = _plugin_provenance(table, plugin, source, check_model)
+    elif "params" in ctrl:
+        raise ConfigError(
+            f"{where} params", f"[controller.params] is for a plug-in controller; {name_c} takes its own keys"
+        )
     law = build(Law, {k: ctrl[k] for k in ("lambdas", "v_max", "omega_max") if k in ctrl}, where)
     ad = _table(ctrl, "adaptive", where)
     _check_keys(ad, ADAPTIVE_KEYS, f"{where}.adaptive")
@@ -427,7 +452,32 @@ def parse(table: dict, source: str = "<scenario>", check_model: bool = True) -> 
         kanayama=kanayama,
         events=tuple(events),
         table=table,
+        plugin=plugin,
     )
+
+
+def _plugin(ctrl: dict, T: float, where: str, source: str) -> Plugin:
+    """The plug-in ``[controller] name`` names (``where`` names that), with its ``[controller.params]``."""
+    params = ctrl.get("params", {})
+    if not isinstance(params, dict):
+        raise ConfigError(f"{source} [controller] params", f"expected a table ([controller.params]), got {params!r}")
+    return resolve(ctrl["name"], params, T, where, f"{source} [controller.params]")
+
+
+def _plugin_provenance(table: dict, plugin: Plugin, source: str, check: bool) -> dict:
+    """The table with ``[provenance] controller`` naming what runs; a config.toml whose plug-in file
+    changed since it was made is refused (``check``), as a changed robot model is."""
+    prov = table.get("provenance")
+    if not isinstance(prov, dict):
+        return table
+    was = prov.get("controller")
+    if check and isinstance(was, dict) and was.get("target") == plugin.target and was.get("sha256") != plugin.sha256:
+        raise ConfigError(
+            f"{source} [provenance] controller",
+            f"{plugin.target} is not the code this configuration was made with (sha256 {str(plugin.sha256)[:12]}..., "
+            f"recorded {str(was.get('sha256'))[:12]}...); remove [provenance.controller] to run it as it is now",
+        )
+    return {**table, "provenance": {**prov, "controller": plugin.provenance()}}
 
 
 def to_toml(table: dict) -> str:

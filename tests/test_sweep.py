@@ -11,9 +11,10 @@ import time
 
 import pytest
 
-from mlpfac import sweep
 from mlpfac.exceptions import ConfigError
 from mlpfac.scenario import load, to_toml
+from mlpfac.sweeps import cli as sweep_cli
+from mlpfac.sweeps import engine as sweep
 
 DUR = 3.0  # seconds per run (2 s of warm-up excluded): the table is what is tested, not the controller
 
@@ -32,7 +33,7 @@ def strip(metrics: dict) -> dict:
 
 def cli_args(out, *extra, command="sweep"):
     p = argparse.ArgumentParser()
-    (sweep.add_sweep_arguments if command == "sweep" else sweep.add_compare_arguments)(p)
+    (sweep_cli.add_sweep_arguments if command == "sweep" else sweep_cli.add_compare_arguments)(p)
     return p.parse_args([*extra, "--out", str(out)])
 
 
@@ -70,7 +71,7 @@ def test_bad_seeds(text):
 def test_bad_input_fails_before_any_run(tmp_path, argv, match):
     out = tmp_path / "out"
     with pytest.raises(ConfigError, match=match) as err:
-        sweep.run_sweep_cli(cli_args(out, *argv))
+        sweep_cli.run_sweep_cli(cli_args(out, *argv))
     assert "\n" not in str(err.value)
     assert not out.exists()  # nothing created, not even the results folder
 
@@ -234,7 +235,7 @@ def test_dask_cluster_gives_the_local_table(tmp_path):
                 "--scheduler",
                 cluster.scheduler_address,
             )
-            assert sweep.run_sweep_cli(args) == 0
+            assert sweep_cli.run_sweep_cli(args) == 0
         finally:
             client.close()
     assert table(jobs, remote) == table(jobs, local)
@@ -287,7 +288,7 @@ def test_a_lost_dask_worker_costs_only_its_runs(tmp_path):
 def test_compare_table(tmp_path, capsys):
     args = cli_args(tmp_path, "paper", "--seeds", "1-2", "--duration", "13", "--workers", "2", command="compare")
     assert args.controllers == "adaptive,corradini,kanayama"
-    assert sweep.run_compare_cli(args) == 0
+    assert sweep_cli.run_compare_cli(args) == 0
     md = (tmp_path / "compare.md").read_text()
     assert "| paper | kanayama | after |" in md and "| 2 / 0 / 0 |" in md
     assert (tmp_path / "compare.csv").exists() and "max error [mm]" in capsys.readouterr().out

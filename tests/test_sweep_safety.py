@@ -13,9 +13,9 @@ import time
 
 import pytest
 
-from mlpfac import sweep
 from mlpfac.cli import main
 from mlpfac.scenario import load, to_toml
+from mlpfac.sweeps import engine as sweep
 
 psutil = pytest.importorskip("psutil")
 

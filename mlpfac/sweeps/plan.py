@@ -45,18 +45,23 @@ def parse_seeds(text: str, limit: int | None = MAX_RUNS) -> list[int]:
     return sorted(seeds)
 
 
-def parse_controllers(text: str | None) -> list[str | None]:
-    """``"adaptive,corradini"`` -> names, checked; ``None`` -> each scenario's own controller."""
+def parse_controllers(text: str | None, where: str = "--controllers") -> list[str | None]:
+    """``"adaptive,corradini,my_law.py:MyLaw"`` -> names, checked (a plug-in's file taken from the
+    current folder and made absolute, :mod:`mlpfac.plugins`); ``None`` -> each scenario's own controller."""
     if text is None:
         return [None]
-    from mlpfac.controllers import CONTROLLERS
+    from pathlib import Path
 
-    names = [c.strip() for c in text.split(",") if c.strip()]
+    from mlpfac.plugins import absolute_spec, is_plugin_spec, resolve
+
+    names = [absolute_spec(c.strip(), Path.cwd()) for c in text.split(",") if c.strip()]
     if not names:
-        raise ConfigError("--controllers", "no controller given")
+        raise ConfigError(where, "no controller given")
+    seen: dict[str, str] = {}
     for c in names:
-        if c not in CONTROLLERS:
-            raise ConfigError("--controllers", f"unknown controller {c!r}; choose from {', '.join(CONTROLLERS)}")
+        name = resolve(c, None, 0.01, where).name if is_plugin_spec(c) else c
+        if seen.setdefault(name, c) != c:
+            raise ConfigError(where, f"{seen[name]} and {c} are both named {name!r}; their folders would collide")
     return list(dict.fromkeys(names))
 
 
@@ -105,7 +110,7 @@ def plan(
         for ctrl in controllers:
             # parsed once; only the seed varies, so each seed's table is this one with its seed
             # (what with_overrides(seed=...) gives: parse checks a seed >= 0, which parse_seeds did)
-            scn = base.with_overrides(controller=ctrl, duration=duration)
+            scn = base.with_overrides(controller=ctrl, duration=duration, flag="--controllers")
             configs = _seed_configs(scn.table, seeds, to_toml)
             for seed in seeds:
                 table = {**scn.table, "seed": seed}

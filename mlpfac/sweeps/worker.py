@@ -26,7 +26,10 @@ def run_task(jobs: list[Job], batched: bool = False, save_rrd: bool = False, tmp
         from mlpfac.runner import run_batch
 
         try:
-            recs = run_batch([parse(j.table, j.source) for j in jobs])
+            scns = [parse(j.table, j.source) for j in jobs]
+            if scns[0].plugin is not None and not scns[0].plugin.batched:  # no batch form: seed by seed
+                return [_run_one(j, save_rrd, tmp_dir) for j in jobs]
+            recs = run_batch(scns)
         except KeyboardInterrupt:
             raise
         except Exception as err:  # a bug, not a divergence: report it per run
@@ -98,9 +101,12 @@ def _make_sink(job: Job, tmp_dir: str | None = None):
 
 
 def _error_text(err: BaseException) -> str:
+    """What error.txt holds: a user's controller's own traceback, or the whole one (a bug of ours)."""
     import traceback
 
-    return "".join(traceback.format_exception(err))
+    from mlpfac.exceptions import PluginError
+
+    return err.report() if isinstance(err, PluginError) else "".join(traceback.format_exception(err))
 
 
 def _worker_init(parent: int) -> None:

@@ -1,0 +1,135 @@
+"""The Python API: what the command line does, for a notebook or a test.
+
+    import mlpfac
+
+    rec = mlpfac.run("eight-wheel-radius", controller=MyLaw, seed=3)   # a RunRecord
+    mlpfac.metrics(rec)["phases"]["after"]["rms_position_error_m"]
+    rows = mlpfac.sweep(["eight-wheel-radius"], [MyLaw, "oracle", "corradini"], seeds="0-9")
+
+A controller is a shipped name, ``"path/to/file.py:Class"``, ``"package.module:Class"``, an
+installed name, a class, or (for :func:`run`) an object of a class (:mod:`mlpfac.plugins`).
+"""
+
+from __future__ import annotations
+
+import shutil
+import tempfile
+import warnings
+from pathlib import Path
+
+from mlpfac.exceptions import ConfigError
+from mlpfac.plugins import local_spec
+from mlpfac.record import RunRecord
+from mlpfac.scenario import Scenario, load
+
+
+def _scenario(scenario: Scenario | str | Path) -> Scenario:
+    return scenario if isinstance(scenario, Scenario) else load(scenario)
+
+
+def _spec(controller, where: str) -> str:
+    """A controller as a name the scenario table holds."""
+    if isinstance(controller, str | Path):
+        return str(controller)
+    if isinstance(controller, type):
+        return local_spec(controller)
+    raise ConfigError(where, f"expected a controller's name or class, got {controller!r}")
+
+
+def run(
+    scenario: Scenario | str | Path,
+    controller=None,
+    *,
+    seed: int | None = None,
+    duration: float | None = None,
+    sink=None,
+    on_step=None,
+) -> RunRecord:
+    """One closed-loop run of ``scenario`` (a :class:`Scenario`, a shipped name or a .toml path).
+
+    ``controller`` overrides the scenario's: a name (as ``--controller``), a class (built as
+    ``Class(T=..., **params)``) or an object of one, which is run as it is (its ``reset(rng)`` is
+    called first). ``sink`` (:mod:`mlpfac.log`) receives the recording; ``on_step(k)`` is called
+    after every step. A status "diverged" or "interrupted" keeps what was recorded; what a user's
+    controller raises is a :class:`~mlpfac.exceptions.PluginError`.
+    """
+    from mlpfac.runner import build
+    from mlpfac.runner import run as run_scenario
+
+    scn = _scenario(scenario)
+    instance = None
+    if controller is not None and not isinstance(controller, str | Path | type):
+        instance, controller = controller, type(controller)
+    spec = None if controller is None else _spec(controller, "controller")
+    scn = scn.with_overrides(spec, seed, duration, flag="controller")
+    return run_scenario(scn, sink=sink, on_step=on_step, built=build(scn, instance))
+
+
+def sweep(
+    scenarios,
+    controllers=None,
+    seeds: str | int | list[int] = "0-9",
+    *,
+    out: str | Path | None = None,
+    duration: float | None = None,
+    workers: int | None = None,
+    batched: bool = False,
+    batch_size: int = 64,
+    scheduler: str | None = None,
+    save_rrd: bool = False,
+) -> list[dict]:
+    """Run scenarios x controllers x seeds (as ``mlpfac sweep``) and return the sweep's rows: the
+    ``rows`` of sweep.json, one per scenario, controller and phase. With ``out`` the folder is
+    written as the command writes it (and resumed: runs already done are not run again); without,
+    the runs are made in a temporary folder that is removed. ``controllers`` None: each scenario's
+    own. A class no file or module names (defined in a notebook) runs in this process only.
+
+    The returned list has ``.errors`` ({(scenario, controller, seed): traceback}) and ``.paired``
+    (the rows of paired.json). Ctrl-C raises KeyboardInterrupt; the runs written are kept."""
+    from mlpfac.sweeps import engine
+
+    if isinstance(scenarios, str | Path):
+        scenarios = [scenarios]
+    if isinstance(seeds, int):
+        seeds = str(seeds)
+    elif not isinstance(seeds, str):
+        seeds = ",".join(str(s) for s in seeds)
+    text = None
+    if controllers is not None:
+        specs = [
+            _spec(c, "controllers") for c in ([controllers] if isinstance(controllers, str | type) else controllers)
+        ]
+        if any(s.startswith("<local>:") for s in specs) and (scheduler or (workers or 1) > 1):
+            warnings.warn("a class defined in this session runs in this process only (workers=1)", stacklevel=2)
+            workers, scheduler = 1, None
+        text = ",".join(specs)
+    tmp = None if out is not None else Path(tempfile.mkdtemp(prefix="mlpfac-sweep-"))
+    try:
+        result = engine.sweep_folder(
+            [str(s) for s in scenarios],
+            text,
+            seeds,
+            Path(out) if out is not None else tmp,
+            duration=duration,
+            workers=workers if workers is not None else 2,
+            batched=batched,
+            batch_size=batch_size,
+            scheduler=scheduler,
+            save_rrd=save_rrd,
+            progress=False,
+        )
+    finally:
+        if tmp is not None:
+            shutil.rmtree(tmp, ignore_errors=True)
+    if result.outcome.interrupted:
+        raise KeyboardInterrupt
+    rows = Rows(result.rows)
+    rows.errors, rows.paired = dict(result.outcome.errors), result.paired
+    return rows
+
+
+class Rows(list):
+    """The rows of a sweep, with its failed runs (``errors``) and its paired rows (``paired``)."""
+
+    errors: dict
+    paired: list

@@ -1,0 +1,358 @@
+"""Your own controller in the testbed: how a name becomes a class, and the contract it keeps.
+
+**The contract** (the shipped controllers keep it too):
+
+- a class, built as ``Class(T=<control period in s>, **params)``; ``params`` are the scenario's
+  ``[controller.params]`` table;
+- ``step(e, r) -> (v, omega)`` for one run: ``e`` = (e1, e2, e3), the tracking error (2) of the
+  measured pose, in the reference's frame; ``r`` = (x_r, y_r, theta_r, v_r, omega_r), the
+  reference sample; the command (v [m/s], omega [rad/s]) goes to the robot's inverse kinematics;
+- optional ``reset(rng)``: called before every run with a seeded ``numpy.random.Generator``
+  (the run's controller stream), so one seed gives the same run every time;
+- optional ``telemetry() -> dict``: floats or small arrays (at most 256 values each), the same
+  keys every step; recorded in ``run.rrd`` under ``ctrl/<key>``. Two keys have a meaning: ``z``
+  (weights: max |z| in metrics.json) and ``mean_diag_P`` (its final value in metrics.json);
+- optional ``name`` (str): the controller's name in folders and tables (default: the class name;
+  not one of the shipped names);
+- optional ``labels``: ``{telemetry key: [component names]}`` for the viewer;
+- optional batch form, for ``--batched``: ``batched = True``, and then ``reset`` may be given a list
+  of B generators, after which ``step`` gets e of shape (B, 3) and returns (B, 2), and telemetry
+  values have a leading B axis. Without it, a batched sweep runs such a controller's seeds one by one.
+
+A ``step`` that returns a command of another shape, or NaN / inf, ends that run as ``diverged``
+with the reason; an exception in the controller's own code is a :class:`~mlpfac.exceptions.PluginError`
+(the run fails, with the controller's traceback).
+
+**Names** (``--controller``, ``--controllers``, ``[controller] name``, :func:`mlpfac.run`,
+:func:`mlpfac.sweep`): a shipped controller; ``path/to/file.py:Class`` (relative to the current
+folder on the command line, to the scenario file's folder in a scenario file); ``package.module:Class``
+(importable); or a name an installed package registers in the entry-point group ``mlpfac.controllers``
+(``name = "module:Class"``).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import importlib
+import importlib.util
+import inspect
+import re
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from mlpfac.exceptions import ConfigError, PluginError
+
+GROUP = "mlpfac.controllers"  # the entry-point group an installed package registers controllers in
+NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._+-]*")  # a controller's name is a folder name
+MAX_TELEMETRY = 256  # values per telemetry key
+_LOCAL: dict[str, type] = {}  # classes handed to the Python API that no file or module names
+
+
+@dataclass(frozen=True)
+class Plugin:
+    """A user's controller, resolved: what the scenario table names and what it ran."""
+
+    spec: str  # as the table holds it: "/abs/file.py:Class", "package.module:Class" or an entry-point name
+    target: str  # what is loaded: "/abs/file.py:Class" or "package.module:Class"
+    name: str  # its name in folders, tables and metrics
+    origin: str  # "file", "module", "entry point (DIST)" or "this process"
+    sha256: str | None  # of the file that defines it (None: no file)
+    batched: bool  # it has the batch form
+    params: dict = field(default_factory=dict, compare=False)
+    cls: type | None = field(default=None, compare=False, repr=False)
+
+    def provenance(self) -> dict:
+        out = {"target": self.target, "origin": self.origin}
+        return out | ({"sha256": self.sha256} if self.sha256 else {})
+
+
+def is_plugin_spec(text: str) -> bool:
+    """Whether a controller name is a plug-in (not one of the shipped controllers)."""
+    from mlpfac.controllers import CONTROLLERS
+
+    return text not in CONTROLLERS
+
+
+def absolute_spec(spec: str, base: Path) -> str:
+    """``file.py:Class`` with a relative path made absolute against ``base``; other names unchanged."""
+    path, sep, cls = spec.rpartition(":")
+    if sep and path.endswith(".py") and not Path(path).expanduser().is_absolute():
+        return f"{(base / Path(path).expanduser()).resolve()}:{cls}"
+    return spec
+
+
+def entry_points() -> dict[str, tuple[str, str]]:
+    """Controllers registered by installed packages: name -> (``module:Class``, distribution)."""
+    from importlib.metadata import entry_points as eps
+
+    out = {}
+    for ep in eps(group=GROUP):
+        dist = ep.dist.name if getattr(ep, "dist", None) is not None else "?"
+        out.setdefault(ep.name, (ep.value, dist))
+    return out
+
+
+def local_spec(cls: type) -> str:
+    """A name for a class given to the Python API: its file or module if they name it, else this process's."""
+    module = sys.modules.get(cls.__module__)
+    qual = cls.__qualname__
+    if "<locals>" not in qual and getattr(module, qual.split(".")[0], None) is not None:
+        if cls.__module__ == "__main__" or cls.__module__.startswith("mlpfac_plugin_"):
+            file = getattr(module, "__file__", None)
+            if file and "." not in qual and Path(file).suffix == ".py":
+                return f"{Path(file).resolve()}:{qual}"
+        elif "." not in qual:
+            return f"{cls.__module__}:{qual}"
+    key = f"<local>:{qual}#{id(cls):x}"
+    _LOCAL[key] = cls
+    return key
+
+
+def resolve(spec: str, params: dict | None, T: float, where: str, params_where: str = "[controller.params]") -> Plugin:
+    """The plug-in a name refers to, checked against the contract; ConfigError naming ``where``
+    (the flag, or the file and key) for a missing file, module or class, a class without ``step``,
+    or parameters it does not accept (``params`` None: not checked). Nothing of the controller runs
+    here but its module's import."""
+    origin = "module"
+    target = spec
+    if spec in _LOCAL:
+        cls, sha, origin = _LOCAL[spec], None, "this process"
+    else:
+        if ":" not in spec:
+            found = entry_points().get(spec)
+            if found is None:
+                raise ConfigError(where, f"unknown controller {spec!r}; {_choices()}")
+            target, origin = found[0], f"entry point ({found[1]})"
+        cls, sha, kind = _load(target, where)
+        origin = "file" if kind == "file" else origin
+    if not inspect.isclass(cls):
+        raise ConfigError(where, f"{target} is not a class (a controller is a class with step(e, r))")
+    if not callable(getattr(cls, "step", None)):
+        raise ConfigError(where, f"{target} has no step(e, r) method (the controller contract: mlpfac.plugins)")
+    name = _name(cls, spec if origin.startswith("entry point") else None, where)
+    if params is not None:
+        _check_params(cls, T, params, where, params_where)
+    return Plugin(spec, target, name, origin, sha, getattr(cls, "batched", False) is True, dict(params or {}), cls)
+
+
+def _choices() -> str:
+    from mlpfac.controllers import CONTROLLERS
+
+    eps = sorted(entry_points())
+    return (
+        f"choose one of {', '.join(CONTROLLERS)}"
+        + (f", or an installed one: {', '.join(eps)}" if eps else "")
+        + ", or your own as path/to/file.py:Class or package.module:Class"
+    )
+
+
+def _name(cls: type, entry: str | None, where: str) -> str:
+    from mlpfac.controllers import CONTROLLERS
+
+    name = entry or getattr(cls, "name", None)
+    if not isinstance(name, str):
+        name = cls.__name__
+    if not NAME.fullmatch(name):
+        raise ConfigError(
+            where, f"the controller's name {name!r} must be letters, digits and . _ + - (it names folders)"
+        )
+    if name in CONTROLLERS:
+        raise ConfigError(
+            where, f"the controller's name {name!r} is a shipped controller's; give the class another name"
+        )
+    return name
+
+
+def _load(target: str, where: str) -> tuple[object, str | None, str]:
+    """The object ``module:Class`` or ``/path/file.py:Class`` names; (object, sha256 of its file, kind)."""
+    left, sep, attr = target.rpartition(":")
+    if not sep or not left or not attr:
+        raise ConfigError(where, f"{target!r}: name a class as path/to/file.py:Class or package.module:Class")
+    if left.endswith(".py"):
+        path = Path(left).expanduser()
+        try:
+            data = path.read_bytes()
+        except FileNotFoundError:
+            raise ConfigError(where, f"{path}: no such file") from None
+        except OSError as err:
+            raise ConfigError(where, f"{path}: cannot read ({err.strerror or err})") from None
+        sha = hashlib.sha256(data).hexdigest()
+        mod_name = f"mlpfac_plugin_{sha[:16]}_{re.sub(r'[^A-Za-z0-9_]', '_', path.stem)}"
+        module = sys.modules.get(mod_name)
+        if module is None:
+            spec = importlib.util.spec_from_file_location(mod_name, path)
+            if spec is None or spec.loader is None:
+                raise ConfigError(where, f"{path}: not a Python file")
+            module = importlib.util.module_from_spec(spec)
+            sys.modules[mod_name] = module
+            try:
+                spec.loader.exec_module(module)
+            except BaseException as err:
+                del sys.modules[mod_name]
+                if isinstance(err, KeyboardInterrupt):
+                    raise
+                raise ConfigError(where, f"{path}: importing it raised {_one_line(err)}") from None
+        kind = "file"
+    else:
+        try:
+            module = importlib.import_module(left)
+        except ModuleNotFoundError as err:
+            raise ConfigError(where, f"no module named {err.name!r} (importing {left})") from None
+        except Exception as err:
+            raise ConfigError(where, f"importing {left} raised {_one_line(err)}") from None
+        file = getattr(module, "__file__", None)
+        sha = _file_sha(file)
+        kind = "module"
+    obj = module
+    for part in attr.split("."):
+        obj = getattr(obj, part, None)
+        if obj is None:
+            raise ConfigError(where, f"{left} has no class {attr!r}")
+    return obj, sha, kind
+
+
+def _file_sha(file: str | None) -> str | None:
+    try:
+        return hashlib.sha256(Path(file).read_bytes()).hexdigest() if file else None
+    except OSError:
+        return None
+
+
+def _one_line(err: BaseException) -> str:
+    text = f"{type(err).__name__}: {err}".splitlines()[0]
+    tb = inspect.trace()[-1] if sys.exc_info()[0] is not None else None
+    if isinstance(err, SyntaxError) and err.lineno:
+        return f"{text} (line {err.lineno})"
+    return text + (f" ({Path(tb.filename).name}, line {tb.lineno})" if tb is not None else "")
+
+
+def _check_params(cls: type, T: float, params: dict, where: str, params_where: str) -> None:
+    try:
+        sig = inspect.signature(cls)
+    except (TypeError, ValueError):
+        return  # a class whose signature cannot be read is trusted
+    try:
+        sig.bind(T=T, **params)
+    except TypeError as err:
+        text = str(err)
+        bad = re.search(r"keyword argument '(\w+)'", text)
+        if bad and bad.group(1) != "T":
+            raise ConfigError(f"{params_where} {bad.group(1)}", f"{cls.__name__} does not take it ({text})") from None
+        if "T" not in sig.parameters and not any(p.kind is p.VAR_KEYWORD for p in sig.parameters.values()):
+            raise ConfigError(where, f"{cls.__name__}(T=..., **params) must take T, the control period in s") from None
+        raise ConfigError(params_where, f"{cls.__name__}(T=..., **params): {text}") from None
+
+
+class PluginController:
+    """A plug-in stepped as the runner steps every controller (a batch of B seeds, arrays (B, ...)):
+    one instance per seed, or one instance in its batch form. What the controller's own code
+    raises becomes a :class:`PluginError`; a bad command ends its seed as diverged (``why``)."""
+
+    def __init__(self, plugin: Plugin, T: float, instance: object | None = None) -> None:
+        self.plugin, self.T = plugin, float(T)
+        self.name = plugin.name
+        cls = plugin.cls if plugin.cls is not None else type(instance)
+        labels = getattr(cls, "labels", None)
+        self.labels = dict(labels) if isinstance(labels, dict) else {}
+        self._given = instance
+        self.why: dict[int, str] = {}
+
+    def _call(self, what: str, fn, *args):
+        try:
+            return fn(*args)
+        except (KeyboardInterrupt, PluginError):
+            raise
+        except Exception as err:
+            raise PluginError(self.name, what, err) from err
+
+    def reset(self, rngs) -> None:
+        rngs = [rngs] if isinstance(rngs, np.random.Generator) else list(rngs)
+        self.B, self.why, self.live = len(rngs), {}, list(range(len(rngs)))
+        self._keys: tuple[str, ...] | None = None
+        make = self.plugin.cls
+        if self.plugin.batched:
+            self.objs = [self._given if self._given is not None else self._call("__init__", self._new, make)]
+            if hasattr(self.objs[0], "reset"):
+                self._call("reset", self.objs[0].reset, rngs if self.B > 1 or self._given is None else rngs[0])
+            return
+        if self._given is not None and self.B > 1:
+            raise ValueError("a controller object runs one seed; pass its class to run a batch")
+        self.objs = (
+            [self._given] if self._given is not None else [self._call("__init__", self._new, make) for _ in rngs]
+        )
+        for obj, rng in zip(self.objs, rngs, strict=True):
+            if hasattr(obj, "reset"):
+                self._call("reset", obj.reset, rng)
+
+    def _new(self, cls: type):
+        return cls(T=self.T, **self.plugin.params)
+
+    def step(self, e: np.ndarray, r: np.ndarray) -> np.ndarray:
+        u = np.full((self.B, 2), np.nan)
+        if self.plugin.batched:
+            E = e if self.B > 1 or self._given is None else e[0]
+            out = self._command(self._call("step", self.objs[0].step, E, r), (self.B, 2) if E.ndim == 2 else (2,))
+            if isinstance(out, str):
+                self.why.update(dict.fromkeys(self.live, out))
+            else:
+                u[:] = out
+            return u
+        for b in self.live:
+            out = self._command(self._call("step", self.objs[b].step, e[b].copy(), r.copy()), (2,))
+            if isinstance(out, str):
+                self.why[b] = out
+            else:
+                u[b] = out
+        return u
+
+    @staticmethod
+    def _command(out, shape: tuple[int, ...]) -> np.ndarray | str:
+        """The command as an array of ``shape``, or why it is not one."""
+        try:
+            u = np.asarray(out, dtype=float)
+        except (TypeError, ValueError):
+            return f"step returned {type(out).__name__}, not (v, omega)"
+        if u.shape != shape:
+            return f"step returned shape {u.shape}, expected {shape} (v, omega)"
+        if not np.isfinite(u).all():
+            return f"step returned a non-finite command {np.array2string(u, precision=3)}"
+        return u
+
+    def telemetry(self) -> dict[str, np.ndarray]:
+        objs = self.objs
+        if not hasattr(objs[0], "telemetry"):
+            return {}
+        rows = [self._call("telemetry", o.telemetry) for o in objs]
+        if self._keys is None:
+            self._keys = tuple(rows[0]) if isinstance(rows[0], dict) else ()
+            self._shapes: dict[str, tuple] = {}
+        out = {}
+        for key in self._keys:
+            try:
+                vals = [np.asarray(row[key], dtype=float) for row in rows]
+            except (KeyError, TypeError, ValueError) as err:
+                raise PluginError(self.name, "telemetry", ValueError(f"key {key!r}: {_one_line(err)}")) from None
+            v = np.stack(vals) if not self.plugin.batched else vals[0]
+            if self.plugin.batched and (self.B == 1 and self._given is not None):
+                v = v[None]
+            shape = self._shapes.setdefault(key, v.shape)
+            if v.shape != shape or v[0].size > MAX_TELEMETRY:
+                raise PluginError(
+                    self.name,
+                    "telemetry",
+                    ValueError(
+                        f"key {key!r} has shape {v.shape[1:]}; each key keeps one shape of at most {MAX_TELEMETRY} values"
+                    ),
+                )
+            out[key] = v
+        return out
+
+    def drop(self, b: int) -> None:
+        if b in self.live:
+            self.live.remove(b)
+        drop = getattr(self.objs[0], "drop", None)
+        if self.plugin.batched and drop is not None:
+            self._call("drop", drop, b)

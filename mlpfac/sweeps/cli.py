@@ -1,0 +1,125 @@
+"""The command line of sweeps: ``mlpfac sweep`` and ``mlpfac compare``, a shell over
+:func:`mlpfac.sweeps.engine.sweep_folder` (one engine, two tables)."""
+
+from __future__ import annotations
+
+import argparse
+import shlex
+import sys
+from pathlib import Path
+
+from mlpfac.sweeps.engine import (
+    COMPARE_COLUMNS,
+    EXIT_FAILED,
+    EXIT_INTERRUPTED,
+    EXIT_OK,
+    EXIT_TERMINATED,
+    SWEEP_COLUMNS,
+    WorkerLostError,
+    markdown,
+    summary,
+    sweep_folder,
+)
+
+COMPARE_CONTROLLERS = ("adaptive", "corradini", "kanayama")
+CONTROLLERS_HELP = "shipped names, path/to/file.py:Class, package.module:Class or installed names"
+
+
+def _add_common(p: argparse.ArgumentParser, seeds: str, out: str) -> None:
+    p.add_argument("--seeds", default=seeds, help=f"seeds: 0-99, 3, 0,2,5 or 0-4,10 (default {seeds})")
+    p.add_argument("--duration", type=float, help="override every scenario's duration in seconds")
+    p.add_argument(
+        "--out", type=Path, default=Path(out), help=f"results folder (default {out}); re-running skips whole runs"
+    )
+    g = p.add_argument_group("execution")
+    g.add_argument("--workers", type=int, default=None, help="local worker processes (default: number of CPUs)")
+    g.add_argument(
+        "--batched",
+        action="store_true",
+        help="step the seeds of one scenario and controller together (runner.run_batch)",
+    )
+    g.add_argument("--batch-size", type=int, default=64, help="seeds per batch with --batched (default 64)")
+    g.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        help="run on an existing Dask cluster, e.g. tcp://10.0.0.5:8786 (workers need `pip install -e .`)",
+    )
+    g.add_argument(
+        "--scheduler-timeout", type=float, default=10.0, help="seconds to wait for the scheduler (default 10)"
+    )
+    g.add_argument("--save-rrd", action="store_true", help="also save each run's rerun recording as run.rrd")
+
+
+def add_sweep_arguments(p: argparse.ArgumentParser) -> None:
+    p.description = (
+        "Monte Carlo sweep: scenarios x controllers x seeds -> mean, median, 95 % CI per phase (CSV, Markdown, JSON)."
+    )
+    p.add_argument("scenarios", nargs="+", help="shipped scenario names or paths to .toml files")
+    p.add_argument(
+        "--controllers", help=f"comma-separated controllers: {CONTROLLERS_HELP} (default: each scenario's own)"
+    )
+    _add_common(p, "0-99", "runs/sweep")
+
+
+def add_compare_arguments(p: argparse.ArgumentParser) -> None:
+    p.description = (
+        "Compare controllers on scenarios and seeds: position RMS, max error, heading RMS, bounded k/n per phase."
+    )
+    p.add_argument("scenarios", nargs="*", help="scenario names or .toml paths (default: every shipped scenario)")
+    p.add_argument(
+        "--controllers",
+        default=",".join(COMPARE_CONTROLLERS),
+        help=f"comma-separated: {CONTROLLERS_HELP} (default {','.join(COMPARE_CONTROLLERS)})",
+    )
+    _add_common(p, "0-9", "runs/compare")
+
+
+def run_sweep_cli(args: argparse.Namespace) -> int:
+    return _run_cli(args, "sweep", SWEEP_COLUMNS)
+
+
+def run_compare_cli(args: argparse.Namespace) -> int:
+    if not args.scenarios:
+        from mlpfac.scenario import scenario_names
+
+        args.scenarios = scenario_names()
+    return _run_cli(args, "compare", COMPARE_COLUMNS)
+
+
+def _run_cli(args: argparse.Namespace, stem: str, columns) -> int:
+    """Validate everything, then run; 0 done, 1 some run failed, 2 bad input or a failed write
+    (one line naming the path), 130 interrupted (Ctrl-C), 143 terminated (SIGTERM)."""
+    cmd = shlex.join(["mlpfac", *sys.argv[1:]]) if sys.argv[1:] else f"mlpfac {stem} ..."
+    try:
+        res = sweep_folder(
+            args.scenarios, args.controllers, args.seeds, args.out, duration=args.duration, workers=args.workers,
+            batched=args.batched, batch_size=args.batch_size, scheduler=args.scheduler,
+            scheduler_timeout=args.scheduler_timeout, save_rrd=args.save_rrd, stem=stem, columns=columns, command=cmd,
+        )  # fmt: skip
+    except WorkerLostError as err:
+        print(f"mlpfac: error: {err}; every run written is whole, resume with: {cmd}", file=sys.stderr)
+        return EXIT_FAILED
+    oc, jobs = res.outcome, res.jobs
+    if oc.interrupted:
+        print(
+            f"mlpfac: {'terminated' if oc.terminated else 'interrupted'}; {len(oc.metrics)} of {len(jobs)} runs"
+            f" are done and kept in {args.out}.\nResume with the same command:\n  {cmd}",
+            file=sys.stderr,
+        )
+        return EXIT_TERMINATED if oc.terminated else EXIT_INTERRUPTED
+    print(markdown(res.rows, columns), end="")
+    print("\n" + summary(res.paired), end="")
+    redo = sum(oc.redo.values())
+    why = "; ".join(f"{k} {v}" for k, v in oc.redo.items())
+    print(
+        f"{len(jobs)} runs ({oc.skipped} already done, {oc.ran} run now in {oc.wall_s:.1f} s"
+        + (f", of which {redo} were found but run again: {why}" if redo else "")
+        + f") -> {', '.join(map(str, res.paths))}"
+    )
+    for key, err in oc.errors.items():
+        last = err.strip().splitlines()[-1] if err.strip() else "error"
+        print(
+            f"mlpfac: error: run {key[0]} / {key[1]} / seed {key[2]} raised: {last} (see error.txt; re-run to retry)",
+            file=sys.stderr,
+        )
+    return EXIT_FAILED if oc.errors else EXIT_OK

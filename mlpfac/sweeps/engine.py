@@ -1,0 +1,198 @@
+"""Experiments at scale: scenarios x controllers x seeds -> run folders -> one table.
+
+``mlpfac sweep`` and ``mlpfac compare`` (:mod:`mlpfac.sweeps.cli`) and :func:`mlpfac.sweep` are one
+engine with two tables. It lives in :mod:`mlpfac.sweeps` (``plan``, ``worker``, ``folders``,
+``execute``, ``tables``); this module runs it into a folder (:func:`sweep_folder`), and every name
+below is importable from here:
+
+1. **Plan** (:func:`plan`): every scenario is loaded and resolved once per controller with
+   :meth:`Scenario.with_overrides` before anything runs, so bad input is a :class:`ConfigError`
+   and no run folder exists yet; each seed's table is that table with its seed (the table
+   ``with_overrides(seed=...)`` gives). More than ``MAX_RUNS`` runs is refused.
+2. **Execute** (:func:`execute`): runs already done are skipped; the rest go to this process
+   (``workers=1``), a local process pool, or a Dask cluster (``scheduler``), one run or one batch
+   of seeds (``batched``, see :func:`mlpfac.runner.run_batch`) per task. Workers compute and return the
+   metrics; **the client writes every run folder**, so Dask workers need no shared disk::
+
+       DIR/<scenario>/<controller>/seed-0003/config.toml    the scenario as resolved
+       DIR/<scenario>/<controller>/seed-0003/run.rrd        only with save_rrd
+       DIR/<scenario>/<controller>/seed-0003/metrics.json   = run_metrics.metrics(rec), written last
+
+   Each file goes through a temporary file and ``os.replace``; metrics.json comes last, so a
+   folder with metrics.json is whole. A run counts as done (:func:`check_done`) when config.toml
+   equals the resolved scenario, metrics.json is a metrics dict of this scenario, controller and
+   seed, and with ``save_rrd`` run.rrd has the size and sha256 recorded in metrics.json; any other
+   folder is run again, and the summary says how many and why.
+
+   The sweep holds ``folder_lock(DIR)`` throughout: a second sweep into DIR stops with one line.
+   Recordings are made in ``DIR/.tmp`` (removed at the end; a killed sweep's is removed by the
+   next one); a recording without rerun's footer (a full disk) is a failed run. Local workers are
+   fresh interpreters with one BLAS thread each that die with the sweep (``PR_SET_PDEATHSIG``
+   and a thread watching the parent), so a killed sweep leaves no worker behind.
+3. **Aggregate** (:func:`aggregate`): per scenario, controller and phase ("before" / "after" the
+   first event; only "before" when the scenario has no event); and **pair** (:func:`paired_rows`,
+   :mod:`mlpfac.sweeps.paired`): per seed against Corradini's law, the oracle and the controller's
+   own run without the event, in paired.csv / .md / .json and summary.md.
+
+How runs enter the statistics: each run is tracking, lost or diverged (``outcome`` in
+metrics.json, :func:`mlpfac.run_metrics.outcome`); the position / heading RMS statistics (mean, median,
+95 % confidence interval of the mean, Student t) are over the runs that finished (tracking or lost;
+status "ok"), next to the three counts. The worst seed is the diverged run that
+diverged first (fewest steps, then lowest seed) if any diverged, else the bounded run with the
+largest position RMS in that phase. A run that raised an exception (a bug, not a divergence)
+leaves ``error.txt`` and no metrics.json; it is reported, left out of the table, and re-run on
+resume.
+
+Each run is seeded by its own seed only, so the table does not depend on the number of workers,
+the scheduler or batching. Dask workers need this package importable (``pip install -e .`` on
+every worker) and, for MuJoCo scenarios, the model files at the same absolute path.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+from mlpfac.exceptions import ConfigError
+from mlpfac.outputs import folder_lock
+from mlpfac.sweeps.execute import (  # noqa: F401  (the engine's API, used as mlpfac.sweeps.engine.*)
+    BLAS_THREAD_VARIABLES,
+    TMP_DIR,
+    Outcome,
+    WorkerLostError,
+    connect,
+    execute,
+    make_tasks,
+    one_blas_thread,
+)
+from mlpfac.sweeps.folders import (  # noqa: F401
+    PHASES,
+    OutputError,
+    _oserror,
+    check_done,
+    load_done,
+    metrics_problem,
+    write_result,
+)
+from mlpfac.sweeps.paired import paired_rows, summary  # noqa: F401
+from mlpfac.sweeps.plan import MAX_RUNS, Job, check_writable, parse_controllers, parse_seeds, plan  # noqa: F401
+from mlpfac.sweeps.tables import (  # noqa: F401
+    COMPARE_COLUMNS,
+    CSV_FIELDS,
+    SWEEP_COLUMNS,
+    aggregate,
+    markdown,
+    write_paired,
+    write_tables,
+)
+from mlpfac.sweeps.worker import rrd_is_whole, run_task  # noqa: F401
+
+EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_TERMINATED = 0, 1, 2, 130, 143
+WORKERS_PER_CORE = 4  # --workers above this many per core is refused (each worker holds ~130 MB)
+
+
+def check_execution_flags(
+    workers: int | None, batch_size: int = 64, scheduler: str | None = None, scheduler_timeout: float = 10.0
+) -> int:
+    """The number of local workers; ConfigError naming the flag for a value that cannot work."""
+    cores = os.cpu_count() or 1
+    workers = cores if workers is None else workers
+    most = WORKERS_PER_CORE * cores
+    if workers < 1:
+        raise ConfigError("--workers", f"need at least 1, got {workers}")
+    if workers > most and not scheduler:
+        raise ConfigError("--workers", f"at most {most} ({WORKERS_PER_CORE} per core on this machine), got {workers}")
+    if batch_size < 1:
+        raise ConfigError("--batch-size", f"need at least 1, got {batch_size}")
+    t = scheduler_timeout
+    if not (math.isfinite(t) and t > 0):
+        raise ConfigError("--scheduler-timeout", f"must be a positive number of seconds, got {t}")
+    return workers
+
+
+@dataclass
+class SweepResult:
+    """A sweep run into a folder: its plan, what ran, and (unless interrupted) its tables."""
+
+    jobs: list[Job]
+    outcome: Outcome
+    rows: list[dict]
+    paired: list[dict]
+    paths: list[Path]
+    command: str
+
+
+def sweep_folder(
+    scenarios: list[str],
+    controllers: str | None,
+    seeds: str,
+    out: Path,
+    *,
+    duration: float | None = None,
+    workers: int | None = None,
+    batched: bool = False,
+    batch_size: int = 64,
+    scheduler: str | None = None,
+    scheduler_timeout: float = 10.0,
+    save_rrd: bool = False,
+    stem: str = "sweep",
+    columns=SWEEP_COLUMNS,
+    command: str | None = None,
+    progress: bool | None = None,
+) -> SweepResult:
+    """Validate everything, run the plan into ``out`` (resuming it), then write its tables and plots.
+
+    Bad input is a ConfigError before anything runs; a failed write an OutputError (the runs
+    written before are whole); a lost local worker a WorkerLostError. An interrupted sweep returns
+    with ``outcome.interrupted`` and no tables. ``command`` is what re-runs it (for messages)."""
+    seed_list = parse_seeds(seeds)
+    names = parse_controllers(controllers)
+    workers = check_execution_flags(workers, batch_size, scheduler, scheduler_timeout)
+    scenarios = list(dict.fromkeys(scenarios))
+    n = len(scenarios) * len(names) * len(seed_list)
+    if n > MAX_RUNS:
+        raise ConfigError(
+            "--seeds",
+            f"{len(scenarios)} scenarios x {len(names)} controllers x {len(seed_list)} seeds = {n} runs is more "
+            f"than the limit of {MAX_RUNS} per sweep; split the seeds into several sweeps",
+        )
+    if progress is not False:
+        print(f"mlpfac: planning {n} runs ...", file=sys.stderr, flush=True)
+    jobs = plan(scenarios, names, seed_list, duration)
+    check_writable(out)
+    cmd = command or f"mlpfac {stem} ..."
+    client = connect(scheduler, scheduler_timeout) if scheduler else None
+    try:
+        with folder_lock(out, "--out"):
+            try:
+                oc = execute(jobs, out, workers=workers, client=client, batched=batched, batch_size=batch_size,
+                             save_rrd=save_rrd, progress=progress, locked=True)  # fmt: skip
+            except OutputError as err:
+                raise OutputError(f"{err}; the runs written before are whole, resume with: {cmd}") from None
+            rows, prows, paths = aggregate(jobs, oc.metrics), [], []
+            if not oc.interrupted:
+                meta = {
+                    "command": stem,
+                    "scenarios": list(scenarios),
+                    "controllers": sorted({j.controller for j in jobs}),
+                    "seeds": seeds,
+                    "duration": duration,
+                    "runs": len(jobs),
+                }
+                prows = paired_rows(jobs, oc.metrics)
+                try:
+                    paths = write_tables(out, stem, rows, columns, meta) + write_paired(out, prows, meta)
+                    from mlpfac.plots import sweep_plots
+
+                    paths += sweep_plots(out, (stem,))  # <stem>.png beside the table
+                except OSError as err:
+                    raise OutputError(
+                        f"{_oserror(err, str(out))}; every run folder is whole, resume with: {cmd}"
+                    ) from None
+    finally:
+        if client is not None:
+            client.close()
+    return SweepResult(jobs, oc, rows, prows, paths, cmd)
