@@ -27,7 +27,7 @@ class PurePursuit:
     name = "pure-pursuit"  # its name in run folders and tables (default: the class name)
     labels = {"target": ["x", "y"]}  # component names of a telemetry array, for the viewer
 
-    def __init__(self, T: float, lookahead: float = 0.1, k_v: float = 3.0, v_max: float = 2.0) -> None:
+    def __init__(self, T: float, lookahead: float = 0.15, k_v: float = 6.0, v_max: float = 2.0) -> None:
         if not lookahead > 0:
             raise ValueError(f"lookahead must be positive, got {lookahead}")
         self.T, self.lookahead, self.k_v, self.v_max = T, lookahead, k_v, v_max

@@ -117,4 +117,4 @@ class Kanayama:
         return KANAYAMA, np.array(self._consts, dtype=float)
 
 
-CONTROLLERS = (*VARIANTS, "corradini", "kanayama", "oracle")  # oracle: mlpfac/oracle.py
+CONTROLLERS = (*VARIANTS, "corradini", "kanayama", "oracle", "oracle-kanayama")  # the oracles: mlpfac/oracle.py

@@ -35,8 +35,10 @@ def make_controller(scn: Scenario, instance: object | None = None):
         return ctrl
     if scn.controller == "corradini":
         return Corradini(scn.law, scn.T)
-    if scn.controller == "oracle":  # the one controller told the scenario's events
-        return Oracle(scn.law, scn.T, [told(ev) for ev in scn.events], scn.plant_kind == "kinematic")
+    if scn.controller in ("oracle", "oracle-kanayama"):  # the controllers told the scenario's events
+        g = scn.kanayama
+        gains = (g.Kx, g.Ky, g.Ktheta) if scn.controller == "oracle-kanayama" else None
+        return Oracle(scn.law, scn.T, [told(ev) for ev in scn.events], scn.plant_kind == "kinematic", gains)
     return Kanayama(scn.law, scn.kanayama, scn.T)
 
 

@@ -1,4 +1,6 @@
-"""The oracle: the law (35) told every change of the plant, the bound beside each adaptive result.
+"""The oracle: the law (35) told every change of the plant, the bound beside each adaptive result;
+and ``oracle-kanayama``, Kanayama's law told the same changes the same way (the bound on robots
+where (35) itself is not the best law: its gain k2 grows as v_r falls and amplifies pose noise).
 
 It is the one controller that reads the scenario's events (through :func:`told`), and it is told
 only what the nominal design would need to be redone for the changed robot:
@@ -28,6 +30,11 @@ only what the nominal design would need to be redone for the changed robot:
   post-event error in the same run is the bound (the same law on the robot changed from t = 0
   measures the same over that window within noise: ``sims/oracle_from_start.py``, README "Beyond
   the paper").
+
+Kanayama's law is a velocity law, so the same telling is simpler: its command divided by the
+radius scale, and on the robot (not the Euler map (7), where f and G scale alike and the law needs
+no change) by the period factor, so that the robot moves per control step as the law meant; and
+the law acts on the error of the same predicted pose.
 """
 
 from __future__ import annotations
@@ -37,7 +44,7 @@ from collections import deque
 import numpy as np
 
 from mlpfac.events import ControlPeriod, DelayLine, Event, SensorDelay, WheelRadius
-from mlpfac.kernels import corradini_step, seeds, tracking_errors
+from mlpfac.kernels import corradini_step, kanayama_step, seeds, tracking_errors
 from mlpfac.law import Law
 
 GAIN_KINDS = ("wheel_radius", "control_period")
@@ -66,8 +73,19 @@ class Oracle:
     name = "oracle"
     labels: dict[str, list[str]] = {"h_hat": ["h1", "h2", "h5"]}
 
-    def __init__(self, law: Law, T: float, changes: list[tuple[float, str, float]], kinematic: bool) -> None:
+    def __init__(
+        self,
+        law: Law,
+        T: float,
+        changes: list[tuple[float, str, float]],
+        kinematic: bool,
+        kanayama: tuple[float, float, float] | None = None,
+    ) -> None:
+        """``kanayama``: the gains (Kx, Ky, Ktheta) of Kanayama's law, told instead of (35)."""
         self.T = float(T)
+        self.kanayama = kanayama
+        if kanayama is not None:
+            self.name, self.labels = "oracle-kanayama", {}
         self.law = law
         self.changes = sorted(changes, key=lambda c: c[0])
         self.kinematic = kinematic
@@ -86,8 +104,9 @@ class Oracle:
         self.sent: deque = deque(maxlen=max(self._depth, 1))  # (velocity driven (B, 2), seconds) per step
         self._h, self._u = np.zeros((B, 3)), np.zeros((B, 2))
         self._q, self._e = np.zeros((B, 3)), np.zeros((B, 3))
-        self._tele = {"h_hat": self._h[0] if self.single else self._h}
+        self._tele = {"h_hat": self._h[0] if self.single else self._h} if self.kanayama is None else {}
         corradini_step(np.zeros((0, 3)), 1.0, 0.0, self.T, *self.law.lambdas, *self._limits, self._h[:0], self._u[:0])
+        kanayama_step(np.zeros((0, 3)), 1.0, 0.0, 1.0, 1.0, 1.0, *self._limits, self._u[:0])
 
     def _apply(self, kind: str, value: float) -> None:
         if kind == "wheel_radius":
@@ -113,9 +132,12 @@ class Oracle:
         else:
             T_law, c = T, self.hold
         v_max, omega_max = self._limits
-        corradini_step(
-            E, float(r[3]), float(r[4]), T_law, *self.law.lambdas, c * v_max, c * omega_max, self._h, self._u
-        )
+        if self.kanayama is not None:  # a velocity law: the robot's c T per step is c times the motion meant
+            kanayama_step(E, float(r[3]), float(r[4]), *self.kanayama, c * v_max, c * omega_max, self._u)
+        else:
+            corradini_step(
+                E, float(r[3]), float(r[4]), T_law, *self.law.lambdas, c * v_max, c * omega_max, self._h, self._u
+            )
         gain = c * self.radius
         if gain != 1.0:
             self._u /= gain

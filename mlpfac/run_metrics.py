@@ -67,6 +67,7 @@ def metrics(rec: RunRecord) -> dict:
     out["max_abs_weight"] = float(np.max(np.abs(z[:n]))) if z is not None and n else None
     P = rec.ctrl.get("mean_diag_P")
     out["mean_diag_P_final"] = float(P[n - 1]) if P is not None and n else None
+    out["ctrl_final"] = final_telemetry(rec)
     out["events"] = [{k: ev[k] for k in ("time", "kind", "params", "text")} for ev in rec.events]
     out["sim_time_s"] = rec.sim_time_s
     out["wall_time_s"] = rec.wall_time_s
@@ -77,6 +78,19 @@ def metrics(rec: RunRecord) -> dict:
         "bin_steps": w,
         "m2": [float(np.mean(pos2[i : i + w])) for i in range(0, n, w)],
     }
+    return out
+
+
+def final_telemetry(rec: RunRecord, most: int = 8) -> dict:
+    """The controller's telemetry at its last recorded step, for keys of at most ``most`` values
+    (a float, or a list; a non-finite value is None); the weights ``z`` are max_abs_weight's."""
+    out: dict = {}
+    for key, arr in rec.ctrl.items():
+        row = np.asarray(arr[rec.n - 1], dtype=float) if rec.n else np.zeros(most + 1)
+        if key == "z" or row.size > most:
+            continue
+        vals = [float(x) if np.isfinite(x) else None for x in row.ravel()]
+        out[key] = vals[0] if row.ndim == 0 else vals
     return out
 
 

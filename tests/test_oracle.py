@@ -117,6 +117,42 @@ def test_the_oracle_is_corradini_to_the_last_bit_where_it_is_told_nothing():
             assert not np.array_equal(a.u[n:], b.u[n:])
 
 
+GAINS = (10.0, 64.0, 16.0)
+
+
+def kanayama_u(e, r, limits=(2.0, 5.0)) -> np.ndarray:
+    v = r[3] * math.cos(e[2]) + GAINS[0] * e[0]
+    w = r[4] + r[3] * (GAINS[1] * e[1] + GAINS[2] * math.sin(e[2]))
+    return np.array([np.clip(v, -limits[0], limits[0]), np.clip(w, -limits[1], limits[1])])
+
+
+@pytest.mark.parametrize(
+    ("changes", "kinematic", "gain"),
+    [
+        ([], False, 1.0),
+        ([(0.0, "wheel_radius", 1.5)], False, 1.5),
+        ([(0.0, "control_period", 2.0)], False, 2.0),
+        ([(0.0, "control_period", 2.0)], True, 1.0),  # (7): f and G scale alike, the velocity law needs no change
+        ([(0.0, "wheel_radius", 1.1), (0.0, "control_period", 1.5)], False, 1.65),
+    ],
+)
+def test_oracle_kanayama_sends_kanayamas_command_divided_by_what_it_is_told(changes, kinematic, gain):
+    o = Oracle(LAW, T, changes, kinematic, GAINS)
+    o.reset(np.random.default_rng(0))
+    assert o.name == "oracle-kanayama" and o.telemetry() == {}
+    c = dict((kind, v) for _, kind, v in changes).get("control_period", 1.0) if not kinematic else 1.0
+    limits = (2.0 * c, 5.0 * c)
+    np.testing.assert_allclose(o.step(E, R), kanayama_u(E, R, limits) / gain, rtol=1e-14)
+
+
+def test_oracle_kanayama_is_kanayama_to_the_last_bit_before_the_event():
+    scn = load("eight-wheel-radius").with_overrides(duration=12.7)
+    a, b = run(scn.with_overrides(controller="oracle-kanayama")), run(scn.with_overrides(controller="kanayama"))
+    n = int(round(12.5 / T))
+    np.testing.assert_array_equal(a.u[:n], b.u[:n])
+    assert not np.array_equal(a.u[n:], b.u[n:])
+
+
 def test_factory_builds_the_oracle_told_the_events():
     ctrl = make_controller(load("eight-sensor-delay").with_overrides(controller="oracle"))
     assert isinstance(ctrl, Oracle) and ctrl.changes == [(12.5, "sensor_delay", 3.0)] and not ctrl.kinematic

@@ -97,6 +97,7 @@ def test_run_a_file_plugin_from_the_command_line(law, tmp_path, rrd_contents):
     assert sorted(os.listdir(out)) == ["config.toml", "figure1.png", "metrics.json", "run.rrd"]
     m = json.loads((out / "metrics.json").read_text())
     assert m["controller"] == "Law" and m["outcome"] == "tracking"
+    assert m["ctrl_final"] == {"steps": m["steps"], "gain": [10.0, 64.0]}  # its telemetry, where it fits
     config = tomllib.loads((out / "config.toml").read_text())
     assert config["controller"]["name"] == f"{law}:Law"
     prov = config["provenance"]["controller"]
@@ -134,7 +135,7 @@ def test_a_scenario_file_names_its_plugin_relative_to_itself(tmp_path):
     (tmp_path / "scn" / "laws").mkdir()
     (tmp_path / "scn" / "laws" / "pp.py").write_text(EXAMPLE.read_text())
     (tmp_path / "scn" / "mine.toml").write_text(
-        KINEMATIC + '[controller]\nname = "laws/pp.py:PurePursuit"\n[controller.params]\nlookahead = 0.15\n'
+        KINEMATIC + '[controller]\nname = "laws/pp.py:PurePursuit"\n[controller.params]\nlookahead = 0.2\n'
     )
     elsewhere = tmp_path / "elsewhere"
     elsewhere.mkdir()
@@ -142,14 +143,14 @@ def test_a_scenario_file_names_its_plugin_relative_to_itself(tmp_path):
     assert p.returncode == 0, p.stderr
     assert "pure-pursuit" in p.stdout
     config = tomllib.loads((elsewhere / "o" / "config.toml").read_text())
-    assert config["controller"]["params"] == {"lookahead": 0.15}
+    assert config["controller"]["params"] == {"lookahead": 0.2}
     rec = mlpfac.run(tmp_path / "scn" / "mine.toml")
     assert rec.controller == "pure-pursuit" and np.isfinite(rec.ctrl["curvature"][: rec.n]).all()
 
 
 def test_the_example_tracks_on_the_robot():
     m = mlpfac.metrics(mlpfac.run("eight-nominal", controller=f"{EXAMPLE}:PurePursuit", duration=6.0))
-    assert m["status"] == "ok" and m["phases"]["before"]["rms_position_error_m"] < 0.03, m["phases"]
+    assert m["status"] == "ok" and m["phases"]["before"]["rms_position_error_m"] < 0.04, m["phases"]
 
 
 def test_the_python_api_runs_a_class_or_an_object(law):
@@ -350,3 +351,17 @@ def test_an_installed_package_registers_controllers(tmp_path):
     assert m["controller"] == "tiny-kanayama"
     prov = tomllib.loads((tmp_path / "o" / "config.toml").read_text())["provenance"]["controller"]
     assert prov["origin"] == "entry point (tinylaws)" and prov["target"] == "tinylaws:Law"
+
+
+def test_a_plugin_on_a_dask_cluster_gives_the_local_rows(law, tmp_path):
+    """Dask workers load the plug-in from the same absolute path (here: the same machine)."""
+    distributed = pytest.importorskip("distributed")
+    (tmp_path / "k.toml").write_text(KINEMATIC)
+    args = ([tmp_path / "k.toml"], [f"{law}:Law", "corradini"])
+    local = mlpfac.sweep(*args, seeds="0-1", workers=1)
+    with distributed.LocalCluster(
+        host="127.0.0.1", n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None
+    ) as cluster:
+        remote = mlpfac.sweep(*args, seeds="0-1", scheduler=cluster.scheduler_address, out=tmp_path / "dask")
+    assert list(remote) == list(local) and not remote.errors
+    assert (tmp_path / "dask" / "k" / "Law" / "seed-0001" / "metrics.json").exists()

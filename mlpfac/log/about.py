@@ -15,6 +15,7 @@ CONTROLLERS = {
     "corradini": "the law (35) given the nominal h, no learning",
     "kanayama": "Kanayama's kinematic law, no learning",
     "oracle": "the law (35) given the plant's true functions",
+    "oracle-kanayama": "Kanayama's law told the plant's changes (the true radius, period and delay)",
 }
 COLOURS = (
     "**colours**: v, omega: commanded blue, measured orange, reference grey; wheels: left blue, right red, "
