@@ -13,12 +13,42 @@ from typing import Protocol
 import numpy as np
 
 from mlpfac.adaptive import VARIANTS
-from mlpfac.exceptions import ConfigError
+from mlpfac.exceptions import ConfigError, PluginError
 from mlpfac.kernels import CORRADINI, KANAYAMA, corradini_step, kanayama_step, seeds
 from mlpfac.law import Law
+from mlpfac.plugins import Plugin, one_line
+
+MAX_TELEMETRY = 256  # values per telemetry key of a user's controller
 
 
 class Controller(Protocol):
+    """The contract every controller keeps, the shipped ones and a user's own (:mod:`mlpfac.plugins`
+    turns a name into a class; :class:`PluginController` steps a user's class).
+
+    - a class, built as ``Class(T=<control period in s>, **params)``; ``params`` are the scenario's
+      ``[controller.params]`` table;
+    - ``step(e, r) -> (v, omega)`` for one run: ``e`` = (e1, e2, e3), the tracking error (2) of the
+      measured pose, in the robot's frame (e1 ahead, e2 to the left, e3 = theta_r - theta wrapped);
+      ``r`` = (x_r, y_r, theta_r, v_r, omega_r), the
+      reference sample; the command (v [m/s], omega [rad/s]) goes to the robot's inverse kinematics;
+    - optional ``reset(rng)``: called before every run with a seeded ``numpy.random.Generator``
+      (the run's controller stream), so one seed gives the same run every time;
+    - optional ``telemetry() -> dict``: floats or small arrays (at most 256 values each), the same
+      keys and shapes every step; recorded in ``run.rrd`` under ``ctrl/<key>``; keys of at most 8
+      values are in metrics.json (``ctrl_final``: the last step's). Two keys have the adaptive
+      scheme's meaning: ``z`` (weights: ``max_abs_weight``) and ``mean_diag_P`` (``mean_diag_P_final``);
+    - optional ``name`` (str): the controller's name in folders and tables (default: the class name;
+      not one of the shipped names);
+    - optional ``labels``: ``{telemetry key: [component names]}`` for the viewer;
+    - optional batch form, for ``--batched``: ``batched = True``, and then ``reset`` may be given a list
+      of B generators, after which ``step`` gets e of shape (B, 3) and returns (B, 2), and telemetry
+      values have a leading B axis. Without it, a batched sweep runs such a controller's seeds one by one.
+
+    A ``step`` that returns a command of another shape, or NaN / inf, ends that run as ``diverged``
+    with the reason; an exception in the controller's own code is a :class:`~mlpfac.exceptions.PluginError`
+    (the run fails, with the controller's traceback).
+    """
+
     name: str
     labels: dict[str, list[str]]
 
@@ -118,3 +148,115 @@ class Kanayama:
 
 
 CONTROLLERS = (*VARIANTS, "corradini", "kanayama", "oracle", "oracle-kanayama")  # the oracles: mlpfac/oracle.py
+
+
+class PluginController:
+    """A plug-in stepped as the runner steps every controller (a batch of B seeds, arrays (B, ...)):
+    one instance per seed, or one instance in its batch form. What the controller's own code
+    raises becomes a :class:`PluginError`; a bad command ends its seed as diverged (``why``)."""
+
+    def __init__(self, plugin: Plugin, T: float, instance: object | None = None) -> None:
+        self.plugin, self.T = plugin, float(T)
+        self.name = plugin.name
+        cls = plugin.cls if plugin.cls is not None else type(instance)
+        labels = getattr(cls, "labels", None)
+        self.labels = dict(labels) if isinstance(labels, dict) else {}
+        self._given = instance
+        self.why: dict[int, str] = {}
+
+    def _call(self, what: str, fn, *args):
+        try:
+            return fn(*args)
+        except (KeyboardInterrupt, PluginError):
+            raise
+        except Exception as err:
+            raise PluginError(self.name, what, err) from err
+
+    def reset(self, rngs) -> None:
+        rngs = [rngs] if isinstance(rngs, np.random.Generator) else list(rngs)
+        self.B, self.why, self.live = len(rngs), {}, list(range(len(rngs)))
+        self._keys: tuple[str, ...] | None = None
+        make = self.plugin.cls
+        if self.plugin.batched:
+            self.objs = [self._given if self._given is not None else self._call("__init__", self._new, make)]
+            if hasattr(self.objs[0], "reset"):
+                self._call("reset", self.objs[0].reset, rngs if self.B > 1 or self._given is None else rngs[0])
+            return
+        if self._given is not None and self.B > 1:
+            raise ValueError("a controller object runs one seed; pass its class to run a batch")
+        self.objs = (
+            [self._given] if self._given is not None else [self._call("__init__", self._new, make) for _ in rngs]
+        )
+        for obj, rng in zip(self.objs, rngs, strict=True):
+            if hasattr(obj, "reset"):
+                self._call("reset", obj.reset, rng)
+
+    def _new(self, cls: type):
+        return cls(T=self.T, **self.plugin.params)
+
+    def step(self, e: np.ndarray, r: np.ndarray) -> np.ndarray:
+        u = np.full((self.B, 2), np.nan)
+        if self.plugin.batched:
+            E = e if self.B > 1 or self._given is None else e[0]
+            out = self._command(self._call("step", self.objs[0].step, E, r), (self.B, 2) if E.ndim == 2 else (2,))
+            if isinstance(out, str):
+                self.why.update(dict.fromkeys(self.live, out))
+            else:
+                u[:] = out
+            return u
+        for b in self.live:
+            out = self._command(self._call("step", self.objs[b].step, e[b].copy(), r.copy()), (2,))
+            if isinstance(out, str):
+                self.why[b] = out
+            else:
+                u[b] = out
+        return u
+
+    @staticmethod
+    def _command(out, shape: tuple[int, ...]) -> np.ndarray | str:
+        """The command as an array of ``shape``, or why it is not one."""
+        try:
+            u = np.asarray(out, dtype=float)
+        except (TypeError, ValueError):
+            return f"step returned {type(out).__name__}, not (v, omega)"
+        if u.shape != shape:
+            return f"step returned shape {u.shape}, expected {shape} (v, omega)"
+        if not np.isfinite(u).all():
+            return f"step returned a non-finite command {np.array2string(u, precision=3)}"
+        return u
+
+    def telemetry(self) -> dict[str, np.ndarray]:
+        objs = self.objs
+        if not hasattr(objs[0], "telemetry"):
+            return {}
+        rows = [self._call("telemetry", o.telemetry) for o in objs]
+        if self._keys is None:
+            self._keys = tuple(rows[0]) if isinstance(rows[0], dict) else ()
+            self._shapes: dict[str, tuple] = {}
+        out = {}
+        for key in self._keys:
+            try:
+                vals = [np.asarray(row[key], dtype=float) for row in rows]
+            except (KeyError, TypeError, ValueError) as err:
+                raise PluginError(self.name, "telemetry", ValueError(f"key {key!r}: {one_line(err)}")) from None
+            v = np.stack(vals) if not self.plugin.batched else vals[0]
+            if self.plugin.batched and (self.B == 1 and self._given is not None):
+                v = v[None]
+            shape = self._shapes.setdefault(key, v.shape)
+            if v.shape != shape or v[0].size > MAX_TELEMETRY:
+                raise PluginError(
+                    self.name,
+                    "telemetry",
+                    ValueError(
+                        f"key {key!r} has shape {v.shape[1:]}; each key keeps one shape of at most {MAX_TELEMETRY} values"
+                    ),
+                )
+            out[key] = v
+        return out
+
+    def drop(self, b: int) -> None:
+        if b in self.live:
+            self.live.remove(b)
+        drop = getattr(self.objs[0], "drop", None)
+        if self.plugin.batched and drop is not None:
+            self._call("drop", drop, b)

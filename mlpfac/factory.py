@@ -14,10 +14,9 @@ import dataclasses
 import numpy as np
 
 from mlpfac.adaptive import VARIANTS, Adaptive
-from mlpfac.controllers import Corradini, Kanayama
+from mlpfac.controllers import Corradini, Kanayama, PluginController
 from mlpfac.exceptions import ConfigError
 from mlpfac.oracle import Oracle, told
-from mlpfac.plugins import PluginController
 from mlpfac.scenario import Scenario
 
 

@@ -1,27 +1,5 @@
-"""Your own controller in the testbed: how a name becomes a class, and the contract it keeps.
-
-**The contract** (the shipped controllers keep it too):
-
-- a class, built as ``Class(T=<control period in s>, **params)``; ``params`` are the scenario's
-  ``[controller.params]`` table;
-- ``step(e, r) -> (v, omega)`` for one run: ``e`` = (e1, e2, e3), the tracking error (2) of the
-  measured pose, in the reference's frame; ``r`` = (x_r, y_r, theta_r, v_r, omega_r), the
-  reference sample; the command (v [m/s], omega [rad/s]) goes to the robot's inverse kinematics;
-- optional ``reset(rng)``: called before every run with a seeded ``numpy.random.Generator``
-  (the run's controller stream), so one seed gives the same run every time;
-- optional ``telemetry() -> dict``: floats or small arrays (at most 256 values each), the same
-  keys every step; recorded in ``run.rrd`` under ``ctrl/<key>``. Two keys have a meaning: ``z``
-  (weights: max |z| in metrics.json) and ``mean_diag_P`` (its final value in metrics.json);
-- optional ``name`` (str): the controller's name in folders and tables (default: the class name;
-  not one of the shipped names);
-- optional ``labels``: ``{telemetry key: [component names]}`` for the viewer;
-- optional batch form, for ``--batched``: ``batched = True``, and then ``reset`` may be given a list
-  of B generators, after which ``step`` gets e of shape (B, 3) and returns (B, 2), and telemetry
-  values have a leading B axis. Without it, a batched sweep runs such a controller's seeds one by one.
-
-A ``step`` that returns a command of another shape, or NaN / inf, ends that run as ``diverged``
-with the reason; an exception in the controller's own code is a :class:`~mlpfac.exceptions.PluginError`
-(the run fails, with the controller's traceback).
+"""Your own controller in the testbed: how a name becomes a class (the contract it keeps is the
+:class:`~mlpfac.controllers.Controller` protocol's docstring, and docs/controllers.md).
 
 **Names** (``--controller``, ``--controllers``, ``[controller] name``, :func:`mlpfac.run`,
 :func:`mlpfac.sweep`): a shipped controller; ``path/to/file.py:Class`` (relative to the current
@@ -41,13 +19,10 @@ import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import numpy as np
-
-from mlpfac.exceptions import ConfigError, PluginError
+from mlpfac.exceptions import ConfigError
 
 GROUP = "mlpfac.controllers"  # the entry-point group an installed package registers controllers in
 NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._+-]*")  # a controller's name is a folder name
-MAX_TELEMETRY = 256  # values per telemetry key
 _LOCAL: dict[str, type] = {}  # classes handed to the Python API that no file or module names
 
 
@@ -167,7 +142,8 @@ def _name(cls: type, entry: str | None, where: str) -> str:
 
 
 def _load(target: str, where: str) -> tuple[object, str | None, str]:
-    """The object ``module:Class`` or ``/path/file.py:Class`` names; (object, sha256 of its file, kind)."""
+    """The object ``module:Class`` or ``/path/file.py:Class`` names; (object, sha256 of its file, kind).
+    A file is imported once per content (a module named by its sha256), so an edited file is new code."""
     left, sep, attr = target.rpartition(":")
     if not sep or not left or not attr:
         raise ConfigError(where, f"{target!r}: name a class as path/to/file.py:Class or package.module:Class")
@@ -194,7 +170,7 @@ def _load(target: str, where: str) -> tuple[object, str | None, str]:
                 del sys.modules[mod_name]
                 if isinstance(err, KeyboardInterrupt):
                     raise
-                raise ConfigError(where, f"{path}: importing it raised {_one_line(err)}") from None
+                raise ConfigError(where, f"{path}: importing it raised {one_line(err)}") from None
         kind = "file"
     else:
         try:
@@ -202,7 +178,7 @@ def _load(target: str, where: str) -> tuple[object, str | None, str]:
         except ModuleNotFoundError as err:
             raise ConfigError(where, f"no module named {err.name!r} (importing {left})") from None
         except Exception as err:
-            raise ConfigError(where, f"importing {left} raised {_one_line(err)}") from None
+            raise ConfigError(where, f"importing {left} raised {one_line(err)}") from None
         file = getattr(module, "__file__", None)
         sha = _file_sha(file)
         kind = "module"
@@ -221,7 +197,7 @@ def _file_sha(file: str | None) -> str | None:
         return None
 
 
-def _one_line(err: BaseException) -> str:
+def one_line(err: BaseException) -> str:
     text = f"{type(err).__name__}: {err}".splitlines()[0]
     tb = inspect.trace()[-1] if sys.exc_info()[0] is not None else None
     if isinstance(err, SyntaxError) and err.lineno:
@@ -244,115 +220,3 @@ def _check_params(cls: type, T: float, params: dict, where: str, params_where: s
         if "T" not in sig.parameters and not any(p.kind is p.VAR_KEYWORD for p in sig.parameters.values()):
             raise ConfigError(where, f"{cls.__name__}(T=..., **params) must take T, the control period in s") from None
         raise ConfigError(params_where, f"{cls.__name__}(T=..., **params): {text}") from None
-
-
-class PluginController:
-    """A plug-in stepped as the runner steps every controller (a batch of B seeds, arrays (B, ...)):
-    one instance per seed, or one instance in its batch form. What the controller's own code
-    raises becomes a :class:`PluginError`; a bad command ends its seed as diverged (``why``)."""
-
-    def __init__(self, plugin: Plugin, T: float, instance: object | None = None) -> None:
-        self.plugin, self.T = plugin, float(T)
-        self.name = plugin.name
-        cls = plugin.cls if plugin.cls is not None else type(instance)
-        labels = getattr(cls, "labels", None)
-        self.labels = dict(labels) if isinstance(labels, dict) else {}
-        self._given = instance
-        self.why: dict[int, str] = {}
-
-    def _call(self, what: str, fn, *args):
-        try:
-            return fn(*args)
-        except (KeyboardInterrupt, PluginError):
-            raise
-        except Exception as err:
-            raise PluginError(self.name, what, err) from err
-
-    def reset(self, rngs) -> None:
-        rngs = [rngs] if isinstance(rngs, np.random.Generator) else list(rngs)
-        self.B, self.why, self.live = len(rngs), {}, list(range(len(rngs)))
-        self._keys: tuple[str, ...] | None = None
-        make = self.plugin.cls
-        if self.plugin.batched:
-            self.objs = [self._given if self._given is not None else self._call("__init__", self._new, make)]
-            if hasattr(self.objs[0], "reset"):
-                self._call("reset", self.objs[0].reset, rngs if self.B > 1 or self._given is None else rngs[0])
-            return
-        if self._given is not None and self.B > 1:
-            raise ValueError("a controller object runs one seed; pass its class to run a batch")
-        self.objs = (
-            [self._given] if self._given is not None else [self._call("__init__", self._new, make) for _ in rngs]
-        )
-        for obj, rng in zip(self.objs, rngs, strict=True):
-            if hasattr(obj, "reset"):
-                self._call("reset", obj.reset, rng)
-
-    def _new(self, cls: type):
-        return cls(T=self.T, **self.plugin.params)
-
-    def step(self, e: np.ndarray, r: np.ndarray) -> np.ndarray:
-        u = np.full((self.B, 2), np.nan)
-        if self.plugin.batched:
-            E = e if self.B > 1 or self._given is None else e[0]
-            out = self._command(self._call("step", self.objs[0].step, E, r), (self.B, 2) if E.ndim == 2 else (2,))
-            if isinstance(out, str):
-                self.why.update(dict.fromkeys(self.live, out))
-            else:
-                u[:] = out
-            return u
-        for b in self.live:
-            out = self._command(self._call("step", self.objs[b].step, e[b].copy(), r.copy()), (2,))
-            if isinstance(out, str):
-                self.why[b] = out
-            else:
-                u[b] = out
-        return u
-
-    @staticmethod
-    def _command(out, shape: tuple[int, ...]) -> np.ndarray | str:
-        """The command as an array of ``shape``, or why it is not one."""
-        try:
-            u = np.asarray(out, dtype=float)
-        except (TypeError, ValueError):
-            return f"step returned {type(out).__name__}, not (v, omega)"
-        if u.shape != shape:
-            return f"step returned shape {u.shape}, expected {shape} (v, omega)"
-        if not np.isfinite(u).all():
-            return f"step returned a non-finite command {np.array2string(u, precision=3)}"
-        return u
-
-    def telemetry(self) -> dict[str, np.ndarray]:
-        objs = self.objs
-        if not hasattr(objs[0], "telemetry"):
-            return {}
-        rows = [self._call("telemetry", o.telemetry) for o in objs]
-        if self._keys is None:
-            self._keys = tuple(rows[0]) if isinstance(rows[0], dict) else ()
-            self._shapes: dict[str, tuple] = {}
-        out = {}
-        for key in self._keys:
-            try:
-                vals = [np.asarray(row[key], dtype=float) for row in rows]
-            except (KeyError, TypeError, ValueError) as err:
-                raise PluginError(self.name, "telemetry", ValueError(f"key {key!r}: {_one_line(err)}")) from None
-            v = np.stack(vals) if not self.plugin.batched else vals[0]
-            if self.plugin.batched and (self.B == 1 and self._given is not None):
-                v = v[None]
-            shape = self._shapes.setdefault(key, v.shape)
-            if v.shape != shape or v[0].size > MAX_TELEMETRY:
-                raise PluginError(
-                    self.name,
-                    "telemetry",
-                    ValueError(
-                        f"key {key!r} has shape {v.shape[1:]}; each key keeps one shape of at most {MAX_TELEMETRY} values"
-                    ),
-                )
-            out[key] = v
-        return out
-
-    def drop(self, b: int) -> None:
-        if b in self.live:
-            self.live.remove(b)
-        drop = getattr(self.objs[0], "drop", None)
-        if self.plugin.batched and drop is not None:
-            self._call("drop", drop, b)
