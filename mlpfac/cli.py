@@ -295,15 +295,17 @@ def _fmt(x: float | None, scale: float = 1.0, unit: str = "") -> str:
     return "-" if x is None else f"{x * scale:.2f}{unit}"
 
 
+def _outcome(m: dict) -> str:
+    """A finished run's outcome and the threshold that decided it, said so that it cannot be misread."""
+    which, side = ("a", "beyond") if m["outcome"] == "lost" else ("every", "within")
+    return f", {m['outcome']} ({which} phase's position RMS {side} {m['lost_threshold_m']:.3g} m)"
+
+
 def _print_summary(m: dict, out: Path) -> None:
     print(
         f"{m['scenario']} / {m['controller']} / seed {m['seed']}: {m['status']}"
         + (f" ({m['reason']})" if m["reason"] else "")
-        + (
-            f", {m['outcome']} (lost: a phase's position RMS beyond {m['lost_threshold_m']:.3g} m)"
-            if m["status"] == "ok"
-            else ""
-        )
+        + (_outcome(m) if m["status"] == "ok" else "")
     )
     for ev in m["events"]:
         print(f"  event at {ev['time']:g} s: {ev['text']}")
