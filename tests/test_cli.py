@@ -31,7 +31,7 @@ def test_run_writes_metrics_config_and_figure(tmp_path, capsys):
     assert m["seed"] == 3 and m["controller"] == "adaptive" and m["status"] == "ok"
     assert "seed = 3" in (out / "config.toml").read_text()
     assert (out / "figure1.png").stat().st_size > 10_000
-    first = capsys.readouterr().out.splitlines()[0]
+    first = next(line for line in capsys.readouterr().out.splitlines() if line.startswith("paper / "))
     assert first.startswith(f"paper / adaptive / seed 3: ok, {m['outcome']} (") and "position RMS" in first, first
 
 
