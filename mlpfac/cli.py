@@ -167,6 +167,9 @@ def cmd_run(args: argparse.Namespace) -> int:
     from mlpfac.scenario import load
 
     scn = load(args.scenario).with_overrides(args.controller, args.seed, args.duration)
+    found = scn.table.get("provenance", {})
+    if found.get("found"):  # the robot's parts the scenario left to the model: what was found
+        print(f"robot: {found['robot']}")
     if scn.dropped_events:
         times = ", ".join(f"{t:g} s" for t in scn.dropped_events)
         print(f"note: --duration {scn.duration:g} s ends before the event at {times}: this run has no such event")

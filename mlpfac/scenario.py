@@ -182,12 +182,15 @@ def load(name_or_path: str | Path, build: bool = True) -> Scenario:
     scn = parse(table, str(path))
     if not build:  # the file's data only (a listing): no robot is read, none downloaded
         return scn
-    table["provenance"] = _provenance(scn)
+    table["provenance"], found = _provenance(scn)
+    if found:  # the robot's parts the file left to the model: written in, so its config.toml re-runs the same
+        table["plant"] = table["plant"] | found
+        return parse(table, str(path), check_model=False)
     return dataclasses.replace(scn, table=table)
 
 
-def _provenance(scn: Scenario) -> dict:
-    """Build the plant once (every check made), and what it simulates."""
+def _provenance(scn: Scenario) -> tuple[dict, dict]:
+    """Build the plant once (every check made): what it simulates, and the [plant] keys it found."""
     from mlpfac import __version__
     from mlpfac.factory import make_plant
     from mlpfac.reference import sample
@@ -196,7 +199,7 @@ def _provenance(scn: Scenario) -> dict:
     out = {"mlpfac": __version__, "numpy": np.__version__}
     if hasattr(plant, "provenance"):
         out |= plant.provenance()
-    return out
+    return out, plant.found() if hasattr(plant, "found") else {}
 
 
 def _check_provenance(recorded, config, where: str) -> None:

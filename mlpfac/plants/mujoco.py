@@ -69,9 +69,9 @@ class MujocoPlant(MujocoEvents):
     _kp, _ki, _n = _Kept("fl", K.F_KP), _Kept("fl", K.F_KI), _Kept("ints", K.I_NSUB, int)
 
     def __init__(self, config: MujocoConfig, T: float) -> None:
-        self.config = config
         self.T = float(T)
         self.robot = r = read_robot(config)
+        self.config = r.config  # every part named: what the model said where ``config`` did not
         self.ints, self.fl = np.zeros(K.N_INTS, dtype=np.int64), np.zeros(K.N_FL)
         self._where = r.where
         self._spec_nominal, self._spec = r.spec, r.spec.copy()
@@ -260,6 +260,11 @@ class MujocoPlant(MujocoEvents):
     def geometry(self) -> list[dict]:
         return self._geometry
 
+    def found(self) -> dict:
+        """The ``[plant]`` keys the scenario left unset and the model answered, with their values:
+        written into the scenario's table, so that its config.toml re-runs the same robot."""
+        return {k: list(v) if isinstance(v, tuple) else v for k in self.robot.found for v in [getattr(self.config, k)]}
+
     def provenance(self) -> dict:
         """What is simulated, for config.toml: the model file and the hash of the compiled model, and
         the geometry, limits and timing read from it."""
@@ -277,7 +282,10 @@ class MujocoPlant(MujocoEvents):
             "max_wheel_speed_rad_s": self.max_wheel_speed if self.max_wheel_speed is not None else "none",
             "torque_limit_Nm": [float(tl), float(tr)] if math.isfinite(tl + tr) else "none",
             "mass_kg": float(m.body_subtreemass[self._root]),
+            "robot": self.robot.description,
         }
+        if self.robot.found:
+            out["found"] = list(self.robot.found)
         if is_menagerie(self.config.model):
             out |= {"model_file": str(self.config.path), "mujoco_menagerie": menagerie_version()}
         if self.robot.locked:
