@@ -3,7 +3,8 @@
 :func:`resolve` fills in what is left unset: the two wheel servos (``left_actuator``,
 ``right_actuator``) and the pose frame (``site``, or ``body`` with ``frame_offset``). A wheel is a
 hinge joint driven by exactly one actuator, a velocity servo (the drive the plant supports), whose
-body has a sphere, cylinder or mesh collision geom and whose axis is within 30 degrees of level.
+body has a sphere, cylinder or mesh collision geom and whose axis is within 30 degrees of level, as
+low as the lowest such wheel (within half its radius: an arm's joint high up is not a wheel).
 Left and right come from the geometry at the start pose (the keyframe's, else the model's default):
 the two wheels' axes parallel and on one axle line, the left one on the +y side of the base frame's
 forward (x) axis. The pose frame is a site named ``axle_mid`` when the model has one, else the free
@@ -28,6 +29,7 @@ ROUND = (int(mujoco.mjtGeom.mjGEOM_SPHERE), int(mujoco.mjtGeom.mjGEOM_CYLINDER))
 WHEEL_SHAPES = (*ROUND, edits.MESH)
 AXLE_SITE = "axle_mid"  # the pose site's name by this project's convention (models/diffdrive.xml)
 LEVEL = 0.5  # a wheel's hinge axis has a vertical component below this (within 30 degrees of level)
+LOW = 0.5  # a wheel's lowest point is within this many of its radii of the lowest wheel's (not an arm's joint)
 PARALLEL = 0.999  # |cos| of the angle between the two wheels' axes (within 2.6 degrees)
 ON_AXLE = 0.01  # the right wheel's anchor lies this close to the left one's axis line, times the track
 PICK = "name the two drive wheels' servos with left_actuator and right_actuator"
@@ -85,7 +87,7 @@ def resolve(config: MujocoConfig, m: mujoco.MjModel, qpos: np.ndarray, where: st
 
 def describe(m: mujoco.MjModel, config: MujocoConfig, acts: tuple[int, int]) -> str:
     """The robot the plant drives, in one line: its wheels' joints and servos and its pose frame."""
-    joints = [m.joint(int(m.actuator_trnid[a, 0])).name for a in acts]
+    joints = [m.joint(j).name or f"#{j}" for j in (int(m.actuator_trnid[a, 0]) for a in acts)]
     kind, name = config.frame
     text = (
         f"left wheel joint {joints[0]} (actuator {config.left_actuator}), "
@@ -99,15 +101,21 @@ def describe(m: mujoco.MjModel, config: MujocoConfig, acts: tuple[int, int]) -> 
 def _candidates(m: mujoco.MjModel, d: mujoco.MjData) -> list[int]:
     """The actuators that may drive a wheel (the module's docstring says which)."""
     drivers = Counter(int(m.actuator_trnid[a, 0]) for a in range(m.nu) if _on_joint(m, a))
-    out = []
+    low: dict[int, tuple[float, float]] = {}  # servo: its wheel's lowest point and radius
     for a in range(m.nu):
         j = int(m.actuator_trnid[a, 0])
         if not _on_joint(m, a) or int(m.jnt_type[j]) != mujoco.mjtJoint.mjJNT_HINGE or drivers[j] != 1:
             continue
-        round_geom = any(int(m.geom_type[g]) in WHEEL_SHAPES for g in collision_geoms(m, int(m.jnt_bodyid[j])))
-        if round_geom and is_velocity_servo(m, a) and abs(d.xaxis[j, 2]) < LEVEL:
-            out.append(a)
-    return out
+        rims = [g for g in collision_geoms(m, int(m.jnt_bodyid[j])) if int(m.geom_type[g]) in WHEEL_SHAPES]
+        if rims and is_velocity_servo(m, a) and abs(d.xaxis[j, 2]) < LEVEL:
+            low[a] = min((float(d.geom_xpos[g, 2]) - _reach(m, g), _reach(m, g)) for g in rims)
+    floor = min((z for z, _ in low.values()), default=0.0)
+    return [a for a, (z, r) in low.items() if z <= floor + LOW * r]
+
+
+def _reach(m: mujoco.MjModel, g: int) -> float:
+    """How far a wheel geom reaches from its centre: a sphere's or cylinder's radius, a mesh's bound."""
+    return float(m.geom_size[g, 0] if int(m.geom_type[g]) in ROUND else m.geom_rbound[g])
 
 
 def _on_joint(m: mujoco.MjModel, a: int) -> bool:
@@ -133,12 +141,15 @@ def _wheel_pair(m: mujoco.MjModel, d: mujoco.MjData, config: MujocoConfig) -> tu
             f"body {m.body(r).name or f'#{r}'}: {_listed(m, [a for a in found if _root(m, a) == r])}" for r in roots
         )
         raise ConfigError("left_actuator", f"wheel servos on {len(roots)} free bodies ({bodies}): {PICK}")
-    if len(found) != 2:
-        what = f"{len(found)} wheel servos ({_listed(m, found)})" if found else "no wheel servo"
+    if len(found) > 2:
+        raise ConfigError("left_actuator", f"{len(found)} wheel servos found ({_listed(m, found)}): {PICK}")
+    if len(found) < 2:
+        have = f"only {_listed(m, found)}" if found else "none"
         raise ConfigError(
             "left_actuator",
-            f"{what} found: a wheel is a hinge joint driven by one velocity servo, with a sphere, cylinder or "
-            f"mesh collision geom, its axis level ({names(m, mujoco.mjtObj.mjOBJ_ACTUATOR, m.nu)}); {PICK}",
+            f"two wheel servos needed, found {have} (a wheel: a hinge joint driven by one velocity servo, its axis "
+            f"level, its body's sphere, cylinder or mesh collision geom low; {names(m, mujoco.mjtObj.mjOBJ_ACTUATOR, m.nu)}): "
+            f"{PICK}",
         )
     j = [int(m.actuator_trnid[a, 0]) for a in found]
     axis, apart = d.xaxis[j[0]], d.xanchor[j[1]] - d.xanchor[j[0]]
