@@ -275,3 +275,17 @@ def test_a_named_frame_says_which_side_is_left(tmp_path):
     plant = MujocoPlant(cfg, 0.01)
     assert (plant.config.left_actuator, plant.config.right_actuator) == ("spin_o", "spin_n")
     assert plant.found() == {"left_actuator": "spin_o", "right_actuator": "spin_n"}
+
+
+def test_an_arms_velocity_servo_high_up_is_not_a_wheel(tmp_path):
+    """A hinge on the robot's top with a velocity servo and a round geom: not as low as the wheels."""
+    arm = (
+        '<body name="elbow" pos="0 0 0.4"><joint name="elbow_j" axis="0 1 0" damping="1"/>'
+        '<inertial pos="0 0 0" mass="0.5" diaginertia="0.001 0.001 0.001"/>'
+        '<geom type="cylinder" size="0.04 0.02" zaxis="0 1 0"/></body>'
+    )
+    text = cart(("left", "right")).replace("</body>\n  </worldbody>", f"{arm}</body>\n  </worldbody>")
+    text = text.replace("</actuator>", '<velocity name="elbow_s" joint="elbow_j" kv="2"/></actuator>')
+    (tmp_path / "cart.xml").write_text(text)
+    plant = MujocoPlant(MujocoConfig(model=str(tmp_path / "cart.xml")), 0.01)
+    assert plant.model.nu == 3 and (plant.config.left_actuator, plant.config.right_actuator) == ("spin_n", "spin_o")
