@@ -150,7 +150,8 @@ def load(name_or_path: str | Path, build: bool = True) -> Scenario:
     is built once here, so that a robot or an event it cannot apply is an error before anything
     runs, and what it simulates is recorded in the table's ``[provenance]`` (config.toml). A file
     that already has ``[provenance]`` (a run's config.toml) must simulate the same compiled model.
-    ``build=False`` reads and checks the file alone (a listing), without building the plant.
+    The robot's parts the file leaves to the model (its wheels, its pose frame) are written into the
+    table's ``[plant]`` as found, so that config.toml names them. ``build=False`` reads and checks the file alone (a listing), without building the plant.
     """
     path = Path(name_or_path)
     if path.suffix != ".toml":

@@ -65,7 +65,7 @@ def names(m: mujoco.MjModel, obj: mujoco.mjtObj, n: int) -> str:
     return "it has: " + ", ".join(repr(x) for x in found if x) if any(found) else "it has none with a name"
 
 
-def resolve(config: MujocoConfig, m: mujoco.MjModel, qpos: np.ndarray, where: str) -> Found:
+def resolve(config: MujocoConfig, m: mujoco.MjModel, qpos: np.ndarray) -> Found:
     """``config`` with the wheels and the pose frame it leaves unset found in the model ``m`` (as its
     files describe it) at the start pose ``qpos``. A name that is set is used as it is (and checked
     by the robot's reader, not here)."""
@@ -187,8 +187,8 @@ def _pose_frame(m: mujoco.MjModel, d: mujoco.MjData, config: MujocoConfig, chang
     """The axle_mid site if there is one, else the wheels' free body moved to the axle midpoint."""
     if mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, AXLE_SITE) >= 0:
         return {"site": AXLE_SITE}
-    acts = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_ACTUATOR, changes.get(k) or getattr(config, k)) for k in
-            ("left_actuator", "right_actuator")]  # fmt: skip
+    named = (changes.get(k) or getattr(config, k) for k in ("left_actuator", "right_actuator"))
+    acts = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_ACTUATOR, name) for name in named]
     if min(acts) < 0 or any(not _on_joint(m, a) for a in acts):
         return {}  # a named servo that is not there: the robot's reader says so
     root = _root(m, acts[0])

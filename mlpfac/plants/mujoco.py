@@ -13,7 +13,8 @@ nominal ones), and held for one control period of ``n_substeps`` physics steps,
 - ``actuator = "torque"``: the same actuators turned into torque motors with the same force limit,
   driven by a discrete wheel-speed PI loop evaluated once per physics step.
 
-The pose (x, y, theta) is read at a site on the axle midpoint (``axle_mid``); theta is unwrapped
+The pose (x, y, theta) is read at a site on the axle midpoint (``axle_mid``, or the frame
+:mod:`mlpfac.plants.detect` finds); theta is unwrapped
 across steps. Events (:mod:`mlpfac.plants.mujoco_events`) edit the model's
 :class:`mujoco.MjSpec` and recompile it keeping the state (``spec.recompile``).
 
@@ -263,7 +264,8 @@ class MujocoPlant(MujocoEvents):
     def found(self) -> dict:
         """The ``[plant]`` keys the scenario left unset and the model answered, with their values:
         written into the scenario's table, so that its config.toml re-runs the same robot."""
-        return {k: list(v) if isinstance(v, tuple) else v for k in self.robot.found for v in [getattr(self.config, k)]}
+        values = {k: getattr(self.config, k) for k in self.robot.found}
+        return {k: list(v) if isinstance(v, tuple) else v for k, v in values.items()}
 
     def provenance(self) -> dict:
         """What is simulated, for config.toml: the model file and the hash of the compiled model, and

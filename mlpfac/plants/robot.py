@@ -1,7 +1,8 @@
 """A differential-drive robot as its MJCF model describes it: which actuators drive which wheels,
 where the pose is measured, the wheel radius and track, the drive's limits and the rest pose.
 
-:func:`read_robot` reads (and checks) all of it once from a :class:`MujocoConfig`, making what the
+:func:`read_robot` reads (and checks) all of it once from a :class:`MujocoConfig` (the parts it leaves
+unset found first by :mod:`mlpfac.plants.detect`), making what the
 model does not say itself (a pose frame on a body, sphere tyres on mesh wheels, locked arms, a
 timestep) as :class:`mujoco.MjSpec` edits (:mod:`mlpfac.plants.edits`); the stepping plant
 (:class:`mlpfac.plants.mujoco.MujocoPlant`) drives the robot it describes. Nothing here steps a run.
@@ -105,7 +106,7 @@ def _read_robot(config: MujocoConfig, stamp: tuple[int, int]) -> Robot:
     m = _compile(spec, where)
     sha256 = fingerprint(m)
     qpos0, ctrl0 = _keyframe(m, config, where)
-    found = resolve(config, m, qpos0, where)
+    found = resolve(config, m, qpos0)
     config = found.config
     acts = (_actuator_id(m, config, "left_actuator", where), _actuator_id(m, config, "right_actuator", where))
     if acts[0] == acts[1]:
