@@ -183,6 +183,9 @@ def cmd_run(args: argparse.Namespace) -> int:
     from mlpfac.scenario import load
 
     scn = load(args.scenario).with_overrides(args.controller, args.seed, args.duration)
+    found = scn.table.get("provenance", {})
+    if found.get("found"):  # the robot's parts the scenario left to the model: what was found
+        print(f"robot: {found['robot']}")
     if scn.dropped_events:
         times = ", ".join(f"{t:g} s" for t in scn.dropped_events)
         print(f"note: --duration {scn.duration:g} s ends before the event at {times}: this run has no such event")
@@ -329,15 +332,17 @@ def _fmt(x: float | None, scale: float = 1.0, unit: str = "") -> str:
     return "-" if x is None else f"{x * scale:.2f}{unit}"
 
 
+def _outcome(m: dict) -> str:
+    """A finished run's outcome and the threshold that decided it, said so that it cannot be misread."""
+    which, side = ("a", "beyond") if m["outcome"] == "lost" else ("every", "within")
+    return f", {m['outcome']} ({which} phase's position RMS {side} {m['lost_threshold_m']:.3g} m)"
+
+
 def _print_summary(m: dict, out: Path) -> None:
     print(
         f"{m['scenario']} / {m['controller']} / seed {m['seed']}: {m['status']}"
         + (f" ({m['reason']})" if m["reason"] else "")
-        + (
-            f", {m['outcome']} (lost: a phase's position RMS beyond {m['lost_threshold_m']:.3g} m)"
-            if m["status"] == "ok"
-            else ""
-        )
+        + (_outcome(m) if m["status"] == "ok" else "")
     )
     for ev in m["events"]:
         print(f"  event at {ev['time']:g} s: {ev['text']}")

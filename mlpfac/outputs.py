@@ -90,7 +90,7 @@ def folder_lock(target: Path, what: str = "--out") -> Iterator[None]:
     from mlpfac.exceptions import ConfigError
 
     where = f"{what} {target}"
-    target = Path(target).resolve()  # one folder, one lock, whatever name it is reached by
+    target = resolved(target, where)  # one folder, one lock, whatever name it is reached by
     lock = target.parent / f".{target.name}.lock"
     try:
         target.parent.mkdir(parents=True, exist_ok=True)
@@ -171,9 +171,27 @@ def check_save_file(path: Path, what: str = "--save") -> None:
         raise ConfigError(f"{what} {path}", "is not a regular file (a device or a pipe); name a file such as run.rrd")
 
 
+def resolved(path: Path, where: str) -> Path:
+    """``path`` with its symbolic links followed (it need not exist); a link that leads back to
+    itself on the way (a symlink loop) is a ConfigError naming ``where`` (a flag and its value)."""
+    from mlpfac.exceptions import ConfigError
+
+    try:
+        return Path(path).resolve()
+    except (RuntimeError, OSError) as err:  # a loop: RuntimeError before Python 3.13, OSError (ELOOP) since
+        loop = isinstance(err, RuntimeError) or err.errno == errno.ELOOP
+        what = (
+            "a symbolic link in this path leads back to itself (a symlink loop)"
+            if loop
+            else f"cannot be followed ({err.strerror or err})"
+        )
+        raise ConfigError(where, f"{what}; name another path") from None
+
+
 def _check_ancestors(path: Path, where: str) -> None:
     from mlpfac.exceptions import ConfigError
 
+    resolved(path, where)
     for up in Path(path).absolute().parents:
         if up.exists():
             if not up.is_dir():
@@ -198,7 +216,7 @@ class Stage:
     Entering also removes ``.NAME.tmp-*`` left by a killed run: hold :func:`folder_lock` first."""
 
     def __init__(self, target: Path, what: str, folder: bool = True) -> None:
-        self.target = Path(target).resolve()  # a symlink's folder is replaced, not the link
+        self.target = resolved(target, f"{what} {target}")  # a symlink's folder is replaced, not the link
         self.what = what
         self.folder = folder
         self.path: Path | None = None

@@ -161,7 +161,9 @@ def load(name_or_path: str | Path, build: bool = True) -> Scenario:
     is built once here, so that a robot or an event it cannot apply is an error before anything
     runs, and what it simulates is recorded in the table's ``[provenance]`` (config.toml). A file
     that already has ``[provenance]`` (a run's config.toml) must simulate the same compiled model.
-    ``build=False`` reads and checks the file alone (a listing), without building the plant.
+    The robot's parts the file leaves to the model (its wheels, its pose frame) are written into the
+    table's ``[plant]`` as found, so that config.toml names them. ``build=False`` reads and checks
+    the file alone (a listing), without building the plant.
     """
     path = Path(name_or_path)
     if path.suffix != ".toml":
@@ -196,12 +198,15 @@ def load(name_or_path: str | Path, build: bool = True) -> Scenario:
     scn = parse(table, str(path))
     if not build:  # the file's data only (a listing): no robot is read, none downloaded
         return scn
-    table["provenance"] = _provenance(scn)
+    table["provenance"], found = _provenance(scn)
+    if found:  # the robot's parts the file left to the model: written in, so its config.toml re-runs the same
+        table["plant"] = table["plant"] | found
+        return parse(table, str(path), check_model=False)
     return dataclasses.replace(scn, table=table)
 
 
-def _provenance(scn: Scenario) -> dict:
-    """Build the plant once (every check made), and what it simulates."""
+def _provenance(scn: Scenario) -> tuple[dict, dict]:
+    """Build the plant once (every check made): what it simulates, and the [plant] keys it found."""
     from mlpfac import __version__
     from mlpfac.factory import make_plant
     from mlpfac.reference import sample
@@ -212,7 +217,7 @@ def _provenance(scn: Scenario) -> dict:
         out |= plant.provenance()
     if scn.plugin is not None:
         out["controller"] = scn.plugin.provenance()
-    return out
+    return out, plant.found() if hasattr(plant, "found") else {}
 
 
 def _check_provenance(recorded, config, where: str) -> None:

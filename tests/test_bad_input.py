@@ -116,6 +116,68 @@ def test_bad_scenario_file(tmp_path, capsys, case):
     assert not out.exists()
 
 
+def wheeled(wheels: str, robots: int = 1, servo: str = 'velocity kv="1"') -> str:
+    """An MJCF of ``robots`` free boxes, each with the wheels "NAME X Y, ..." (a hinge across x driven
+    by the actuator NAME, numbered by robot when there are several)."""
+    bodies, servos = "", ""
+    for r in range(robots):
+        inner = ""
+        for name, x, y in (w.split() for w in wheels.split(",")):
+            name += str(r) if robots > 1 else ""
+            inner += f'<body name="{name}" pos="{x} {y} 0"><joint name="{name}_hinge" axis="0 1 0"/>'
+            inner += '<geom type="cylinder" size="0.05 0.01" zaxis="0 1 0"/></body>'
+            servos += f'<{servo} name="{name}" joint="{name}_hinge"/>'
+        bodies += (
+            f'<body name="base{r}" pos="{r} 0 0.1"><freejoint/><geom type="box" size="0.1 0.1 0.02"/>{inner}</body>'
+        )
+    return f"<mujoco><worldbody>{bodies}</worldbody><actuator>{servos}</actuator></mujoco>"
+
+
+# robots named by their model alone (robot.xml): (MJCF, texts the message must hold)
+BAD_ROBOTS = {
+    "three wheel servos": (wheeled("a 0 0.2, b 0 -0.2, c -0.2 0.2"), ["3 wheel servos found (a (joint a_hinge), b (joint b_hinge), c (joint c_hinge)", "left_actuator and right_actuator"]),
+    "two free bodies": (wheeled("a 0 0.2, b 0 -0.2", robots=2), ["2 free bodies", "body base0: a0 (joint a0_hinge), b0", "body base1: a1", "left_actuator and right_actuator"]),
+    "wheels on different axles": (wheeled("a 0.1 0.2, b -0.1 -0.2"), ["not on one axle", "a (joint a_hinge), b", "left_actuator and right_actuator"]),
+    "wheels on one side": (wheeled("a 0 0.2, b 0 0.4"), ["not on either side", "a (joint a_hinge), b", "left_actuator and right_actuator", "site or body"]),
+    "no wheel servo": (wheeled("a 0 0.2, b 0 -0.2", servo="motor"), ["two wheel servos needed, found none", "it has: 'a', 'b'", "left_actuator and right_actuator"]),
+}  # fmt: skip
+
+
+@pytest.mark.parametrize("case", sorted(BAD_ROBOTS))
+def test_bad_robot(tmp_path, capsys, case):
+    xml, needles = BAD_ROBOTS[case]
+    (tmp_path / "robot.xml").write_text(xml)
+    path = tmp_path / "scenario.toml"
+    path.write_text(ROBOT + 'model = "robot.xml"\n')
+    out = tmp_path / "out"
+    assert main(["run", str(path), "--no-log", "--no-plot", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and err.startswith(f"mlpfac: error: {path} [plant] left_actuator: "), err
+    assert all(needle in err for needle in needles), err
+    assert not out.exists()
+
+
+# "loop" is a symbolic link to itself: (argv, text the message must hold)
+SYMLINK_LOOPS = {
+    "run --out": (["run", "paper", "--out", "loop"], "--out loop: "),
+    "run --out inside": (["run", "paper", "--out", "loop/run"], "--out loop/run: "),
+    "run --save": (["run", "paper", "--out", "out", "--save", "loop"], "--save loop: "),
+    "sweep --out": (["sweep", "paper", "--seeds", "0", "--out", "loop"], "--out loop: "),
+    "compare --out": (["compare", "paper", "--seeds", "0", "--out", "loop/cmp"], "--out loop/cmp: "),
+}
+
+
+@pytest.mark.parametrize("case", sorted(SYMLINK_LOOPS))
+def test_a_symlink_loop(tmp_path, capsys, monkeypatch, case):
+    argv, needle = SYMLINK_LOOPS[case]
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "loop").symlink_to("loop")
+    assert main([*argv, "--duration", "0.5"]) == 2
+    err = [line for line in capsys.readouterr().err.splitlines() if not line.startswith("mlpfac: planning")]
+    assert len(err) == 1 and needle in err[0] and "symlink loop" in err[0], err
+    assert [p.name for p in tmp_path.iterdir()] == ["loop"]
+
+
 # flags: (argv after "run", text the message must hold)
 BAD_FLAGS = {
     "duration zero": (["paper", "--duration", "0"], "--duration"),

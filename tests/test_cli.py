@@ -6,7 +6,7 @@ import sys
 
 import pytest
 
-from mlpfac.cli import main
+from mlpfac.cli import _outcome, main
 
 
 def test_run_writes_metrics_config_and_figure(tmp_path, capsys):
@@ -31,7 +31,17 @@ def test_run_writes_metrics_config_and_figure(tmp_path, capsys):
     assert m["seed"] == 3 and m["controller"] == "adaptive" and m["status"] == "ok"
     assert "seed = 3" in (out / "config.toml").read_text()
     assert (out / "figure1.png").stat().st_size > 10_000
-    assert "paper / adaptive / seed 3: ok" in capsys.readouterr().out
+    first = next(line for line in capsys.readouterr().out.splitlines() if line.startswith("paper / "))
+    assert first.startswith(f"paper / adaptive / seed 3: ok, {m['outcome']} (") and "position RMS" in first, first
+
+
+def test_a_runs_outcome_says_its_threshold_the_right_way_round():
+    assert _outcome({"outcome": "tracking", "lost_threshold_m": 0.2}) == (
+        ", tracking (every phase's position RMS within 0.2 m)"
+    )
+    assert (
+        _outcome({"outcome": "lost", "lost_threshold_m": 0.0313}) == ", lost (a phase's position RMS beyond 0.0313 m)"
+    )
 
 
 def test_config_toml_reproduces_the_run(tmp_path):

@@ -8,6 +8,7 @@ import math
 import os
 import subprocess
 import sys
+import tomllib
 from pathlib import Path
 
 import numpy as np
@@ -15,6 +16,8 @@ import pytest
 
 import mlpfac
 from mlpfac.cli import main
+from mlpfac.plants.config import MujocoConfig
+from mlpfac.plants.mujoco import MujocoPlant
 
 # A third robot: other names, a 0.12 m wheel on a 0.5 m track, a 4 ms timestep, no site (the pose
 # frame is a body, moved to the axle by an offset), a keyframe with a mast up, a mast servo held at
@@ -192,3 +195,97 @@ def test_tiago_is_drawn_with_its_meshes_standing_on_the_floor():
     assert (
         1.0 < lift + max(meshes.posed_vertices(s)[:, 2].max() for s in shapes if s["type"] == "mesh") < 1.6
     )  # TIAGo's height
+
+
+# A robot named by its model alone: no site, no name the plant knows; the free body's origin ahead
+# of and above the axle, the right wheel's hinge axis reversed.
+CART = """
+<mujoco model="cart">
+  <option timestep="0.002" integrator="implicitfast"/>
+  <worldbody>
+    <geom name="floor" type="plane" size="0 0 0.05"/>
+    <body name="tub" pos="0.1 0 0.08">
+      <freejoint name="float"/>
+      <inertial pos="0 0 0.02" mass="6" diaginertia="0.05 0.08 0.1"/>
+      <geom type="box" size="0.2 0.12 0.04" pos="0 0 0.03" contype="0" conaffinity="0"/>
+      <geom type="sphere" size="0.03" pos="0.15 0 -0.05" condim="1" priority="1"/>
+      {wheels}
+    </body>
+  </worldbody>
+  <actuator>{servos}</actuator>
+</mujoco>
+"""
+CART_WHEELS = {  # side: (wheel body, servo)
+    "left": (
+        '<body name="nearside" pos="-0.1 0.16 -0.02"><joint name="hub_n" axis="0 1 0" armature="0.001"/>'
+        '<inertial pos="0 0 0" mass="0.3" diaginertia="0.0003 0.0005 0.0003"/>'
+        '<geom type="cylinder" size="0.06 0.015" zaxis="0 1 0" priority="1"/></body>',
+        '<velocity name="spin_n" joint="hub_n" kv="3" forcerange="-1.5 1.5"/>',
+    ),
+    "right": (
+        '<body name="offside" pos="-0.1 -0.16 -0.02"><joint name="hub_o" axis="0 -1 0" armature="0.001"/>'
+        '<inertial pos="0 0 0" mass="0.3" diaginertia="0.0003 0.0005 0.0003"/>'
+        '<geom type="cylinder" size="0.06 0.015" zaxis="0 1 0" priority="1"/></body>',
+        '<velocity name="spin_o" joint="hub_o" kv="3" forcerange="-1.5 1.5"/>',
+    ),
+}
+CART_TOML = '[controller]\nname = "kanayama"\nv_max = 2.0\n[plant]\nkind = "mujoco"\nmodel = "cart.xml"\n'
+FOUND = "robot: left wheel joint hub_n (actuator spin_n), right hub_o (spin_o), pose from body tub moved by (-0.1, 0, -0.02) m"
+
+
+def cart(order: tuple[str, str]) -> str:
+    """The cart's MJCF with its wheels (bodies and servos) in the given order."""
+    return CART.format(
+        wheels="".join(CART_WHEELS[side][0] for side in order), servos="".join(CART_WHEELS[side][1] for side in order)
+    )
+
+
+@pytest.mark.parametrize("order", [("left", "right"), ("right", "left")], ids=["left-first", "right-first"])
+def test_a_robot_runs_from_its_model_alone_and_reruns_from_its_config_toml(tmp_path, capsys, order):
+    """Wheels, left and right, and the pose frame (the free body, moved to the axle midpoint) found
+    in the model whatever the XML's order; said on the run's first line, written into config.toml,
+    whose re-run names them and records the same."""
+    (tmp_path / "cart.xml").write_text(cart(order))
+    (tmp_path / "cart.toml").write_text(CART_TOML)
+    first, again = tmp_path / "a", tmp_path / "b"
+    common = ["--duration", "4", "--no-log", "--no-plot"]
+    assert main(["run", str(tmp_path / "cart.toml"), *common, "--out", str(first)]) == 0
+    assert capsys.readouterr().out.splitlines()[0] == FOUND
+    config = tomllib.loads((first / "config.toml").read_text())
+    assert {k: config["plant"][k] for k in ("left_actuator", "right_actuator", "body", "frame_offset")} == {
+        "left_actuator": "spin_n",
+        "right_actuator": "spin_o",
+        "body": "tub",
+        "frame_offset": [-0.1, 0.0, -0.02],
+    }
+    assert config["provenance"]["robot"] == FOUND.removeprefix("robot: ")
+    assert config["provenance"]["track_m"] == pytest.approx(0.32) and config["provenance"]["wheel_radius_m"] == 0.06
+    assert main(["run", str(first / "config.toml"), *common, "--out", str(again)]) == 0
+    assert not capsys.readouterr().out.startswith("robot:")  # nothing left to find
+    a, b = (json.loads((d / "metrics.json").read_text()) for d in (first, again))
+    assert a["status"] == "ok" and a["outcome"] == "tracking" and a["rms_position_error_m"] < 0.05
+    assert {k: v for k, v in a.items() if k != "wall_time_s"} == {k: v for k, v in b.items() if k != "wall_time_s"}
+
+
+def test_a_named_frame_says_which_side_is_left(tmp_path):
+    """Only the pose frame named, turned half a turn: what was the right wheel is now on its left."""
+    back = '<freejoint name="float"/><site name="back" pos="-0.1 0 -0.02" xyaxes="-1 0 0 0 -1 0"/>'
+    (tmp_path / "cart.xml").write_text(cart(("left", "right")).replace('<freejoint name="float"/>', back))
+    cfg = MujocoConfig(model=str(tmp_path / "cart.xml"), site="back")
+    plant = MujocoPlant(cfg, 0.01)
+    assert (plant.config.left_actuator, plant.config.right_actuator) == ("spin_o", "spin_n")
+    assert plant.found() == {"left_actuator": "spin_o", "right_actuator": "spin_n"}
+
+
+def test_an_arms_velocity_servo_high_up_is_not_a_wheel(tmp_path):
+    """A hinge on the robot's top with a velocity servo and a round geom: not as low as the wheels."""
+    arm = (
+        '<body name="elbow" pos="0 0 0.4"><joint name="elbow_j" axis="0 1 0" damping="1"/>'
+        '<inertial pos="0 0 0" mass="0.5" diaginertia="0.001 0.001 0.001"/>'
+        '<geom type="cylinder" size="0.04 0.02" zaxis="0 1 0"/></body>'
+    )
+    text = cart(("left", "right")).replace("</body>\n  </worldbody>", f"{arm}</body>\n  </worldbody>")
+    text = text.replace("</actuator>", '<velocity name="elbow_s" joint="elbow_j" kv="2"/></actuator>')
+    (tmp_path / "cart.xml").write_text(text)
+    plant = MujocoPlant(MujocoConfig(model=str(tmp_path / "cart.xml")), 0.01)
+    assert plant.model.nu == 3 and (plant.config.left_actuator, plant.config.right_actuator) == ("spin_n", "spin_o")

@@ -35,15 +35,12 @@ class MujocoConfig:
         default_factory=shipped_model
     )  # MJCF file (from the scenario's folder) or "menagerie:ROBOT/ENTRY"
     actuator: str = "velocity"  # "velocity": the model's velocity servos; "torque": torque motors + PI here
-    left_actuator: str = "left_wheel"  # velocity servo (<velocity kv forcerange>) on the left wheel's hinge
-    right_actuator: str = "right_wheel"
-    site: str | None = None  # the pose frame: a site on the axle midpoint, x forward ("axle_mid" unless body is given)
+    # None below: found in the model (mlpfac.plants.detect); frame_offset None is 0 for a frame that is named
+    left_actuator: str | None = None  # velocity servo (<velocity kv forcerange>) on the left wheel's hinge
+    right_actuator: str | None = None
+    site: str | None = None  # the pose frame: a site on the axle midpoint, x forward (not with body)
     body: str | None = None  # ... or a body's frame instead of a site
-    frame_offset: tuple[float, float, float] = (
-        0.0,
-        0.0,
-        0.0,
-    )  # the pose frame moved by this, in the site's/body's axes (m)
+    frame_offset: tuple[float, float, float] | None = None  # the pose frame moved by this, in its axes (m)
     keyframe: str | None = None  # start from this keyframe of the model (None: the model's default pose)
     other_actuators: str = "hold"  # "hold": keep the keyframe's controls; "lock": fix their joints at the keyframe
     tyre: str = "model"  # "model": the wheels' own collision geoms; "sphere": a sphere tyre on each wheel
@@ -62,15 +59,13 @@ class MujocoConfig:
                 raise ConfigError(name, f"choose {' or '.join(map(repr, allowed))}, got {getattr(self, name)!r}")
         for name in ("model", "left_actuator", "right_actuator", "site", "body", "keyframe"):
             value = getattr(self, name)
-            if (value is not None or name in ("model", "left_actuator", "right_actuator")) and (
-                not isinstance(value, str) or not value
-            ):
+            if (value is not None or name == "model") and (not isinstance(value, str) or not value):
                 raise ConfigError(name, f"expected a non-empty name, got {value!r}")
         if self.site is not None and self.body is not None:
             raise ConfigError(
                 "body", f"the pose frame is a site or a body, not both (site {self.site!r}, body {self.body!r})"
             )
-        off = np.asarray(self.frame_offset, dtype=float)
+        off = np.asarray(self.offset, dtype=float)
         if off.shape != (3,) or not np.all(np.isfinite(off)):
             raise ConfigError("frame_offset", f"expected three finite numbers (m), got {self.frame_offset!r}")
         for name in LIMITS:
@@ -93,8 +88,13 @@ class MujocoConfig:
 
     @property
     def frame(self) -> tuple[str, str]:
-        """("site" or "body", name) of the pose frame."""
+        """("site" or "body", name) of the pose frame (once found: see mlpfac.plants.detect)."""
         return ("body", self.body) if self.body is not None else ("site", self.site or "axle_mid")
+
+    @property
+    def offset(self) -> tuple[float, float, float]:
+        """The pose frame's offset from the site or body (m), zero when none is set."""
+        return (0.0, 0.0, 0.0) if self.frame_offset is None else self.frame_offset
 
     def noise_std(self) -> np.ndarray | None:
         """(3,) standard deviations of the pose noise, or None when there is none."""

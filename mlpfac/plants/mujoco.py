@@ -13,7 +13,8 @@ nominal ones), and held for one control period of ``n_substeps`` physics steps,
 - ``actuator = "torque"``: the same actuators turned into torque motors with the same force limit,
   driven by a discrete wheel-speed PI loop evaluated once per physics step.
 
-The pose (x, y, theta) is read at a site on the axle midpoint (``axle_mid``); theta is unwrapped
+The pose (x, y, theta) is read at a site on the axle midpoint (``axle_mid``, or the frame
+:mod:`mlpfac.plants.detect` finds); theta is unwrapped
 across steps. Events (:mod:`mlpfac.plants.mujoco_events`) edit the model's
 :class:`mujoco.MjSpec` and recompile it keeping the state (``spec.recompile``).
 
@@ -69,9 +70,9 @@ class MujocoPlant(MujocoEvents):
     _kp, _ki, _n = _Kept("fl", K.F_KP), _Kept("fl", K.F_KI), _Kept("ints", K.I_NSUB, int)
 
     def __init__(self, config: MujocoConfig, T: float) -> None:
-        self.config = config
         self.T = float(T)
         self.robot = r = read_robot(config)
+        self.config = r.config  # every part named: what the model said where ``config`` did not
         self.ints, self.fl = np.zeros(K.N_INTS, dtype=np.int64), np.zeros(K.N_FL)
         self._where = r.where
         self._spec_nominal, self._spec = r.spec, r.spec.copy()
@@ -260,6 +261,12 @@ class MujocoPlant(MujocoEvents):
     def geometry(self) -> list[dict]:
         return self._geometry
 
+    def found(self) -> dict:
+        """The ``[plant]`` keys the scenario left unset and the model answered, with their values:
+        written into the scenario's table, so that its config.toml re-runs the same robot."""
+        values = {k: getattr(self.config, k) for k in self.robot.found}
+        return {k: list(v) if isinstance(v, tuple) else v for k, v in values.items()}
+
     def provenance(self) -> dict:
         """What is simulated, for config.toml: the model file and the hash of the compiled model, and
         the geometry, limits and timing read from it."""
@@ -277,7 +284,10 @@ class MujocoPlant(MujocoEvents):
             "max_wheel_speed_rad_s": self.max_wheel_speed if self.max_wheel_speed is not None else "none",
             "torque_limit_Nm": [float(tl), float(tr)] if math.isfinite(tl + tr) else "none",
             "mass_kg": float(m.body_subtreemass[self._root]),
+            "robot": self.robot.description,
         }
+        if self.robot.found:
+            out["found"] = list(self.robot.found)
         if is_menagerie(self.config.model):
             out |= {"model_file": str(self.config.path), "mujoco_menagerie": menagerie_version()}
         if self.robot.locked:

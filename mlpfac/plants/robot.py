@@ -1,7 +1,8 @@
 """A differential-drive robot as its MJCF model describes it: which actuators drive which wheels,
 where the pose is measured, the wheel radius and track, the drive's limits and the rest pose.
 
-:func:`read_robot` reads (and checks) all of it once from a :class:`MujocoConfig`, making what the
+:func:`read_robot` reads (and checks) all of it once from a :class:`MujocoConfig` (the parts it leaves
+unset found first by :mod:`mlpfac.plants.detect`), making what the
 model does not say itself (a pose frame on a body, sphere tyres on mesh wheels, locked arms, a
 timestep) as :class:`mujoco.MjSpec` edits (:mod:`mlpfac.plants.edits`); the stepping plant
 (:class:`mlpfac.plants.mujoco.MujocoPlant`) drives the robot it describes. Nothing here steps a run.
@@ -20,6 +21,7 @@ from numba import njit
 from mlpfac.exceptions import ConfigError
 from mlpfac.plants import edits
 from mlpfac.plants.config import MujocoConfig
+from mlpfac.plants.detect import ROUND, WHEEL_SHAPES, collision_geoms, describe, is_velocity_servo, names, resolve
 from mlpfac.plants.model_file import fingerprint, is_menagerie, load_spec
 
 SETTLE_S = 0.5  # seconds the robot settles on its wheels at least, at construction (the rest pose)
@@ -32,8 +34,6 @@ SHAPES = {
     edits.MESH: "mesh",
 }
 SIZE_LEN = {"box": 3, "cylinder": 2, "sphere": 1, "mesh": 0}
-ROUND = (int(mujoco.mjtGeom.mjGEOM_SPHERE), int(mujoco.mjtGeom.mjGEOM_CYLINDER))  # wheel shapes: size[0] is the radius
-WHEEL_SHAPES = (*ROUND, edits.MESH)
 
 
 @dataclass(frozen=True)
@@ -47,6 +47,9 @@ class Robot:
     """
 
     where: str  # the model file, for messages
+    config: MujocoConfig  # the configuration with every part named (mlpfac.plants.detect found what was not)
+    found: tuple[str, ...]  # the [plant] keys found in the model, not named by the configuration
+    description: str  # the wheels' joints and servos and the pose frame, in one line
     sha256: str  # the file as compiled (before any change for the torque drive): model_fingerprint
     spec: mujoco.MjSpec
     model: mujoco.MjModel
@@ -102,13 +105,16 @@ def _read_robot(config: MujocoConfig, stamp: tuple[int, int]) -> Robot:
     where = config.model if is_menagerie(config.model) else str(path)
     m = _compile(spec, where)
     sha256 = fingerprint(m)
+    qpos0, ctrl0 = _keyframe(m, config, where)
+    found = resolve(config, m, qpos0)
+    config = found.config
     acts = (_actuator_id(m, config, "left_actuator", where), _actuator_id(m, config, "right_actuator", where))
     if acts[0] == acts[1]:
         raise ConfigError(
             "right_actuator", f"left and right wheels need two actuators, both are {config.left_actuator!r}"
         )
-    qpos0, ctrl0 = _keyframe(m, config, where)
-    names = [m.actuator(a).name for a in acts]
+    description = describe(m, config, acts)
+    act_names = [m.actuator(a).name for a in acts]
     locked: list[str] = []
     if config.other_actuators == "lock":
         m_full = m
@@ -116,12 +122,12 @@ def _read_robot(config: MujocoConfig, stamp: tuple[int, int]) -> Robot:
         m = _compile(spec, where)
         qpos0 = edits.by_name(m_full, qpos0, m, "qpos", m.qpos0)
         ctrl0 = edits.by_name(m_full, ctrl0, m, "ctrl", np.zeros(m.nu))
-        acts = tuple(mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_ACTUATOR, n) for n in names)
+        acts = tuple(mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_ACTUATOR, n) for n in act_names)
     if config.timestep is not None:
         spec.option.timestep = float(config.timestep)
     site = _pose_frame(spec, m, config, where)
     joints = [int(m.actuator_trnid[a, 0]) for a in acts]
-    wheels = [(j, _collision_geoms(m, int(m.jnt_bodyid[j]))) for j in joints]
+    wheels = [(j, collision_geoms(m, int(m.jnt_bodyid[j]))) for j in joints]
     for key, (_, geoms) in zip(("left_actuator", "right_actuator"), wheels, strict=True):
         if not any(int(m.geom_type[g]) in WHEEL_SHAPES for g in geoms):
             raise ConfigError(
@@ -148,7 +154,7 @@ def _read_robot(config: MujocoConfig, stamp: tuple[int, int]) -> Robot:
             kind, f"the body tree of {kind} {name!r} must hang from a <freejoint/> (a robot free to drive)"
         )
     wheel_bodies = tuple(int(m.jnt_bodyid[j]) for j in joints)
-    tyres = tuple(g for b in wheel_bodies for g in _collision_geoms(m, b) if int(m.geom_type[g]) in WHEEL_SHAPES)
+    tyres = tuple(g for b in wheel_bodies for g in collision_geoms(m, b) if int(m.geom_type[g]) in WHEEL_SHAPES)
     dt = float(m.opt.timestep)
     d = mujoco.MjData(m)
     _settle(m, d, dt, qpos0, ctrl0, int(m.jnt_dofadr[jnt]), where)
@@ -158,6 +164,9 @@ def _read_robot(config: MujocoConfig, stamp: tuple[int, int]) -> Robot:
     limit = [w / abs(ci) for w, ci in zip(wheel_speed, c, strict=True) if w is not None]
     return Robot(
         where=where,
+        config=config,
+        found=found.keys,
+        description=description,
         sha256=sha256,
         spec=spec,
         model=m,
@@ -198,7 +207,7 @@ def _keyframe(m: mujoco.MjModel, config: MujocoConfig, where: str) -> tuple[np.n
     if k < 0:
         raise ConfigError(
             "keyframe",
-            f"no keyframe named {config.keyframe!r} in {where} ({_names(m, mujoco.mjtObj.mjOBJ_KEY, m.nkey)})",
+            f"no keyframe named {config.keyframe!r} in {where} ({names(m, mujoco.mjtObj.mjOBJ_KEY, m.nkey)})",
         )
     return m.key_qpos[k].copy(), m.key_ctrl[k].copy()
 
@@ -206,12 +215,12 @@ def _keyframe(m: mujoco.MjModel, config: MujocoConfig, where: str) -> tuple[np.n
 def _pose_frame(spec: mujoco.MjSpec, m: mujoco.MjModel, config: MujocoConfig, where: str) -> int | None:
     """The pose frame's site id, or None when a site is added for it (a body, or an offset)."""
     kind, name = config.frame
-    offset = np.asarray(config.frame_offset, dtype=float)
+    offset = np.asarray(config.offset, dtype=float)
     if kind == "body":
         b = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, name)
         if b <= 0:
             raise ConfigError(
-                "body", f"no body named {name!r} in {where} ({_names(m, mujoco.mjtObj.mjOBJ_BODY, m.nbody)})"
+                "body", f"no body named {name!r} in {where} ({names(m, mujoco.mjtObj.mjOBJ_BODY, m.nbody)})"
             )
         edits.add_pose_site(spec, b, offset, np.array([1.0, 0.0, 0.0, 0.0]))
         return None
@@ -219,7 +228,7 @@ def _pose_frame(spec: mujoco.MjSpec, m: mujoco.MjModel, config: MujocoConfig, wh
     if site < 0:
         raise ConfigError(
             "site",
-            f"no site named {name!r} in {where} ({_names(m, mujoco.mjtObj.mjOBJ_SITE, m.nsite)}); a body's frame can be named instead (body = ...)",
+            f"no site named {name!r} in {where} ({names(m, mujoco.mjtObj.mjOBJ_SITE, m.nsite)}); a body's frame can be named instead (body = ...)",
         )
     if not np.any(offset):
         return site
@@ -250,23 +259,14 @@ def _actuator_id(m: mujoco.MjModel, config: MujocoConfig, key: str, where: str) 
     a = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_ACTUATOR, name)
     if a < 0:
         raise ConfigError(
-            key, f"no actuator named {name!r} in {where} ({_names(m, mujoco.mjtObj.mjOBJ_ACTUATOR, m.nu)})"
+            key, f"no actuator named {name!r} in {where} ({names(m, mujoco.mjtObj.mjOBJ_ACTUATOR, m.nu)})"
         )
     if (
         int(m.actuator_trntype[a]) != mujoco.mjtTrn.mjTRN_JOINT
         or int(m.jnt_type[m.actuator_trnid[a, 0]]) != mujoco.mjtJoint.mjJNT_HINGE
     ):
         raise ConfigError(key, f"actuator {name!r} must drive a hinge joint (the wheel)")
-    kv = m.actuator_gainprm[a, 0]
-    servo = (
-        int(m.actuator_gaintype[a]) == mujoco.mjtGain.mjGAIN_FIXED
-        and int(m.actuator_biastype[a]) == mujoco.mjtBias.mjBIAS_AFFINE
-        and kv > 0
-        and m.actuator_biasprm[a, 0] == 0
-        and m.actuator_biasprm[a, 1] == 0
-        and m.actuator_biasprm[a, 2] == -kv
-    )
-    if not servo:
+    if not is_velocity_servo(m, a):
         raise ConfigError(key, f"actuator {name!r} must be a velocity servo (<velocity kv=... forcerange=...>)")
     return a
 
@@ -305,7 +305,7 @@ def _wheel_signs(
         if side * float((p - d.site_xpos[site]) @ R[:, 1]) <= 0:
             raise ConfigError(
                 key,
-                f"this wheel is not on the {'left' if side > 0 else 'right'} of site {config.site!r} (y axis to the left)",
+                f"this wheel is not on the {'left' if side > 0 else 'right'} of {' '.join(config.frame)} (y axis to the left)",
             )
         signs.append(1.0 if roll > 0 else -1.0)
     return signs[0], signs[1]
@@ -343,15 +343,6 @@ def _static_geometry(m: mujoco.MjModel, d: mujoco.MjData, site: int, root: int, 
             shape |= edits.mesh_shape(m, g)
         shapes.append(shape)
     return shapes
-
-
-def _collision_geoms(m: mujoco.MjModel, body: int) -> list[int]:
-    return [g for g in range(m.ngeom) if m.geom_bodyid[g] == body and (m.geom_contype[g] or m.geom_conaffinity[g])]
-
-
-def _names(m: mujoco.MjModel, obj: mujoco.mjtObj, n: int) -> str:
-    names = [mujoco.mj_id2name(m, obj, i) for i in range(n)]
-    return "it has: " + ", ".join(repr(x) for x in names if x) if any(names) else "it has none with a name"
 
 
 @njit(cache=True)

@@ -9,6 +9,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from mlpfac.exceptions import ConfigError
+from mlpfac.outputs import resolved
 
 MAX_RUNS = 100_000  # runs per sweep: a larger plan is refused before anything is loaded
 
@@ -131,7 +132,7 @@ def _seed_configs(table: dict, seeds: list[int], to_toml) -> Callable[[int, dict
 
 def check_writable(out: Path) -> None:
     """ConfigError unless ``out`` is (or can be created as) a writable folder; creates nothing."""
-    p = out.resolve()
+    p = resolved(out, f"--out {out}")
     while not p.exists():
         p = p.parent
     if not p.is_dir():
