@@ -42,6 +42,9 @@ def run(
     *,
     seed: int | None = None,
     duration: float | None = None,
+    out: str | Path | None = None,
+    figure: str | None = "corradini",
+    record: bool = True,
     sink=None,
     on_step=None,
 ) -> RunRecord:
@@ -49,9 +52,12 @@ def run(
 
     ``controller`` overrides the scenario's: a name (as ``--controller``), a class (built as
     ``Class(T=..., **params)``) or an object of one, which is run as it is (its ``reset(rng)`` is
-    called first). ``sink`` (:mod:`mlpfac.log`) receives the recording; ``on_step(k)`` is called
-    after every step. A status "diverged" or "interrupted" keeps what was recorded; what a user's
-    controller raises is a :class:`~mlpfac.exceptions.PluginError`.
+    called first). With ``out``, the run's folder is written as ``mlpfac run --out`` writes it:
+    config.toml, metrics.json, figure1.png (panel (h) from a run of ``figure``, None: no figure) and
+    run.rrd (``record``), put in place only when whole. Without it, ``sink`` (:mod:`mlpfac.log`)
+    may receive the recording and ``on_step(k)`` is called after every step. A status "diverged"
+    or "interrupted" keeps what was recorded; what a user's controller raises is a
+    :class:`~mlpfac.exceptions.PluginError`.
     """
     from mlpfac.runner import build
     from mlpfac.runner import run as run_scenario
@@ -62,7 +68,20 @@ def run(
         instance, controller = controller, type(controller)
     spec = None if controller is None else _spec(controller, "controller")
     scn = scn.with_overrides(spec, seed, duration, flag="controller")
-    return run_scenario(scn, sink=sink, on_step=on_step, built=build(scn, instance))
+    if out is None:
+        return run_scenario(scn, sink=sink, on_step=on_step, built=build(scn, instance))
+    if sink is not None or on_step is not None:
+        raise ConfigError("out", "a run into a folder records into it: give out, or sink / on_step, not both")
+    from mlpfac.run_folder import Recording, check_outputs, run_into_folder
+
+    baseline = None
+    if figure is not None:
+        try:
+            baseline = scn.with_overrides(controller=figure, flag="figure")
+        except ConfigError as err:
+            raise ConfigError("figure", err.what) from None
+    recording = check_outputs(Path(out), Recording(off=not record))
+    return run_into_folder(scn, Path(out), build(scn, instance), recording, baseline).rec
 
 
 def sweep(

@@ -176,9 +176,9 @@ def cmd_plot(args: argparse.Namespace) -> int:
 
 def cmd_run(args: argparse.Namespace) -> int:
     """Check everything, build the plant and the controller, then run into a folder beside --out
-    that replaces it only when whole (see :class:`mlpfac.outputs.Stage`), under --out's lock."""
+    that replaces it only when whole (:mod:`mlpfac.run_folder`), under --out's lock."""
     from mlpfac.exceptions import ConfigError
-    from mlpfac.outputs import check_run_folder, check_save_file
+    from mlpfac.run_folder import Recording, check_outputs, run_into_folder
     from mlpfac.runner import build
     from mlpfac.scenario import load
 
@@ -196,136 +196,22 @@ def cmd_run(args: argparse.Namespace) -> int:
         except ConfigError as err:  # the flag that named it
             raise ConfigError("--baseline", err.what) from None
     out = args.out or Path("runs") / f"{scn.name}-{scn.controller}-s{scn.seed}"
-    check_run_folder(out)
-    if args.save is not None and args.save.absolute() == (out / "run.rrd").absolute():
-        args.save = None  # where the recording goes anyway
-    if args.save is not None:
-        check_save_file(args.save)
-        if out.absolute() in args.save.absolute().parents:
-            raise ConfigError(f"--save {args.save}", f"is inside --out {out}, which a run replaces whole")
-    return _run_staged(args, scn, out, build(scn), baseline)
-
-
-def _run_staged(args: argparse.Namespace, scn, out: Path, built, baseline) -> int:
-    """Under the locks of --out (and --save): run into the stages, then put them in place."""
-    from contextlib import nullcontext
-
-    from mlpfac.exceptions import PluginError
-    from mlpfac.outputs import Stage, folder_lock, holds_finished_run
-
-    with (
-        folder_lock(out, "--out"),
-        folder_lock(args.save, "--save") if args.save else nullcontext(),
-        Stage(out, "--out") as folder,
-        Stage(args.save, "--save", folder=False) if args.save else nullcontext() as saved,
-    ):
-        held = holds_finished_run(out), args.save is not None and holds_finished_run(args.save)
-        saving = not (args.no_log or args.spawn or args.connect or args.serve)
-        rrd_path = saved.path if saved else folder.path / "run.rrd"
-        rrd_shown = args.save if saved else out / "run.rrd"
-        sink = _open_sink(args, scn, (rrd_path, rrd_shown) if saving else None)
-        try:
-            rec, m = _run_into(folder, out, scn, built, sink, baseline)
-            if saving:
-                from mlpfac.log.sinks import check_recording
-
-                check_recording(rrd_path, rrd_shown)
-        except BaseException as err:
-            if sink is not None:
-                sink.close()  # a web viewer started for --serve stops with the run
-            if isinstance(err, PluginError):
-                _keep_error(folder, out, scn, err, held[0])
-            raise
-        if rec.status == "interrupted" and any(held):  # the stage is removed on leaving the block
-            if sink is not None:
-                sink.close()
-            kept = " and ".join(str(p) for p, h in zip((out, args.save), held, strict=True) if h)
-            print(f"mlpfac: {rec.reason}; {kept} kept the earlier run, this one was discarded", file=sys.stderr)
-            return _interrupt_code(rec)
-        if saved:
-            saved.commit()
-        folder.commit()
-    _print_summary(m, out)
-    if sink is not None and sink.serving:
+    recording = check_outputs(out, Recording(args.save, args.spawn, args.connect, args.serve, args.bind, args.no_log))
+    done = run_into_folder(scn, out, build(scn), recording, baseline)
+    rec = done.rec
+    if done.kept:
+        kept = " and ".join(map(str, done.kept))
+        print(f"mlpfac: {rec.reason}; {kept} kept the earlier run, this one was discarded", file=sys.stderr)
+        return _interrupt_code(rec)
+    _print_summary(done.metrics, out)
+    if done.sink is not None and done.sink.serving:
         print("serving the recording; Ctrl-C stops the web viewer", flush=True)
-        sink.wait()
-    return {"ok": 0, "diverged": 1}.get(rec.status) if rec.status != "interrupted" else _interrupt_code(rec)
-
-
-def _keep_error(folder, out: Path, scn, err, held: bool) -> None:
-    """A run whose controller raised: its folder holds error.txt and config.toml (and what was
-    recorded), unless --out holds a finished run, which is kept."""
-    from mlpfac.outputs import write_atomic
-    from mlpfac.scenario import to_toml
-
-    if held:
-        print(f"mlpfac: {out} kept the earlier run; this one failed", file=sys.stderr)
-        return
-    write_atomic(folder.path / "config.toml", to_toml(scn.table))
-    write_atomic(folder.path / "error.txt", err.report())
-    folder.commit()
-    print(f"mlpfac: the run failed; its traceback is in {out / 'error.txt'}", file=sys.stderr)
+        done.sink.wait()
+    return {"ok": 0, "diverged": EXIT_FAILED}.get(rec.status) if rec.status != "interrupted" else _interrupt_code(rec)
 
 
 def _interrupt_code(rec) -> int:
     return EXIT_TERMINATED if rec.reason.startswith("terminated") else EXIT_INTERRUPTED
-
-
-def _open_sink(args: argparse.Namespace, scn, save: tuple[Path, Path] | None):
-    """The sink the flags ask for; ``save``: (the file written, the name it will have)."""
-    if args.no_log:
-        return None
-    from mlpfac.exceptions import ConfigError
-
-    try:
-        return _make_sink(args, scn, save[0] if save else None)
-    except ConfigError as err:
-        if save is None or str(save[0]) not in err.where:
-            raise
-        raise ConfigError(err.where.replace(str(save[0]), str(save[1])), err.what) from None
-
-
-def _make_sink(args: argparse.Namespace, scn, save: Path | None):
-    from mlpfac.log import sinks
-
-    sink = sinks.make_sink(
-        save=save,
-        spawn=args.spawn,
-        connect=args.connect,
-        serve=args.serve,
-        recording_name=f"{scn.name} / {scn.controller} / seed {scn.seed}",
-        recording_id=f"{scn.name}-{scn.controller}-{scn.seed}",
-        bind=args.bind,
-        description=scn.description,
-    )
-    if sink is not None and args.serve:
-        print(f"web viewer: {sink.viewer_url}", flush=True)
-    return sink
-
-
-def _run_into(folder, out: Path, scn, built, sink, baseline) -> tuple:
-    """The run, then its folder (config.toml, metrics.json, figure1.png) in the stage. A write that
-    fails is a ConfigError naming the file where it would have gone."""
-    from mlpfac.exceptions import ConfigError
-    from mlpfac.outputs import Terminated, write_run
-    from mlpfac.runner import run
-
-    rec = run(scn, sink=sink, built=built)
-    writing = folder.path / "metrics.json"
-    try:
-        m = write_run(folder.path, scn, rec)
-        if baseline is not None and rec.status != "interrupted":
-            from mlpfac.plots import figure1
-
-            base = run(baseline)
-            if base.status == "interrupted":  # Ctrl-C while the figure's baseline ran
-                raise Terminated() if base.reason.startswith("terminated") else KeyboardInterrupt()
-            writing = folder.path / "figure1.png"
-            figure1(rec, base, writing)
-    except OSError as err:
-        name = folder.shown(err.filename or writing)
-        raise ConfigError(name, f"cannot write ({err.strerror or err}); nothing was changed in {out}") from None
-    return rec, m
 
 
 def _fmt(x: float | None, scale: float = 1.0, unit: str = "") -> str:

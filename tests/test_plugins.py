@@ -365,3 +365,18 @@ def test_a_plugin_on_a_dask_cluster_gives_the_local_rows(law, tmp_path):
         remote = mlpfac.sweep(*args, seeds="0-1", scheduler=cluster.scheduler_address, out=tmp_path / "dask")
     assert list(remote) == list(local) and not remote.errors
     assert (tmp_path / "dask" / "k" / "Law" / "seed-0001" / "metrics.json").exists()
+
+
+def test_the_python_api_runs_into_a_folder_as_the_command_does(law, tmp_path):
+    (tmp_path / "k.toml").write_text(KINEMATIC)
+    rec = mlpfac.run(tmp_path / "k.toml", controller=f"{law}:Law", out=tmp_path / "api")
+    assert sorted(os.listdir(tmp_path / "api")) == ["config.toml", "figure1.png", "metrics.json", "run.rrd"]
+    m = json.loads((tmp_path / "api" / "metrics.json").read_text())
+    assert m["steps"] == rec.n and m["controller"] == "Law"
+    p = cli(["run", "k.toml", "--controller", "law.py:Law", "--out", "cli"], tmp_path)
+    assert p.returncode == 0, p.stderr
+    assert (tmp_path / "cli" / "config.toml").read_text() == (tmp_path / "api" / "config.toml").read_text()
+    mlpfac.run(tmp_path / "k.toml", controller="kanayama", out=tmp_path / "bare", figure=None, record=False)
+    assert sorted(os.listdir(tmp_path / "bare")) == ["config.toml", "metrics.json"]
+    with pytest.raises(mlpfac.ConfigError, match="figure"):
+        mlpfac.run(tmp_path / "k.toml", out=tmp_path / "x", figure="pid")

@@ -1,0 +1,165 @@
+"""One run into a folder: config.toml, metrics.json, figure1.png and run.rrd, written beside the
+folder and put in place only when whole (:class:`mlpfac.outputs.Stage`), under its lock. What
+``mlpfac run`` does, and :func:`mlpfac.run` with ``out``.
+"""
+
+from __future__ import annotations
+
+import sys
+from contextlib import nullcontext
+from dataclasses import dataclass
+from pathlib import Path
+
+from mlpfac.exceptions import ConfigError, PluginError
+from mlpfac.outputs import Stage, check_run_folder, check_save_file, folder_lock, holds_finished_run
+
+
+@dataclass
+class Recording:
+    """Where the run's rerun recording goes: ``run.rrd`` in the folder (the default), another file
+    (``save``), a viewer (``spawn``, ``connect``, ``serve`` on ``bind``), or nowhere (``off``)."""
+
+    save: Path | None = None
+    spawn: bool = False
+    connect: str | None = None
+    serve: bool = False
+    bind: str = "127.0.0.1"
+    off: bool = False
+
+    @property
+    def to_file(self) -> bool:
+        return not (self.off or self.spawn or self.connect or self.serve)
+
+
+@dataclass
+class FolderRun:
+    """What a run into a folder gave: the record, its metrics (None when nothing was put in place),
+    whether an earlier finished run was kept instead (``kept``: its paths), and the sink (a viewer
+    being served stays up)."""
+
+    rec: object
+    metrics: dict | None
+    kept: list[Path]
+    sink: object = None
+
+
+def check_outputs(out: Path, recording: Recording) -> Recording:
+    """Before anything runs: ``out`` can hold a run, and ``recording.save`` is a file outside it.
+    Returns the recording with ``save`` dropped where it is ``out/run.rrd`` (where it goes anyway)."""
+    check_run_folder(out)
+    save = recording.save
+    if save is not None and save.absolute() == (out / "run.rrd").absolute():
+        save = None
+    if save is not None:
+        check_save_file(save)
+        if out.absolute() in save.absolute().parents:
+            raise ConfigError(f"--save {save}", f"is inside --out {out}, which a run replaces whole")
+    return Recording(save, recording.spawn, recording.connect, recording.serve, recording.bind, recording.off)
+
+
+def run_into_folder(scn, out: Path, built, recording: Recording, baseline=None, painter=None) -> FolderRun:
+    """Under the locks of ``out`` (and ``recording.save``): run into the stages, then put them in
+    place. ``baseline`` (a scenario) is run for panel (h) of figure1.png (None: no figure).
+
+    An interrupted run is kept only where no finished run was (``kept`` names those that stay); a
+    run whose controller raised leaves error.txt and config.toml, unless ``out`` holds a finished
+    run, and the :class:`PluginError` propagates. A write that fails is a ConfigError naming the file."""
+    save = recording.save
+    with (
+        folder_lock(out, "--out"),
+        folder_lock(save, "--save") if save else nullcontext(),
+        Stage(out, "--out") as folder,
+        Stage(save, "--save", folder=False) if save else nullcontext() as saved,
+    ):
+        held = holds_finished_run(out), save is not None and holds_finished_run(save)
+        rrd_path = saved.path if saved else folder.path / "run.rrd"
+        rrd_shown = save if saved else out / "run.rrd"
+        sink = _open_sink(recording, scn, (rrd_path, rrd_shown) if recording.to_file else None)
+        try:
+            rec, m = _run_into(folder, out, scn, built, sink, baseline, painter)
+            if recording.to_file:
+                from mlpfac.log.sinks import check_recording
+
+                check_recording(rrd_path, rrd_shown)
+        except BaseException as err:
+            if sink is not None:
+                sink.close()  # a web viewer started for --serve stops with the run
+            if isinstance(err, PluginError):
+                _keep_error(folder, out, scn, err, held[0])
+            raise
+        if rec.status == "interrupted" and any(held):  # the stage is removed on leaving the block
+            if sink is not None:
+                sink.close()
+            return FolderRun(rec, None, [p for p, h in zip((out, save), held, strict=True) if h])
+        if saved:
+            saved.commit()
+        folder.commit()
+    return FolderRun(rec, m, [], sink)
+
+
+def _keep_error(folder: Stage, out: Path, scn, err: PluginError, held: bool) -> None:
+    """A run whose controller raised: its folder holds error.txt and config.toml (and what was
+    recorded), unless ``out`` holds a finished run, which is kept."""
+    from mlpfac.outputs import write_atomic
+    from mlpfac.scenario import to_toml
+
+    if held:
+        print(f"mlpfac: {out} kept the earlier run; this one failed", file=sys.stderr)
+        return
+    write_atomic(folder.path / "config.toml", to_toml(scn.table))
+    write_atomic(folder.path / "error.txt", err.report())
+    folder.commit()
+    print(f"mlpfac: the run failed; its traceback is in {out / 'error.txt'}", file=sys.stderr)
+
+
+def _open_sink(recording: Recording, scn, save: tuple[Path, Path] | None):
+    """The sink ``recording`` asks for; ``save``: (the file written, the name it will have)."""
+    if recording.off:
+        return None
+    from mlpfac.log import sinks
+
+    try:
+        sink = sinks.make_sink(
+            save=save[0] if save else None,
+            spawn=recording.spawn,
+            connect=recording.connect,
+            serve=recording.serve,
+            recording_name=f"{scn.name} / {scn.controller} / seed {scn.seed}",
+            recording_id=f"{scn.name}-{scn.controller}-{scn.seed}",
+            bind=recording.bind,
+            description=scn.description,
+        )
+    except ConfigError as err:
+        if save is None or str(save[0]) not in err.where:
+            raise
+        raise ConfigError(err.where.replace(str(save[0]), str(save[1])), err.what) from None
+    if sink is not None and recording.serve:
+        print(f"web viewer: {sink.viewer_url}", flush=True)
+    return sink
+
+
+def _run_into(folder: Stage, out: Path, scn, built, sink, baseline, painter) -> tuple:
+    """The run, then its folder (config.toml, metrics.json, figure1.png) in the stage. A write that
+    fails is a ConfigError naming the file where it would have gone."""
+    from mlpfac.outputs import Terminated, write_run
+    from mlpfac.runner import run
+
+    rec = run(scn, sink=sink, built=built)
+    writing = folder.path / "metrics.json"
+    try:
+        m = write_run(folder.path, scn, rec)
+        if baseline is not None and rec.status != "interrupted":
+            base = run(baseline)
+            if base.status == "interrupted":  # Ctrl-C while the figure's baseline ran
+                raise Terminated() if base.reason.startswith("terminated") else KeyboardInterrupt()
+            writing = folder.path / "figure1.png"
+            if painter is None:
+                from mlpfac.plots import figure1
+
+                figure1(rec, base, writing)
+            else:
+                painter.figure1(rec, base, writing)
+    except OSError as err:
+        name = folder.shown(err.filename or writing)
+        raise ConfigError(name, f"cannot write ({err.strerror or err}); nothing was changed in {out}") from None
+    return rec, m
