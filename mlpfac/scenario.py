@@ -9,13 +9,10 @@ from __future__ import annotations
 import copy
 import dataclasses
 import importlib.resources
-import json
 import math
 import os
 import re
 import tomllib
-import types
-import typing
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -31,12 +28,9 @@ from mlpfac.law import Law
 from mlpfac.networks import Networks
 from mlpfac.plugins import Plugin, absolute_spec, is_plugin_spec, resolve
 from mlpfac.reference import make_reference
+from mlpfac.toml_data import build, check_keys, number, subtable, to_toml, typed  # noqa: F401 (mlpfac.scenario.to_toml)
 
 NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._+-]*")  # a scenario's name is a folder name in runs/ and sweeps
-NO_LIMIT = {"v_max", "omega_max"}  # keys where inf means "no limit" (None)
-INF_OK = NO_LIMIT | {
-    "max_wheel_speed"
-}  # keys that take inf ("no limit"; max_wheel_speed keeps it: None is the model's)
 MEMORY_SHARE = 0.8  # a run may plan to use at most this share of the memory available now
 
 TOP_KEYS = {
@@ -239,90 +233,6 @@ def _check_provenance(recorded, config, where: str) -> None:
         )
 
 
-def _check_keys(table: dict, allowed: set[str], where: str) -> None:
-    for key in table:
-        if key not in allowed:
-            raise ConfigError(f"{where} {key}", f"unknown key (known: {', '.join(sorted(allowed))})")
-
-
-def _table(table: dict, key: str, where: str, default=None) -> dict:
-    val = table.get(key, {} if default is None else default)
-    if not isinstance(val, dict):
-        raise ConfigError(f"{where} {key}", f"expected a table ([{key}]), got {val!r}")
-    return dict(val)
-
-
-def _number(table: dict, key: str, default: float, where: str, positive: bool = True) -> float:
-    val = table.get(key, default)
-    if isinstance(val, bool) or not isinstance(val, int | float) or not math.isfinite(val):
-        raise ConfigError(f"{where} {key}", f"expected a finite number, got {val!r}")
-    if positive and not val > 0:
-        raise ConfigError(f"{where} {key}", f"must be positive, got {val}")
-    if not positive and val < 0:
-        raise ConfigError(f"{where} {key}", f"must be >= 0, got {val}")
-    return float(val)
-
-
-def _typed(value, hint, key: str) -> bool:
-    """Whether a TOML value fits a dataclass field's type (float: a finite number, inf where it means no limit)."""
-    origin = typing.get_origin(hint)
-    if origin in (typing.Union, types.UnionType):
-        return any(_typed(value, h, key) for h in typing.get_args(hint))
-    if origin is tuple:
-        args = typing.get_args(hint)
-        if not isinstance(value, list | tuple):
-            return False
-        if len(args) == 2 and args[1] is Ellipsis:
-            return all(_typed(v, args[0], key) for v in value)
-        return len(value) == len(args) and all(_typed(v, h, key) for v, h in zip(value, args, strict=True))
-    if hint is type(None):
-        return value is None
-    if hint is bool:
-        return isinstance(value, bool)
-    if hint is int:
-        return isinstance(value, int) and not isinstance(value, bool)
-    if hint is float:
-        ok = isinstance(value, int | float) and not isinstance(value, bool)
-        return ok and (math.isfinite(value) or (key in INF_OK and value == math.inf))
-    if hint is str:
-        return isinstance(value, str)
-    return True  # nested configs (Networks) are built on their own
-
-
-def _describe(hint) -> str:
-    origin = typing.get_origin(hint)
-    if origin in (typing.Union, types.UnionType):
-        return " or ".join(_describe(h) for h in typing.get_args(hint) if h is not type(None))
-    if origin is tuple:
-        args = typing.get_args(hint)
-        if len(args) == 2 and args[1] is Ellipsis:
-            return f"a list of {_describe(args[0])}s"
-        return f"a list of {len(args)} {_describe(args[0])}s"
-    return {bool: "true or false", int: "a whole number", float: "a finite number", str: "a string"}.get(
-        hint, str(hint)
-    )
-
-
-def build(cls, table: dict, where: str):
-    """A frozen config dataclass from a TOML table: unknown keys, wrong types and bad values name the key."""
-    fields = {f.name for f in dataclasses.fields(cls)}
-    _check_keys(table, fields, where)
-    hints = typing.get_type_hints(cls)
-    values = {}
-    for key, val in table.items():
-        if not _typed(val, hints[key], key):
-            raise ConfigError(f"{where} {key}", f"expected {_describe(hints[key])}, got {val!r}")
-        if key in NO_LIMIT and val == math.inf:
-            val = None  # inf: no limit
-        values[key] = tuple(val) if isinstance(val, list) else val
-    try:
-        return cls(**values)
-    except ConfigError as err:
-        raise ConfigError(f"{where} {err.where}".strip(), err.what) from None
-    except (TypeError, ValueError) as err:
-        raise ConfigError(where, str(err)) from None
-
-
 def _memory_available() -> int:
     """Bytes of memory available now (MemAvailable), or the physical memory where that is unknown."""
     try:
@@ -349,9 +259,9 @@ def parse(table: dict, source: str = "<scenario>", check_model: bool = True) -> 
     made with; ``check_model=False`` skips that compile where the table's model was just checked."""
     if not isinstance(table, dict):
         raise ConfigError(source, "expected a table of scenario keys")
-    _check_keys(table, TOP_KEYS, source)
-    T = _number(table, "T", 0.01, source)
-    duration = _number(table, "duration", 25.0, source)
+    check_keys(table, TOP_KEYS, source)
+    T = number(table, "T", 0.01, source)
+    duration = number(table, "duration", 25.0, source)
     if duration < T:
         raise ConfigError(f"{source} duration", f"{duration:g} s is shorter than one control period T = {T:g} s")
     seed = table.get("seed", 0)
@@ -366,23 +276,23 @@ def parse(table: dict, source: str = "<scenario>", check_model: bool = True) -> 
     if not isinstance(description, str):
         raise ConfigError(f"{source} description", f"expected a string, got {description!r}")
 
-    ref_table = _table(table, "reference", source, {"kind": "eight"})
+    ref_table = subtable(table, "reference", source, {"kind": "eight"})
     kind = ref_table.pop("kind", "eight")
     for key, val in ref_table.items():
         if isinstance(val, bool) or not isinstance(val, int | float) or not math.isfinite(val):
             raise ConfigError(f"{source} [reference] {key}", f"expected a finite number, got {val!r}")
     reference = make_reference(kind, ref_table, f"{source} [reference]")
 
-    initial = _table(table, "initial", source)
-    _check_keys(initial, {"error", "moving"}, f"{source} [initial]")
+    initial = subtable(table, "initial", source)
+    check_keys(initial, {"error", "moving"}, f"{source} [initial]")
     moving = initial.get("moving", True)
     if not isinstance(moving, bool):
         raise ConfigError(f"{source} [initial] moving", f"expected true or false, got {moving!r}")
     e0 = initial.get("error", [0.0, 0.0, 0.0])
-    if not _typed(e0, tuple[float, float, float], "error"):
+    if not typed(e0, tuple[float, float, float], "error"):
         raise ConfigError(f"{source} [initial] error", f"expected three finite numbers (e1, e2, e3), got {e0!r}")
 
-    plant_table = _table(table, "plant", source, {"kind": "kinematic"})
+    plant_table = subtable(table, "plant", source, {"kind": "kinematic"})
     plant_kind = plant_table.pop("kind", "kinematic")
     where = f"{source} [plant]"
     if plant_kind == "kinematic":
@@ -398,9 +308,9 @@ def parse(table: dict, source: str = "<scenario>", check_model: bool = True) -> 
     if "provenance" in table and check_model:
         _check_provenance(table["provenance"], plant_config, f"{source} [provenance]")
 
-    ctrl = _table(table, "controller", source)
+    ctrl = subtable(table, "controller", source)
     where = f"{source} [controller]"
-    _check_keys(ctrl, CONTROLLER_KEYS, where)
+    check_keys(ctrl, CONTROLLER_KEYS, where)
     name_c = ctrl.get("name", "adaptive")
     if not isinstance(name_c, str) or not name_c:
         raise ConfigError(f"{where} name", f"expected a controller's name, got {name_c!r}")
@@ -414,12 +324,12 @@ def parse(table: dict, source: str = "<scenario>", check_model: bool = True) -> 
             f"{where} params", f"[controller.params] is for a plug-in controller; {name_c} takes its own keys"
         )
     law = build(Law, {k: ctrl[k] for k in ("lambdas", "v_max", "omega_max") if k in ctrl}, where)
-    ad = _table(ctrl, "adaptive", where)
-    _check_keys(ad, ADAPTIVE_KEYS, f"{where}.adaptive")
+    ad = subtable(ctrl, "adaptive", where)
+    check_keys(ad, ADAPTIVE_KEYS, f"{where}.adaptive")
     nets = build(Networks, {k: ad.pop(k) for k in list(ad) if k in NETWORK_KEYS}, f"{where}.adaptive")
     adaptive = build(AdaptiveConfig, ad, f"{where}.adaptive")
     adaptive = dataclasses.replace(adaptive, networks=nets)
-    kanayama = build(KanayamaGains, _table(ctrl, "kanayama", where), f"{where}.kanayama")
+    kanayama = build(KanayamaGains, subtable(ctrl, "kanayama", where), f"{where}.kanayama")
 
     steps = int(round(duration / T))
     alpha = nets.alpha if name_c in VARIANTS else 0
@@ -444,8 +354,8 @@ def parse(table: dict, source: str = "<scenario>", check_model: bool = True) -> 
         duration=duration,
         T=T,
         seed=seed,
-        warmup=_number(table, "warmup", 2.0, source, positive=False),
-        divergence_m=_number(table, "divergence_m", 5.0, source),
+        warmup=number(table, "warmup", 2.0, source, positive=False),
+        divergence_m=number(table, "divergence_m", 5.0, source),
         initial_error=tuple(float(x) for x in e0),
         start_moving=moving,
         reference=reference,
@@ -483,35 +393,3 @@ def _plugin_provenance(table: dict, plugin: Plugin, source: str, check: bool) ->
             f"recorded {str(was.get('sha256'))[:12]}...); remove [provenance.controller] to run it as it is now",
         )
     return {**table, "provenance": {**prov, "controller": plugin.provenance()}}
-
-
-def to_toml(table: dict) -> str:
-    """A scenario table as TOML (scalars, lists of scalars, tables and arrays of tables)."""
-    lines: list[str] = []
-
-    def value(v) -> str:
-        if isinstance(v, bool):
-            return "true" if v else "false"
-        if isinstance(v, str):
-            return json.dumps(v, ensure_ascii=False)  # a JSON string is a TOML basic string
-        if isinstance(v, float) and math.isinf(v):
-            return "inf" if v > 0 else "-inf"
-        if isinstance(v, list | tuple):
-            return "[" + ", ".join(value(x) for x in v) + "]"
-        return repr(v)
-
-    def emit(t: dict, prefix: str) -> None:
-        for k, v in t.items():
-            if not isinstance(v, dict) and not (isinstance(v, list) and v and isinstance(v[0], dict)):
-                lines.append(f"{k} = {value(v)}")
-        for k, v in t.items():
-            if isinstance(v, dict):
-                lines.append(f"\n[{prefix}{k}]")
-                emit(v, f"{prefix}{k}.")
-            elif isinstance(v, list) and v and isinstance(v[0], dict):
-                for item in v:
-                    lines.append(f"\n[[{prefix}{k}]]")
-                    emit(item, f"{prefix}{k}.")
-
-    emit(table, "")
-    return "\n".join(lines) + "\n"

@@ -1,0 +1,133 @@
+"""TOML tables -> plain, validated data: frozen config dataclasses built from a table (unknown
+keys, wrong types and bad values named by their key), and a table written back as TOML."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import types
+import typing
+
+from mlpfac.exceptions import ConfigError
+
+NO_LIMIT = {"v_max", "omega_max"}  # keys where inf means "no limit" (None)
+INF_OK = NO_LIMIT | {
+    "max_wheel_speed"
+}  # keys that take inf ("no limit"; max_wheel_speed keeps it: None is the model's)
+
+
+def check_keys(table: dict, allowed: set[str], where: str) -> None:
+    for key in table:
+        if key not in allowed:
+            raise ConfigError(f"{where} {key}", f"unknown key (known: {', '.join(sorted(allowed))})")
+
+
+def subtable(table: dict, key: str, where: str, default=None) -> dict:
+    val = table.get(key, {} if default is None else default)
+    if not isinstance(val, dict):
+        raise ConfigError(f"{where} {key}", f"expected a table ([{key}]), got {val!r}")
+    return dict(val)
+
+
+def number(table: dict, key: str, default: float, where: str, positive: bool = True) -> float:
+    val = table.get(key, default)
+    if isinstance(val, bool) or not isinstance(val, int | float) or not math.isfinite(val):
+        raise ConfigError(f"{where} {key}", f"expected a finite number, got {val!r}")
+    if positive and not val > 0:
+        raise ConfigError(f"{where} {key}", f"must be positive, got {val}")
+    if not positive and val < 0:
+        raise ConfigError(f"{where} {key}", f"must be >= 0, got {val}")
+    return float(val)
+
+
+def typed(value, hint, key: str) -> bool:
+    """Whether a TOML value fits a dataclass field's type (float: a finite number, inf where it means no limit)."""
+    origin = typing.get_origin(hint)
+    if origin in (typing.Union, types.UnionType):
+        return any(typed(value, h, key) for h in typing.get_args(hint))
+    if origin is tuple:
+        args = typing.get_args(hint)
+        if not isinstance(value, list | tuple):
+            return False
+        if len(args) == 2 and args[1] is Ellipsis:
+            return all(typed(v, args[0], key) for v in value)
+        return len(value) == len(args) and all(typed(v, h, key) for v, h in zip(value, args, strict=True))
+    if hint is type(None):
+        return value is None
+    if hint is bool:
+        return isinstance(value, bool)
+    if hint is int:
+        return isinstance(value, int) and not isinstance(value, bool)
+    if hint is float:
+        ok = isinstance(value, int | float) and not isinstance(value, bool)
+        return ok and (math.isfinite(value) or (key in INF_OK and value == math.inf))
+    if hint is str:
+        return isinstance(value, str)
+    return True  # nested configs (Networks) are built on their own
+
+
+def describe(hint) -> str:
+    origin = typing.get_origin(hint)
+    if origin in (typing.Union, types.UnionType):
+        return " or ".join(describe(h) for h in typing.get_args(hint) if h is not type(None))
+    if origin is tuple:
+        args = typing.get_args(hint)
+        if len(args) == 2 and args[1] is Ellipsis:
+            return f"a list of {describe(args[0])}s"
+        return f"a list of {len(args)} {describe(args[0])}s"
+    return {bool: "true or false", int: "a whole number", float: "a finite number", str: "a string"}.get(
+        hint, str(hint)
+    )
+
+
+def build(cls, table: dict, where: str):
+    """A frozen config dataclass from a TOML table: unknown keys, wrong types and bad values name the key."""
+    fields = {f.name for f in dataclasses.fields(cls)}
+    check_keys(table, fields, where)
+    hints = typing.get_type_hints(cls)
+    values = {}
+    for key, val in table.items():
+        if not typed(val, hints[key], key):
+            raise ConfigError(f"{where} {key}", f"expected {describe(hints[key])}, got {val!r}")
+        if key in NO_LIMIT and val == math.inf:
+            val = None  # inf: no limit
+        values[key] = tuple(val) if isinstance(val, list) else val
+    try:
+        return cls(**values)
+    except ConfigError as err:
+        raise ConfigError(f"{where} {err.where}".strip(), err.what) from None
+    except (TypeError, ValueError) as err:
+        raise ConfigError(where, str(err)) from None
+
+
+def to_toml(table: dict) -> str:
+    """A scenario table as TOML (scalars, lists of scalars, tables and arrays of tables)."""
+    lines: list[str] = []
+
+    def value(v) -> str:
+        if isinstance(v, bool):
+            return "true" if v else "false"
+        if isinstance(v, str):
+            return json.dumps(v, ensure_ascii=False)  # a JSON string is a TOML basic string
+        if isinstance(v, float) and math.isinf(v):
+            return "inf" if v > 0 else "-inf"
+        if isinstance(v, list | tuple):
+            return "[" + ", ".join(value(x) for x in v) + "]"
+        return repr(v)
+
+    def emit(t: dict, prefix: str) -> None:
+        for k, v in t.items():
+            if not isinstance(v, dict) and not (isinstance(v, list) and v and isinstance(v[0], dict)):
+                lines.append(f"{k} = {value(v)}")
+        for k, v in t.items():
+            if isinstance(v, dict):
+                lines.append(f"\n[{prefix}{k}]")
+                emit(v, f"{prefix}{k}.")
+            elif isinstance(v, list) and v and isinstance(v[0], dict):
+                for item in v:
+                    lines.append(f"\n[[{prefix}{k}]]")
+                    emit(item, f"{prefix}{k}.")
+
+    emit(table, "")
+    return "\n".join(lines) + "\n"
