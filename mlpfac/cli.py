@@ -1,4 +1,4 @@
-"""The command line: mlpfac run / list / compare / sweep / view / plot.
+"""The command line: mlpfac run / list / compare / sweep / view / plot / report.
 
 Arguments are parsed before any heavy import; bad input prints one line and exits with code 2.
 Exit codes of ``run``: 0 ok, 1 the run diverged, 2 bad input or a write that failed (nothing
@@ -84,6 +84,25 @@ def build_parser() -> argparse.ArgumentParser:
         description="Draw sweep.png / compare.png beside the tables of finished sweep folders.",
     )
     p.add_argument("folders", nargs="+", type=Path, help="results folders of `mlpfac sweep` or `mlpfac compare`")
+
+    p = sub.add_parser(
+        "report",
+        help="write the results tables of the docs from their data",
+        description="Write every marked table of DOCS/*.md from the data folder it names (mlpfac/report.py).",
+    )
+    p.add_argument("docs", nargs="?", type=Path, default=Path("docs"), help="the folder of pages (default docs)")
+    p.add_argument("--check", action="store_true", help="write nothing; exit 1 if a table differs from its data")
+    p.add_argument(
+        "--collect",
+        action="append",
+        default=[],
+        metavar="NAME=RESULTS",
+        help="first copy a finished results folder (or a script's printed table) into DOCS/data/NAME",
+    )
+    p.add_argument(
+        "--command", dest="made_by", help="with one --collect: the command that made it (default: the one on record)"
+    )
+    p.add_argument("--code-version", help="with --collect: the code that ran it (default: git rev-parse HEAD)")
     return parser
 
 
@@ -103,6 +122,8 @@ def main(argv: list[str] | None = None) -> int:
             return cmd_view(args)
         if args.command == "plot":
             return cmd_plot(args)
+        if args.command == "report":
+            return cmd_report(args)
         from mlpfac import sweep
 
         return sweep.run_compare_cli(args) if args.command == "compare" else sweep.run_sweep_cli(args)
@@ -127,6 +148,29 @@ def cmd_list() -> int:
         scn = load(name, build=False)
         print(f"{name:<{width}}  {scn.plant_kind:<9}  {scn.description}")
     print(f"\ncontrollers: {', '.join(CONTROLLERS)}")
+    return 0
+
+
+def cmd_report(args: argparse.Namespace) -> int:
+    from mlpfac import report
+    from mlpfac.exceptions import ConfigError
+
+    for item in args.collect:
+        name, sep, results = item.partition("=")
+        if not (sep and name and results):
+            raise ConfigError("--collect", f"expected NAME=RESULTS, got {item!r}")
+        print(
+            f"{results} -> {report.collect(args.docs / 'data' / name, Path(results), args.made_by, args.code_version)}"
+        )
+    if args.check:
+        stale = report.stale(args.docs)
+        for page in stale:
+            print(
+                f"mlpfac: {page}: a table differs from its data; `mlpfac report {args.docs}` writes it", file=sys.stderr
+            )
+        return 1 if stale else 0
+    for page, n, changed in report.write(args.docs):
+        print(f"{page}: {n} tables, {'written' if changed else 'unchanged'}")
     return 0
 
 
