@@ -26,8 +26,8 @@ only what the nominal design would need to be redone for the changed robot:
 - **payload, friction, weak actuator**: nothing. The law (35) has no parameter that mass, friction
   or actuator strength change; the oracle is the nominal law, bit for bit Corradini's. Its
   post-event error in the same run is the bound (the same law on the robot changed from t = 0
-  measures the same over that window within noise: ``sims/oracle_from_start.py``, README "Beyond
-  the paper").
+  measures the same over that window within noise: ``sims/oracle_from_start.py``,
+  docs/results-beyond.md).
 """
 
 from __future__ import annotations
