@@ -106,7 +106,7 @@ def rewrite(page: Path) -> tuple[str, int]:
         nonlocal count
         count += 1
         path, opts = parse_spec(m["spec"], str(page))
-        return f"<!-- table: {m['spec']} -->\n{render(page.parent / path, opts)}<!-- /table -->"
+        return f"<!-- table: {m['spec']} -->\n\n{render(page.parent / path, opts)}\n<!-- /table -->"  # blank lines: a table block
 
     return MARKER.sub(table, text), count
 
