@@ -100,9 +100,14 @@ def build_parser() -> argparse.ArgumentParser:
         help="first copy a finished results folder (or a script's printed table) into DOCS/data/NAME",
     )
     p.add_argument(
-        "--command", dest="made_by", help="with one --collect: the command that made it (default: the one on record)"
+        "--command",
+        dest="made_by",
+        metavar="COMMAND",
+        help="with one --collect: the command that made it (default: the one on record)",
     )
-    p.add_argument("--code-version", help="with --collect: the code that ran it (default: git rev-parse HEAD)")
+    p.add_argument(
+        "--code-version", metavar="SHA", help="with --collect: the code that ran it (default: git rev-parse HEAD)"
+    )
     return parser
 
 
