@@ -85,29 +85,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("folders", nargs="+", type=Path, help="results folders of `mlpfac sweep` or `mlpfac compare`")
 
-    p = sub.add_parser(
-        "report",
-        help="write the results tables of the docs from their data",
-        description="Write every marked table of DOCS/*.md from the data folder it names (mlpfac/report.py).",
-    )
-    p.add_argument("docs", nargs="?", type=Path, default=Path("docs"), help="the folder of pages (default docs)")
-    p.add_argument("--check", action="store_true", help="write nothing; exit 1 if a table differs from its data")
-    p.add_argument(
-        "--collect",
-        action="append",
-        default=[],
-        metavar="NAME=RESULTS",
-        help="first copy a finished results folder (or a script's printed table) into DOCS/data/NAME",
-    )
-    p.add_argument(
-        "--command",
-        dest="made_by",
-        metavar="COMMAND",
-        help="with one --collect: the command that made it (default: the one on record)",
-    )
-    p.add_argument(
-        "--code-version", metavar="SHA", help="with --collect: the code that ran it (default: git rev-parse HEAD)"
-    )
+    from mlpfac import report
+
+    report.add_arguments(sub.add_parser("report", help="write the results tables of the docs from their data"))
     return parser
 
 
@@ -158,25 +138,8 @@ def cmd_list() -> int:
 
 def cmd_report(args: argparse.Namespace) -> int:
     from mlpfac import report
-    from mlpfac.exceptions import ConfigError
 
-    for item in args.collect:
-        name, sep, results = item.partition("=")
-        if not (sep and name and results):
-            raise ConfigError("--collect", f"expected NAME=RESULTS, got {item!r}")
-        print(
-            f"{results} -> {report.collect(args.docs / 'data' / name, Path(results), args.made_by, args.code_version)}"
-        )
-    if args.check:
-        stale = report.stale(args.docs)
-        for page in stale:
-            print(
-                f"mlpfac: {page}: a table differs from its data; `mlpfac report {args.docs}` writes it", file=sys.stderr
-            )
-        return 1 if stale else 0
-    for page, n, changed in report.write(args.docs):
-        print(f"{page}: {n} tables, {'written' if changed else 'unchanged'}")
-    return 0
+    return report.run_cli(args)
 
 
 def cmd_view(args: argparse.Namespace) -> int:

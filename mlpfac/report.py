@@ -27,11 +27,13 @@ the data and the tables.
 
 from __future__ import annotations
 
+import argparse
 import json
 import re
 import shlex
 import shutil
 import subprocess
+import sys
 from datetime import UTC, datetime
 from pathlib import Path
 
@@ -171,3 +173,42 @@ def collect(folder: Path, results: Path, command: str | None = None, version: st
     }
     old.write_text(json.dumps(meta, indent=2) + "\n")
     return folder
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.description = "Write every marked table of DOCS/*.md from the data folder it names (mlpfac/report.py)."
+    p.add_argument("docs", nargs="?", type=Path, default=Path("docs"), help="the folder of pages (default docs)")
+    p.add_argument("--check", action="store_true", help="write nothing; exit 1 if a table differs from its data")
+    p.add_argument(
+        "--collect",
+        action="append",
+        default=[],
+        metavar="NAME=RESULTS",
+        help="first copy a finished results folder (or a script's printed table) into DOCS/data/NAME",
+    )
+    p.add_argument(
+        "--command",
+        dest="made_by",
+        metavar="COMMAND",
+        help="with one --collect: the command that made it (default: the one on record)",
+    )
+    p.add_argument("--code-version", metavar="SHA", help="with --collect: the code that ran it (default: HEAD)")
+
+
+def run_cli(args: argparse.Namespace) -> int:
+    """``mlpfac report``: collect, then check (exit 1 if a table differs) or write the tables."""
+    for item in args.collect:
+        name, sep, results = item.partition("=")
+        if not (sep and name and results):
+            raise ConfigError("--collect", f"expected NAME=RESULTS, got {item!r}")
+        print(f"{results} -> {collect(args.docs / 'data' / name, Path(results), args.made_by, args.code_version)}")
+    if args.check:
+        old = stale(args.docs)
+        for page in old:
+            print(
+                f"mlpfac: {page}: a table differs from its data; `mlpfac report {args.docs}` writes it", file=sys.stderr
+            )
+        return 1 if old else 0
+    for page, n, changed in write(args.docs):
+        print(f"{page}: {n} tables, {'written' if changed else 'unchanged'}")
+    return 0
