@@ -24,6 +24,7 @@ LINK = re.compile(r"!?\[[^\]]*\]\(\s*<?([^)\s>]+)>?(?:\s+\"[^\"]*\")?\s*\)")
 HTML = re.compile(r"<(?:img|a)\b[^>]*?\b(?:src|href)=\"([^\"]+)\"", re.I)
 FENCE = re.compile(r"^(```|~~~).*?^\1\s*$", re.M | re.S)
 CODE = re.compile(r"`[^`\n]*`")
+DATE = r"\d{4}-\d\d-\d\dT\d\d:\d\d:\d\dZ"
 
 
 def _prose(text: str) -> str:
@@ -99,6 +100,25 @@ def test_every_table_in_the_docs_is_what_its_data_gives():
     assert main(["report", str(DOCS), "--check"]) == 0
 
 
+def test_every_data_folder_says_how_it_was_made_and_is_shown():
+    """meta.json holds the command, the code version and the date; the command is written in a page
+    (above its table) and a table shows the folder."""
+    prose = " ".join(" ".join(p.read_text().replace("\\\n", " ") for p in report.pages(DOCS)).split())
+    shown = {
+        report.parse_spec(m["spec"], p.name)[0]
+        for p in report.pages(DOCS)
+        for m in report.MARKER.finditer(p.read_text())
+    }
+    folders = sorted(p for p in (DOCS / "data").iterdir() if p.is_dir())
+    assert len(folders) >= 6
+    for folder in folders:
+        meta = json.loads((folder / "meta.json").read_text())
+        assert re.fullmatch(r"[0-9a-f]{40}", meta["code_version"]), folder.name
+        assert re.fullmatch(DATE, meta["date"]), folder.name
+        assert " ".join(meta["command"].split()) in prose, f"{folder.name}: its command is in no page"
+        assert f"data/{folder.name}" in shown, f"{folder.name}: no table shows it"
+
+
 def _copy(tmp_path: Path) -> Path:
     docs = tmp_path / "docs"
     (docs / "data").mkdir(parents=True)
@@ -150,7 +170,7 @@ def test_collect_keeps_the_command_and_stamps_the_version_and_date(tmp_path: Pat
     report.collect(target, results, version="abc123")
     meta = json.loads((target / "meta.json").read_text())
     assert meta["command"] == before["command"] and meta["code_version"] == "abc123"
-    assert re.fullmatch(r"\d{4}-\d\d-\d\dT\d\d:\d\d:\d\dZ", meta["date"])
+    assert re.fullmatch(DATE, meta["date"])
     with pytest.raises(ConfigError, match="--command"):
         report.collect(docs / "data" / "new", results)
     with pytest.raises(ConfigError, match="not a finished results folder"):
