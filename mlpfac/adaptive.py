@@ -24,8 +24,8 @@ from mlpfac.networks import Networks
 class AdaptiveConfig:
     """The MLP-EKF scheme's choices; the paper fixes L_f, L_G and P0 only.
 
-    The defaults are the paper's scheme with the project's tuned choices (README, "The project's
-    defaults"; the paper's own numbers are sims/paper-faithful.toml). The options beyond the paper,
+    The defaults are the paper's scheme with the project's tuned choices (docs/results-paper.md, "The
+    project's defaults"; the paper's own numbers are sims/paper-faithful.toml). The options beyond the paper,
     each off by default:
 
     - ``estimator = "ukf"``: tune the weights with the square-root unscented filter
@@ -338,7 +338,7 @@ class _NumpySeed:
 # "networks") that override the scenario's [controller.adaptive] table. "adaptive" is the table as is.
 # One variant per option alone, and "adaptive-best": the combination that measured best on the
 # MuJoCo eight-* scenarios (the nominal prior, with forgetting so that it keeps adapting after an
-# event, P bounded). The README's ablation table gives the figures and the command that made them.
+# event, P bounded). The ablation table (docs/results-beyond.md) gives the figures and the command that made them.
 # With no Q and no forgetting the EKF depends on P0 and R only through P0 / R.
 VARIANTS: dict[str, dict] = {
     "adaptive": {},

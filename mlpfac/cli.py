@@ -1,4 +1,4 @@
-"""The command line: mlpfac run / list / compare / sweep / view / plot.
+"""The command line: mlpfac run / list / compare / sweep / view / plot / report.
 
 Arguments are parsed before any heavy import; bad input prints one line and exits with code 2.
 Exit codes of ``run``: 0 ok, 1 the run diverged, 2 bad input or a write that failed (nothing
@@ -89,6 +89,10 @@ def build_parser() -> argparse.ArgumentParser:
         description="Draw sweep.png / compare.png beside the tables of finished sweep folders.",
     )
     p.add_argument("folders", nargs="+", type=Path, help="results folders of `mlpfac sweep` or `mlpfac compare`")
+
+    from mlpfac import report
+
+    report.add_arguments(sub.add_parser("report", help="write the results tables of the docs from their data"))
     return parser
 
 
@@ -108,6 +112,8 @@ def main(argv: list[str] | None = None) -> int:
             return cmd_view(args)
         if args.command == "plot":
             return cmd_plot(args)
+        if args.command == "report":
+            return cmd_report(args)
         from mlpfac.sweeps import cli as sweep
 
         return sweep.run_compare_cli(args) if args.command == "compare" else sweep.run_sweep_cli(args)
@@ -144,6 +150,12 @@ def cmd_list() -> int:
             print(f"  {name:<{width}}  {target}  (from {dist})")
     print("your own: --controller path/to/file.py:Class or package.module:Class")
     return 0
+
+
+def cmd_report(args: argparse.Namespace) -> int:
+    from mlpfac import report
+
+    return report.run_cli(args)
 
 
 def cmd_view(args: argparse.Namespace) -> int:

@@ -28,8 +28,8 @@ only what the nominal design would need to be redone for the changed robot:
 - **payload, friction, weak actuator**: nothing. The law (35) has no parameter that mass, friction
   or actuator strength change; the oracle is the nominal law, bit for bit Corradini's. Its
   post-event error in the same run is the bound (the same law on the robot changed from t = 0
-  measures the same over that window within noise: ``sims/oracle_from_start.py``, README "Beyond
-  the paper").
+  measures the same over that window within noise: ``sims/oracle_from_start.py``,
+  docs/results-beyond.md).
 
 Kanayama's law is a velocity law, so the same telling is simpler: its command divided by the
 radius scale, and on the robot (not the Euler map (7), where f and G scale alike and the law needs

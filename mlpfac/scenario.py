@@ -1,7 +1,7 @@
 """Scenario files (TOML) -> frozen, validated configuration; the factories for plant and controller.
 
 A scenario names the reference, the plant, the controller and its parameters, the events that
-change the plant mid-run, the duration and the seed. See ``sims/*.toml`` and the README.
+change the plant mid-run, the duration and the seed. See ``sims/*.toml`` and docs/scenarios.md.
 """
 
 from __future__ import annotations

@@ -73,7 +73,7 @@ def _where_to_look(record: RunRecord) -> list[str]:
         side = "behind" if m1 > 0 else "ahead of"
         lag = f"- e1: the robot runs {side} its reference by {1e3 * abs(m1):.0f} mm on average, along the path"
         if record.controller.startswith("adaptive"):
-            lag += "; the networks do not learn this lag away (the README's finding on the robot, see Results)"
+            lag += "; the networks do not learn this lag away (the finding on the robot: docs/results-dynamics.md)"
         out.append(lag)
     if record.split_s is not None and record.split_s / T < n:
         k = int(round(record.split_s / T))

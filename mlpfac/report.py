@@ -1,0 +1,214 @@
+"""The results tables of the docs, written from the data kept beside them: ``mlpfac report``.
+
+A table in a Markdown page sits between two markers, and everything between them is generated::
+
+    <!-- table: data/ablation view=summary controllers=oracle,corradini -->
+    | controller | eight-nominal | ... |
+    <!-- /table -->
+
+The path is a data folder relative to the page's own folder. It holds what a documented command
+wrote (``sweep.json`` or ``compare.json``, ``paired.json``; or ``table.md``, the Markdown table a
+script printed) and ``meta.json``: the command, the code version that ran it and the date. Views,
+each drawn by the table code the sweep itself uses (:mod:`mlpfac.sweeps.tables`,
+:mod:`mlpfac.sweeps.paired`):
+
+- ``sweep``: the full per-phase table (``sweep.json``), ``compare``: the shorter one (``compare.json``);
+- ``paired``: per seed against Corradini's law and the oracle (``paired.json``);
+- ``summary``: controllers x scenarios, median position RMS and x oracle (``paired.json``);
+- ``text``: ``table.md`` as it is.
+
+Options (shell words after the view): ``scenarios=a,b`` and ``controllers=a,b`` keep those, in
+that order; ``labels=a,b`` renames the scenarios kept (column heads of a summary).
+
+``collect`` copies a finished results folder into a data folder and stamps ``meta.json``, so that
+re-running the documented command, then ``mlpfac report --collect NAME=RESULTS``, updates both
+the data and the tables.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import re
+import shlex
+import shutil
+import subprocess
+import sys
+from datetime import UTC, datetime
+from pathlib import Path
+
+from mlpfac.exceptions import ConfigError
+
+MARKER = re.compile(r"^<!-- table: (?P<spec>.+?) -->\n(?P<body>.*?)^<!-- /table -->$", re.M | re.S)
+VIEWS = ("sweep", "compare", "paired", "summary", "text")
+DATA_FILES = ("sweep.json", "compare.json", "paired.json")
+OPTIONS = ("view", "scenarios", "controllers", "labels")
+
+
+def parse_spec(spec: str, where: str) -> tuple[str, dict[str, str]]:
+    """``data/NAME key=value ...`` -> (the data path, its options); ConfigError naming the page."""
+    words = shlex.split(spec)
+    opts = dict(w.split("=", 1) for w in words[1:] if "=" in w)
+    bad = [w for w in words[1:] if "=" not in w or w.split("=", 1)[0] not in OPTIONS]
+    if not words or bad:
+        raise ConfigError(where, f"table marker {spec!r}: expected 'PATH key=value ...' with keys {OPTIONS}")
+    if opts.get("view", "summary") not in VIEWS:
+        raise ConfigError(where, f"table marker {spec!r}: view must be one of {VIEWS}")
+    return words[0], opts
+
+
+def _read(folder: Path, name: str) -> str:
+    path = folder / name
+    if not path.is_file():
+        raise ConfigError(str(path), "missing: the data folder holds no such file")
+    return path.read_text()
+
+
+def select(rows: list[dict], scenarios: str | None, controllers: str | None) -> list[dict]:
+    """The rows of the listed scenarios and controllers (all if not listed), scenario by scenario,
+    each in the listed order, else in the data's; the phases of one keep their order."""
+    order = {}
+    for key, wanted in (("scenario", scenarios), ("controller", controllers)):
+        names = wanted.split(",") if wanted else list(dict.fromkeys(r[key] for r in rows))
+        order[key] = {n: i for i, n in enumerate(names)}
+    kept = [r for r in rows if r["scenario"] in order["scenario"] and r["controller"] in order["controller"]]
+    return sorted(kept, key=lambda r: (order["scenario"][r["scenario"]], order["controller"][r["controller"]]))
+
+
+def render(folder: Path, opts: dict[str, str]) -> str:
+    """The Markdown table a data folder gives for one view and its options."""
+    from mlpfac.sweeps.paired import PAIRED_COLUMNS, summary
+    from mlpfac.sweeps.tables import COMPARE_COLUMNS, SWEEP_COLUMNS, markdown
+
+    view = opts.get("view", "summary")
+    if view == "text":
+        return _read(folder, "table.md")
+    rows = json.loads(_read(folder, {"sweep": "sweep.json", "compare": "compare.json"}.get(view, "paired.json")))[
+        "rows"
+    ]
+    rows = select(rows, opts.get("scenarios"), opts.get("controllers"))
+    if "labels" in opts:
+        kept = list(dict.fromkeys(r["scenario"] for r in rows))
+        labels = opts["labels"].split(",")
+        if len(labels) != len(kept):
+            raise ConfigError(str(folder), f"labels: {len(labels)} given for {len(kept)} scenarios {kept}")
+        rows = [r | {"scenario": labels[kept.index(r["scenario"])]} for r in rows]
+    if view == "summary":
+        return summary(rows)
+    columns = {"sweep": SWEEP_COLUMNS, "compare": COMPARE_COLUMNS, "paired": PAIRED_COLUMNS}[view]
+    return markdown(rows, columns)
+
+
+def rewrite(page: Path) -> tuple[str, int]:
+    """The page's text with every marked table written from its data, and the number of tables."""
+    text = page.read_text()
+    count = 0
+
+    def table(m: re.Match) -> str:
+        nonlocal count
+        count += 1
+        path, opts = parse_spec(m["spec"], str(page))
+        return f"<!-- table: {m['spec']} -->\n\n{render(page.parent / path, opts)}\n<!-- /table -->"  # blank lines: a table block
+
+    return MARKER.sub(table, text), count
+
+
+def pages(docs: Path) -> list[Path]:
+    """The Markdown pages of a docs folder (not the data folders)."""
+    if not docs.is_dir():
+        raise ConfigError(str(docs), "not a folder of Markdown pages")
+    return sorted(docs.glob("*.md"))
+
+
+def stale(docs: Path) -> list[Path]:
+    """The pages whose tables differ from what their data gives."""
+    return [p for p in pages(docs) if rewrite(p)[0] != p.read_text()]
+
+
+def write(docs: Path) -> list[tuple[Path, int, bool]]:
+    """Rewrite every page's tables; (page, tables, changed) for each page that has tables."""
+    done = []
+    for p in pages(docs):
+        text, n = rewrite(p)
+        if n:
+            changed = text != p.read_text()
+            if changed:
+                p.write_text(text)
+            done.append((p, n, changed))
+    return done
+
+
+def code_version() -> str:
+    """``git rev-parse HEAD`` of the checkout in the current folder, or "unknown"."""
+    try:
+        out = subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True, check=True)
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+    return out.stdout.strip()
+
+
+def collect(folder: Path, results: Path, command: str | None = None, version: str | None = None) -> Path:
+    """Copy a finished results folder (or a script's printed table, a file) into a data folder and
+    write its meta.json: the command (kept from the earlier meta.json unless given), the code
+    version and the date the results were written."""
+    old = folder / "meta.json"
+    meta = json.loads(old.read_text()) if old.is_file() else {}
+    command = command or meta.get("command")
+    if not command:
+        raise ConfigError("--command", f"{folder} has no meta.json yet: give the command that made {results}")
+    if results.is_file():
+        sources = {"table.md": results}
+    else:
+        sources = {n: results / n for n in DATA_FILES if (results / n).is_file()}
+        if "paired.json" not in sources:
+            raise ConfigError(str(results), "not a finished results folder of `mlpfac sweep` or `mlpfac compare`")
+    folder.mkdir(parents=True, exist_ok=True)
+    for name, src in sources.items():
+        shutil.copyfile(src, folder / name)
+    made = max(src.stat().st_mtime for src in sources.values())
+    meta = {
+        "command": command,
+        "code_version": version or code_version(),
+        "date": datetime.fromtimestamp(made, UTC).strftime("%Y-%m-%dT%H:%M:%SZ"),
+    }
+    old.write_text(json.dumps(meta, indent=2) + "\n")
+    return folder
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.description = "Write every marked table of DOCS/*.md from the data folder it names (mlpfac/report.py)."
+    p.add_argument("docs", nargs="?", type=Path, default=Path("docs"), help="the folder of pages (default docs)")
+    p.add_argument("--check", action="store_true", help="write nothing; exit 1 if a table differs from its data")
+    p.add_argument(
+        "--collect",
+        action="append",
+        default=[],
+        metavar="NAME=RESULTS",
+        help="first copy a finished results folder (or a script's printed table) into DOCS/data/NAME",
+    )
+    p.add_argument(
+        "--command",
+        dest="made_by",
+        metavar="COMMAND",
+        help="with one --collect: the command that made it (default: the one on record)",
+    )
+    p.add_argument("--code-version", metavar="SHA", help="with --collect: the code that ran it (default: HEAD)")
+
+
+def run_cli(args: argparse.Namespace) -> int:
+    """``mlpfac report``: collect, then check (exit 1 if a table differs) or write the tables."""
+    for item in args.collect:
+        name, sep, results = item.partition("=")
+        if not (sep and name and results):
+            raise ConfigError("--collect", f"expected NAME=RESULTS, got {item!r}")
+        print(f"{results} -> {collect(args.docs / 'data' / name, Path(results), args.made_by, args.code_version)}")
+    if args.check:
+        old = stale(args.docs)
+        for page in old:
+            print(
+                f"mlpfac: {page}: a table differs from its data; `mlpfac report {args.docs}` writes it", file=sys.stderr
+            )
+        return 1 if old else 0
+    for page, n, changed in write(args.docs):
+        print(f"{page}: {n} tables, {'written' if changed else 'unchanged'}")
+    return 0
