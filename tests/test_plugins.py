@@ -380,3 +380,16 @@ def test_the_python_api_runs_into_a_folder_as_the_command_does(law, tmp_path):
     assert sorted(os.listdir(tmp_path / "bare")) == ["config.toml", "metrics.json"]
     with pytest.raises(mlpfac.ConfigError, match="figure"):
         mlpfac.run(tmp_path / "k.toml", out=tmp_path / "x", figure="pid")
+
+
+def test_the_readmes_controller_runs_as_written(tmp_path):
+    """The class on the README's front page, copied to my_law.py, is Kanayama's law to the bit."""
+    import re
+
+    text = (REPO / "README.md").read_text()
+    code = re.search(r"```python\n(from math import cos, sin\nclass MyLaw.*?)```", text, re.S)
+    assert code, "README: the my_law.py block"
+    (tmp_path / "my_law.py").write_text(code.group(1))
+    scn = mlpfac.parse({"duration": 1.0, "plant": {"kind": "kinematic"}, "initial": {"error": [0.05, 0.02, 0.1]}})
+    mine, theirs = mlpfac.run(scn, controller=f"{tmp_path}/my_law.py:MyLaw"), mlpfac.run(scn, controller="kanayama")
+    np.testing.assert_array_equal(mine.u, theirs.u)
