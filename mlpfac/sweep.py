@@ -54,6 +54,7 @@ import math
 import os
 import shlex
 import sys
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from mlpfac.exceptions import ConfigError
@@ -190,61 +191,116 @@ def _run_cli(args: argparse.Namespace, stem: str, columns) -> int:
     check_writable(args.out)
     client = connect(args.scheduler, args.scheduler_timeout) if args.scheduler else None
     cmd = shlex.join(["mlpfac", *sys.argv[1:]]) if sys.argv[1:] else f"mlpfac {stem} ..."
+    meta = {
+        "command": stem,
+        "scenarios": list(args.scenarios),
+        "controllers": sorted({j.controller for j in jobs}),
+        "seeds": args.seeds,
+        "duration": args.duration,
+        "runs": len(jobs),
+    }
     try:
-        with folder_lock(args.out, "--out"):
-            try:
-                oc = execute(
-                    jobs,
-                    args.out,
-                    workers=workers,
-                    client=client,
-                    batched=args.batched,
-                    batch_size=args.batch_size,
-                    save_rrd=args.save_rrd,
-                    locked=True,
-                )
-            except OutputError as err:
-                raise OutputError(f"{err}; the runs written before are whole, resume with: {cmd}") from None
-            except WorkerLostError as err:
-                print(f"mlpfac: error: {err}; every run written is whole, resume with: {cmd}", file=sys.stderr)
-                return EXIT_FAILED
-            rows = aggregate(jobs, oc.metrics)
-            if oc.interrupted:
-                print(
-                    f"mlpfac: {'terminated' if oc.terminated else 'interrupted'}; {len(oc.metrics)} of {len(jobs)} runs"
-                    f" are done and kept in {args.out}.\nResume with the same command:\n  {cmd}",
-                    file=sys.stderr,
-                )
-                return EXIT_TERMINATED if oc.terminated else EXIT_INTERRUPTED
-            meta = {
-                "command": stem,
-                "scenarios": list(args.scenarios),
-                "controllers": sorted({j.controller for j in jobs}),
-                "seeds": args.seeds,
-                "duration": args.duration,
-                "runs": len(jobs),
-            }
-            prows = paired_rows(jobs, oc.metrics)
-            try:
-                paths = write_tables(args.out, stem, rows, columns, meta) + write_paired(args.out, prows, meta)
-                from mlpfac.plots import sweep_plots
-
-                paths += sweep_plots(args.out, (stem,))  # <stem>.png beside the table
-            except OSError as err:
-                raise OutputError(
-                    f"{_oserror(err, str(args.out))}; every run folder is whole, resume with: {cmd}"
-                ) from None
+        done = sweep_into(
+            jobs,
+            args.out,
+            stem,
+            columns,
+            meta,
+            cmd,
+            workers=workers,
+            client=client,
+            batched=args.batched,
+            batch_size=args.batch_size,
+            save_rrd=args.save_rrd,
+        )
     finally:
         if client is not None:
             client.close()
-    print(markdown(rows, columns), end="")
-    print("\n" + summary(prows), end="")
+    if done.code is not None:
+        return done.code
+    print(markdown(done.rows, columns), end="")
+    print("\n" + summary(done.paired), end="")
+    return report(done)
+
+
+@dataclass
+class Swept:
+    """What :func:`sweep_into` made: the runs' outcome, the table rows, the paired rows, the files
+    written; ``code`` is the exit code when the sweep stopped before its tables (else None)."""
+
+    jobs: list[Job]
+    outcome: Outcome
+    rows: list[dict] = field(default_factory=list)
+    paired: list[dict] = field(default_factory=list)
+    paths: list[Path] = field(default_factory=list)
+    code: int | None = None
+
+
+def sweep_into(
+    jobs: list[Job],
+    out: Path,
+    stem: str,
+    columns,
+    meta: dict,
+    cmd: str,
+    *,
+    workers: int = 1,
+    client=None,
+    batched: bool = False,
+    batch_size: int = 64,
+    save_rrd: bool = False,
+) -> Swept:
+    """Run ``jobs`` into ``out`` under its lock (runs already done are skipped), then write the
+    tables (``stem``.csv / .md / .json, paired.*, summary.md) and ``stem``.png. Stopped by Ctrl-C or
+    SIGTERM, or by a lost worker, it says so on stderr with ``cmd``, the command that resumes it,
+    and returns with ``code`` set; a failed write is an :class:`OutputError` naming the path."""
+    with folder_lock(out, "--out"):
+        try:
+            oc = execute(
+                jobs,
+                out,
+                workers=workers,
+                client=client,
+                batched=batched,
+                batch_size=batch_size,
+                save_rrd=save_rrd,
+                locked=True,
+            )
+        except OutputError as err:
+            raise OutputError(f"{err}; the runs written before are whole, resume with: {cmd}") from None
+        except WorkerLostError as err:
+            print(f"mlpfac: error: {err}; every run written is whole, resume with: {cmd}", file=sys.stderr)
+            return Swept(jobs, Outcome(jobs, {}, {}, 0, 0), code=EXIT_FAILED)
+        done = Swept(jobs, oc, aggregate(jobs, oc.metrics))
+        if oc.interrupted:
+            print(
+                f"mlpfac: {'terminated' if oc.terminated else 'interrupted'}; {len(oc.metrics)} of {len(jobs)} runs"
+                f" are done and kept in {out}.\nResume with the same command:\n  {cmd}",
+                file=sys.stderr,
+            )
+            done.code = EXIT_TERMINATED if oc.terminated else EXIT_INTERRUPTED
+            return done
+        done.paired = paired_rows(jobs, oc.metrics)
+        try:
+            done.paths = write_tables(out, stem, done.rows, columns, meta) + write_paired(out, done.paired, meta)
+            from mlpfac.plots import sweep_plots
+
+            done.paths += sweep_plots(out, (stem,))  # <stem>.png beside the table
+        except OSError as err:
+            raise OutputError(f"{_oserror(err, str(out))}; every run folder is whole, resume with: {cmd}") from None
+    return done
+
+
+def report(done: Swept) -> int:
+    """One line on the runs (done before, run now, run again and why, files written) and one on
+    stderr per run that raised; EXIT_FAILED if some run raised, else EXIT_OK."""
+    oc = done.outcome
     redo = sum(oc.redo.values())
     why = "; ".join(f"{k} {v}" for k, v in oc.redo.items())
     print(
-        f"{len(jobs)} runs ({oc.skipped} already done, {oc.ran} run now in {oc.wall_s:.1f} s"
+        f"{len(done.jobs)} runs ({oc.skipped} already done, {oc.ran} run now in {oc.wall_s:.1f} s"
         + (f", of which {redo} were found but run again: {why}" if redo else "")
-        + f") -> {', '.join(map(str, paths))}"
+        + f") -> {', '.join(map(str, done.paths))}"
     )
     for key, err in oc.errors.items():
         last = err.strip().splitlines()[-1] if err.strip() else "error"
