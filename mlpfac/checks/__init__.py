@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import argparse
 import shlex
-import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -89,9 +88,6 @@ def check(
         if p.is_dir():
             raise ConfigError(f"{flag} {p}", "is a folder; name a file")
         check_writable(p.parent)
-    print(
-        f"mlpfac: planning {len(b.scenarios) * len(b.controllers) * len(b.seeds)} runs ...", file=sys.stderr, flush=True
-    )
     jobs, groups = b.plan()
     check_writable(out)
     argv = ["mlpfac", "check", str(budget), "--out", str(out), "--workers", str(n_workers)]
