@@ -172,7 +172,7 @@ BAD_BUDGETS: dict[str, tuple[str, str]] = {
     "after without an event": (RUNS + 'duration = 2.0\n[[budget]]\nphase = "after"\nlost = 0\n', "budget #1 phase"),
     "baseline figure without --baseline": (RUNS + "[[budget]]\nno_worse_than_baseline = 1.1\n", "--baseline"),
     "p without --baseline": (RUNS + "[[budget]]\np = 0.01\n", "--baseline"),
-}
+}  # fmt: skip
 
 
 @pytest.mark.parametrize("case", sorted(BAD_BUDGETS))
