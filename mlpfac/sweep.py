@@ -271,8 +271,8 @@ def sweep_into(
         except WorkerLostError as err:
             print(f"mlpfac: error: {err}; every run written is whole, resume with: {cmd}", file=sys.stderr)
             return Swept(jobs, Outcome(jobs, {}, {}, 0, 0), code=EXIT_FAILED)
-        done = Swept(jobs, oc, aggregate(jobs, oc.metrics))
-        if oc.interrupted:
+        done = Swept(jobs, oc)
+        if oc.interrupted:  # stop now: no table (aggregating imports scipy, seconds on a loaded machine)
             print(
                 f"mlpfac: {'terminated' if oc.terminated else 'interrupted'}; {len(oc.metrics)} of {len(jobs)} runs"
                 f" are done and kept in {out}.\nResume with the same command:\n  {cmd}",
@@ -280,7 +280,7 @@ def sweep_into(
             )
             done.code = EXIT_TERMINATED if oc.terminated else EXIT_INTERRUPTED
             return done
-        done.paired = paired_rows(jobs, oc.metrics)
+        done.rows, done.paired = aggregate(jobs, oc.metrics), paired_rows(jobs, oc.metrics)
         try:
             done.paths = write_tables(out, stem, done.rows, columns, meta) + write_paired(out, done.paired, meta)
             from mlpfac.plots import sweep_plots
