@@ -144,12 +144,15 @@ def test_bad_flag(tmp_path, capsys, monkeypatch, case):
     assert not (tmp_path / "out").exists()
 
 
-# view and plot: (argv, text the message must hold); "D" is a folder holding no run
+# view, plot and check: (argv, text the message must hold); "D" is a folder holding no run
 BAD_VIEW_PLOT = {
     "view: no run.rrd": (["view", "D"], "no run.rrd"),
     "view --save: folders without run.rrd": (["view", "D", "D", "--save", "x.rrd"], "no run.rrd"),
     "plot: not a folder": (["plot", "missing"], "is not a folder"),
     "plot: no runs": (["plot", "D"], "holds no finished runs"),
+    "check: no budget file": (["check", "missing.toml"], "budget file not found"),
+    "check: a folder as the budget": (["check", "D"], "is a folder, not a budget file"),
+    "check: --workers 0": (["check", "missing.toml", "--workers", "0"], "--workers"),
 }
 
 

@@ -5,7 +5,6 @@ found before anything runs."""
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -127,18 +126,9 @@ class Budget:
 def read_budget(path: Path) -> Budget:
     """The budget file at ``path``, checked; scenario paths and ``file.py:Class`` controllers are
     taken from the file's own folder."""
-    try:
-        table = tomllib.loads(path.read_bytes().decode("utf-8"))
-    except FileNotFoundError:
-        raise ConfigError(str(path), "budget file not found") from None
-    except IsADirectoryError:
-        raise ConfigError(str(path), "is a folder, not a budget file") from None
-    except OSError as err:
-        raise ConfigError(str(path), f"cannot read: {err.strerror or err}") from None
-    except UnicodeDecodeError:
-        raise ConfigError(str(path), "not a text file (TOML is UTF-8 text)") from None
-    except tomllib.TOMLDecodeError as err:
-        raise ConfigError(str(path), f"not valid TOML: {err}") from None
+    from mlpfac.scenario import read_toml
+
+    table = read_toml(path, "budget file")
     _known(table, TOP_KEYS, str(path))
     here = path.absolute().parent
     scenarios = _strings(table, "scenarios", path, required=True)
