@@ -104,11 +104,13 @@ class Budget:
             src, spec = pairs[i // per_pair] if len(jobs) == len(pairs) * per_pair else (j.scenario, j.controller)
             groups.setdefault((j.scenario, j.controller), Group(j.scenario, j.controller, src, spec)).jobs.append(j)
         for b in self.limits:
-            for key in ("scenario", "controller"):
+            names = {
+                "scenario": {n for g in groups.values() for n in (g.scenario, g.source)},
+                "controller": {n for g in groups.values() for n in (g.controller, g.spec)},
+            }
+            for key, known_names in names.items():
                 value = getattr(b, key)
-                if value is not None and not any(
-                    getattr(g, key) == value or value in (g.source, g.spec) for g in groups.values()
-                ):
+                if value is not None and value not in known_names:
                     known = ", ".join(dict.fromkeys(getattr(g, key) for g in groups.values()))
                     raise ConfigError(
                         f"{self.path} {b.where} {key}", f"{value!r} matches no {key} of this budget ({known})"
