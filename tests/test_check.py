@@ -226,3 +226,27 @@ def test_no_regression_is_found_where_there_is_none(folder, tmp_path, capsys):
     by = {v.figure: v for v in case.verdicts}
     assert by["no_worse_than_baseline"].value == 0.5 and by["no_worse_than_baseline"].note == "1 seeds paired"
     assert by["median_position_rms_mm"].baseline is not None  # the same figure over the baseline's runs
+
+
+DIVERGES = """name = "kin-diverges"
+duration = 3.0
+divergence_m = 0.05
+[reference]
+kind = "eight"
+[plant]
+kind = "kinematic"
+[initial]
+error = [0.3, 0.0, 0.0]
+[controller]
+name = "corradini"
+"""
+
+
+def test_runs_that_diverged_are_counted_and_have_no_position_figure(tmp_path, capsys):
+    (tmp_path / "div.toml").write_text(DIVERGES)  # 0.3 m off, diverged beyond 0.05 m: every run
+    budget = 'scenarios = ["div.toml"]\nseeds = "0-1"\n[[budget]]\ndiverged = 0\nmedian_position_rms_mm = 10\n'
+    assert _check(tmp_path, budget) == 1
+    misses = [line for line in capsys.readouterr().out.splitlines() if line.startswith("miss:")]
+    assert len(misses) == 2, misses
+    assert "median_position_rms_mm - (no run finished), limit <= 10.00; worst seed 0" in misses[0]
+    assert "diverged 2, limit <= 0; worst seed 0: mlpfac run " in misses[1]

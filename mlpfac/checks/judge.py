@@ -93,7 +93,7 @@ def _statistic(how: Callable[[list[float]], float | None], i: int, scale: float)
     def figure(runs: Runs, phase: str, base: Runs | None) -> Value:
         vals = _values(runs, phase, i)
         if not vals:
-            return None, None, "no run finished"
+            return None, _diverged(runs, phase, base)[1], "no run finished"
         return how(list(vals.values())) * scale, _largest(vals), ""
 
     return figure
