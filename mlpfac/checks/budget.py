@@ -103,11 +103,11 @@ class Budget:
         for i, j in enumerate(jobs):
             src, spec = pairs[i // per_pair] if len(jobs) == len(pairs) * per_pair else (j.scenario, j.controller)
             groups.setdefault((j.scenario, j.controller), Group(j.scenario, j.controller, src, spec)).jobs.append(j)
+        names = {
+            "scenario": {n for g in groups.values() for n in (g.scenario, g.source)},
+            "controller": {n for g in groups.values() for n in (g.controller, g.spec)},
+        }
         for b in self.limits:
-            names = {
-                "scenario": {n for g in groups.values() for n in (g.scenario, g.source)},
-                "controller": {n for g in groups.values() for n in (g.controller, g.spec)},
-            }
             for key, known_names in names.items():
                 value = getattr(b, key)
                 if value is not None and value not in known_names:
