@@ -8,6 +8,7 @@ The public API::
     rec = mlpfac.run(scn)                      # one closed-loop run -> a RunRecord
     m = mlpfac.metrics(rec)                    # what metrics.json holds
     mlpfac.scenario_names()                    # the shipped scenarios
+    mlpfac.check("budget.toml").code           # run a budget's sweep and judge it (``mlpfac check``)
 
 Names are imported on first use, so ``import mlpfac`` (and the command line) stays light.
 """
@@ -30,6 +31,7 @@ _WHERE = {
     "metrics": "mlpfac.run_metrics",
     "RunRecord": "mlpfac.record",
     "CONTROLLERS": "mlpfac.controllers",
+    "check": "mlpfac.checks",
     "ConfigError": "mlpfac.exceptions",
     "MlpfacError": "mlpfac.exceptions",
 }
@@ -41,6 +43,7 @@ __all__ = [
     "RunRecord",
     "Scenario",
     "__version__",
+    "check",
     "load",
     "metrics",
     "parse",
@@ -51,6 +54,7 @@ __all__ = [
 
 if TYPE_CHECKING:
     from mlpfac.api import run, sweep
+    from mlpfac.checks import check
     from mlpfac.controllers import CONTROLLERS
     from mlpfac.exceptions import ConfigError, MlpfacError, PluginError
     from mlpfac.record import RunRecord

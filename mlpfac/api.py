@@ -17,7 +17,7 @@ import tempfile
 import warnings
 from pathlib import Path
 
-from mlpfac.exceptions import ConfigError
+from mlpfac.exceptions import ConfigError, MlpfacError
 from mlpfac.plugins import local_spec
 from mlpfac.record import RunRecord
 from mlpfac.scenario import Scenario, load
@@ -142,6 +142,8 @@ def sweep(
             shutil.rmtree(tmp, ignore_errors=True)
     if result.outcome.interrupted:
         raise KeyboardInterrupt
+    if result.code is not None:  # a local worker process died (said on stderr)
+        raise MlpfacError("a sweep worker process died; every run written is whole: run the sweep again to resume")
     rows = Rows(result.rows)
     rows.errors, rows.paired = dict(result.outcome.errors), result.paired
     return rows

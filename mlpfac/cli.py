@@ -1,4 +1,4 @@
-"""The command line: mlpfac run / list / compare / sweep / view / plot / report.
+"""The command line: mlpfac run / list / compare / sweep / check / view / plot / report.
 
 Arguments are parsed before any heavy import; bad input prints one line and exits with code 2.
 Exit codes of ``run``: 0 ok, 1 the run diverged, 2 bad input or a write that failed (nothing
@@ -73,6 +73,25 @@ def build_parser() -> argparse.ArgumentParser:
     sweep.add_sweep_arguments(sub.add_parser("sweep", help="Monte Carlo sweep -> mean, median, 95 %% CI per phase"))
 
     p = sub.add_parser(
+        "check",
+        help="run a budget's sweep and judge it: exit 0 every budget holds, 1 a miss, 2 a bad budget",
+        description="Run the sweep a budget file names, then judge it against the budget's limits "
+        "(exit 0 every budget holds, 1 at least one does not, 2 a bad budget: nothing run). See docs/ci.md.",
+    )
+    p.add_argument("budget", type=Path, help="the budget file (TOML)")
+    p.add_argument("--junit", type=Path, metavar="FILE.xml", help="write JUnit XML for a CI page")
+    p.add_argument("--summary", type=Path, metavar="FILE.md", help="write a Markdown summary (a CI job summary)")
+    p.add_argument(
+        "--baseline",
+        metavar="DIR_OR_SWEEP_JSON",
+        help="a previous sweep (folder or its sweep.json) to compare per seed",
+    )
+    p.add_argument(
+        "--out", type=Path, default=Path("runs/check"), help="results folder (default runs/check); resumable"
+    )
+    p.add_argument("--workers", type=int, default=2, help="local worker processes (default 2)")
+
+    p = sub.add_parser(
         "view",
         help="open saved runs in one rerun viewer",
         description="Open one run, or several side by side and overlaid (one colour per controller), in rerun.",
@@ -114,6 +133,8 @@ def main(argv: list[str] | None = None) -> int:
             return cmd_plot(args)
         if args.command == "report":
             return cmd_report(args)
+        if args.command == "check":
+            return cmd_check(args)
         from mlpfac.sweeps import cli as sweep
 
         return sweep.run_compare_cli(args) if args.command == "compare" else sweep.run_sweep_cli(args)
@@ -156,6 +177,18 @@ def cmd_report(args: argparse.Namespace) -> int:
     from mlpfac import report
 
     return report.run_cli(args)
+
+
+def cmd_check(args: argparse.Namespace) -> int:
+    from mlpfac.checks import check
+
+    result = check(args.budget, args.junit, args.summary, args.baseline, args.out, args.workers)
+    for line in result.lines():
+        print(line)
+    if result.cases:
+        held = sum(c.passed for c in result.cases)
+        print(f"check: {held} of {len(result.cases)} budget cases hold -> {', '.join(map(str, result.files))}")
+    return result.code
 
 
 def cmd_view(args: argparse.Namespace) -> int:

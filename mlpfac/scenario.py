@@ -148,6 +148,23 @@ def scenario_names() -> list[str]:
     return sorted(p.stem for p in shipped_dir().glob("*.toml"))
 
 
+def read_toml(path: Path, kind: str) -> dict:
+    """The TOML file at ``path`` (a ``kind``, e.g. "scenario file"); a ConfigError naming it when it
+    cannot be read or is not UTF-8 TOML."""
+    try:
+        return tomllib.loads(path.read_bytes().decode("utf-8"))
+    except FileNotFoundError:
+        raise ConfigError(str(path), f"{kind} not found") from None
+    except IsADirectoryError:
+        raise ConfigError(str(path), f"is a folder, not a {kind}") from None
+    except OSError as err:
+        raise ConfigError(str(path), f"cannot read: {err.strerror or err}") from None
+    except UnicodeDecodeError:
+        raise ConfigError(str(path), "not a text file (TOML is UTF-8 text)") from None
+    except tomllib.TOMLDecodeError as err:
+        raise ConfigError(str(path), f"not valid TOML: {err}") from None
+
+
 def load(name_or_path: str | Path, build: bool = True) -> Scenario:
     """A scenario by name (``paper`` -> the shipped paper.toml) or by path to a TOML file.
 
@@ -164,19 +181,7 @@ def load(name_or_path: str | Path, build: bool = True) -> Scenario:
         if str(name_or_path) not in scenario_names():
             raise ConfigError(str(name_or_path), f"no such scenario; shipped ones: {', '.join(scenario_names())}")
         path = shipped_dir() / f"{name_or_path}.toml"
-    try:
-        text = path.read_bytes().decode("utf-8")
-        table = tomllib.loads(text)
-    except FileNotFoundError:
-        raise ConfigError(str(path), "scenario file not found") from None
-    except IsADirectoryError:
-        raise ConfigError(str(path), "is a folder, not a scenario file") from None
-    except OSError as err:
-        raise ConfigError(str(path), f"cannot read: {err.strerror or err}") from None
-    except UnicodeDecodeError:
-        raise ConfigError(str(path), "not a text file (TOML is UTF-8 text)") from None
-    except tomllib.TOMLDecodeError as err:
-        raise ConfigError(str(path), f"not valid TOML: {err}") from None
+    table = read_toml(path, "scenario file")
     table.setdefault("name", path.stem)
     ctrl = table.get("controller")
     if isinstance(ctrl, dict) and isinstance(ctrl.get("name"), str):  # file.py:Class, from the file's folder

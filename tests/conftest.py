@@ -1,12 +1,14 @@
-"""Shared by the logging tests (test_log.py, test_viewer_browser.py): a deterministic synthetic run
-record, logging it the way the runner does, and reading an .rrd back."""
+"""Shared by the tests: the ``menagerie`` marker (a test that needs a MuJoCo Menagerie robot skips,
+saying why, where the robot is neither local nor downloadable), and for the logging tests
+(test_log.py, test_viewer_browser.py) a deterministic synthetic run record, logging it the way the
+runner does, and reading an .rrd back."""
 
 from __future__ import annotations
 
-import os
+import functools
 import signal
+import threading
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -16,11 +18,72 @@ from mlpfac.networks import Networks
 from mlpfac.record import RunRecord
 from mlpfac.reference import Eight, sample
 
-# The Menagerie robots (tiago-* scenarios) come from the local Menagerie root beside the repository
-# when there is one, as in CI, unless MENAGERIE_ROOT names another.
-_MENAGERIE = Path(__file__).resolve().parents[2] / "shared" / "menagerie"
-if _MENAGERIE.is_dir():
-    os.environ.setdefault("MENAGERIE_ROOT", str(_MENAGERIE))
+MENAGERIE_ROBOT = "pal_tiago"  # the Menagerie robot of the tiago-* scenarios
+PROBE_S = 3.0  # how long the one probe of the download server may take
+
+
+@functools.cache
+def menagerie_missing(robot: str = MENAGERIE_ROBOT) -> str | None:
+    """Why the tests cannot have ``robot`` from MuJoCo Menagerie, or None when they can: it is under
+    MENAGERIE_ROOT, in mujoco-menagerie's download cache, or its archive answers a HEAD request
+    within PROBE_S seconds (once per session; no download starts here)."""
+    try:
+        import mujoco_menagerie as mm
+    except ImportError:
+        return "needs mujoco-menagerie (pip install -e '.[test]')"
+    cache, r = mm.Cache(), mm.get(robot)
+    if cache.root is not None:
+        return None if (cache.root / robot).is_dir() else f"MENAGERIE_ROOT={cache.root} has no {robot}/"
+    if cache.is_cached(r) or _answers(f"{cache.base_url}/{r.asset}"):
+        return None
+    return (
+        f"needs MuJoCo Menagerie's {robot}: not in MENAGERIE_ROOT (unset), not in the download cache "
+        f"{cache.dir}, and {cache.base_url} did not answer within {PROBE_S:g} s (offline?); set "
+        "MENAGERIE_ROOT to a Menagerie checkout, or run the tests online once"
+    )
+
+
+def _answers(url: str) -> bool:
+    """Whether ``url`` answers a HEAD request within PROBE_S seconds (name lookup included)."""
+    import urllib.request
+
+    ok: list[bool] = []
+
+    def probe() -> None:
+        try:
+            req = urllib.request.Request(url, method="HEAD", headers={"User-Agent": "mujoco-menagerie"})
+            with urllib.request.urlopen(req, timeout=PROBE_S):
+                ok.append(True)
+        except Exception:
+            pass
+
+    t = threading.Thread(target=probe, name="menagerie-probe", daemon=True)
+    t.start()
+    t.join(PROBE_S + 1.0)
+    return bool(ok)
+
+
+@functools.cache
+def _menagerie_scenarios() -> frozenset[str]:
+    """The shipped scenarios whose robot comes from MuJoCo Menagerie."""
+    from mlpfac.scenario import load, scenario_names
+
+    models = {n: getattr(load(n, build=False).plant_config, "model", None) for n in scenario_names()}
+    return frozenset(n for n, m in models.items() if isinstance(m, str) and m.startswith("menagerie:"))
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """A test parametrized with a shipped scenario on a Menagerie robot needs that robot too."""
+    for item in items:
+        spec = getattr(item, "callspec", None)
+        if spec is not None and any(isinstance(v, str) and v in _menagerie_scenarios() for v in spec.params.values()):
+            item.add_marker(pytest.mark.menagerie)
+
+
+def pytest_runtest_setup(item: pytest.Item) -> None:
+    if item.get_closest_marker("menagerie") is not None and (why := menagerie_missing()) is not None:
+        pytest.skip(why)
+
 
 # A suite started in the background of a non-interactive shell (nohup, `cmd &`) inherits SIGINT
 # ignored, and so would every run it starts: the Ctrl-C tests need Python's own handler here, and

@@ -10,6 +10,7 @@ from pathlib import Path
 import pytest
 
 from mlpfac.cli import main
+from mlpfac.scenario import scenario_names
 
 MINIMAL = 'duration = 0.5\n[plant]\nkind = "kinematic"\n'
 EVENT = '[[events]]\ntime = 0.2\nkind = "control_period"\nfactor = 1.5\n'
@@ -205,12 +206,15 @@ def test_bad_flag(tmp_path, capsys, monkeypatch, case):
     assert not (tmp_path / "out").exists()
 
 
-# view and plot: (argv, text the message must hold); "D" is a folder holding no run
+# view, plot and check: (argv, text the message must hold); "D" is a folder holding no run
 BAD_VIEW_PLOT = {
     "view: no run.rrd": (["view", "D"], "no run.rrd"),
     "view --save: folders without run.rrd": (["view", "D", "D", "--save", "x.rrd"], "no run.rrd"),
     "plot: not a folder": (["plot", "missing"], "is not a folder"),
     "plot: no runs": (["plot", "D"], "holds no finished runs"),
+    "check: no budget file": (["check", "missing.toml"], "budget file not found"),
+    "check: a folder as the budget": (["check", "D"], "is a folder, not a budget file"),
+    "check: --workers 0": (["check", "missing.toml", "--workers", "0"], "--workers"),
 }
 
 
@@ -275,15 +279,15 @@ def test_a_custom_robot_reruns_from_its_config_toml(tmp_path, monkeypatch):
     assert main(["run", str(first / "config.toml"), "--no-log", "--no-plot", "--out", str(tmp_path / "c")]) == 2
 
 
-def test_config_toml_round_trips(tmp_path):
+@pytest.mark.parametrize("name", scenario_names())
+def test_config_toml_round_trips(name):
     """What config.toml says is the table that was run: every shipped scenario, read back, is equal."""
     import tomllib
 
-    from mlpfac.scenario import load, scenario_names, to_toml
+    from mlpfac.scenario import load, to_toml
 
-    for name in scenario_names():
-        table = load(name).table
-        assert tomllib.loads(to_toml(table)) == table, name
+    table = load(name).table
+    assert tomllib.loads(to_toml(table)) == table, name
 
 
 def test_shipped_scenarios_resolve_inside_the_package():

@@ -347,6 +347,7 @@ TIAGO = {
 }
 TIAGO_TORQUE = {"pi_kp": 10.0, "pi_ki": 200.0}
 ROBOTS = {"diffdrive": {}, "tiago": TIAGO}
+ROBOT_NAMES = ["diffdrive", pytest.param("tiago", marks=pytest.mark.menagerie)]
 SPEEDS = {"diffdrive": [(0.5, 0.5), (0.3, -1.5)], "tiago": [(0.3, 0.3), (0.4, 0.0), (0.15, -0.8)]}
 
 
@@ -359,7 +360,7 @@ def robot(name: str, actuator: str = "velocity", **kw) -> MujocoPlant:
     return plant
 
 
-@pytest.mark.parametrize("name", ROBOTS)
+@pytest.mark.parametrize("name", ROBOT_NAMES)
 @pytest.mark.parametrize("actuator", DRIVES)
 def test_each_robot_tracks_constant_commands_within_2_percent(name, actuator):
     plant = robot(name, actuator)
@@ -372,7 +373,7 @@ def test_each_robot_tracks_constant_commands_within_2_percent(name, actuator):
     assert plant.diverged() is None
 
 
-@pytest.mark.parametrize("name", ROBOTS)
+@pytest.mark.parametrize("name", ROBOT_NAMES)
 @pytest.mark.parametrize(
     "kind, params",
     [
@@ -411,7 +412,7 @@ def test_every_event_applies_to_each_robot_and_it_stays_on_its_wheels(name, kind
     assert plant.mujoco_warnings() == {}
 
 
-@pytest.mark.parametrize("name", ROBOTS)
+@pytest.mark.parametrize("name", ROBOT_NAMES)
 def test_each_robot_is_bit_identical_for_a_seed(name):
     runs = []
     for _ in range(2):
@@ -420,6 +421,7 @@ def test_each_robot_is_bit_identical_for_a_seed(name):
     np.testing.assert_array_equal(runs[0], runs[1])
 
 
+@pytest.mark.menagerie
 def test_smaller_wheels_that_leave_the_robot_on_its_casters_are_refused():
     """Our robot's one caster tilts it onto smaller wheels; TIAGo's four rigid casters hold its base up."""
     robot("diffdrive").check_event(make_event("wheel_radius", 1.0, scale=0.9), "here")
@@ -427,6 +429,7 @@ def test_smaller_wheels_that_leave_the_robot_on_its_casters_are_refused():
         robot("tiago").check_event(make_event("wheel_radius", 1.0, scale=0.9), "here")
 
 
+@pytest.mark.menagerie
 def test_tiago_limits_are_read_where_its_makers_declared_them():
     """The wheels' speed limit is the servo's ctrlrange (5 rad/s), the torque limit the joints'
     actuatorfrcrange (100 N m): defaults, applied to (v, omega) keeping the curvature."""
@@ -444,6 +447,7 @@ def test_tiago_limits_are_read_where_its_makers_declared_them():
     assert MujocoPlant(MujocoConfig(**TIAGO, max_wheel_speed=math.inf), T).max_wheel_speed is None
 
 
+@pytest.mark.menagerie
 def test_tiago_starts_from_its_keyframe_at_rest_with_the_arm_locked_or_held():
     locked, held = robot("tiago"), robot("tiago", other_actuators="hold")
     assert len(locked.robot.locked) == 12 and held.robot.locked == ()
@@ -458,6 +462,7 @@ def test_tiago_starts_from_its_keyframe_at_rest_with_the_arm_locked_or_held():
     assert held.data.qpos[torso.qposadr[0]] == pytest.approx(0.15, abs=0.01)  # "home", not 0
 
 
+@pytest.mark.menagerie
 def test_tiago_geometry_is_its_meshes():
     shapes = robot("tiago").geometry()
     meshes = [s for s in shapes if s["type"] == "mesh"]

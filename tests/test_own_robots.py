@@ -163,6 +163,7 @@ def test_tiago_without_the_package_says_how_to_install_it(tmp_path):
     assert "pip install 'mlpfac[menagerie]'" in proc.stderr
 
 
+@pytest.mark.menagerie
 def test_a_tiago_config_toml_reruns_to_the_same_metrics(tmp_path):
     pytest.importorskip("mujoco_menagerie")
     first, again = tmp_path / "a", tmp_path / "b"
@@ -176,6 +177,7 @@ def test_a_tiago_config_toml_reruns_to_the_same_metrics(tmp_path):
         assert a[key] == b[key]
 
 
+@pytest.mark.menagerie
 def test_tiago_is_drawn_with_its_meshes_standing_on_the_floor():
     pytest.importorskip("mujoco_menagerie")
     import rerun as rr

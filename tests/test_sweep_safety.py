@@ -98,6 +98,39 @@ def test_workers_die_with_the_sweep(tmp_path, sig):
         assert not (out / ".tmp").exists()
 
 
+# A signal that lands while cf.wait takes its futures' locks one by one (a window a loaded machine
+# widens): the pool's thread would wait for the lock left taken, and the stopped sweep with it.
+SIGNAL_INSIDE_THE_POOLS_LOCKS = """
+import signal, sys
+from pathlib import Path
+import concurrent.futures._base as base
+from mlpfac.sweeps import engine as sweep
+
+enter = base._AcquireFutures.__enter__
+def enter_and_signal(self):
+    for i, f in enumerate(sorted(self.futures, key=id)):
+        f._condition.acquire()
+        if i == 0 and not getattr(base, "signalled", False):
+            base.signalled = True
+            signal.raise_signal(signal.SIGINT)  # Ctrl-C, one lock taken and the others not
+base._AcquireFutures.__enter__ = enter_and_signal
+
+jobs = sweep.plan(["paper"], ["corradini"], [0, 1, 2, 3], 1.0)
+oc = sweep.execute(jobs, Path(sys.argv[1]), workers=2)
+print("interrupted" if oc.interrupted else "not interrupted", oc.ran)
+"""
+
+
+def test_a_signal_inside_the_pools_locks_still_stops_the_sweep(tmp_path):
+    proc = subprocess.run(
+        [sys.executable, "-c", SIGNAL_INSIDE_THE_POOLS_LOCKS, str(tmp_path / "o")],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert proc.returncode == 0 and proc.stdout.startswith("interrupted"), proc.stdout + proc.stderr
+
+
 def test_an_interrupted_save_rrd_sweep_leaves_no_temporary_file(tmp_path, monkeypatch):
     jobs = sweep.plan(["paper"], ["corradini"], [0, 1, 2], 0.5)
     monkeypatch.setenv("TMPDIR", str(tmp_path / "systmp"))

@@ -266,6 +266,7 @@ def test_web_viewer_renders_a_comparison(tmp_path: Path, runs) -> None:
 
 
 @pytest.mark.skipif(CHROMIUM is None, reason="no chromium binary (Debian: apt-get install chromium)")
+@pytest.mark.menagerie
 def test_web_viewer_renders_tiago_from_its_meshes(tmp_path: Path) -> None:
     """A short run of PAL TIAGo (MuJoCo Menagerie, base-only): the robot drawn from its own meshes,
     the paths and the error plots in the same default layout. Kept as docs/tiago-viewer.png."""

@@ -27,6 +27,24 @@ APPLICATION_ID = "mlpfac"
 BATCH_ROWS = 1000  # flush() sends once this many rows are pending ...
 BATCH_SECONDS = 1.0  # ... or this much wall time has passed since the last send
 CLOSE_TIMEOUT_S = 10.0  # rerun's disconnect never returns when its file cannot be written (a full disk)
+
+
+def _bounded_rerun_exit() -> None:
+    """rerun flushes every recording when the interpreter exits (its atexit handler), which, like
+    disconnect, may never return once a file could not be written: wait for it CLOSE_TIMEOUT_S at
+    most, so that a sweep whose recording failed still exits (seen on a loaded machine)."""
+    import atexit
+
+    def shutdown() -> None:
+        t = threading.Thread(target=rr.rerun_shutdown, name="mlpfac-rerun-shutdown", daemon=True)
+        t.start()
+        t.join(CLOSE_TIMEOUT_S)
+
+    rr.unregister_shutdown()
+    atexit.register(shutdown)
+
+
+_bounded_rerun_exit()
 STATUS_LEVEL = {"ok": "INFO", "interrupted": "WARN", "diverged": "ERROR"}
 
 

@@ -57,7 +57,8 @@ def model_path(model: str) -> Path:
         ) from None
     try:
         r = mm.get(robot)
-        return r.path(progress=None) / r.entry(entry or None).file
+        file = r.entry(entry or None).file  # an unknown entry point is known without a download
+        return r.path(progress=None) / file
     except mm.UnknownRobotError as err:
         raise ConfigError("model", f"{model}: {err}") from None
     except mm.UnknownEntryPointError as err:

@@ -8,18 +8,7 @@ import shlex
 import sys
 from pathlib import Path
 
-from mlpfac.sweeps.engine import (
-    COMPARE_COLUMNS,
-    EXIT_FAILED,
-    EXIT_INTERRUPTED,
-    EXIT_OK,
-    EXIT_TERMINATED,
-    SWEEP_COLUMNS,
-    WorkerLostError,
-    markdown,
-    summary,
-    sweep_folder,
-)
+from mlpfac.sweeps.engine import COMPARE_COLUMNS, SWEEP_COLUMNS, markdown, report, summary, sweep_folder
 
 COMPARE_CONTROLLERS = ("adaptive", "corradini", "kanayama")
 CONTROLLERS_HELP = "shipped names, path/to/file.py:Class, package.module:Class or installed names"
@@ -87,39 +76,16 @@ def run_compare_cli(args: argparse.Namespace) -> int:
 
 
 def _run_cli(args: argparse.Namespace, stem: str, columns) -> int:
-    """Validate everything, then run; 0 done, 1 some run failed, 2 bad input or a failed write
-    (one line naming the path), 130 interrupted (Ctrl-C), 143 terminated (SIGTERM)."""
+    """Validate everything, then run; 0 done, 1 some run failed or a worker was lost, 2 bad input
+    or a failed write (one line naming the path), 130 interrupted (Ctrl-C), 143 terminated (SIGTERM)."""
     cmd = shlex.join(["mlpfac", *sys.argv[1:]]) if sys.argv[1:] else f"mlpfac {stem} ..."
-    try:
-        res = sweep_folder(
-            args.scenarios, args.controllers, args.seeds, args.out, duration=args.duration, workers=args.workers,
-            batched=args.batched, batch_size=args.batch_size, scheduler=args.scheduler,
-            scheduler_timeout=args.scheduler_timeout, save_rrd=args.save_rrd, stem=stem, columns=columns, command=cmd,
-        )  # fmt: skip
-    except WorkerLostError as err:
-        print(f"mlpfac: error: {err}; every run written is whole, resume with: {cmd}", file=sys.stderr)
-        return EXIT_FAILED
-    oc, jobs = res.outcome, res.jobs
-    if oc.interrupted:
-        print(
-            f"mlpfac: {'terminated' if oc.terminated else 'interrupted'}; {len(oc.metrics)} of {len(jobs)} runs"
-            f" are done and kept in {args.out}.\nResume with the same command:\n  {cmd}",
-            file=sys.stderr,
-        )
-        return EXIT_TERMINATED if oc.terminated else EXIT_INTERRUPTED
-    print(markdown(res.rows, columns), end="")
-    print("\n" + summary(res.paired), end="")
-    redo = sum(oc.redo.values())
-    why = "; ".join(f"{k} {v}" for k, v in oc.redo.items())
-    print(
-        f"{len(jobs)} runs ({oc.skipped} already done, {oc.ran} run now in {oc.wall_s:.1f} s"
-        + (f", of which {redo} were found but run again: {why}" if redo else "")
-        + f") -> {', '.join(map(str, res.paths))}"
-    )
-    for key, err in oc.errors.items():
-        last = err.strip().splitlines()[-1] if err.strip() else "error"
-        print(
-            f"mlpfac: error: run {key[0]} / {key[1]} / seed {key[2]} raised: {last} (see error.txt; re-run to retry)",
-            file=sys.stderr,
-        )
-    return EXIT_FAILED if oc.errors else EXIT_OK
+    done = sweep_folder(
+        args.scenarios, args.controllers, args.seeds, args.out, duration=args.duration, workers=args.workers,
+        batched=args.batched, batch_size=args.batch_size, scheduler=args.scheduler,
+        scheduler_timeout=args.scheduler_timeout, save_rrd=args.save_rrd, stem=stem, columns=columns, command=cmd,
+    )  # fmt: skip
+    if done.code is not None:
+        return done.code
+    print(markdown(done.rows, columns), end="")
+    print("\n" + summary(done.paired), end="")
+    return report(done)

@@ -53,7 +53,7 @@ from __future__ import annotations
 import math
 import os
 import sys
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from mlpfac.exceptions import ConfigError
@@ -114,15 +114,73 @@ def check_execution_flags(
 
 
 @dataclass
-class SweepResult:
-    """A sweep run into a folder: its plan, what ran, and (unless interrupted) its tables."""
+class Swept:
+    """What :func:`sweep_into` made: the runs' outcome, the table rows, the paired rows, the files
+    written; ``code`` is the exit code when the sweep stopped before its tables (else None)."""
 
     jobs: list[Job]
     outcome: Outcome
-    rows: list[dict]
-    paired: list[dict]
-    paths: list[Path]
-    command: str
+    rows: list[dict] = field(default_factory=list)
+    paired: list[dict] = field(default_factory=list)
+    paths: list[Path] = field(default_factory=list)
+    code: int | None = None
+
+
+def sweep_into(
+    jobs: list[Job],
+    out: Path,
+    stem: str,
+    columns,
+    meta: dict,
+    cmd: str,
+    *,
+    workers: int = 1,
+    client=None,
+    batched: bool = False,
+    batch_size: int = 64,
+    save_rrd: bool = False,
+    progress: bool | None = None,
+) -> Swept:
+    """Run ``jobs`` into ``out`` under its lock (runs already done are skipped), then write the
+    tables (``stem``.csv / .md / .json, paired.*, summary.md) and ``stem``.png. Stopped by Ctrl-C or
+    SIGTERM, or by a lost worker, it says so on stderr with ``cmd``, the command that resumes it,
+    and returns with ``code`` set; a failed write is an :class:`OutputError` naming the path."""
+    with folder_lock(out, "--out"):
+        try:
+            oc = execute(
+                jobs,
+                out,
+                workers=workers,
+                client=client,
+                batched=batched,
+                batch_size=batch_size,
+                save_rrd=save_rrd,
+                progress=progress,
+                locked=True,
+            )
+        except OutputError as err:
+            raise OutputError(f"{err}; the runs written before are whole, resume with: {cmd}") from None
+        except WorkerLostError as err:
+            print(f"mlpfac: error: {err}; every run written is whole, resume with: {cmd}", file=sys.stderr)
+            return Swept(jobs, Outcome(jobs, {}, {}, 0, 0), code=EXIT_FAILED)
+        done = Swept(jobs, oc)
+        if oc.interrupted:  # stop now: no table (aggregating imports scipy, seconds on a loaded machine)
+            print(
+                f"mlpfac: {'terminated' if oc.terminated else 'interrupted'}; {len(oc.metrics)} of {len(jobs)} runs"
+                f" are done and kept in {out}.\nResume with the same command:\n  {cmd}",
+                file=sys.stderr,
+            )
+            done.code = EXIT_TERMINATED if oc.terminated else EXIT_INTERRUPTED
+            return done
+        done.rows, done.paired = aggregate(jobs, oc.metrics), paired_rows(jobs, oc.metrics)
+        try:
+            done.paths = write_tables(out, stem, done.rows, columns, meta) + write_paired(out, done.paired, meta)
+            from mlpfac.plots import sweep_plots
+
+            done.paths += sweep_plots(out, (stem,))  # <stem>.png beside the table
+        except OSError as err:
+            raise OutputError(f"{_oserror(err, str(out))}; every run folder is whole, resume with: {cmd}") from None
+    return done
 
 
 def sweep_folder(
@@ -142,12 +200,10 @@ def sweep_folder(
     columns=SWEEP_COLUMNS,
     command: str | None = None,
     progress: bool | None = None,
-) -> SweepResult:
-    """Validate everything, run the plan into ``out`` (resuming it), then write its tables and plots.
-
-    Bad input is a ConfigError before anything runs; a failed write an OutputError (the runs
-    written before are whole); a lost local worker a WorkerLostError. An interrupted sweep returns
-    with ``outcome.interrupted`` and no tables. ``command`` is what re-runs it (for messages)."""
+) -> Swept:
+    """Validate everything (a ConfigError naming the flag before anything runs), plan, then
+    :func:`sweep_into` ``out``; what ``mlpfac sweep`` / ``compare`` and :func:`mlpfac.sweep` do.
+    ``command`` is what re-runs it (for messages)."""
     seed_list = parse_seeds(seeds)
     names = parse_controllers(controllers)
     workers = check_execution_flags(workers, batch_size, scheduler, scheduler_timeout)
@@ -163,36 +219,39 @@ def sweep_folder(
         print(f"mlpfac: planning {n} runs ...", file=sys.stderr, flush=True)
     jobs = plan(scenarios, names, seed_list, duration)
     check_writable(out)
-    cmd = command or f"mlpfac {stem} ..."
+    meta = {
+        "command": stem,
+        "scenarios": list(scenarios),
+        "controllers": sorted({j.controller for j in jobs}),
+        "seeds": seeds,
+        "duration": duration,
+        "runs": len(jobs),
+    }
     client = connect(scheduler, scheduler_timeout) if scheduler else None
     try:
-        with folder_lock(out, "--out"):
-            try:
-                oc = execute(jobs, out, workers=workers, client=client, batched=batched, batch_size=batch_size,
-                             save_rrd=save_rrd, progress=progress, locked=True)  # fmt: skip
-            except OutputError as err:
-                raise OutputError(f"{err}; the runs written before are whole, resume with: {cmd}") from None
-            rows, prows, paths = aggregate(jobs, oc.metrics), [], []
-            if not oc.interrupted:
-                meta = {
-                    "command": stem,
-                    "scenarios": list(scenarios),
-                    "controllers": sorted({j.controller for j in jobs}),
-                    "seeds": seeds,
-                    "duration": duration,
-                    "runs": len(jobs),
-                }
-                prows = paired_rows(jobs, oc.metrics)
-                try:
-                    paths = write_tables(out, stem, rows, columns, meta) + write_paired(out, prows, meta)
-                    from mlpfac.plots import sweep_plots
-
-                    paths += sweep_plots(out, (stem,))  # <stem>.png beside the table
-                except OSError as err:
-                    raise OutputError(
-                        f"{_oserror(err, str(out))}; every run folder is whole, resume with: {cmd}"
-                    ) from None
+        return sweep_into(jobs, out, stem, columns, meta, command or f"mlpfac {stem} ...", workers=workers,
+                          client=client, batched=batched, batch_size=batch_size, save_rrd=save_rrd,
+                          progress=progress)  # fmt: skip
     finally:
         if client is not None:
             client.close()
-    return SweepResult(jobs, oc, rows, prows, paths, cmd)
+
+
+def report(done: Swept) -> int:
+    """One line on the runs (done before, run now, run again and why, files written) and one on
+    stderr per run that raised; EXIT_FAILED if some run raised, else EXIT_OK."""
+    oc = done.outcome
+    redo = sum(oc.redo.values())
+    why = "; ".join(f"{k} {v}" for k, v in oc.redo.items())
+    print(
+        f"{len(done.jobs)} runs ({oc.skipped} already done, {oc.ran} run now in {oc.wall_s:.1f} s"
+        + (f", of which {redo} were found but run again: {why}" if redo else "")
+        + f") -> {', '.join(map(str, done.paths))}"
+    )
+    for key, err in oc.errors.items():
+        last = err.strip().splitlines()[-1] if err.strip() else "error"
+        print(
+            f"mlpfac: error: run {key[0]} / {key[1]} / seed {key[2]} raised: {last} (see error.txt; re-run to retry)",
+            file=sys.stderr,
+        )
+    return EXIT_FAILED if oc.errors else EXIT_OK

@@ -19,6 +19,7 @@ from mlpfac.sweeps.worker import _worker_init, run_task
 TMP_DIR = ".tmp"  # OUT/.tmp: recordings being made; removed when the sweep ends and when the next one starts
 BLAS_THREAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
 EXIT_GRACE_S = 15.0  # how long a finished worker may take to exit before it is killed
+POLL_S = 0.2  # the longest a Ctrl-C or SIGTERM waits while a local pool is waited on
 
 
 class WorkerLostError(MlpfacError):
@@ -206,6 +207,11 @@ def _pool_results(
     Workers are fresh interpreters (``spawn``: no copy of this process's threads or BLAS state),
     started with one BLAS thread each, and die with this process. Closing the generator (or an
     exception in it) kills the workers: a run being computed is lost, its folder never written.
+
+    A Ctrl-C or SIGTERM is held while this thread is inside the pool's calls (``cf.wait`` in slices
+    of POLL_S, ``submit``, the shutdown) and raised between them: raised inside, it can leave a
+    future's lock taken (``cf.wait`` takes them one by one), and the pool's thread then waits for
+    that lock forever, and the sweep with it (seen on a loaded machine).
     """
     import concurrent.futures as cf
     import multiprocessing as mp
@@ -223,7 +229,7 @@ def _pool_results(
     queue = iter(tasks)
 
     def submit(t: list[Job]) -> None:
-        with one_blas_thread():  # the pool starts its workers as tasks are submitted
+        with one_blas_thread(), sigint_deferred():  # the pool starts its workers as tasks are submitted
             pending.add(pool.submit(run_task, t, batched, save_rrd, tmp_dir))
 
     try:
@@ -232,7 +238,8 @@ def _pool_results(
             if len(pending) >= 2 * workers:
                 break
         while pending:
-            finished, pending = cf.wait(pending, return_when=cf.FIRST_COMPLETED)
+            with sigint_deferred():  # Ctrl-C / SIGTERM come between the pool's calls, not inside them (see below)
+                finished, pending = cf.wait(pending, timeout=POLL_S, return_when=cf.FIRST_COMPLETED)
             for f in finished:
                 try:
                     res = f.result()
@@ -251,11 +258,15 @@ def _pool_results(
             if p.is_alive():
                 p.kill()
     except BaseException:  # also GeneratorExit: the consumer stopped
-        for f in pending:
-            f.cancel()
-        for p in set(mp.active_children()) - before:  # this pool's workers: they ignore SIGINT and SIGTERM
+        workers_now = set(mp.active_children()) - before
+        for p in workers_now:  # this pool's workers: they ignore SIGINT and SIGTERM
             p.kill()
-        pool.shutdown(wait=True, cancel_futures=True)
+        with sigint_deferred():
+            for f in pending:
+                f.cancel()
+            for p in workers_now:
+                p.join(EXIT_GRACE_S)  # killed: at once, unless the machine is swamped
+            pool.shutdown(wait=False, cancel_futures=True)  # its thread sees the workers gone and ends
         raise
 
 

@@ -44,14 +44,15 @@ def window_rms(m: dict, start_s: float, end_s: float) -> float | None:
     return math.sqrt(total / count) if count else None
 
 
-def wilcoxon(x: list[float], y: list[float]) -> float | None:
-    """Two-sided Wilcoxon signed-rank p of the differences x - y (scipy); None when all are zero."""
+def wilcoxon(x: list[float], y: list[float], alternative: str = "two-sided") -> float | None:
+    """Wilcoxon signed-rank p of the differences x - y (scipy), two-sided or, with ``alternative``
+    "greater", one-sided (x larger); None when all are zero."""
     d = [a - b for a, b in zip(x, y, strict=True) if a != b]
     if not d:
         return None
     from scipy.stats import wilcoxon as test
 
-    return float(test(d).pvalue)
+    return float(test(d, alternative=alternative).pvalue)
 
 
 def last_phase(m: dict) -> str:
@@ -69,8 +70,11 @@ def _rms(m: dict | None) -> float | None:
     return math.inf if x is None else x
 
 
-def compare(x: list[float | None], y: list[float | None]) -> tuple[int, int, float | None]:
-    """(wins of x, pairs, Wilcoxon p) over the seeds where both are known; inf is worse than any number."""
+def compare(
+    x: list[float | None], y: list[float | None], alternative: str = "two-sided"
+) -> tuple[int, int, float | None]:
+    """(wins of x, pairs, Wilcoxon p (see :func:`wilcoxon`)) over the seeds where both are known;
+    inf is worse than any number."""
     pairs = [(a, b) for a, b in zip(x, y, strict=True) if a is not None and b is not None and a == a and b == b]
     if not pairs:
         return 0, 0, None
@@ -79,7 +83,7 @@ def compare(x: list[float | None], y: list[float | None]) -> tuple[int, int, flo
     xs = [a if math.isfinite(a) else big for a, _ in pairs]
     ys = [b if math.isfinite(b) else big for _, b in pairs]
     wins = sum(a < b for a, b in pairs)
-    return wins, len(pairs), wilcoxon(xs, ys)
+    return wins, len(pairs), wilcoxon(xs, ys, alternative)
 
 
 def twins(jobs: list[Job]) -> dict[str, str]:

@@ -1,0 +1,236 @@
+"""A budget file: what to run (scenarios, controllers, seeds, duration) and the limits each run
+group must keep (``[[budget]]`` tables). Every mistake is a ConfigError naming the file and key,
+found before anything runs."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from mlpfac.exceptions import ConfigError
+from mlpfac.sweeps.plan import MAX_RUNS, Job, parse_controllers, parse_seeds, plan
+
+PHASE_NAMES = ("before", "after", "whole")  # "whole": the run after the warm-up
+
+
+@dataclass(frozen=True)
+class Figure:
+    """A figure a budget can limit: ``text`` and ``unit`` for reports; ``at_least``: the value must
+    not fall below the limit (a p-value), else it must not exceed it."""
+
+    text: str
+    unit: str = ""
+    count: bool = False  # a number of runs: the limit is a whole number
+    baseline: bool = False  # needs --baseline
+    at_least: bool = False
+
+
+FIGURES: dict[str, Figure] = {
+    "median_position_rms_mm": Figure("median position RMS", "mm"),
+    "mean_position_rms_mm": Figure("mean position RMS", "mm"),
+    "max_position_rms_mm": Figure("largest position RMS of a run", "mm"),
+    "max_error_mm": Figure("largest position error", "mm"),
+    "median_heading_rms_mrad": Figure("median heading RMS", "mrad"),
+    "mean_heading_rms_mrad": Figure("mean heading RMS", "mrad"),
+    "max_heading_rms_mrad": Figure("largest heading RMS of a run", "mrad"),
+    "lost": Figure("runs lost", "runs", count=True),
+    "diverged": Figure("runs diverged", "runs", count=True),
+    "no_worse_than_baseline": Figure("median per-seed ratio of position RMS to the baseline", "x", baseline=True),
+    "p": Figure("one-sided Wilcoxon p that it is worse than the baseline", baseline=True, at_least=True),
+}
+TOP_KEYS = ("scenarios", "controllers", "seeds", "duration", "budget")
+FILTER_KEYS = ("name", "scenario", "controller", "phase")
+
+
+@dataclass
+class Group:
+    """The runs of one scenario and controller, with the names the budget gave them."""
+
+    scenario: str  # the scenario's name (its folder)
+    controller: str
+    source: str  # the scenario as the budget wrote it (a name, or a path made absolute)
+    spec: str | None  # the controller as the budget wrote it (None: the scenario's own)
+    jobs: list[Job] = field(default_factory=list)
+
+    @property
+    def has_event(self) -> bool:
+        return bool(self.jobs and self.jobs[0].table.get("events"))
+
+
+@dataclass
+class Limit:
+    """One ``[[budget]]`` table: its filters and the figures it limits."""
+
+    index: int  # 1 for the first [[budget]]
+    name: str | None
+    scenario: str | None
+    controller: str | None
+    phase: str
+    figures: dict[str, float]
+
+    @property
+    def where(self) -> str:
+        return f"budget #{self.index}"
+
+    def matches(self, g: Group) -> bool:
+        return self.scenario in (None, g.scenario, g.source) and self.controller in (None, g.controller, g.spec)
+
+
+@dataclass
+class Budget:
+    path: Path
+    scenarios: list[str]  # as given to plan: names, or absolute paths
+    controllers: list[str | None]
+    seeds: list[int]
+    seeds_text: str
+    duration: float | None
+    limits: list[Limit]
+
+    def needs_baseline(self) -> Limit | None:
+        return next((b for b in self.limits if any(FIGURES[f].baseline for f in b.figures)), None)
+
+    def plan(self) -> tuple[list[Job], list[Group]]:
+        """The runs (ConfigError naming this file's ``scenarios`` key for a scenario that cannot
+        load) and their groups; each limit's filters must match a group, and "after" needs an event."""
+        try:
+            jobs = plan(self.scenarios, self.controllers, self.seeds, self.duration)
+        except ConfigError as err:
+            raise ConfigError(f"{self.path} scenarios", str(err)) from None
+        groups: dict[tuple[str, str], Group] = {}
+        per_pair = len(self.seeds)
+        pairs = [(s, c) for s in self.scenarios for c in self.controllers]
+        for i, j in enumerate(jobs):
+            src, spec = pairs[i // per_pair] if len(jobs) == len(pairs) * per_pair else (j.scenario, j.controller)
+            groups.setdefault((j.scenario, j.controller), Group(j.scenario, j.controller, src, spec)).jobs.append(j)
+        names = {
+            "scenario": {n for g in groups.values() for n in (g.scenario, g.source)},
+            "controller": {n for g in groups.values() for n in (g.controller, g.spec)},
+        }
+        for b in self.limits:
+            for key, known_names in names.items():
+                value = getattr(b, key)
+                if value is not None and value not in known_names:
+                    known = ", ".join(dict.fromkeys(getattr(g, key) for g in groups.values()))
+                    raise ConfigError(
+                        f"{self.path} {b.where} {key}", f"{value!r} matches no {key} of this budget ({known})"
+                    )
+            matched = [g for g in groups.values() if b.matches(g)]
+            if not matched:
+                raise ConfigError(f"{self.path} {b.where}", "its scenario and controller match no run group together")
+            if b.phase == "after" and not any(g.has_event for g in matched):
+                raise ConfigError(
+                    f"{self.path} {b.where} phase", "'after' needs a scenario with an event; these have none"
+                )
+        return jobs, list(groups.values())
+
+
+def read_budget(path: Path) -> Budget:
+    """The budget file at ``path``, checked; scenario paths and ``file.py:Class`` controllers are
+    taken from the file's own folder."""
+    from mlpfac.scenario import read_toml
+
+    table = read_toml(path, "budget file")
+    _known(table, TOP_KEYS, str(path))
+    here = path.absolute().parent
+    scenarios = _strings(table, "scenarios", path, required=True)
+    scenarios = [str(here / s) if s.endswith(".toml") and not Path(s).is_absolute() else s for s in scenarios]
+    specs = _strings(table, "controllers", path, required=False)
+    controllers: list[str | None] = [None]
+    if specs is not None:
+        try:
+            controllers = parse_controllers(",".join(_near(s, here) for s in specs))
+        except ConfigError as err:
+            raise ConfigError(f"{path} controllers", err.what) from None
+    seeds_text = _seeds_text(table.get("seeds", "0"), path)
+    try:
+        seeds = parse_seeds(seeds_text)
+    except ConfigError as err:
+        raise ConfigError(f"{path} seeds", err.what) from None
+    duration = table.get("duration")
+    if duration is not None and not (_is_number(duration) and math.isfinite(duration) and duration > 0):
+        raise ConfigError(f"{path} duration", f"expected a positive number of seconds, got {duration!r}")
+    n = len(dict.fromkeys(scenarios)) * len(controllers) * len(seeds)
+    if n > MAX_RUNS:
+        raise ConfigError(f"{path} seeds", f"{n} runs is more than the limit of {MAX_RUNS}; split the budget")
+    raw = table.get("budget")
+    if not isinstance(raw, list) or not raw or not all(isinstance(b, dict) for b in raw):
+        raise ConfigError(f"{path} budget", "expected one or more [[budget]] tables")
+    limits = [_limit(b, i + 1, path, here) for i, b in enumerate(raw)]
+    return Budget(path, list(dict.fromkeys(scenarios)), controllers, seeds, seeds_text, duration, limits)
+
+
+def _limit(b: dict, index: int, path: Path, here: Path) -> Limit:
+    where = f"{path} budget #{index}"
+    _known(b, (*FILTER_KEYS, *FIGURES), where)
+    for key in FILTER_KEYS:
+        if key in b and not (isinstance(b[key], str) and b[key]):
+            raise ConfigError(f"{where} {key}", f"expected a non-empty string, got {b[key]!r}")
+    phase = b.get("phase", "whole")
+    if phase not in PHASE_NAMES:
+        raise ConfigError(f"{where} phase", f"expected one of {', '.join(PHASE_NAMES)}, got {phase!r}")
+    figures = {}
+    for key, fig in FIGURES.items():
+        if key not in b:
+            continue
+        v = b[key]
+        ok = _is_number(v) and math.isfinite(v) and v >= 0
+        if fig.count:
+            ok = ok and isinstance(v, int)
+        elif key == "p":
+            ok = ok and 0 < v < 1
+        elif fig.baseline:
+            ok = ok and v > 0
+        if not ok:
+            want = (
+                "a whole number of runs >= 0"
+                if fig.count
+                else "a number between 0 and 1"
+                if key == "p"
+                else "a number >= 0"
+            )
+            raise ConfigError(f"{where} {key}", f"expected {want}, got {v!r}")
+        figures[key] = float(v) if not fig.count else v
+    if not figures:
+        raise ConfigError(where, f"limits no figure; give at least one of {', '.join(FIGURES)}")
+    scenario, controller = b.get("scenario"), b.get("controller")
+    if scenario is not None and scenario.endswith(".toml") and not Path(scenario).is_absolute():
+        scenario = str(here / scenario)
+    return Limit(index, b.get("name"), scenario, controller and _near(controller, here), phase, figures)
+
+
+def _known(table: dict, keys: tuple[str, ...], where: str) -> None:
+    for key in table:
+        if key not in keys:
+            raise ConfigError(f"{where} {key}", f"unknown key; known keys: {', '.join(keys)}")
+
+
+def _strings(table: dict, key: str, path: Path, required: bool) -> list[str] | None:
+    v = table.get(key)
+    if v is None and not required:
+        return None
+    if not (isinstance(v, list) and v and all(isinstance(s, str) and s.strip() for s in v)):
+        raise ConfigError(f"{path} {key}", f'expected a non-empty list of names, like ["eight-nominal"], got {v!r}')
+    return [s.strip() for s in v]
+
+
+def _seeds_text(v, path: Path) -> str:
+    if isinstance(v, str):
+        return v
+    if isinstance(v, int) and not isinstance(v, bool):
+        return str(v)
+    if isinstance(v, list) and v and all(isinstance(s, int) and not isinstance(s, bool) for s in v):
+        return ",".join(map(str, v))
+    raise ConfigError(f"{path} seeds", f'expected seeds like "0-3", 3 or [0, 2, 5], got {v!r}')
+
+
+def _near(spec: str, here: Path) -> str:
+    """``file.py:Class`` with a relative file -> the file from the budget's folder, as an absolute path."""
+    file, sep, rest = spec.partition(":")
+    if sep and file.endswith(".py") and not Path(file).is_absolute():
+        return f"{here / file}:{rest}"
+    return spec
+
+
+def _is_number(v) -> bool:
+    return isinstance(v, int | float) and not isinstance(v, bool)

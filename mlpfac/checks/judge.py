@@ -1,0 +1,220 @@
+"""Judging run groups against the budget's limits: each figure over the group's runs in one phase,
+and, with a baseline, per seed against the baseline's run of the same scenario, controller and seed.
+
+Position and heading figures are over the runs that finished (tracking or lost), as in
+``mlpfac sweep``'s table; a group where no run finished has no such figure, which is a miss.
+``lost`` and ``diverged`` count runs. Against the baseline, a run that diverged is worse than any
+that finished (its position RMS counts as infinite); seeds the baseline lacks are named and left
+out, never guessed.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from mlpfac.checks.budget import FIGURES, Group, Limit
+from mlpfac.exceptions import ConfigError
+from mlpfac.sweeps.folders import metrics_problem
+from mlpfac.sweeps.paired import compare, median, outcome
+
+Runs = dict[int, dict]  # seed -> metrics.json
+Value = tuple[float | None, int | None, str]  # (value, worst seed, note)
+
+
+@dataclass
+class Verdict:
+    figure: str
+    limit: float
+    value: float | None
+    passed: bool
+    worst_seed: int | None
+    baseline: float | None = None  # the same figure over the baseline's runs of the same seeds
+    note: str = ""
+
+
+@dataclass
+class Case:
+    """One limit applied to one run group: a test case of the report."""
+
+    limit: Limit
+    group: Group
+    verdicts: list[Verdict] = field(default_factory=list)
+    time_s: float = 0.0  # wall time of the group's runs
+    missing: list[int] = field(default_factory=list)  # seeds the baseline lacks
+    errors: list[int] = field(default_factory=list)  # seeds whose run raised (no metrics)
+
+    @property
+    def passed(self) -> bool:
+        return not self.errors and all(v.passed for v in self.verdicts)
+
+    @property
+    def misses(self) -> list[Verdict]:
+        return [v for v in self.verdicts if not v.passed]
+
+
+def phase_figures(m: dict, phase: str) -> tuple[float, float, float] | None:
+    """(position RMS, largest position error, heading RMS) of run ``m`` in ``phase``; "whole" is
+    the run after the warm-up, the phases joined (RMS weighted by their lengths); None when the
+    phase has no step."""
+    ph = m["phases"]
+    names = ("before", "after") if phase == "whole" else (phase,)
+    parts = [ph[k] for k in names if k in ph and ph[k]["rms_position_error_m"] is not None]
+    if not parts:
+        return None
+    if len(parts) == 1:
+        p = parts[0]
+        return p["rms_position_error_m"], p["max_position_error_m"], p["rms_heading_error_rad"]
+    w = [max(p["end_s"] - p["start_s"], 0.0) for p in parts]
+
+    def rms(key: str) -> float:
+        return math.sqrt(math.fsum(wi * p[key] ** 2 for wi, p in zip(w, parts, strict=True)) / math.fsum(w))
+
+    return rms("rms_position_error_m"), max(p["max_position_error_m"] for p in parts), rms("rms_heading_error_rad")
+
+
+def _values(runs: Runs, phase: str, i: int) -> dict[int, float]:
+    out = {}
+    for seed, m in runs.items():
+        f = phase_figures(m, phase) if m["status"] == "ok" else None
+        if f is not None and f[i] is not None:
+            out[seed] = f[i]
+    return out
+
+
+def _largest(values: dict[int, float]) -> int | None:
+    return max(values, key=lambda s: (values[s], -s)) if values else None
+
+
+def _statistic(how: Callable[[list[float]], float | None], i: int, scale: float):
+    def figure(runs: Runs, phase: str, base: Runs | None) -> Value:
+        vals = _values(runs, phase, i)
+        if not vals:
+            return None, _diverged(runs, phase, base)[1], "no run finished"
+        return how(list(vals.values())) * scale, _largest(vals), ""
+
+    return figure
+
+
+def _mean(xs: list[float]) -> float:
+    return math.fsum(xs) / len(xs)
+
+
+def _lost(runs: Runs, phase: str, base: Runs | None) -> Value:
+    rms = _values(runs, phase, 0)
+    lost = {s: rms.get(s, 0.0) for s, m in runs.items() if outcome(m) == "lost"}
+    return len(lost), _largest(lost), ""
+
+
+def _diverged(runs: Runs, phase: str, base: Runs | None) -> Value:
+    bad = sorted((m["steps"], s) for s, m in runs.items() if m["status"] != "ok")
+    return len(bad), (bad[0][1] if bad else None), ""  # the first to diverge
+
+
+def _rms(m: dict, phase: str) -> float | None:
+    """The compared figure: the phase's position RMS; inf for a run that diverged."""
+    if m["status"] != "ok":
+        return math.inf
+    f = phase_figures(m, phase)
+    return None if f is None else f[0]
+
+
+def _ratios(runs: Runs, phase: str, base: Runs) -> dict[int, float]:
+    out = {}
+    for seed in sorted(set(runs) & set(base)):
+        x, y = _rms(runs[seed], phase), _rms(base[seed], phase)
+        if x is None or y is None:
+            continue
+        out[seed] = 1.0 if x == y else math.inf if y == 0 else 0.0 if math.isinf(y) else x / y
+    return out
+
+
+def _no_worse(runs: Runs, phase: str, base: Runs | None) -> Value:
+    ratios = _ratios(runs, phase, base or {})
+    if not ratios:
+        return None, None, "no seed pairs with the baseline"
+    return median(list(ratios.values())), _largest(ratios), f"{len(ratios)} seeds paired"
+
+
+def _p(runs: Runs, phase: str, base: Runs | None) -> Value:
+    base = base or {}
+    seeds = [s for s in sorted(set(runs) & set(base)) if None not in (_rms(runs[s], phase), _rms(base[s], phase))]
+    if not seeds:
+        return None, None, "no seed pairs with the baseline"
+    x = [_rms(runs[s], phase) for s in seeds]
+    y = [_rms(base[s], phase) for s in seeds]
+    _, n, p = compare(x, y, alternative="greater")
+    return (1.0 if p is None else p), _largest(_ratios(runs, phase, base)), f"{n} seeds paired"
+
+
+FIGURE_VALUES: dict[str, Callable[[Runs, str, Runs | None], Value]] = {
+    "median_position_rms_mm": _statistic(median, 0, 1e3),
+    "mean_position_rms_mm": _statistic(_mean, 0, 1e3),
+    "max_position_rms_mm": _statistic(max, 0, 1e3),
+    "max_error_mm": _statistic(max, 1, 1e3),
+    "median_heading_rms_mrad": _statistic(median, 2, 1e3),
+    "mean_heading_rms_mrad": _statistic(_mean, 2, 1e3),
+    "max_heading_rms_mrad": _statistic(max, 2, 1e3),
+    "lost": _lost,
+    "diverged": _diverged,
+    "no_worse_than_baseline": _no_worse,
+    "p": _p,
+}
+assert set(FIGURE_VALUES) == set(FIGURES)
+
+
+def judge(limit: Limit, group: Group, metrics: dict[tuple, dict], base: Runs | None) -> Case:
+    """The verdicts of ``limit`` on ``group``'s runs (``metrics`` by job key); ``base``: the
+    baseline's runs of the group by seed, or None without a baseline."""
+    runs = {j.seed: metrics[j.key] for j in group.jobs if j.key in metrics}
+    case = Case(limit, group, errors=[j.seed for j in group.jobs if j.key not in metrics])
+    case.time_s = math.fsum(m.get("wall_time_s", 0.0) for m in runs.values())
+    paired = None
+    if base is not None:
+        case.missing = [s for s in runs if s not in base]
+        paired = {s: base[s] for s in runs if s in base}
+    for key, lim in limit.figures.items():
+        fig = FIGURES[key]
+        value, worst, note = FIGURE_VALUES[key](runs, limit.phase, base)
+        passed = value is not None and (value >= lim if fig.at_least else value <= lim)
+        n = len(_ratios(runs, limit.phase, base or {}))
+        if key == "p" and n and 0.5**n >= lim:  # the exact test's smallest p with n pairs is 2**-n
+            note += f"; with {n} pairs p cannot fall below {0.5**n:.3g}, so this limit cannot fail: add seeds"
+        ref = None
+        if paired and not fig.baseline:
+            ref = FIGURE_VALUES[key](paired, limit.phase, None)[0]
+        case.verdicts.append(Verdict(key, lim, value, passed, worst, ref, note))
+    return case
+
+
+def baseline_folder(text: str | Path) -> Path:
+    """The sweep folder ``--baseline`` names (the folder, or its sweep.json); ConfigError naming the
+    flag when it is neither or holds no finished run."""
+    p = Path(text)
+    where = f"--baseline {p}"
+    if not p.exists():
+        raise ConfigError(where, "not found; give a sweep folder or its sweep.json")
+    if p.is_file():
+        if p.suffix != ".json":
+            raise ConfigError(where, "expected a sweep folder or its sweep.json")
+        p = p.parent
+    if next(p.glob("*/*/seed-*/metrics.json"), None) is None:
+        raise ConfigError(where, "holds no finished runs (<scenario>/<controller>/seed-*/metrics.json)")
+    return p
+
+
+def baseline_runs(folder: Path, group: Group) -> Runs:
+    """The baseline's whole runs of ``group``'s scenario, controller and seeds, by seed (a folder
+    without a valid metrics.json of that run is missing)."""
+    out = {}
+    for j in group.jobs:
+        try:
+            m = json.loads((j.folder(folder) / "metrics.json").read_text())
+        except (OSError, ValueError):
+            continue
+        if metrics_problem(m, j) is None:
+            out[j.seed] = m
+    return out
