@@ -250,3 +250,27 @@ def test_runs_that_diverged_are_counted_and_have_no_position_figure(tmp_path, ca
     assert len(misses) == 2, misses
     assert "median_position_rms_mm - (no run finished), limit <= 10.00; worst seed 0" in misses[0]
     assert "diverged 2, limit <= 0; worst seed 0: mlpfac run " in misses[1]
+
+
+def test_a_budget_names_a_plugin_relative_to_its_own_folder(tmp_path, monkeypatch, capsys):
+    """controllers = ["laws/my_law.py:MyLaw"] from the budget's folder, filtered by that spelling;
+    a baseline swept from another folder pairs with it by the controller's name."""
+    (tmp_path / "ci" / "laws").mkdir(parents=True)
+    (tmp_path / "ci" / "laws" / "my_law.py").write_text(
+        "import math\n\n\nclass MyLaw:\n    def __init__(self, T):\n        pass\n\n"
+        "    def step(self, e, r):\n        return r[3] * math.cos(e[2]) + 10 * e[0], "
+        "r[4] + r[3] * (64 * e[1] + 16 * math.sin(e[2]))\n"
+    )
+    (tmp_path / "ci" / "budget.toml").write_text(
+        'scenarios = ["paper"]\ncontrollers = ["laws/my_law.py:MyLaw", "corradini"]\nseeds = "0-1"\n'
+        'duration = 4.0\n\n[[budget]]\ncontroller = "laws/my_law.py:MyLaw"\nmedian_position_rms_mm = 50.0\n'
+        "diverged = 0\nno_worse_than_baseline = 1.0\n"
+    )
+    monkeypatch.chdir(tmp_path)
+    base = mlpfac.sweep(["paper"], [f"{tmp_path}/ci/laws/my_law.py:MyLaw"], seeds="0-1", duration=4.0, out="base")
+    assert {r["controller"] for r in base} == {"MyLaw"}
+    code = main(["check", "ci/budget.toml", "--out", "o", "--workers", "1", "--baseline", "base", "--junit", "j.xml"])
+    out = capsys.readouterr()
+    assert code == 0, out.out + out.err
+    root, cases = _junit(tmp_path / "j.xml")
+    assert len(cases) == 1 and "MyLaw" in cases[0].get("name") and root.get("failures") in ("0", None)
