@@ -96,7 +96,10 @@ def main(argv: list[str] | None = None) -> int:
 
     try:
         if args.command == "run":
-            return cmd_run(args)
+            from mlpfac.plots.painter import painting
+
+            with painting(args.baseline != "none" and not args.no_plot) as args.painter:  # figure1 drawn beside
+                return cmd_run(args)
         if args.command == "list":
             return cmd_list()
         if args.command == "view":
@@ -205,7 +208,7 @@ def _run_staged(args: argparse.Namespace, scn, out: Path, built, baseline) -> in
         rrd_shown = args.save if saved else out / "run.rrd"
         sink = _open_sink(args, scn, (rrd_path, rrd_shown) if saving else None)
         try:
-            rec, m = _run_into(folder, out, scn, built, sink, baseline)
+            rec, m = _run_into(folder, out, scn, built, sink, baseline, args.painter)
             if saving:
                 from mlpfac.log.sinks import check_recording
 
@@ -266,7 +269,7 @@ def _make_sink(args: argparse.Namespace, scn, save: Path | None):
     return sink
 
 
-def _run_into(folder, out: Path, scn, built, sink, baseline) -> tuple:
+def _run_into(folder, out: Path, scn, built, sink, baseline, painter) -> tuple:
     """The run, then its folder (config.toml, metrics.json, figure1.png) in the stage. A write that
     fails is a ConfigError naming the file where it would have gone."""
     from mlpfac.exceptions import ConfigError
@@ -278,13 +281,11 @@ def _run_into(folder, out: Path, scn, built, sink, baseline) -> tuple:
     try:
         m = write_run(folder.path, scn, rec)
         if baseline is not None and rec.status != "interrupted":
-            from mlpfac.plots import figure1
-
             base = run(baseline)
             if base.status == "interrupted":  # Ctrl-C while the figure's baseline ran
                 raise Terminated() if base.reason.startswith("terminated") else KeyboardInterrupt()
             writing = folder.path / "figure1.png"
-            figure1(rec, base, writing)
+            painter.figure1(rec, base, writing)
     except OSError as err:
         name = folder.shown(err.filename or writing)
         raise ConfigError(name, f"cannot write ({err.strerror or err}); nothing was changed in {out}") from None
