@@ -166,7 +166,6 @@ def cmd_run(args: argparse.Namespace) -> int:
     that replaces it only when whole (see :class:`mlpfac.outputs.Stage`), under --out's lock."""
     from mlpfac.exceptions import ConfigError
     from mlpfac.outputs import check_run_folder, check_save_file
-    from mlpfac.runner import build
     from mlpfac.scenario import load
 
     scn = load(args.scenario).with_overrides(args.controller, args.seed, args.duration)
@@ -187,6 +186,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         check_save_file(args.save)
         if out.absolute() in args.save.absolute().parents:
             raise ConfigError(f"--save {args.save}", f"is inside --out {out}, which a run replaces whole")
+    from mlpfac.runner import build  # numba and the run's imports: after the checks of the input
+
     return _run_staged(args, scn, out, build(scn), baseline)
 
 
