@@ -186,6 +186,10 @@ def _run_cli(args: argparse.Namespace, stem: str, columns) -> int:
             f"than the limit of {MAX_RUNS} per sweep; split the seeds into several sweeps",
         )
     print(f"mlpfac: planning {n} runs ...", file=sys.stderr, flush=True)
+    if workers > 1 and not args.scheduler:
+        from mlpfac.sweeps.worker import start_pool_server
+
+        start_pool_server()  # the workers' fork server warms up while the runs are planned
     jobs = plan(scenarios, controllers, seeds, args.duration)
     check_writable(args.out)
     client = connect(args.scheduler, args.scheduler_timeout) if args.scheduler else None
