@@ -207,10 +207,19 @@ def _run_staged(args: argparse.Namespace, scn, out: Path, built, baseline) -> in
         saving = not (args.no_log or args.spawn or args.connect or args.serve)
         rrd_path = saved.path if saved else folder.path / "run.rrd"
         rrd_shown = args.save if saved else out / "run.rrd"
-        sink = _open_sink(args, scn, (rrd_path, rrd_shown) if saving else None)
+        from mlpfac.replay import DEFER_MAX_S, DeferredSink
+
+        if saving and scn.duration <= DEFER_MAX_S:  # written after the run, while the figure is drawn
+            sink = DeferredSink(lambda: _open_sink(args, scn, (rrd_path, rrd_shown)))
+            if args.painter is not None:
+                args.painter.meanwhile.append(sink.replay_quietly)
+        else:
+            sink = _open_sink(args, scn, (rrd_path, rrd_shown) if saving else None)
         try:
             rec, m = _run_into(folder, out, scn, built, sink, baseline, args.painter)
             if saving:
+                if isinstance(sink, DeferredSink):
+                    sink.replay()
                 from mlpfac.log.sinks import check_recording
 
                 check_recording(rrd_path, rrd_shown)

@@ -12,7 +12,7 @@ import os
 import pickle
 import signal
 import sys
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager, suppress
 from pathlib import Path
 
@@ -22,6 +22,7 @@ class Painter:
 
     def __init__(self) -> None:
         self.pid: int | None = None
+        self.meanwhile: list[Callable[[], None]] = []  # done here while the child draws
         if sys.platform != "linux":  # fork is safe to use here only where it is the default
             return
         sys.stdout.flush()
@@ -43,6 +44,7 @@ class Painter:
             try:
                 pickle.dump((rec, baseline, path), self._send, protocol=pickle.HIGHEST_PROTOCOL)
                 self._send.close()
+                self._do_meanwhile()
                 answer = pickle.load(self._receive)
             except (OSError, EOFError, pickle.UnpicklingError):
                 answer = None  # the child is gone: draw here
@@ -55,7 +57,13 @@ class Painter:
                     return details[0]
         from mlpfac.plots.figure1 import figure1
 
+        self._do_meanwhile()
         return figure1(rec, baseline, path)
+
+    def _do_meanwhile(self) -> None:
+        jobs, self.meanwhile = self.meanwhile, []
+        for job in jobs:
+            job()
 
     def close(self) -> None:
         """End the child (if it still runs) and reap it."""
