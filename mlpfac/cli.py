@@ -97,7 +97,9 @@ def main(argv: list[str] | None = None) -> int:
     try:
         if args.command == "run":
             from mlpfac.plots.painter import painting
+            from mlpfac.scenario import load
 
+            load(args.scenario, build=False)  # a bad name or file fails here, before the figure's process starts
             with painting(args.baseline != "none" and not args.no_plot) as args.painter:  # figure1 drawn beside
                 return cmd_run(args)
         if args.command == "list":
