@@ -10,6 +10,11 @@
    after an install). Targets: <= 2x the floor warm, <= 5x cold.
 2. ``mlpfac list``, ``mlpfac --help`` and two bad inputs (an unknown scenario, a bad flag value):
    median wall time, target < 0.3 s each.
+3. A sweep worker's fixed cost: the CPU time (its own clock, so other load on the machine does not
+   count) a local pool worker spends before and in its first run beyond what a warm run costs, for
+   the sweep's pool (forked from a warm fork server) against fresh spawned interpreters; and the
+   2-workers-vs-1 speedup on ``bench_sweep.py``'s 48 runs that these costs allow when the two
+   cores are free (48 warm runs + 2 fixed costs shared by 2, against 48 warm runs in one process).
 
 The floor script is looked up at ``$LATENCY_FLOOR`` or ``../shared/tools/latency_floor.py`` beside
 the repository. On a machine shared with other work, compare the CPU columns as well.
@@ -30,6 +35,7 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
 MODEL = ROOT / "models" / "scene.xml"
 MLPFAC = [sys.executable, "-m", "mlpfac.cli"]
 
@@ -96,16 +102,53 @@ def bench_quick(repeats: int) -> None:
         line(k, samples, target="target < 0.3 s")
 
 
+def _task_cpu(jobs: list) -> float:
+    """A pool task: this worker's CPU seconds so far (imports, its first run) after running ``jobs``."""
+    from mlpfac.sweeps.worker import run_task
+
+    run_task(jobs)
+    t = os.times()
+    return t.user + t.system
+
+
+def bench_workers(repeats: int) -> None:
+    import concurrent.futures as cf
+    import multiprocessing as mp
+
+    from mlpfac import sweep
+    from mlpfac.sweeps.execute import one_blas_thread
+    from mlpfac.sweeps.worker import _worker_init, pool_context
+
+    jobs = sweep.plan(["eight-nominal"], ["adaptive"], list(range(3)), 25.0)
+    c0 = time.process_time()
+    for j in jobs:  # warm runs in this process: what a run costs
+        _task_cpu([j])
+    warm = (time.process_time() - c0) / len(jobs)
+    print(f"sweep workers, eight-nominal adaptive 25 s runs; a warm run costs {warm:.3f} s CPU:")
+    for name, ctx in (("spawned (before)", mp.get_context("spawn")), ("forked from the fork server", pool_context())):
+        fixed = []
+        for _ in range(repeats):
+            with one_blas_thread():
+                pool = cf.ProcessPoolExecutor(1, mp_context=ctx, initializer=_worker_init, initargs=(os.getpid(),))
+                fixed.append(pool.submit(_task_cpu, [jobs[0]]).result() - warm)
+            pool.shutdown()
+        cost = statistics.median(fixed)
+        speedup = 2 * 48 * warm / (48 * warm + 2 * cost)
+        print(f"  {name:<34} fixed cost {cost:5.2f} s CPU per worker -> 2 vs 1 worker at most {speedup:.2f}x")
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--cold", action="store_true", help="also the first run after an install (a fresh numba cache)")
-    ap.add_argument("--only", choices=("run", "quick"))
+    ap.add_argument("--only", choices=("run", "quick", "workers"))
     a = ap.parse_args()
-    if a.only != "quick":
+    if a.only in (None, "run"):
         bench_run(a.repeats, a.cold)
-    if a.only != "run":
+    if a.only in (None, "quick"):
         bench_quick(a.repeats)
+    if a.only in (None, "workers"):
+        bench_workers(a.repeats)
     return 0
 
 
