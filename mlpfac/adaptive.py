@@ -14,8 +14,6 @@ import numpy as np
 from mlpfac.error_model import G_true, f_true, wrap
 from mlpfac.estimators import EKF, UKF, covariance
 from mlpfac.exceptions import ConfigError
-from mlpfac.input_model import InputModel
-from mlpfac.kernels import adaptive_step, seeds
 from mlpfac.law import GAIN_RANGE, Law
 from mlpfac.networks import Networks
 
@@ -173,6 +171,9 @@ class Adaptive:
         return EKF(**common)
 
     def reset(self, rng) -> None:
+        from mlpfac.input_model import InputModel  # numba: imported by a run, not by reading a scenario
+        from mlpfac.kernels import adaptive_step, seeds
+
         rngs, self.single = seeds(rng)
         T = self.T
         z0 = np.stack([self._initial_weights(g) for g in rngs])  # (B, alpha)
@@ -214,6 +215,7 @@ class Adaptive:
         self._consts = (ints, params, est.R, Q)
         self._tele = {"z": None, "trace_P": None, "mean_diag_P": None, "innovation": None, "h_hat": None}
         # load (or compile) the kernel now, not mid-run: zero seeds
+        self._kernel = adaptive_step
         adaptive_step(np.zeros((0, 3)), 1.0, 0.0, True, *(x[:0] for x in self._args), *self._consts)
 
     def step(self, e: np.ndarray, r: np.ndarray) -> np.ndarray:
@@ -224,7 +226,7 @@ class Adaptive:
             u = np.stack([s.step(E[b], r, self.first) for b, s in enumerate(self.seeds)])
         else:
             u = self._u
-            adaptive_step(
+            self._kernel(
                 np.ascontiguousarray(E, dtype=float), float(r[3]), float(r[4]), self.first, *self._args, *self._consts
             )
         self.first = False

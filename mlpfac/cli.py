@@ -124,7 +124,12 @@ def main(argv: list[str] | None = None) -> int:
 
     try:
         if args.command == "run":
-            return cmd_run(args)
+            from mlpfac.plots.painter import painting
+            from mlpfac.scenario import load
+
+            load(args.scenario, build=False)  # a bad name or file fails here, before the figure's process starts
+            with painting(args.baseline != "none" and not args.no_plot) as args.painter:  # figure1 drawn beside
+                return cmd_run(args)
         if args.command == "list":
             return cmd_list()
         if args.command == "view":
@@ -224,7 +229,6 @@ def cmd_run(args: argparse.Namespace) -> int:
     that replaces it only when whole (:mod:`mlpfac.run_folder`), under --out's lock."""
     from mlpfac.exceptions import ConfigError
     from mlpfac.run_folder import Recording, check_outputs, run_into_folder
-    from mlpfac.runner import build
     from mlpfac.scenario import load
 
     scn = load(args.scenario).with_overrides(args.controller, args.seed, args.duration)
@@ -242,7 +246,9 @@ def cmd_run(args: argparse.Namespace) -> int:
             raise ConfigError("--baseline", err.what) from None
     out = args.out or Path("runs") / f"{scn.name}-{scn.controller}-s{scn.seed}"
     recording = check_outputs(out, Recording(args.save, args.spawn, args.connect, args.serve, args.bind, args.no_log))
-    done = run_into_folder(scn, out, build(scn), recording, baseline)
+    from mlpfac.runner import build  # numba and the run's imports: after the checks of the input
+
+    done = run_into_folder(scn, out, build(scn), recording, baseline, args.painter)
     rec = done.rec
     if done.kept:
         kept = " and ".join(map(str, done.kept))

@@ -14,7 +14,6 @@ import numpy as np
 
 from mlpfac.adaptive import VARIANTS
 from mlpfac.exceptions import ConfigError, PluginError
-from mlpfac.kernels import CORRADINI, KANAYAMA, corradini_step, kanayama_step, seeds
 from mlpfac.law import Law
 from mlpfac.plugins import Plugin, one_line
 
@@ -75,15 +74,18 @@ class Corradini:
         )
 
     def reset(self, rng) -> None:
+        from mlpfac.kernels import corradini_step, seeds  # numba: imported by a run, not by reading a scenario
+
         rngs, self.single = seeds(rng)
         T = self.T
+        self._kernel = corradini_step
         self._h, self._u = np.zeros((len(rngs), 3)), np.zeros((len(rngs), 2))
         self._tele = {"h_hat": self._h[0] if self.single else self._h}
         corradini_step(np.zeros((0, 3)), 1.0, 0.0, T, *self.law.lambdas, *self._limits, self._h[:0], self._u[:0])
 
     def step(self, e: np.ndarray, r: np.ndarray) -> np.ndarray:
         E = e[None] if self.single else e
-        corradini_step(E, float(r[3]), float(r[4]), self.T, *self.law.lambdas, *self._limits, self._h, self._u)
+        self._kernel(E, float(r[3]), float(r[4]), self.T, *self.law.lambdas, *self._limits, self._h, self._u)
         return self._u[0].copy() if self.single else self._u
 
     @property
@@ -95,6 +97,8 @@ class Corradini:
 
     def law_kernel(self) -> tuple[int, np.ndarray]:
         """The law for the compiled closed loop: (its number, its constants) (:func:`mlpfac.kernels.law_step`)."""
+        from mlpfac.kernels import CORRADINI
+
         return CORRADINI, np.array([self.T, *self.law.lambdas, *self._limits], dtype=float)
 
 
@@ -129,14 +133,17 @@ class Kanayama:
         )
 
     def reset(self, rng) -> None:
+        from mlpfac.kernels import kanayama_step, seeds
+
         rngs, self.single = seeds(rng)
+        self._kernel = kanayama_step
         self._u = np.zeros((len(rngs), 2))
         self._tele: dict = {}
         kanayama_step(np.zeros((0, 3)), 1.0, 0.0, *self._consts, self._u[:0])  # load the kernel before the run
 
     def step(self, e: np.ndarray, r: np.ndarray) -> np.ndarray:
         E = e[None] if self.single else e
-        kanayama_step(E, float(r[3]), float(r[4]), *self._consts, self._u)
+        self._kernel(E, float(r[3]), float(r[4]), *self._consts, self._u)
         return self._u[0].copy() if self.single else self._u
 
     def telemetry(self) -> dict[str, np.ndarray | float]:
@@ -144,6 +151,8 @@ class Kanayama:
 
     def law_kernel(self) -> tuple[int, np.ndarray]:
         """The law for the compiled closed loop: (its number, its constants) (:func:`mlpfac.kernels.law_step`)."""
+        from mlpfac.kernels import KANAYAMA
+
         return KANAYAMA, np.array(self._consts, dtype=float)
 
 

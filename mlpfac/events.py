@@ -10,12 +10,12 @@ the event's class. The one delay line of every plant (what ``sensor_delay`` chan
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from dataclasses import dataclass, field
 from typing import ClassVar
 
 import numpy as np
-from numba import njit
 
 from mlpfac.exceptions import ConfigError
 
@@ -204,10 +204,11 @@ class DelayLine:
         self.hist = np.empty((1, *first.shape), dtype=first.dtype)
         self.hist[0] = first
         self.fill = np.ones(1, dtype=np.int64)
+        self._push = delay_push_kernel()
 
     def push(self, measurement) -> None:
         h = self.hist
-        delay_push(h, self.fill, h.dtype.type(measurement) if h.ndim == 1 else np.asarray(measurement, dtype=h.dtype))
+        self._push(h, self.fill, h.dtype.type(measurement) if h.ndim == 1 else np.asarray(measurement, dtype=h.dtype))
 
     def read(self):
         """The oldest measurement held (a copy; a number for a line of numbers)."""
@@ -227,7 +228,14 @@ class DelayLine:
         return f"sensor delay {old} -> {steps} control steps"
 
 
-@njit(cache=True)
+@functools.cache
+def delay_push_kernel():
+    """:func:`delay_push` compiled (numba is imported here, by a run, not by reading a scenario)."""
+    from numba import njit
+
+    return njit(cache=True)(delay_push)
+
+
 def delay_push(hist: np.ndarray, fill: np.ndarray, x) -> None:
     """Append x to a delay line (see :class:`DelayLine`): the oldest row drops out when it is full."""
     n, cap = fill[0], hist.shape[0]

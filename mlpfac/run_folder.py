@@ -12,6 +12,7 @@ from pathlib import Path
 
 from mlpfac.exceptions import ConfigError, PluginError
 from mlpfac.outputs import Stage, check_run_folder, check_save_file, folder_lock, holds_finished_run
+from mlpfac.replay import DEFER_MAX_S, DeferredSink
 
 
 @dataclass
@@ -74,10 +75,17 @@ def run_into_folder(scn, out: Path, built, recording: Recording, baseline=None, 
         held = holds_finished_run(out), save is not None and holds_finished_run(save)
         rrd_path = saved.path if saved else folder.path / "run.rrd"
         rrd_shown = save if saved else out / "run.rrd"
-        sink = _open_sink(recording, scn, (rrd_path, rrd_shown) if recording.to_file else None)
+        if recording.to_file and scn.duration <= DEFER_MAX_S:  # written after the run, while the figure is drawn
+            sink = DeferredSink(lambda: _open_sink(recording, scn, (rrd_path, rrd_shown)))
+            if painter is not None:
+                painter.meanwhile.append(sink.replay_quietly)
+        else:
+            sink = _open_sink(recording, scn, (rrd_path, rrd_shown) if recording.to_file else None)
         try:
             rec, m = _run_into(folder, out, scn, built, sink, baseline, painter)
             if recording.to_file:
+                if isinstance(sink, DeferredSink):
+                    sink.replay()
                 from mlpfac.log.sinks import check_recording
 
                 check_recording(rrd_path, rrd_shown)

@@ -34,8 +34,11 @@ def wait_for(cond, timeout=60.0):
 
 
 def pool_workers(pid: int) -> list:
-    """The pool's worker processes of the sweep ``pid`` (not multiprocessing's resource tracker)."""
-    return [c for c in psutil.Process(pid).children() if "spawn_main" in " ".join(c.cmdline())]
+    """The pool's worker processes of the sweep ``pid``: spawned, or forked by its fork server (not
+    multiprocessing's resource tracker, nor the fork server itself)."""
+    procs = psutil.Process(pid).children(recursive=True)
+    servers = {c.pid for c in procs if c.ppid() == pid and "forkserver" in " ".join(c.cmdline())}
+    return [c for c in procs if "spawn_main" in " ".join(c.cmdline()) or c.ppid() in servers]
 
 
 def gone(pids, timeout=5.0) -> list[int]:

@@ -15,7 +15,6 @@ from mlpfac.error_model import pose_from_error, tracking_error
 from mlpfac.estimators import covariance
 from mlpfac.events import ControlPeriod, DelayLine, Event, SensorDelay
 from mlpfac.exceptions import ConfigError
-from mlpfac.kernels import kinematic_step, seeds
 
 
 @dataclass(frozen=True)
@@ -48,6 +47,8 @@ class KinematicPlant:
 
     def reset(self, q0: np.ndarray, rng, u0: np.ndarray | None = None) -> None:
         """``u0`` is ignored: the error model (7) has no velocity state."""
+        from mlpfac.kernels import kinematic_step, seeds  # numba: imported by a run, not by reading a scenario
+
         rngs, self.single = seeds(rng)
         B, N = len(rngs), len(self.ref) - 1
         self.k = 0
@@ -62,6 +63,7 @@ class KinematicPlant:
         self._u, self._h = np.zeros((B, 2)), np.zeros((B, 3))
         self._tele = {"u_meas": self._u, "h_true": self._h}
         e0 = np.empty((0, 3))  # load (or compile) the kernel now, not mid-run
+        self._kernel = kinematic_step
         kinematic_step(e0, self.ref[0], self.ref[0], self.T, self._u[:0], self.noise[:0, 0], e0, e0, e0)
 
     def true_pose(self) -> np.ndarray:
@@ -75,7 +77,7 @@ class KinematicPlant:
         U = np.asarray(u, dtype=float).reshape(-1, 2)
         self._u[:] = U
         e, pose = np.empty_like(self.e), np.empty_like(self._pose)
-        kinematic_step(self.e, self.ref[k], self.ref[k + 1], self.T_p, U, self.noise[:, k], e, pose, self._h)
+        self._kernel(self.e, self.ref[k], self.ref[k + 1], self.T_p, U, self.noise[:, k], e, pose, self._h)
         self.e, self._pose = e, pose
         self.k = k + 1
         self.history.push(pose)

@@ -12,11 +12,14 @@ from __future__ import annotations
 import hashlib
 import importlib.resources
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import mujoco
 import numpy as np
 
 from mlpfac.exceptions import ConfigError
+
+if TYPE_CHECKING:
+    import mujoco
 
 MENAGERIE = "menagerie:"
 FIX = "set MENAGERIE_ROOT to a local MuJoCo Menagerie checkout, or run online so that mujoco-menagerie can download it"
@@ -78,6 +81,8 @@ def menagerie_version() -> str | None:
 
 def load_spec(model: str) -> tuple[mujoco.MjSpec, Path]:
     """The model's spec as its files describe it, and the file it came from."""
+    import mujoco  # here, not at the top: a listing reads scenarios without MuJoCo
+
     path = model_path(model)
     try:
         return mujoco.MjSpec.from_file(str(path)), path
@@ -96,6 +101,8 @@ def model_fingerprint(model: str) -> str:
 
 
 def fingerprint(model: mujoco.MjModel) -> str:
+    import mujoco
+
     buf = np.empty(mujoco.mj_sizeModel(model), np.uint8)
     mujoco.mj_saveModel(model, None, buf)
     return hashlib.sha256(buf.tobytes()).hexdigest()

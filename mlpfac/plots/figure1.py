@@ -20,10 +20,9 @@ RUN_COLOR = "tab:blue"
 def figure1(rec: RunRecord, baseline: RunRecord | None, path: Path) -> list[str]:
     """Write Figure 1 for ``rec`` (and ``baseline`` for panel h) to ``path`` (PNG); the letters of
     the panels drawn."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+    from matplotlib.ticker import LogFormatter
 
     n = rec.n
     z, P = rec.ctrl.get("z"), rec.ctrl.get("mean_diag_P")
@@ -32,10 +31,12 @@ def figure1(rec: RunRecord, baseline: RunRecord | None, path: Path) -> list[str]
     time_panels = ["a", "b", "c"] + (["d"] if adaptive else []) + (["g"] if P is not None else [])
     time_panels += ["h"] if show_h else []
     rows = -(-len(time_panels) // 2) + 1
-    fig = plt.figure(figsize=(12, 2.9 * rows + 0.6), layout="constrained")
-    grid = fig.add_gridspec(rows, 2)
+    height = 2.9 * rows + 0.6
+    fig = Figure(figsize=(12, height))  # no pyplot: nothing global, nothing to close
+    FigureCanvasAgg(fig)
+    grid = fig.add_gridspec(rows, 2, **_layout(height))
     title = f"{rec.scenario} / {rec.controller} / seed {rec.seed}: {rec.status}"
-    fig.suptitle(title + (f" ({rec.reason})" if rec.reason else ""), fontsize=12)
+    fig.suptitle(title + (f" ({rec.reason})" if rec.reason else ""), fontsize=12, y=1 - 0.06 / height, va="top")
     t = rec.t[:n]
     warm = min(rec.warmup_s, t[-1] if n else 0.0)
     axes = {}
@@ -52,6 +53,8 @@ def figure1(rec: RunRecord, baseline: RunRecord | None, path: Path) -> list[str]
     if P is not None:
         ax = axes["g"]
         ax.semilogy(t, P[:n], color=RUN_COLOR, lw=1.0)
+        for minor in (False, True):  # plain "9e-02" labels: the same ticks, no mathtext to lay out
+            (ax.yaxis.set_minor_formatter if minor else ax.yaxis.set_major_formatter)(LogFormatter())
         ax.set(title="(g) mean of diag(P_k): the EKF's uncertainty", ylabel="mean diag(P_k) [-]")
     if show_h:
         nb = baseline.n
@@ -70,8 +73,20 @@ def figure1(rec: RunRecord, baseline: RunRecord | None, path: Path) -> list[str]
     prow = min(2, rows - 1)
     _paths(fig.add_subplot(grid[prow, 0]), fig.add_subplot(grid[prow, 1]), rec, warm)
     fig.savefig(path, dpi=90)
-    plt.close(fig)
     return sorted([*axes, "e", "f"])
+
+
+def _layout(height: float) -> dict[str, float]:
+    """A fixed layout (what constrained layout found for this figure, without its solver's passes):
+    margins in inches, room on the right for the legend of (d)."""
+    return {
+        "left": 0.08,
+        "right": 0.865,
+        "top": 1 - 0.5 / height,
+        "bottom": 0.5 / height,
+        "wspace": 0.2,
+        "hspace": 0.36,
+    }
 
 
 def _signal(ax, t: np.ndarray, y: np.ndarray, warm: float) -> None:

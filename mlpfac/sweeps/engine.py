@@ -217,6 +217,10 @@ def sweep_folder(
         )
     if progress is not False:
         print(f"mlpfac: planning {n} runs ...", file=sys.stderr, flush=True)
+    if workers > 1 and not scheduler:
+        from mlpfac.sweeps.worker import start_pool_server
+
+        start_pool_server()  # the workers' fork server warms up while the runs are planned
     jobs = plan(scenarios, names, seed_list, duration)
     check_writable(out)
     meta = {

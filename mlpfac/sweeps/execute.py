@@ -14,7 +14,7 @@ from mlpfac.exceptions import ConfigError, MlpfacError
 from mlpfac.outputs import Terminated, folder_lock, sigint_deferred
 from mlpfac.sweeps.folders import _oserror, check_done, write_result
 from mlpfac.sweeps.plan import Job
-from mlpfac.sweeps.worker import _worker_init, run_task
+from mlpfac.sweeps.worker import _worker_init, pool_context, run_task
 
 TMP_DIR = ".tmp"  # OUT/.tmp: recordings being made; removed when the sweep ends and when the next one starts
 BLAS_THREAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
@@ -204,9 +204,10 @@ def _pool_results(
 ) -> Iterator[list[dict]]:
     """Results of ``tasks`` from a local process pool, as they finish; at most 2 tasks per worker in flight.
 
-    Workers are fresh interpreters (``spawn``: no copy of this process's threads or BLAS state),
-    started with one BLAS thread each, and die with this process. Closing the generator (or an
-    exception in it) kills the workers: a run being computed is lost, its folder never written.
+    Workers are forked from a warm fork server (:func:`~mlpfac.sweeps.worker.pool_context`: no copy
+    of this process's threads or BLAS state), run with one BLAS thread each, and die with this
+    process. Closing the generator (or an exception in it) kills the workers: a run being computed
+    is lost, its folder never written.
 
     A Ctrl-C or SIGTERM is held while this thread is inside the pool's calls (``cf.wait`` in slices
     of POLL_S, ``submit``, the shutdown) and raised between them: raised inside, it can leave a
@@ -221,7 +222,7 @@ def _pool_results(
     with one_blas_thread():
         pool = cf.ProcessPoolExecutor(
             max_workers=min(workers, len(tasks)),
-            mp_context=mp.get_context("spawn"),
+            mp_context=pool_context(),
             initializer=_worker_init,
             initargs=(os.getpid(),),
         )

@@ -11,6 +11,8 @@ from pathlib import Path
 
 from mlpfac.sweeps.plan import Job
 
+POOL_TMP_VARIABLE = "MLPFAC_POOL_TMP"
+
 
 def run_task(jobs: list[Job], batched: bool = False, save_rrd: bool = False, tmp_dir: str | None = None) -> list[dict]:
     """Run ``jobs`` (one, or seeds of one scenario and controller when ``batched``).
@@ -109,14 +111,80 @@ def _error_text(err: BaseException) -> str:
     return err.report() if isinstance(err, PluginError) else "".join(traceback.format_exception(err))
 
 
+def pool_context():
+    """The multiprocessing context of a local pool: workers forked from a fork server that imported
+    :mod:`mlpfac.sweeps.warm` once (started by the first pool, with its environment, and kept for
+    the next ones; a fresh interpreter, no copy of this process's threads or BLAS state), or
+    spawned where there is no fork server."""
+    import multiprocessing as mp
+    from multiprocessing import util
+
+    if "forkserver" not in mp.get_all_start_methods():
+        return mp.get_context("spawn")
+    ctx = mp.get_context("forkserver")
+    ctx.set_forkserver_preload(["mlpfac.sweeps.warm"])
+    # the folder of the fork server's socket, which the fork server removes when it ends (also
+    # after this process was killed, when its workers have gone): see mlpfac.sweeps.warm
+    os.environ[POOL_TMP_VARIABLE] = f"{os.getpid()}:{util.get_temp_dir()}"
+    return ctx
+
+
+def start_pool_server() -> None:
+    """Start the fork server of :func:`pool_context` now, with one BLAS thread: it imports and warms
+    up while this process plans the sweep."""
+    if pool_context().get_start_method() == "forkserver":
+        from multiprocessing import forkserver
+
+        from mlpfac.sweeps.execute import one_blas_thread
+
+        with one_blas_thread():
+            forkserver.ensure_running()
+
+
 def _worker_init(parent: int) -> None:
-    """Pool workers leave Ctrl-C and SIGTERM to the parent, which stops them (a half run is never
-    returned), and die with the parent: a killed sweep leaves no worker behind."""
+    """Pool workers leave Ctrl-C and SIGTERM to the parent (the sweep's process), which stops them
+    (a half run is never returned), and die with it: a killed sweep leaves no worker behind. A
+    worker forked by the fork server watches the sweep's process and dies with the fork server."""
     import signal
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_IGN)
-    _die_with_parent(parent)
+    if os.getppid() != parent:  # the fork server's child: it lives as long as its children do
+        _die_with_sweep(parent)
+    _die_with_parent(os.getppid())
+
+
+def _die_with_sweep(pid: int) -> None:
+    """A daemon thread exits this process when the process ``pid`` ends (Linux: a pidfd, else polled)."""
+    import select
+    import threading
+
+    try:
+        fd = os.pidfd_open(pid)
+    except ProcessLookupError:
+        os._exit(1)
+    except (AttributeError, OSError):
+        fd = None
+
+    def watch() -> None:
+        if fd is not None:
+            select.select([fd], [], [])  # readable when the process has ended
+        else:
+            while _alive(pid):
+                time.sleep(0.5)
+        os._exit(1)
+
+    threading.Thread(target=watch, name="mlpfac-sweep-watch", daemon=True).start()
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        pass
+    return True
 
 
 def _die_with_parent(parent: int) -> None:

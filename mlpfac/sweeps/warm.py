@@ -1,0 +1,30 @@
+"""Imported by the fork server of a local pool (:func:`mlpfac.sweeps.worker.pool_context`), once:
+what a run needs, and numba started (its compiler and cache), so that every worker forked from it
+starts warm instead of importing numpy, MuJoCo and numba and starting numba itself (about 0.6 s
+of CPU a worker). Importing this module elsewhere does the same work in that process.
+"""
+
+from __future__ import annotations
+
+import atexit
+import os
+import shutil
+
+# The folder of the fork server's socket goes when the fork server does: "PID:FOLDER", set by
+# mlpfac.sweeps.worker.pool_context in the process PID, which started this one.
+_owner, _, _folder = os.environ.get("MLPFAC_POOL_TMP", "").partition(":")
+if _folder and _owner == str(os.getppid()):
+    atexit.register(shutil.rmtree, _folder, True)
+
+try:
+    import numpy as np
+
+    from mlpfac.kernels import tracking_errors
+    from mlpfac.run_metrics import metrics  # noqa: F401
+    from mlpfac.runner import run  # noqa: F401
+    from mlpfac.scenario import parse  # noqa: F401
+    from mlpfac.sweeps.worker import run_task  # noqa: F401
+
+    tracking_errors(np.zeros((0, 3)), np.zeros(5), np.zeros((0, 3)))
+except Exception:  # a worker imports (and reports) what failed here itself
+    pass
