@@ -44,6 +44,9 @@ class AdaptiveConfig:
       their covariance when a CUSUM on the normalised innovation exceeds h (a change detected);
       ``input_delay = D > 0``: find a measurement delay of up to D control steps from the commands'
       correlation with the measured motion, and give the law the error of the pose predicted over it.
+    - ``law_form = "kanayama"``: the certainty-equivalence law takes Kanayama's structure, with the
+      estimates h2, h5 of (34) as its feedforward (:func:`~mlpfac.kernels._law_kanayama`); ``delay_finder
+      = "bank"``: the delay by a bank of predictors over the candidate delays (:mod:`mlpfac.delay_bank`).
     - ``output_weight_std``: the initial spread of the output-layer weights (``weight_std`` if unset);
       0 with ``prior`` starts from the nominal functions exactly.
     """
@@ -70,6 +73,8 @@ class AdaptiveConfig:
     input_P0: float = 1e-4  # noqa: N815 -- the input gains' initial (and reopened) variance
     input_forgetting: float = 0.999  # the input gains' forgetting factor (1: none)
     detect: float = 0.0  # CUSUM threshold on the input gains' normalised innovation that reopens their P (0: off)
+    law_form: str = "35"  # "35": the law (35); "kanayama": Kanayama's structure fed by (34)
+    delay_finder: str = "correlation"  # how input_delay is found: "correlation" or "bank" (of predictors)
 
     def __post_init__(self) -> None:
         for name in ("P0", "weight_std", "ukf_alpha"):
@@ -102,6 +107,11 @@ class AdaptiveConfig:
             raise ConfigError("input_forgetting", f"must be in (0, 1] (1: none), got {self.input_forgetting}")
         if not self.detect >= 0:
             raise ConfigError("detect", f"the CUSUM threshold must be >= 0 (0: off), got {self.detect}")
+        for name, allowed in (("law_form", ("35", "kanayama")), ("delay_finder", ("correlation", "bank"))):
+            if getattr(self, name) not in allowed:
+                raise ConfigError(name, f"choose one of {', '.join(map(repr, allowed))}, got {getattr(self, name)!r}")
+        if self.law_form == "kanayama" and (self.estimator != "ekf" or self.cautious != 0 or self.learned_gains):
+            raise ConfigError("law_form", "'kanayama' runs with estimator 'ekf', cautious 0 and learned_gains off")
         if self.prior and self.networks.residual:
             raise ConfigError("prior", "prior already adds e to f (f = f_nominal + NN_f); turn residual off")
 
@@ -140,8 +150,12 @@ class Adaptive:
 
     name = "adaptive"
 
-    def __init__(self, law: Law, config: AdaptiveConfig, T: float) -> None:
+    def __init__(
+        self, law: Law, config: AdaptiveConfig, T: float, kanayama: tuple[float, float, float] = (10.0, 64.0, 16.0)
+    ) -> None:
+        """``kanayama``: the gains (Kx, Ky, Ktheta) of the law with ``law_form = "kanayama"``."""
         self.T = float(T)  # the control period the law and the networks' nominal prior are designed for
+        self.kanayama = tuple(float(k) for k in kanayama)
         self.law = law
         self.config = config
         self.nets = config.networks
@@ -181,7 +195,9 @@ class Adaptive:
         c = self.config
         self.input = None
         if c.input_gains or c.input_delay > 0:
-            self.input = InputModel(B, T, c.input_gains, c.input_delay, c.input_P0, c.input_forgetting, c.detect)
+            self.input = InputModel(
+                B, T, c.input_gains, c.input_delay, c.input_P0, c.input_forgetting, c.detect, c.delay_finder == "bank"
+            )
         if not self.compiled:
             self.seeds = [_NumpySeed(self, self._estimator(z0[b]), T) for b in range(B)]
             self.est = self.seeds[0].est if self.single else None  # one run: its estimator, for inspection
@@ -196,7 +212,10 @@ class Adaptive:
         self._trace = np.zeros(B)
         self._H = np.zeros((B, 3, a))
         est, lim = self.est, self.law
-        ints = np.array([Lf, LG, c.networks.residual, self.prior is not None, est.Q is not None, nf], dtype=np.int64)
+        ints = np.array(
+            [Lf, LG, c.networks.residual, self.prior is not None, est.Q is not None, nf, c.law_form == "kanayama"],
+            dtype=np.int64,
+        )
         params = np.array(
             [
                 c.networks.error_scale,
@@ -206,6 +225,7 @@ class Adaptive:
                 np.inf if lim.omega_max is None else lim.omega_max,
                 est.forgetting,
                 np.inf if est.P_max is None else est.P_max,
+                *self.kanayama,
             ],
             dtype=float,
         )
@@ -365,3 +385,7 @@ VARIANTS["adaptive-input-forget"] = VARIANTS["adaptive-best"] | {"input_gains": 
 VARIANTS["adaptive-input-delay"] = VARIANTS["adaptive-input"] | {"input_delay": 6}
 # the paper's scheme whose NN_f also sees the last command (the velocity state)
 VARIANTS["adaptive-velocity"] = {"networks": {"velocity_inputs": True}}
+# adaptive-input-delay on a real base: the certainty-equivalence law in Kanayama's structure, fed by
+# h2, h5 (34) of the networks over the nominal prior, so that pose noise is not amplified as v_r falls;
+# the delay found by a bank of predictors with a likelihood ratio (docs/real-robot-adaptive.md).
+VARIANTS["adaptive-real"] = VARIANTS["adaptive-input-delay"] | {"law_form": "kanayama", "delay_finder": "bank"}

@@ -43,6 +43,7 @@ import math
 import numpy as np
 from numba import njit
 
+from mlpfac.delay_bank import DelayBank
 from mlpfac.kernels import JIT
 
 # columns of the per-seed state S, per channel c (v: +0, omega: +1)
@@ -202,10 +203,14 @@ class InputModel:
     """The batched state of the input model for B seeds, and its two steps: ``observe`` before the
     law, ``command`` after it (the command sent)."""
 
-    def __init__(self, B: int, T: float, gains: bool, delay: int, P0: float, forgetting: float, detect: float) -> None:
+    def __init__(
+        self, B: int, T: float, gains: bool, delay: int, P0: float, forgetting: float, detect: float, bank: bool = False
+    ) -> None:
+        """``bank``: the delay is found by :class:`~mlpfac.delay_bank.DelayBank` instead of the correlations."""
         self.gains = gains
         self.hist = np.zeros((B, 2, max(2, delay + 2)))
-        self.C = np.zeros((B, delay + 1))
+        self.C = np.zeros((B, 1 if bank else delay + 1))  # one column: no correlation search in the kernel
+        self.bank = DelayBank(B, T, delay) if bank and delay > 0 else None
         self.e_hat = np.zeros((B, 3))
         self.q_prev = np.zeros((B, 3))
         self.S = np.zeros((B, WIDTH))
@@ -219,6 +224,8 @@ class InputModel:
 
     def observe(self, e: np.ndarray, r: np.ndarray, first: bool) -> np.ndarray:
         e = np.ascontiguousarray(e, dtype=float)
+        if self.bank is not None:  # the delay, into S[:, DELAY], before the kernel predicts over it
+            self.S[:, DELAY] = self.bank.update(e, r, first, self.hist, self.q_prev, self.S[:, G : G + 2])
         observe(e, r, first, self.hist, self.q_prev, self.S, self.C, self.e_hat, self.params)
         return self.e_hat
 

@@ -1,0 +1,121 @@
+"""The measurement delay found by a bank of predictors over the candidate delays d = 0..D, with a
+likelihood ratio: the input model's ``delay_finder = "bank"``.
+
+Candidate d says the measured pose is d control steps old, so the velocity realised between the
+poses measured at k - 1 and k (:mod:`mlpfac.input_model`: the chord over T at the mid heading, and
+the heading increment over T) is the input gain times the command sent d steps before the one the
+undelayed robot answers with, per channel c in {v, omega}:
+
+    y_c,k = g_c u_c,k-2-d + n_c,k,     n_c ~ N(0, s_c^2).
+
+Each candidate's prediction error r_c,d = y_c,k - g_c u_c,k-2-d scores its log-likelihood,
+exponentially windowed over ``WINDOW`` steps,
+
+    L_d <- a L_d - sum_c r_c,d^2 / (2 s_c^2),       a = 1 - 1 / WINDOW,
+
+with s_c^2 the running mean of the chosen candidate's r_c^2. The choice moves to the best
+candidate as soon as its log-likelihood ratio over the current one exceeds ``THRESHOLD``: no
+correlation held for a hundred steps, no persistence count. The closed loop's own pose noise
+excites the commands; what the ratio gains per step is that excitation over the measurement noise.
+
+A measurement stream that stalls (the same pose again: the plant's delay grew by one step, the
+sample is that much older) is evidence too, and exact: every candidate's score moves one delay up
+(L_d+1 <- L_d) and so does the choice, at that step. Candidate 0 then starts ``THRESHOLD`` below
+the worst, so it must be won back by the likelihood.
+
+Batch-first and compiled as :mod:`mlpfac.kernels`: a seed's arithmetic does not depend on the batch.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from mlpfac.kernels import JIT
+
+# columns of the per-seed state S
+N, S2, DELAY = 0, 1, 3  # samples, the noise variances s_v^2 and s_omega^2 (1, 2), the delay chosen
+WIDTH = 4
+WINDOW = 100  # steps in the exponential window of the log-likelihoods (1 s at T = 10 ms)
+THRESHOLD = 4.0  # the log-likelihood ratio that moves the choice (about 55 : 1)
+S2_WINDOW = 1000  # steps in the running mean of the noise variances
+WARMUP = 50  # samples before the first decision by likelihood
+
+
+@njit(**JIT)
+def bank_step(e, r, first, hist, q_prev, g, S, L, T):
+    """One step for B seeds: e (B, 3) the measured error (2), r (>= 3,) the reference sample;
+    hist (B, 2, >= D + 2) the commands sent, newest first; q_prev (B, 3) the last measured pose;
+    g (B, 2) the input gains; S (B, WIDTH) and L (B, D + 1) the state, updated in place."""
+    D = L.shape[1] - 1
+    a = 1.0 - 1.0 / WINDOW
+    y = np.empty(2)
+    for b in range(e.shape[0]):
+        Sb, Lb = S[b], L[b]
+        if first:
+            continue
+        th = r[2] - e[b, 2]
+        c, s = math.cos(th), math.sin(th)
+        x = r[0] - (c * e[b, 0] - s * e[b, 1])
+        yy = r[1] - (s * e[b, 0] + c * e[b, 1])
+        if x == q_prev[b, 0] and yy == q_prev[b, 1] and th == q_prev[b, 2]:  # the stream stalled: one step older
+            worst = Lb.min()
+            for d in range(D, 0, -1):
+                Lb[d] = Lb[d - 1]
+            Lb[0] = worst - THRESHOLD
+            Sb[DELAY] = min(Sb[DELAY] + 1.0, D)
+            continue
+        dth = math.pi - ((math.pi - (th - q_prev[b, 2])) % (2.0 * math.pi))
+        mid = q_prev[b, 2] + 0.5 * dth
+        y[0] = (math.cos(mid) * (x - q_prev[b, 0]) + math.sin(mid) * (yy - q_prev[b, 1])) / T
+        y[1] = dth / T
+        Sb[N] += 1.0
+        if Sb[N] < 2.0:  # the commands' history is not yet a step deep
+            continue
+        cur = int(Sb[DELAY])
+        w = 1.0 / min(Sb[N] - 1.0, S2_WINDOW)
+        for ch in range(2):
+            rc = y[ch] - g[b, ch] * hist[b, ch, 1 + cur]
+            s2 = Sb[S2 + ch]
+            r2 = rc * rc if Sb[N] == 2.0 else min(rc * rc, 25.0 * s2)
+            Sb[S2 + ch] = s2 + (r2 - s2) * w
+        for d in range(D + 1):
+            ll = 0.0
+            for ch in range(2):
+                rc = y[ch] - g[b, ch] * hist[b, ch, 1 + d]
+                ll += rc * rc / max(Sb[S2 + ch], 1e-12)
+            Lb[d] = a * Lb[d] - 0.5 * ll
+        if Sb[N] > WARMUP:
+            best = cur
+            for d in range(D + 1):
+                if Lb[d] > Lb[best]:
+                    best = d
+            if Lb[best] - Lb[cur] > THRESHOLD:
+                Sb[DELAY] = best
+
+
+class DelayBank:
+    """The batched state of the bank for B seeds and delays up to D steps."""
+
+    def __init__(self, B: int, T: float, D: int) -> None:
+        self.T = float(T)
+        self.S = np.zeros((B, WIDTH))
+        self.L = np.zeros((B, D + 1))
+        self._g = np.ones((B, 2))
+        # load (or compile) the kernel now, not mid-run: zero seeds
+        bank_step(np.zeros((0, 3)), np.zeros(5), True, np.zeros((0, 2, D + 2)), np.zeros((0, 3)), self._g[:0],
+                  self.S[:0], self.L[:0], self.T)  # fmt: skip
+
+    def update(
+        self, e: np.ndarray, r: np.ndarray, first: bool, hist: np.ndarray, q_prev: np.ndarray, gains: np.ndarray
+    ) -> np.ndarray:
+        """The delay chosen per seed (B,), in steps, after the measurement e; ``gains`` (B, 2) g_v, g_omega."""
+        self._g[:] = gains
+        bank_step(e, r, first, hist, q_prev, self._g, self.S, self.L, self.T)
+        return self.S[:, DELAY]
+
+    @property
+    def delay(self) -> np.ndarray:
+        return self.S[:, DELAY]
