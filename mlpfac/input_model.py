@@ -43,7 +43,7 @@ import math
 import numpy as np
 from numba import njit
 
-from mlpfac.delay_bank import DelayBank
+from mlpfac.delay_bank import HELD, DelayBank
 from mlpfac.kernels import JIT
 
 # columns of the per-seed state S, per channel c (v: +0, omega: +1)
@@ -81,9 +81,10 @@ def observe(e, r, first, hist, q_prev, S, C, e_hat, params):
 
     e (B, 3), r (>= 3,); hist (B, 2, H) the commands sent, newest first (H = max(2, D + 2));
     q_prev (B, 3) the last measured pose; S (B, WIDTH) the scalars (columns above); C (B, D + 1)
-    the correlations of the delay. params = (T, P0, forgetting, detect).
+    the correlations of the delay. params = (T, P0, forgetting, detect, held): a pose within ``held``
+    of the last one (0: equal to it) is the same measurement held over.
     """
-    T, P0, forgetting, detect = params[0], params[1], params[2], params[3]
+    T, P0, forgetting, detect, tol = params[0], params[1], params[2], params[3], params[4]
     D = C.shape[1] - 1
     a = 1.0 - 1.0 / WINDOW
     ac = 1.0 - 1.0 / CORR_WINDOW
@@ -92,7 +93,7 @@ def observe(e, r, first, hist, q_prev, S, C, e_hat, params):
     for b in range(e.shape[0]):
         Sb = S[b]
         _pose(e[b], r, q)
-        held = q[0] == q_prev[b, 0] and q[1] == q_prev[b, 1] and q[2] == q_prev[b, 2]
+        held = max(abs(q[0] - q_prev[b, 0]), abs(q[1] - q_prev[b, 1]), abs(q[2] - q_prev[b, 2])) <= tol
         if not first and not held:
             dth = math.pi - ((math.pi - (q[2] - q_prev[b, 2])) % (2.0 * math.pi))
             mid = q_prev[b, 2] + 0.5 * dth
@@ -217,7 +218,8 @@ class InputModel:
         self.S[:, G : G + 2] = 1.0
         self.S[:, P : P + 2] = P0
         self.u = np.zeros((B, 2))
-        self.params = np.array([T, P0, forgetting, detect], dtype=float)
+        # with the bank, a held pose is told apart from a new one as the bank does (rebuilt from e and r)
+        self.params = np.array([T, P0, forgetting, detect, HELD if bank else 0.0], dtype=float)
         z = (self.hist, self.q_prev, self.S, self.C, self.e_hat)  # load (or compile) now, not mid-run
         observe(np.zeros((0, 3)), np.zeros(5), True, *(x[:0] for x in z), self.params)
         command(self.u[:0], gains, self.S[:0], self.hist[:0], self.u[:0])
@@ -225,7 +227,9 @@ class InputModel:
     def observe(self, e: np.ndarray, r: np.ndarray, first: bool) -> np.ndarray:
         e = np.ascontiguousarray(e, dtype=float)
         if self.bank is not None:  # the delay, into S[:, DELAY], before the kernel predicts over it
-            self.S[:, DELAY] = self.bank.update(e, r, first, self.hist, self.q_prev, self.S[:, G : G + 2])
+            self.S[:, DELAY] = self.bank.update(
+                e, r, first, self.hist, self.q_prev, self.S[:, G : G + 2], self.S[:, ALARMS]
+            )
         observe(e, r, first, self.hist, self.q_prev, self.S, self.C, self.e_hat, self.params)
         return self.e_hat
 
