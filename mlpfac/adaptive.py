@@ -7,6 +7,7 @@ r_k = (x_r, y_r, theta_r, v_r, omega_r) and returns u_k = (v, omega).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -45,7 +46,8 @@ class AdaptiveConfig:
       ``input_delay = D > 0``: find a measurement delay of up to D control steps from the commands'
       correlation with the measured motion, and give the law the error of the pose predicted over it.
     - ``law_form = "kanayama"``: the certainty-equivalence law takes Kanayama's structure, with the
-      estimates h2, h5 of (34) as its feedforward (:func:`~mlpfac.kernels._law_kanayama`); ``delay_finder
+      estimates h2, h5 of (34) as its feedforward (:func:`~mlpfac.kernels._law_kanayama`), with gains
+      ``law_gains`` (Kx, Ky, Ktheta) (the scenario's Kanayama gains if unset); ``delay_finder
       = "bank"``: the delay by a bank of predictors over the candidate delays (:mod:`mlpfac.delay_bank`).
     - ``output_weight_std``: the initial spread of the output-layer weights (``weight_std`` if unset);
       0 with ``prior`` starts from the nominal functions exactly.
@@ -75,6 +77,7 @@ class AdaptiveConfig:
     detect: float = 0.0  # CUSUM threshold on the input gains' normalised innovation that reopens their P (0: off)
     law_form: str = "35"  # "35": the law (35); "kanayama": Kanayama's structure fed by (34)
     delay_finder: str = "correlation"  # how input_delay is found: "correlation" or "bank" (of predictors)
+    law_gains: tuple[float, float, float] | None = None  # (Kx, Ky, Ktheta) of law_form "kanayama"; None: the scenario's
 
     def __post_init__(self) -> None:
         for name in ("P0", "weight_std", "ukf_alpha"):
@@ -110,6 +113,15 @@ class AdaptiveConfig:
         for name, allowed in (("law_form", ("35", "kanayama")), ("delay_finder", ("correlation", "bank"))):
             if getattr(self, name) not in allowed:
                 raise ConfigError(name, f"choose one of {', '.join(map(repr, allowed))}, got {getattr(self, name)!r}")
+        if self.law_gains is not None:
+            g = self.law_gains
+            if (
+                not isinstance(g, list | tuple)
+                or len(g) != 3
+                or not all(isinstance(x, int | float) and not isinstance(x, bool) and 0 < x < math.inf for x in g)
+            ):
+                raise ConfigError("law_gains", f"three positive numbers (Kx, Ky, Ktheta), got {g!r}")
+            object.__setattr__(self, "law_gains", tuple(float(x) for x in g))
         if self.law_form == "kanayama" and (self.estimator != "ekf" or self.cautious != 0 or self.learned_gains):
             raise ConfigError("law_form", "'kanayama' runs with estimator 'ekf', cautious 0 and learned_gains off")
         if self.prior and self.networks.residual:
@@ -153,9 +165,10 @@ class Adaptive:
     def __init__(
         self, law: Law, config: AdaptiveConfig, T: float, kanayama: tuple[float, float, float] = (10.0, 64.0, 16.0)
     ) -> None:
-        """``kanayama``: the gains (Kx, Ky, Ktheta) of the law with ``law_form = "kanayama"``."""
+        """``kanayama``: the gains (Kx, Ky, Ktheta) of the law with ``law_form = "kanayama"``, unless the
+        config's ``law_gains`` are given."""
         self.T = float(T)  # the control period the law and the networks' nominal prior are designed for
-        self.kanayama = tuple(float(k) for k in kanayama)
+        self.kanayama = tuple(float(k) for k in (config.law_gains or kanayama))
         self.law = law
         self.config = config
         self.nets = config.networks
@@ -386,6 +399,11 @@ VARIANTS["adaptive-input-delay"] = VARIANTS["adaptive-input"] | {"input_delay": 
 # the paper's scheme whose NN_f also sees the last command (the velocity state)
 VARIANTS["adaptive-velocity"] = {"networks": {"velocity_inputs": True}}
 # adaptive-input-delay on a real base: the certainty-equivalence law in Kanayama's structure, fed by
-# h2, h5 (34) of the networks over the nominal prior, so that pose noise is not amplified as v_r falls;
-# the delay found by a bank of predictors with a likelihood ratio (docs/real-robot-adaptive.md).
-VARIANTS["adaptive-real"] = VARIANTS["adaptive-input-delay"] | {"law_form": "kanayama", "delay_finder": "bank"}
+# h2, h5 (34) of the networks over the nominal prior, so that pose noise is not amplified as v_r falls,
+# with one gain set for every robot (Ky = 150, Ktheta = 12: chosen on seeds 0-4 of the eight-* and
+# tiago-* scenarios); the delay found by a bank of predictors (docs/real-robot-adaptive.md).
+VARIANTS["adaptive-real"] = VARIANTS["adaptive-input-delay"] | {
+    "law_form": "kanayama",
+    "law_gains": (10.0, 150.0, 12.0),
+    "delay_finder": "bank",
+}

@@ -18,9 +18,10 @@ part of the error (the commands' step-to-step moves, which the closed loop's pos
 a wrong input gain (after a wheel or period change, before the input model has relearnt it) adds
 g_err u, slow, which the running mean takes out: otherwise the oldest command would fit best while
 the robot slows down. The cap bounds what one step can add. And when the input model detects a
-change (its CUSUM alarm), the scores are cleared and no choice is made for ``QUIET_STEPS``: while
-g is relearnt, a fast change of the commands makes any lag fit (measured: delay 6 chosen 0.2 s
-after a wheel-radius change without this). The choice moves to the best
+change (its CUSUM alarm), no choice is made for ``QUIET_STEPS``: while g is relearnt, a fast
+change of the commands makes any lag fit (measured: delay 6 chosen 0.2 s after a wheel-radius
+change without this). The scores are kept: clearing them there let a delay of 1 be chosen on a
+nominal run (before candidate 0's lead, below, had built up again). The choice moves to the best
 candidate as soon as its log-likelihood ratio over the current one exceeds ``THRESHOLD``: no
 correlation held for a hundred steps, no persistence count. The closed loop's own pose noise
 excites the commands; what the ratio gains per step is that excitation over the measurement noise.
@@ -61,7 +62,7 @@ CAP = 9.0  # a step's normalised squared error counts at most this (3 s_c)
 MEAN_WINDOW = 10  # steps in the running mean of each candidate's error
 S2_WINDOW = 1000  # steps in the running mean of the noise variances
 WARMUP = 50  # samples before the first decision by likelihood
-QUIET_STEPS = 100  # steps without a decision after the input model's alarm
+QUIET_STEPS = 300  # steps without a decision after the input model's alarm (g settles within about 2 s)
 
 
 @njit(**JIT)
@@ -77,10 +78,8 @@ def bank_step(e, r, first, hist, q_prev, g, alarms, S, L, M, T):
         Sb, Lb = S[b], L[b]
         if first:
             continue
-        if alarms[b] != Sb[ALARMS]:  # the input gains are being relearnt: what the bank holds is void
+        if alarms[b] != Sb[ALARMS]:  # the input gains are being relearnt: no choice for a while
             Sb[ALARMS], Sb[QUIET] = alarms[b], QUIET_STEPS
-            for d in range(D + 1):
-                Lb[d] = 0.0
         th = r[2] - e[b, 2]
         c, s = math.cos(th), math.sin(th)
         x = r[0] - (c * e[b, 0] - s * e[b, 1])
