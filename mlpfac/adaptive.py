@@ -400,10 +400,10 @@ VARIANTS["adaptive-input-delay"] = VARIANTS["adaptive-input"] | {"input_delay": 
 VARIANTS["adaptive-velocity"] = {"networks": {"velocity_inputs": True}}
 # adaptive-input-delay on a real base: the certainty-equivalence law in Kanayama's structure, fed by
 # h2, h5 (34) of the networks over the nominal prior, so that pose noise is not amplified as v_r falls,
-# with one gain set for every robot (Ky = 150, Ktheta = 12: chosen on seeds 0-4 of the eight-* and
+# with one gain set for every robot (Ky = 150, Ktheta = 16: chosen on seeds 0-9 of the eight-* and
 # tiago-* scenarios); the delay found by a bank of predictors (docs/real-robot-adaptive.md).
 VARIANTS["adaptive-real"] = VARIANTS["adaptive-input-delay"] | {
     "law_form": "kanayama",
-    "law_gains": (10.0, 150.0, 12.0),
+    "law_gains": (10.0, 150.0, 16.0),
     "delay_finder": "bank",
 }

@@ -61,7 +61,7 @@ THRESHOLD = 4.0  # the log-likelihood ratio that moves the choice (about 55 : 1)
 CAP = 9.0  # a step's normalised squared error counts at most this (3 s_c)
 MEAN_WINDOW = 10  # steps in the running mean of each candidate's error
 S2_WINDOW = 1000  # steps in the running mean of the noise variances
-WARMUP = 50  # samples before the first decision by likelihood
+WARMUP = 200  # samples before the first decision by likelihood (50 chose a delay of 1 at 0.7 s on a nominal run)
 QUIET_STEPS = 300  # steps without a decision after the input model's alarm (g settles within about 2 s)
 
 
