@@ -69,6 +69,26 @@ QUIET_STEPS = 300  # steps without a decision after the input model's alarm (g s
 
 
 @njit(**JIT)
+def pose_of(e, r, q):
+    """The pose q whose error (2) to r is e: (2) inverted."""
+    th = r[2] - e[2]
+    c, s = math.cos(th), math.sin(th)
+    q[0] = r[0] - (c * e[0] - s * e[1])
+    q[1] = r[1] - (s * e[0] + c * e[1])
+    q[2] = th
+
+
+@njit(**JIT)
+def motion(q, qp, T, y):
+    """The velocity realised between the poses qp and q one step apart: y = (the chord over T at the
+    mid heading, the heading increment over T)."""
+    dth = math.pi - ((math.pi - (q[2] - qp[2])) % (2.0 * math.pi))
+    mid = qp[2] + 0.5 * dth
+    y[0] = (math.cos(mid) * (q[0] - qp[0]) + math.sin(mid) * (q[1] - qp[1])) / T
+    y[1] = dth / T
+
+
+@njit(**JIT)
 def bank_step(e, r, first, hist, q_prev, g, alarms, S, L, M, T):
     """One step for B seeds: e (B, 3) the measured error (2), r (>= 3,) the reference sample;
     hist (B, 2, >= D + 2) the commands sent, newest first; q_prev (B, 3) the last measured pose;
@@ -77,17 +97,15 @@ def bank_step(e, r, first, hist, q_prev, g, alarms, S, L, M, T):
     D = L.shape[1] - 1
     a = 1.0 - 1.0 / WINDOW
     y = np.empty(2)
+    q = np.empty(3)
     for b in range(e.shape[0]):
         Sb, Lb = S[b], L[b]
         if first:
             continue
         if alarms[b] != Sb[ALARMS]:  # the input gains are being relearnt: no choice for a while
             Sb[ALARMS], Sb[QUIET] = alarms[b], QUIET_STEPS
-        th = r[2] - e[b, 2]
-        c, s = math.cos(th), math.sin(th)
-        x = r[0] - (c * e[b, 0] - s * e[b, 1])
-        yy = r[1] - (s * e[b, 0] + c * e[b, 1])
-        dq = max(abs(x - q_prev[b, 0]), abs(yy - q_prev[b, 1]), abs(th - q_prev[b, 2]))
+        pose_of(e[b], r, q)
+        dq = max(abs(q[0] - q_prev[b, 0]), abs(q[1] - q_prev[b, 1]), abs(q[2] - q_prev[b, 2]))
         if dq < HELD:  # the stream stalled: the measurement is one step older
             worst = Lb.min()
             for d in range(D, 0, -1):
@@ -95,10 +113,7 @@ def bank_step(e, r, first, hist, q_prev, g, alarms, S, L, M, T):
             Lb[0] = worst - THRESHOLD
             Sb[DELAY] = min(Sb[DELAY] + 1.0, D)
             continue
-        dth = math.pi - ((math.pi - (th - q_prev[b, 2])) % (2.0 * math.pi))
-        mid = q_prev[b, 2] + 0.5 * dth
-        y[0] = (math.cos(mid) * (x - q_prev[b, 0]) + math.sin(mid) * (yy - q_prev[b, 1])) / T
-        y[1] = dth / T
+        motion(q, q_prev[b], T, y)
         Sb[N] += 1.0
         if Sb[N] < 2.0:  # the commands' history is not yet a step deep
             continue

@@ -43,7 +43,7 @@ import math
 import numpy as np
 from numba import njit
 
-from mlpfac.delay_bank import HELD, DelayBank
+from mlpfac.delay_bank import HELD, DelayBank, motion, pose_of
 from mlpfac.kernels import JIT
 
 # columns of the per-seed state S, per channel c (v: +0, omega: +1)
@@ -65,16 +65,6 @@ GAINS = (0.8, 2.0)  # the input gains sent are kept within these (the law divide
 
 
 @njit(**JIT)
-def _pose(e, r, q):
-    """The pose whose error (2) to r is e: (2) inverted."""
-    th = r[2] - e[2]
-    c, s = math.cos(th), math.sin(th)
-    q[0] = r[0] - (c * e[0] - s * e[1])
-    q[1] = r[1] - (s * e[0] + c * e[1])
-    q[2] = th
-
-
-@njit(**JIT)
 def observe(e, r, first, hist, q_prev, S, C, e_hat, params):
     """Update the gains (and the delay) with the motion measured since the last step; e_hat the
     error (2) of the pose predicted over the delay (e itself when it is 0).
@@ -92,13 +82,10 @@ def observe(e, r, first, hist, q_prev, S, C, e_hat, params):
     y = np.empty(2)
     for b in range(e.shape[0]):
         Sb = S[b]
-        _pose(e[b], r, q)
+        pose_of(e[b], r, q)
         held = max(abs(q[0] - q_prev[b, 0]), abs(q[1] - q_prev[b, 1]), abs(q[2] - q_prev[b, 2])) <= tol
         if not first and not held:
-            dth = math.pi - ((math.pi - (q[2] - q_prev[b, 2])) % (2.0 * math.pi))
-            mid = q_prev[b, 2] + 0.5 * dth
-            y[0] = (math.cos(mid) * (q[0] - q_prev[b, 0]) + math.sin(mid) * (q[1] - q_prev[b, 1])) / T
-            y[1] = dth / T
+            motion(q, q_prev[b], T, y)
             Sb[N] += 1.0
             w = 1.0 / min(Sb[N], R_WINDOW)
             alarm = False
