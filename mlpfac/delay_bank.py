@@ -19,7 +19,7 @@ a wrong input gain (after a wheel or period change, before the input model has r
 g_err u, slow, which the running mean takes out: otherwise the oldest command would fit best while
 the robot slows down. The cap bounds what one step can add. And when the input model detects a
 change (its CUSUM alarm), no choice is made for ``QUIET_STEPS``: while g is relearnt, a fast
-change of the commands makes any lag fit (measured: delay 6 chosen 0.2 s after a wheel-radius
+change of the commands makes any lag fit (measured: delay 6 chosen 0.5 s after a wheel-radius
 change without this). The scores are kept: clearing them there let a delay of 1 be chosen on a
 nominal run (before candidate 0's lead, below, had built up again). The choice moves to the best
 candidate as soon as its log-likelihood ratio over the current one exceeds ``THRESHOLD``: no
@@ -27,9 +27,9 @@ correlation held for a hundred steps, no persistence count. The closed loop's ow
 excites the commands; what the ratio gains per step is that excitation over the measurement noise.
 
 A measurement stream that stalls (the same pose again, to the rounding of rebuilding it from e and
-r: the delay grew by one step, the sample is that much older) is evidence too, and exact: every candidate's score moves one delay up
-(L_d+1 <- L_d) and so does the choice, at that step. Candidate 0 then starts ``THRESHOLD`` below
-the worst.
+r: the delay grew by one step, the sample is that much older) is evidence too, and exact: every
+candidate's score moves one delay up (L_d+1 <- L_d) and so does the choice, at that step.
+Candidate 0 then starts ``THRESHOLD`` below the worst.
 
 Candidate 0 alone is compared with the command u_k-1, which answered the pose noise n_k-1 that
 y_k also holds (as -n_k-1 / T): in closed loop its error is smaller than the plant explains (the
@@ -38,8 +38,9 @@ delay is found it gains on the true candidate (measured on eight-sensor-delay: f
 to 4 above within 4.5 s). So the likelihood never moves the choice back to 0 (a delay that
 returns to 0 is left at 1 at most), and moves it away from 0 only past ``FROM_ZERO``: with
 ``THRESHOLD`` a delay of 1 was chosen on 2 of 240 runs without one (seeds 20-39 of the eight-*,
-tiago-* and cart-* scenarios), each costing about 10 mm. Lags of two steps and more have no such bias, but on them the
-loop's own excitation at 1 mm of pose noise does not tell neighbouring delays apart within seconds.
+tiago-* and cart-* scenarios), each costing about 10 mm. Lags of two steps and more have no such
+bias, but on them the loop's own excitation at 1 mm of pose noise does not tell neighbouring delays
+apart within seconds (candidates on u_k-2-d chose a delay of 4 before any event).
 
 Batch-first and compiled as :mod:`mlpfac.kernels`: a seed's arithmetic does not depend on the batch.
 """
@@ -64,7 +65,7 @@ FROM_ZERO = 12.0  # the ratio that moves the choice away from 0 (candidate 0 lea
 CAP = 9.0  # a step's normalised squared error counts at most this (3 s_c)
 MEAN_WINDOW = 10  # steps in the running mean of each candidate's error
 S2_WINDOW = 1000  # steps in the running mean of the noise variances
-WARMUP = 200  # samples before the first decision by likelihood (50 chose a delay of 1 at 0.7 s on a nominal run)
+WARMUP = 200  # samples before the first decision by likelihood (50: a delay of 1 at 0.7 s on a nominal run)
 QUIET_STEPS = 300  # steps without a decision after the input model's alarm (g settles within about 2 s)
 
 
@@ -92,8 +93,8 @@ def motion(q, qp, T, y):
 def bank_step(e, r, first, hist, q_prev, g, alarms, S, L, M, T):
     """One step for B seeds: e (B, 3) the measured error (2), r (>= 3,) the reference sample;
     hist (B, 2, >= D + 2) the commands sent, newest first; q_prev (B, 3) the last measured pose;
-    g (B, 2) the input gains and alarms (B,) the input model's alarms so far; S (B, WIDTH), L (B, D + 1) and M (B, 2, D + 1) (the running means m_c,d)
-    the state, updated in place."""
+    g (B, 2) the input gains and alarms (B,) the input model's alarms so far; S (B, WIDTH),
+    L (B, D + 1) and M (B, 2, D + 1) (the running means m_c,d): the state, updated in place."""
     D = L.shape[1] - 1
     a = 1.0 - 1.0 / WINDOW
     y = np.empty(2)
