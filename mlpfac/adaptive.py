@@ -7,6 +7,7 @@ r_k = (x_r, y_r, theta_r, v_r, omega_r) and returns u_k = (v, omega).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -16,6 +17,7 @@ from mlpfac.estimators import EKF, UKF, covariance
 from mlpfac.exceptions import ConfigError
 from mlpfac.law import GAIN_RANGE, Law
 from mlpfac.networks import Networks
+from mlpfac.variants import VARIANTS  # noqa: F401 -- exported here too (factory, scenario, controllers)
 
 
 @dataclass(frozen=True)
@@ -42,6 +44,10 @@ class AdaptiveConfig:
       their covariance when a CUSUM on the normalised innovation exceeds h (a change detected);
       ``input_delay = D > 0``: find a measurement delay of up to D control steps from the commands'
       correlation with the measured motion, and give the law the error of the pose predicted over it.
+    - ``law_form = "kanayama"``: the certainty-equivalence law takes Kanayama's structure, with the
+      estimates h2, h5 of (34) as its feedforward (:func:`~mlpfac.kernels._law_kanayama`), with gains
+      ``law_gains`` (Kx, Ky, Ktheta) (the scenario's Kanayama gains if unset); ``delay_finder
+      = "bank"``: the delay by a bank of predictors over the candidate delays (:mod:`mlpfac.delay_bank`).
     - ``output_weight_std``: the initial spread of the output-layer weights (``weight_std`` if unset);
       0 with ``prior`` starts from the nominal functions exactly.
     """
@@ -68,6 +74,9 @@ class AdaptiveConfig:
     input_P0: float = 1e-4  # noqa: N815 -- the input gains' initial (and reopened) variance
     input_forgetting: float = 0.999  # the input gains' forgetting factor (1: none)
     detect: float = 0.0  # CUSUM threshold on the input gains' normalised innovation that reopens their P (0: off)
+    law_form: str = "35"  # "35": the law (35); "kanayama": Kanayama's structure fed by (34)
+    delay_finder: str = "correlation"  # how input_delay is found: "correlation" or "bank" (of predictors)
+    law_gains: tuple[float, float, float] | None = None  # (Kx, Ky, Ktheta) of law_form "kanayama"; None: the scenario's
 
     def __post_init__(self) -> None:
         for name in ("P0", "weight_std", "ukf_alpha"):
@@ -100,6 +109,20 @@ class AdaptiveConfig:
             raise ConfigError("input_forgetting", f"must be in (0, 1] (1: none), got {self.input_forgetting}")
         if not self.detect >= 0:
             raise ConfigError("detect", f"the CUSUM threshold must be >= 0 (0: off), got {self.detect}")
+        for name, allowed in (("law_form", ("35", "kanayama")), ("delay_finder", ("correlation", "bank"))):
+            if getattr(self, name) not in allowed:
+                raise ConfigError(name, f"choose one of {', '.join(map(repr, allowed))}, got {getattr(self, name)!r}")
+        if self.law_gains is not None:
+            g = self.law_gains
+            if (
+                not isinstance(g, list | tuple)
+                or len(g) != 3
+                or not all(isinstance(x, int | float) and not isinstance(x, bool) and 0 < x < math.inf for x in g)
+            ):
+                raise ConfigError("law_gains", f"three positive numbers (Kx, Ky, Ktheta), got {g!r}")
+            object.__setattr__(self, "law_gains", tuple(float(x) for x in g))
+        if self.law_form == "kanayama" and (self.estimator != "ekf" or self.cautious != 0 or self.learned_gains):
+            raise ConfigError("law_form", "'kanayama' runs with estimator 'ekf', cautious 0 and learned_gains off")
         if self.prior and self.networks.residual:
             raise ConfigError("prior", "prior already adds e to f (f = f_nominal + NN_f); turn residual off")
 
@@ -138,8 +161,13 @@ class Adaptive:
 
     name = "adaptive"
 
-    def __init__(self, law: Law, config: AdaptiveConfig, T: float) -> None:
+    def __init__(
+        self, law: Law, config: AdaptiveConfig, T: float, kanayama: tuple[float, float, float] = (10.0, 64.0, 16.0)
+    ) -> None:
+        """``kanayama``: the gains (Kx, Ky, Ktheta) of the law with ``law_form = "kanayama"``, unless the
+        config's ``law_gains`` are given."""
         self.T = float(T)  # the control period the law and the networks' nominal prior are designed for
+        self.kanayama = tuple(float(k) for k in (config.law_gains or kanayama))
         self.law = law
         self.config = config
         self.nets = config.networks
@@ -182,7 +210,9 @@ class Adaptive:
         c = self.config
         self.input = None
         if c.input_gains or c.input_delay > 0:
-            self.input = InputModel(B, T, c.input_gains, c.input_delay, c.input_P0, c.input_forgetting, c.detect)
+            self.input = InputModel(
+                B, T, c.input_gains, c.input_delay, c.input_P0, c.input_forgetting, c.detect, c.delay_finder == "bank"
+            )
         if not self.compiled:
             self.seeds = [_NumpySeed(self, self._estimator(z0[b]), T) for b in range(B)]
             self.est = self.seeds[0].est if self.single else None  # one run: its estimator, for inspection
@@ -197,7 +227,10 @@ class Adaptive:
         self._trace = np.zeros(B)
         self._H = np.zeros((B, 3, a))
         est, lim = self.est, self.law
-        ints = np.array([Lf, LG, c.networks.residual, self.prior is not None, est.Q is not None, nf], dtype=np.int64)
+        ints = np.array(
+            [Lf, LG, c.networks.residual, self.prior is not None, est.Q is not None, nf, c.law_form == "kanayama"],
+            dtype=np.int64,
+        )
         params = np.array(
             [
                 c.networks.error_scale,
@@ -207,6 +240,7 @@ class Adaptive:
                 np.inf if lim.omega_max is None else lim.omega_max,
                 est.forgetting,
                 np.inf if est.P_max is None else est.P_max,
+                *self.kanayama,
             ],
             dtype=float,
         )
@@ -334,36 +368,3 @@ class _NumpySeed:
             "innovation": self.innovation,
             "h_hat": self.h_hat,
         }
-
-
-# Named variants of the adaptive controller: AdaptiveConfig fields (and Networks fields under
-# "networks") that override the scenario's [controller.adaptive] table. "adaptive" is the table as is.
-# One variant per option alone, and "adaptive-best": the combination that measured best on the
-# MuJoCo eight-* scenarios (the nominal prior, with forgetting so that it keeps adapting after an
-# event, P bounded). The ablation table (docs/results-beyond.md) gives the figures and the command that made them.
-# With no Q and no forgetting the EKF depends on P0 and R only through P0 / R.
-VARIANTS: dict[str, dict] = {
-    "adaptive": {},
-    "adaptive-ukf": {"estimator": "ukf", "ukf_alpha": 0.1},
-    "adaptive-cautious": {"cautious": 1.0},
-    "adaptive-forget": {"forgetting": 0.9999, "P_max": 0.1},
-    "adaptive-q": {"Q": 1e-8, "P_max": 0.1},
-    "adaptive-prior": {"prior": True, "output_weight_std": 0.0, "P0": 1e-5, "R": 0.1},
-    "adaptive-gains": {"learned_gains": True},
-    "adaptive-best": {
-        "prior": True,
-        "output_weight_std": 0.0,
-        "P0": 1e-5,
-        "R": 0.1,
-        "forgetting": 0.999,
-        "P_max": 1e-4,
-    },
-}
-# adaptive-best with the input gains learned from the measured motion (mlpfac.input_model), re-adapted
-# when a CUSUM on their innovation detects a change ("adaptive-input"), or by forgetting alone; and
-# with a measurement delay of up to 6 steps found and predicted over ("adaptive-input-delay").
-VARIANTS["adaptive-input"] = VARIANTS["adaptive-best"] | {"input_gains": True, "detect": 20.0}
-VARIANTS["adaptive-input-forget"] = VARIANTS["adaptive-best"] | {"input_gains": True}
-VARIANTS["adaptive-input-delay"] = VARIANTS["adaptive-input"] | {"input_delay": 6}
-# the paper's scheme whose NN_f also sees the last command (the velocity state)
-VARIANTS["adaptive-velocity"] = {"networks": {"velocity_inputs": True}}

@@ -29,7 +29,10 @@ def make_controller(scn: Scenario, instance: object | None = None):
     if scn.controller in VARIANTS:
         over = dict(VARIANTS[scn.controller])
         nets = dataclasses.replace(scn.adaptive.networks, **over.pop("networks", {}))
-        ctrl = Adaptive(scn.law, dataclasses.replace(scn.adaptive, networks=nets, **over), scn.T)
+        g = scn.kanayama
+        ctrl = Adaptive(
+            scn.law, dataclasses.replace(scn.adaptive, networks=nets, **over), scn.T, (g.Kx, g.Ky, g.Ktheta)
+        )
         ctrl.name = scn.controller
         return ctrl
     if scn.controller == "corradini":

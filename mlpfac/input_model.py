@@ -43,6 +43,7 @@ import math
 import numpy as np
 from numba import njit
 
+from mlpfac.delay_bank import HELD, DelayBank, motion, pose_of
 from mlpfac.kernels import JIT
 
 # columns of the per-seed state S, per channel c (v: +0, omega: +1)
@@ -64,25 +65,16 @@ GAINS = (0.8, 2.0)  # the input gains sent are kept within these (the law divide
 
 
 @njit(**JIT)
-def _pose(e, r, q):
-    """The pose whose error (2) to r is e: (2) inverted."""
-    th = r[2] - e[2]
-    c, s = math.cos(th), math.sin(th)
-    q[0] = r[0] - (c * e[0] - s * e[1])
-    q[1] = r[1] - (s * e[0] + c * e[1])
-    q[2] = th
-
-
-@njit(**JIT)
 def observe(e, r, first, hist, q_prev, S, C, e_hat, params):
     """Update the gains (and the delay) with the motion measured since the last step; e_hat the
     error (2) of the pose predicted over the delay (e itself when it is 0).
 
     e (B, 3), r (>= 3,); hist (B, 2, H) the commands sent, newest first (H = max(2, D + 2));
     q_prev (B, 3) the last measured pose; S (B, WIDTH) the scalars (columns above); C (B, D + 1)
-    the correlations of the delay. params = (T, P0, forgetting, detect).
+    the correlations of the delay. params = (T, P0, forgetting, detect, held): a pose within ``held``
+    of the last one (0: equal to it) is the same measurement held over.
     """
-    T, P0, forgetting, detect = params[0], params[1], params[2], params[3]
+    T, P0, forgetting, detect, tol = params[0], params[1], params[2], params[3], params[4]
     D = C.shape[1] - 1
     a = 1.0 - 1.0 / WINDOW
     ac = 1.0 - 1.0 / CORR_WINDOW
@@ -90,13 +82,10 @@ def observe(e, r, first, hist, q_prev, S, C, e_hat, params):
     y = np.empty(2)
     for b in range(e.shape[0]):
         Sb = S[b]
-        _pose(e[b], r, q)
-        held = q[0] == q_prev[b, 0] and q[1] == q_prev[b, 1] and q[2] == q_prev[b, 2]
+        pose_of(e[b], r, q)
+        held = max(abs(q[0] - q_prev[b, 0]), abs(q[1] - q_prev[b, 1]), abs(q[2] - q_prev[b, 2])) <= tol
         if not first and not held:
-            dth = math.pi - ((math.pi - (q[2] - q_prev[b, 2])) % (2.0 * math.pi))
-            mid = q_prev[b, 2] + 0.5 * dth
-            y[0] = (math.cos(mid) * (q[0] - q_prev[b, 0]) + math.sin(mid) * (q[1] - q_prev[b, 1])) / T
-            y[1] = dth / T
+            motion(q, q_prev[b], T, y)
             Sb[N] += 1.0
             w = 1.0 / min(Sb[N], R_WINDOW)
             alarm = False
@@ -202,23 +191,32 @@ class InputModel:
     """The batched state of the input model for B seeds, and its two steps: ``observe`` before the
     law, ``command`` after it (the command sent)."""
 
-    def __init__(self, B: int, T: float, gains: bool, delay: int, P0: float, forgetting: float, detect: float) -> None:
+    def __init__(
+        self, B: int, T: float, gains: bool, delay: int, P0: float, forgetting: float, detect: float, bank: bool = False
+    ) -> None:
+        """``bank``: the delay is found by :class:`~mlpfac.delay_bank.DelayBank` instead of the correlations."""
         self.gains = gains
         self.hist = np.zeros((B, 2, max(2, delay + 2)))
-        self.C = np.zeros((B, delay + 1))
+        self.C = np.zeros((B, 1 if bank else delay + 1))  # one column: no correlation search in the kernel
+        self.bank = DelayBank(B, T, delay) if bank and delay > 0 else None
         self.e_hat = np.zeros((B, 3))
         self.q_prev = np.zeros((B, 3))
         self.S = np.zeros((B, WIDTH))
         self.S[:, G : G + 2] = 1.0
         self.S[:, P : P + 2] = P0
         self.u = np.zeros((B, 2))
-        self.params = np.array([T, P0, forgetting, detect], dtype=float)
+        # with the bank, a held pose is told apart from a new one as the bank does (rebuilt from e and r)
+        self.params = np.array([T, P0, forgetting, detect, HELD if bank else 0.0], dtype=float)
         z = (self.hist, self.q_prev, self.S, self.C, self.e_hat)  # load (or compile) now, not mid-run
         observe(np.zeros((0, 3)), np.zeros(5), True, *(x[:0] for x in z), self.params)
         command(self.u[:0], gains, self.S[:0], self.hist[:0], self.u[:0])
 
     def observe(self, e: np.ndarray, r: np.ndarray, first: bool) -> np.ndarray:
         e = np.ascontiguousarray(e, dtype=float)
+        if self.bank is not None:  # the delay, into S[:, DELAY], before the kernel predicts over it
+            self.S[:, DELAY] = self.bank.update(
+                e, r, first, self.hist, self.q_prev, self.S[:, G : G + 2], self.S[:, ALARMS]
+            )
         observe(e, r, first, self.hist, self.q_prev, self.S, self.C, self.e_hat, self.params)
         return self.e_hat
 

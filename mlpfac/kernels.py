@@ -216,6 +216,17 @@ def _law(e0, e1, e2, h1, h2, h5, v_r, T, l1, l2, l3, v_max, omega_max, u):
 
 
 @njit(**JIT)
+def _law_kanayama(e0, e1, e2, h2, h5, v_r, T, Kx, Ky, Ktheta, v_max, omega_max, u):
+    """Kanayama's structure with the estimates of (34) in its feedforward: v = h2 / T + Kx e1,
+    omega = h5 / T + v_r (Ky e2 + Ktheta sin e3); with the nominal h2 = T v_r cos e3, h5 = T omega_r
+    it is Kanayama's law. Its feedback does not divide by T v_r: pose noise is not amplified as v_r falls."""
+    v = h2 / T + Kx * e0
+    omega = h5 / T + v_r * (Ky * e1 + Ktheta * math.sin(e2))
+    u[0] = min(max(v, -v_max), v_max)
+    u[1] = min(max(omega, -omega_max), omega_max)
+
+
+@njit(**JIT)
 def adaptive_step(e, v_r, omega_r, first, z, P, S, H, u, innov, h_hat, trace, ints, params, R, Q):
     """One step of the adaptive controller for B seeds, e (B, 3) -> u (B, 2).
 
@@ -227,10 +238,12 @@ def adaptive_step(e, v_r, omega_r, first, z, P, S, H, u, innov, h_hat, trace, in
     State per seed, updated in place: z (B, alpha), P (B, alpha, alpha) and S (B, 11 + n_f + L_f + L_G) =
     [x_f (n_f), x_G (3), phi_f (L_f), phi_G (L_G), u_{k-1} (2), e_{k-1} (3), e_nom (3)].
     Out: u, innov (32), h_hat (34), trace (trace P); H (B, 3, alpha) the Jacobian of the update.
-    ints = (L_f, L_G, residual, prior, has_Q, n_f) (n_f = 8: x_f ends with u_{k-1}); params = (c, T, lambda_1..3, v_max, omega_max,
-    forgetting, P_max) with c the input scale on the errors.
+    ints = (L_f, L_G, residual, prior, has_Q, n_f, kanayama) (n_f = 8: x_f ends with u_{k-1}; kanayama != 0:
+    :func:`_law_kanayama` instead of (35)); params = (c, T, lambda_1..3, v_max, omega_max,
+    forgetting, P_max, Kx, Ky, Ktheta) with c the input scale on the errors.
     """
     Lf, LG, residual, prior, has_Q, nf = ints[0], ints[1], ints[2] != 0, ints[3] != 0, ints[4] != 0, ints[5]
+    kanayama = ints[6] != 0
     c, T, l1, l2, l3, v_max, omega_max, forgetting, P_max = (
         params[0], params[1], params[2], params[3], params[4], params[5], params[6], params[7], params[8],
     )  # fmt: skip
@@ -278,7 +291,12 @@ def adaptive_step(e, v_r, omega_r, first, z, P, S, H, u, innov, h_hat, trace, in
         else:
             h1, h2, h5 = G[0, 1], f[0] - eb[0], f[2] - eb[2]  # (34)
         h_hat[b, 0], h_hat[b, 1], h_hat[b, 2] = h1, h2, h5
-        _law(eb[0], eb[1], eb[2], h1, h2, h5, v_r, T, l1, l2, l3, v_max, omega_max, u[b])
+        if kanayama:
+            _law_kanayama(
+                eb[0], eb[1], eb[2], h2, h5, v_r, T, params[9], params[10], params[11], v_max, omega_max, u[b]
+            )
+        else:
+            _law(eb[0], eb[1], eb[2], h1, h2, h5, v_r, T, l1, l2, l3, v_max, omega_max, u[b])
         if prior:  # the nominal prediction of e_{k+1}: f_true + G_true u, (5)-(6)
             u0, u1 = u[b, 0], u[b, 1]
             e_nom[0] = (eb[0] + T * v_r * math.cos(eb[2])) + (-T * u0 + T * eb[1] * u1)

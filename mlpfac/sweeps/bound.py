@@ -1,0 +1,139 @@
+"""The bound beside an adaptive result: per seed, the least position RMS of the laws that learn
+nothing (by default the oracle, ``oracle-kanayama``, Corradini's and Kanayama's law), and each
+variant against it.
+
+Reads one or more sweep folders (``SCENARIO/CONTROLLER/seed-NNNN/metrics.json``; a later folder's
+run replaces an earlier one's) and writes, per scenario, over the seeds that every bound law and
+every variant ran:
+
+- **bound [mm] (law)**: the median over seeds of the per-seed minimum, and the law that gives the
+  minimum on most seeds;
+- per variant, **median [mm] (x bound)**: its median RMS and the median over seeds of its RMS / the
+  per-seed bound, with the worst seed's ratio; **tracking**: runs tracking / runs;
+  **p worse than corradini**: the one-sided Wilcoxon signed-rank test (scipy) that the variant's
+  RMS is larger than Corradini's on the same seed (a diverged run is worse than any finished one).
+
+The figure is the one of :mod:`mlpfac.sweeps.paired`: the last phase's position RMS ("after" the
+first event; after the warm-up on a run without one).
+
+    python -m mlpfac.sweeps.bound DIR [DIR ...] --variants adaptive-real,adaptive-best [--out FILE.md]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from collections import Counter
+from pathlib import Path
+
+from mlpfac.sweeps.paired import _rms, median, outcome
+
+BOUND_LAWS = ("oracle", "oracle-kanayama", "corradini", "kanayama")
+
+
+def load(folders: list[Path]) -> dict[tuple[str, str, int], dict]:
+    """(scenario, controller, seed) -> the run's metrics, from the sweep folders in order."""
+    metrics: dict[tuple[str, str, int], dict] = {}
+    for folder in folders:
+        for path in sorted(Path(folder).glob("*/*/seed-*/metrics.json")):
+            m = json.loads(path.read_text())
+            metrics[(m["scenario"], m["controller"], int(m["seed"]))] = m
+    return metrics
+
+
+def p_worse(x: list[float], y: list[float]) -> float | None:
+    """One-sided Wilcoxon signed-rank p that x is larger than y, paired (inf: larger than any number);
+    None when every pair is equal."""
+    finite = [abs(v) for v in (*x, *y) if math.isfinite(v)]
+    big = 2.0 * max(finite, default=0.0) + 1.0
+    d = [(a if math.isfinite(a) else big) - (b if math.isfinite(b) else big) for a, b in zip(x, y, strict=True)]
+    d = [v for v in d if v != 0.0]
+    if not d:
+        return None
+    from scipy.stats import wilcoxon
+
+    return float(wilcoxon(d, alternative="greater").pvalue)
+
+
+def bound_rows(
+    metrics: dict[tuple[str, str, int], dict], variants: list[str], laws: tuple[str, ...] = BOUND_LAWS
+) -> list[dict]:
+    """One row per scenario (in the order first met) with the bound and each variant against it."""
+    scenarios = list(dict.fromkeys(s for s, _, _ in metrics))
+    rows = []
+    for scn in scenarios:
+        needed = (*laws, *variants)
+        seeds = sorted(set.intersection(*({k for s, c, k in metrics if s == scn and c == n} for n in needed)))
+        if not seeds:
+            continue
+        per_law = {n: [_rms(metrics[(scn, n, k)]) for k in seeds] for n in laws}
+        bound = [min(per_law[n][i] for n in laws) for i in range(len(seeds))]
+        which = Counter(min(laws, key=lambda n: per_law[n][i]) for i in range(len(seeds))).most_common(1)[0][0]
+        row = {"scenario": scn, "seeds": seeds, "bound_m": median(bound), "bound_law": which, "variants": {}}
+        for name in variants:
+            runs = [metrics[(scn, name, k)] for k in seeds]
+            x = [_rms(m) for m in runs]
+            ratios = [a / b for a, b in zip(x, bound, strict=True)]
+            row["variants"][name] = {
+                "median_m": median(x),
+                "ratio": median(ratios),
+                "worst_ratio": max(ratios),
+                "tracking": sum(outcome(m) == "tracking" for m in runs),
+                "runs": len(runs),
+                "p_worse_than_corradini": p_worse(x, per_law["corradini"]) if "corradini" in laws else None,
+            }
+        rows.append(row)
+    return rows
+
+
+def _mm(x: float | None) -> str:
+    return "-" if x is None or not math.isfinite(x) else f"{1e3 * x:.2f}"
+
+
+def _ratio(x: float) -> str:
+    return "inf" if not math.isfinite(x) else f"{x:.2g}x" if x < 10 else f"{x:.0f}x"
+
+
+def markdown(rows: list[dict], variants: list[str]) -> str:
+    """The table: bound [mm] (law), then per variant its median [mm] (median x bound, worst seed's),
+    tracking runs and the one-sided p that it is worse than Corradini's law."""
+    head = ["scenario", "seeds", "bound [mm] (law)"]
+    for name in variants:
+        head += [f"`{name}` [mm] (x bound; worst seed)", "tracking", "p worse than corradini"]
+    lines = ["| " + " | ".join(head) + " |", "|" + " --- |" * len(head)]
+    for r in rows:
+        s = r["seeds"]
+        cells = [r["scenario"], f"{s[0]}-{s[-1]}" if s == list(range(s[0], s[-1] + 1)) else ",".join(map(str, s))]
+        cells.append(f"{_mm(r['bound_m'])} ({r['bound_law']})")
+        for name in variants:
+            v = r["variants"][name]
+            p = v["p_worse_than_corradini"]
+            cells += [
+                f"{_mm(v['median_m'])} ({_ratio(v['ratio'])}; {_ratio(v['worst_ratio'])})",
+                f"{v['tracking']} / {v['runs']}",
+                "-" if p is None else f"{p:.2g}",
+            ]
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(prog="python -m mlpfac.sweeps.bound", description=__doc__.split("\n\n")[0])
+    ap.add_argument("folders", nargs="+", type=Path, help="sweep folders; a later one's run replaces an earlier's")
+    ap.add_argument("--variants", required=True, help="comma-separated controllers to set against the bound")
+    ap.add_argument("--laws", default=",".join(BOUND_LAWS), help="the laws of the bound (default: %(default)s)")
+    ap.add_argument("--out", type=Path, help="write the Markdown table (and FILE.json) here; default: print")
+    a = ap.parse_args(argv)
+    variants = [v for v in a.variants.split(",") if v]
+    rows = bound_rows(load(a.folders), variants, tuple(n for n in a.laws.split(",") if n))
+    text = markdown(rows, variants)
+    if a.out is None:
+        print(text, end="")
+        return
+    a.out.write_text(text)
+    a.out.with_suffix(".json").write_text(json.dumps(rows, indent=1))
+
+
+if __name__ == "__main__":
+    main()

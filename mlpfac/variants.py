@@ -1,0 +1,45 @@
+"""The named variants of the adaptive controller (:class:`~mlpfac.adaptive.AdaptiveConfig` fields,
+and :class:`~mlpfac.networks.Networks` fields under "networks"); :mod:`mlpfac.adaptive` exports them."""
+
+from __future__ import annotations
+
+# Named variants of the adaptive controller: AdaptiveConfig fields (and Networks fields under
+# "networks") that override the scenario's [controller.adaptive] table. "adaptive" is the table as is.
+# One variant per option alone, and "adaptive-best": the combination that measured best on the
+# MuJoCo eight-* scenarios (the nominal prior, with forgetting so that it keeps adapting after an
+# event, P bounded). The ablation table (docs/results-beyond.md) gives the figures and the command that made them.
+# With no Q and no forgetting the EKF depends on P0 and R only through P0 / R.
+VARIANTS: dict[str, dict] = {
+    "adaptive": {},
+    "adaptive-ukf": {"estimator": "ukf", "ukf_alpha": 0.1},
+    "adaptive-cautious": {"cautious": 1.0},
+    "adaptive-forget": {"forgetting": 0.9999, "P_max": 0.1},
+    "adaptive-q": {"Q": 1e-8, "P_max": 0.1},
+    "adaptive-prior": {"prior": True, "output_weight_std": 0.0, "P0": 1e-5, "R": 0.1},
+    "adaptive-gains": {"learned_gains": True},
+    "adaptive-best": {
+        "prior": True,
+        "output_weight_std": 0.0,
+        "P0": 1e-5,
+        "R": 0.1,
+        "forgetting": 0.999,
+        "P_max": 1e-4,
+    },
+}
+# adaptive-best with the input gains learned from the measured motion (mlpfac.input_model), re-adapted
+# when a CUSUM on their innovation detects a change ("adaptive-input"), or by forgetting alone; and
+# with a measurement delay of up to 6 steps found and predicted over ("adaptive-input-delay").
+VARIANTS["adaptive-input"] = VARIANTS["adaptive-best"] | {"input_gains": True, "detect": 20.0}
+VARIANTS["adaptive-input-forget"] = VARIANTS["adaptive-best"] | {"input_gains": True}
+VARIANTS["adaptive-input-delay"] = VARIANTS["adaptive-input"] | {"input_delay": 6}
+# the paper's scheme whose NN_f also sees the last command (the velocity state)
+VARIANTS["adaptive-velocity"] = {"networks": {"velocity_inputs": True}}
+# adaptive-input-delay on a real base: the certainty-equivalence law in Kanayama's structure, fed by
+# h2, h5 (34) of the networks over the nominal prior, so that pose noise is not amplified as v_r falls,
+# with one gain set for every robot (Ky = 150, Ktheta = 16: chosen on seeds 0-9 of the eight-* and
+# tiago-* scenarios); the delay found by a bank of predictors (docs/real-robot-adaptive.md).
+VARIANTS["adaptive-real"] = VARIANTS["adaptive-input-delay"] | {
+    "law_form": "kanayama",
+    "law_gains": (10.0, 150.0, 16.0),
+    "delay_finder": "bank",
+}
