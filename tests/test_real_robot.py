@@ -175,3 +175,20 @@ def test_p_worse_is_one_sided():
     assert p_worse(worse, better) < 0.01
     assert p_worse(better, worse) > 0.99
     assert p_worse(better, better) is None
+
+
+def test_the_windows_after_the_event_have_their_known_answer():
+    """0.1 s bins of 1 mm^2 for 2 s after an event at 1 s, then 4 mm^2: the first 2 s have an RMS of
+    1 mm and the rest 2 mm, whatever the seed; a run without an event has no row."""
+    from mlpfac.sweeps.bound import window_rows
+
+    def run(seed: int, event: bool) -> dict:
+        m2 = [9e-6] * 10 + [1e-6] * 20 + [4e-6] * 20  # 5 s of 10-step bins at T = 10 ms
+        return {"status": "ok", "T": 0.01, "steps": 500, "events": [{"time": 1.0}] if event else [],
+                "position_ms_bins": {"bin_steps": 10, "m2": m2}}  # fmt: skip
+
+    metrics = {("s", "v", k): run(k, True) for k in range(3)} | {("n", "v", 0): run(0, False)}
+    (row,) = window_rows(metrics, ["v"], 2.0)
+    assert row["scenario"] == "s"
+    first, then = row["windows"]["v"]
+    assert first == pytest.approx(1e-3) and then == pytest.approx(2e-3)

@@ -118,16 +118,59 @@ def markdown(rows: list[dict], variants: list[str]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def window_rows(metrics: dict[tuple[str, str, int], dict], names: list[str], seconds: float) -> list[dict]:
+    """Per scenario with an event and per controller of ``names``: the median over seeds of the
+    position RMS in the ``seconds`` after the first event and from then to the end (0.1 s bins)."""
+    from mlpfac.sweeps.paired import window_rms
+
+    rows = []
+    for scn in dict.fromkeys(s for s, _, _ in metrics):
+        row: dict = {"scenario": scn, "windows": {}}
+        for name in names:
+            runs = [m for (s, c, _), m in sorted(metrics.items()) if s == scn and c == name and m["events"]]
+            if runs:
+                t = runs[0]["events"][0]["time"]
+                first = [window_rms(m, t, t + seconds) for m in runs]
+                then = [window_rms(m, t + seconds, m["steps"] * m["T"]) for m in runs]
+                row["windows"][name] = tuple(median([x for x in xs if x is not None]) for xs in (first, then))
+        if row["windows"]:
+            rows.append(row)
+    return rows
+
+
+def windows_markdown(rows: list[dict], names: list[str], seconds: float) -> str:
+    head = ["scenario"] + [f"`{n}` {w} [mm]" for n in names for w in (f"first {seconds:g} s", "then")]
+    lines = ["| " + " | ".join(head) + " |", "|" + " --- |" * len(head)]
+    for r in rows:
+        cells = [r["scenario"]]
+        for n in names:
+            cells += [_mm(x) for x in r["windows"].get(n, (None, None))]
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(prog="python -m mlpfac.sweeps.bound", description=__doc__.split("\n\n")[0])
     ap.add_argument("folders", nargs="+", type=Path, help="sweep folders; a later one's run replaces an earlier's")
     ap.add_argument("--variants", required=True, help="comma-separated controllers to set against the bound")
+    ap.add_argument(
+        "--windows",
+        type=float,
+        metavar="SECONDS",
+        help="instead: the median RMS of the variants and the laws in the SECONDS after the event, and after them",
+    )
     ap.add_argument("--laws", default=",".join(BOUND_LAWS), help="the laws of the bound (default: %(default)s)")
     ap.add_argument("--out", type=Path, help="write the Markdown table (and FILE.json) here; default: print")
     a = ap.parse_args(argv)
     variants = [v for v in a.variants.split(",") if v]
-    rows = bound_rows(load(a.folders), variants, tuple(n for n in a.laws.split(",") if n))
-    text = markdown(rows, variants)
+    laws = tuple(n for n in a.laws.split(",") if n)
+    if a.windows is not None:
+        names = [*variants, *laws]
+        rows = window_rows(load(a.folders), names, a.windows)
+        text = windows_markdown(rows, names, a.windows)
+    else:
+        rows = bound_rows(load(a.folders), variants, laws)
+        text = markdown(rows, variants)
     if a.out is None:
         print(text, end="")
         return
