@@ -115,7 +115,7 @@ def bench_workers(repeats: int) -> None:
     import concurrent.futures as cf
     import multiprocessing as mp
 
-    from mlpfac import sweep
+    from mlpfac.sweeps import engine as sweep
     from mlpfac.sweeps.execute import one_blas_thread
     from mlpfac.sweeps.worker import _worker_init, pool_context
 

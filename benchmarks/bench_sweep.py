@@ -96,7 +96,7 @@ def bench_sweep(seeds: int, duration: float, repeat: int) -> None:
         f"({seeds} runs of {duration:g} s: {t[1]:.2f} s vs {t[2]:.2f} s wall; "
         f"CPU s of the last repeat {cpu_s[1]:.2f} vs {cpu_s[2]:.2f})"
     )
-    report("2 workers / 1 worker (runs per second)", ratio, ">= 1.8", ratio >= 1.8, detail)
+    report("2 workers / 1 worker (runs per second)", ratio, ">= 1.9", ratio >= 1.9, detail)
 
 
 def bench_batched(batch_seeds: int, batch_duration: float, repeat: int) -> None:
