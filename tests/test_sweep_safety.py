@@ -440,3 +440,32 @@ def test_a_worker_killed_from_outside_is_one_line(tmp_path):
     assert gone([w.pid for w in workers]) == []
     for d in out.glob("*/*/seed-*"):
         assert (d / "metrics.json").exists()
+
+
+# A worker killed while it sends a result leaves half a message in the pool's result pipe: the
+# pool's thread, reading it, must not wait forever for the rest (and the interpreter's exit with it).
+HALF_A_RESULT = """
+import concurrent.futures as cf, multiprocessing as mp, os, struct, sys, time
+from mlpfac.sweeps.execute import _end_result_pipe
+
+pool = cf.ProcessPoolExecutor(1, mp_context=mp.get_context("spawn"))
+pool.submit(int, 1).result()  # the pool, its worker and its thread are up
+thread = pool._executor_manager_thread
+os.write(pool._result_queue._writer.fileno(), struct.pack("!i", 100) + b"abc")  # 3 bytes of 100
+time.sleep(0.5)  # the thread is reading it now
+for p in list(pool._processes.values()):
+    p.kill()
+    p.join()
+if sys.argv[1] == "end":
+    _end_result_pipe(pool)
+thread.join(5)
+print("stuck" if thread.is_alive() else "ended", flush=True)
+os._exit(0)  # a stuck thread would hold the interpreter's exit
+"""
+
+
+def test_a_half_sent_result_does_not_hold_the_pools_thread():
+    run = lambda how: subprocess.run([sys.executable, "-c", HALF_A_RESULT, how], capture_output=True, text=True,  # noqa: E731
+                                     timeout=60).stdout.strip()  # fmt: skip
+    assert run("end") == "ended"
+    assert run("keep") == "stuck"  # the mechanism: without the write end closed the read never ends

@@ -267,8 +267,21 @@ def _pool_results(
                 f.cancel()
             for p in workers_now:
                 p.join(EXIT_GRACE_S)  # killed: at once, unless the machine is swamped
+            _end_result_pipe(pool)
             pool.shutdown(wait=False, cancel_futures=True)  # its thread sees the workers gone and ends
         raise
+
+
+def _end_result_pipe(pool) -> None:
+    """Close this process's copy of the write end of the pool's result pipe, once its workers are
+    dead. A worker killed while it sent a result leaves half a message in the pipe; the pool's
+    thread, reading it, would wait for the rest forever, and the interpreter's exit for that thread
+    (seen on a loaded machine: a stopped sweep that never exits). With no writer left, the read ends
+    and the thread finds the pool broken and stops."""
+    writer = getattr(getattr(pool, "_result_queue", None), "_writer", None)
+    if writer is not None:
+        with contextlib.suppress(OSError):
+            writer.close()
 
 
 def _dask_results(client, tasks: list[list[Job]], batched: bool, save_rrd: bool) -> Iterator[list[dict]]:
