@@ -95,6 +95,12 @@ def resolve(spec: str, params: dict | None, T: float, where: str, params_where: 
     target = spec
     if spec in _LOCAL:
         cls, sha, origin = _LOCAL[spec], None, "this process"
+    elif spec.startswith("<local>:"):
+        raise ConfigError(
+            where,
+            f"{spec.split('#')[0]} was a class given to the Python API in another process, which no file or "
+            "module names: run it from Python again, or put it in a file and name it path/to/file.py:Class",
+        )
     else:
         if ":" not in spec:
             found = entry_points().get(spec)

@@ -393,3 +393,24 @@ def test_the_readmes_controller_runs_as_written(tmp_path):
     scn = mlpfac.parse({"duration": 1.0, "plant": {"kind": "kinematic"}, "initial": {"error": [0.05, 0.02, 0.1]}})
     mine, theirs = mlpfac.run(scn, controller=f"{tmp_path}/my_law.py:MyLaw"), mlpfac.run(scn, controller="kanayama")
     np.testing.assert_array_equal(mine.u, theirs.u)
+
+
+def test_a_config_of_a_class_no_file_names_is_refused_in_one_line(tmp_path, capsys):
+    class Local:
+        def __init__(self, T):
+            pass
+
+        def step(self, e, r):
+            return r[3], r[4]
+
+    scn = mlpfac.parse({"duration": 0.5, "plant": {"kind": "kinematic"}})
+    mlpfac.run(scn, controller=Local, out=tmp_path / "o", figure=None, record=False)
+    config = tomllib.loads((tmp_path / "o" / "config.toml").read_text())
+    assert config["controller"]["name"].startswith("<local>:") and "Local#" in config["controller"]["name"]
+    config["controller"]["name"] = config["controller"]["name"].replace("#", "#0")  # another process's
+    from mlpfac.scenario import to_toml
+
+    (tmp_path / "again.toml").write_text(to_toml(config))
+    assert main(["run", str(tmp_path / "again.toml"), "--out", str(tmp_path / "x")]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "put it in a file" in err
