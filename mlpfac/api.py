@@ -21,6 +21,7 @@ from mlpfac.exceptions import ConfigError, MlpfacError
 from mlpfac.plugins import local_spec
 from mlpfac.record import RunRecord
 from mlpfac.scenario import Scenario, load
+from mlpfac.sweeps.worker import not_in_a_worker
 
 
 def _scenario(scenario: Scenario | str | Path) -> Scenario:
@@ -62,6 +63,7 @@ def run(
     from mlpfac.runner import build
     from mlpfac.runner import run as run_scenario
 
+    not_in_a_worker("run")
     scn = _scenario(scenario)
     instance = None
     if controller is not None and not isinstance(controller, str | Path | type):
@@ -104,9 +106,11 @@ def sweep(
     own. A class no file or module names (defined in a notebook) runs in this process only.
 
     The returned list has ``.errors`` ({(scenario, controller, seed): traceback}) and ``.paired``
-    (the rows of paired.json). Ctrl-C raises KeyboardInterrupt; the runs written are kept."""
+    (the rows of paired.json). Ctrl-C raises KeyboardInterrupt (with ``out``, the runs written are
+    kept and the next call resumes them)."""
     from mlpfac.sweeps import engine
 
+    not_in_a_worker("sweep")
     if isinstance(scenarios, str | Path):
         scenarios = [scenarios]
     if isinstance(seeds, int):
@@ -116,9 +120,11 @@ def sweep(
     text = None
     if controllers is not None:
         specs = [
-            _spec(c, "controllers") for c in ([controllers] if isinstance(controllers, str | type) else controllers)
+            _spec(c, "controllers")
+            for c in ([controllers] if isinstance(controllers, str | Path | type) else controllers)
         ]
-        if any(s.startswith("<local>:") for s in specs) and (scheduler or (workers or 1) > 1):
+        workers = 2 if workers is None else workers
+        if any(s.startswith("<local>:") for s in specs) and (scheduler or workers > 1):
             warnings.warn("a class defined in this session runs in this process only (workers=1)", stacklevel=2)
             workers, scheduler = 1, None
         text = ",".join(specs)

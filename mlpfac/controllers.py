@@ -238,7 +238,13 @@ class PluginController:
         objs = self.objs
         if not hasattr(objs[0], "telemetry"):
             return {}
-        rows = [self._call("telemetry", o.telemetry) for o in objs]
+        if self.plugin.batched:
+            rows = [self._call("telemetry", objs[0].telemetry)]
+        else:  # a seed that stopped is not asked again: its last row stands (the runner keeps no more rows of it)
+            rows = self._rows = [
+                self._call("telemetry", o.telemetry) if b in self.live or self._keys is None else self._rows[b]
+                for b, o in enumerate(objs)
+            ]
         if self._keys is None:
             self._keys = tuple(rows[0]) if isinstance(rows[0], dict) else ()
             self._shapes: dict[str, tuple] = {}

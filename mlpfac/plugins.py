@@ -112,7 +112,7 @@ def resolve(spec: str, params: dict | None, T: float, where: str, params_where: 
     if not inspect.isclass(cls):
         raise ConfigError(where, f"{target} is not a class (a controller is a class with step(e, r))")
     if not callable(getattr(cls, "step", None)):
-        raise ConfigError(where, f"{target} has no step(e, r) method (the controller contract: mlpfac.plugins)")
+        raise ConfigError(where, f"{target} has no step(e, r) method (the contract: mlpfac.controllers.Controller)")
     name = _name(cls, spec if origin.startswith("entry point") else None, where)
     if params is not None:
         _check_params(cls, T, params, where, params_where)
@@ -163,6 +163,9 @@ def _load(target: str, where: str) -> tuple[object, str | None, str]:
             raise ConfigError(where, f"{path}: cannot read ({err.strerror or err})") from None
         sha = hashlib.sha256(data).hexdigest()
         mod_name = f"mlpfac_plugin_{sha[:16]}_{re.sub(r'[^A-Za-z0-9_]', '_', path.stem)}"
+        main = getattr(sys.modules.get("__main__"), "__file__", None)
+        if main and Path(main).resolve() == path.resolve():  # the running script: not run a second time
+            mod_name = "__main__"
         module = sys.modules.get(mod_name)
         if module is None:
             spec = importlib.util.spec_from_file_location(mod_name, path)

@@ -414,3 +414,41 @@ def test_a_config_of_a_class_no_file_names_is_refused_in_one_line(tmp_path, caps
     assert main(["run", str(tmp_path / "again.toml"), "--out", str(tmp_path / "x")]) == 2
     err = capsys.readouterr().err
     assert len(err.strip().splitlines()) == 1 and "put it in a file" in err
+
+
+def test_a_seed_that_stopped_is_not_asked_for_telemetry_again(tmp_path):
+    """In a batch without the batch form, a diverged seed's controller (which may be in a bad state)
+    is neither stepped nor asked for telemetry again; the other seeds go on."""
+    from mlpfac.runner import run_batch, seeded_generators
+
+    (tmp_path / "fragile.py").write_text(
+        LAW + "\n\nclass Fragile(Law):\n"
+        "    def reset(self, rng):\n        super().reset(rng)\n"
+        "        self.bad, self.asked = ('nan' if self.draw < 0.5 else None), 0\n"
+        "    def telemetry(self):\n        self.asked += 1\n"
+        "        if self.bad and self.asked > self.k:\n            raise RuntimeError('asked after it stopped')\n"
+        "        return super().telemetry()\n"
+    )
+    draws = [seeded_generators(s)[0].random() for s in range(8)]
+    assert any(d < 0.5 for d in draws) and any(d >= 0.5 for d in draws)
+    spec = f"{tmp_path}/fragile.py:Fragile"
+    scns = [mlpfac.parse({**tomllib.loads(KINEMATIC), "seed": s, "controller": {"name": spec}}) for s in range(8)]
+    for rec, d in zip(run_batch(scns), draws, strict=True):
+        assert rec.status == ("diverged" if d < 0.5 else "ok"), (d, rec.reason)
+
+
+def test_sweep_workers_see_the_environment_of_the_sweep_that_uses_them(tmp_path, monkeypatch):
+    """The warm fork server outlives a sweep; its workers take the sweep's environment, not the one
+    it was started with."""
+    (tmp_path / "envlaw.py").write_text(
+        LAW + "\n\nclass EnvLaw(Law):\n    def __init__(self, T):\n"
+        "        import os\n        super().__init__(T, kx=float(os.environ['MLPFAC_TEST_KX']))\n"
+    )
+    (tmp_path / "k.toml").write_text(KINEMATIC + "[initial]\nerror = [0.05, 0.0, 0.0]\n")
+    got = []
+    for kx in ("2.0", "20.0"):
+        monkeypatch.setenv("MLPFAC_TEST_KX", kx)
+        rows = mlpfac.sweep([tmp_path / "k.toml"], [f"{tmp_path}/envlaw.py:EnvLaw"], seeds="0-1", workers=2)
+        assert not rows.errors, rows.errors
+        got.append(rows[0]["pos_rms_m_median"])
+    assert got[0] != got[1]

@@ -64,6 +64,9 @@ def check(
     Bad input (the budget, a flag) is a ConfigError naming the file and key before anything runs.
     """
     from mlpfac.outputs import write_atomic
+    from mlpfac.sweeps.worker import not_in_a_worker
+
+    not_in_a_worker("check")
     from mlpfac.sweeps.engine import SWEEP_COLUMNS, check_execution_flags, report, sweep_into
     from mlpfac.sweeps.folders import OutputError, _oserror
     from mlpfac.sweeps.plan import check_writable

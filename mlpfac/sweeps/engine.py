@@ -27,8 +27,9 @@ below is importable from here:
    The sweep holds ``folder_lock(DIR)`` throughout: a second sweep into DIR stops with one line.
    Recordings are made in ``DIR/.tmp`` (removed at the end; a killed sweep's is removed by the
    next one); a recording without rerun's footer (a full disk) is a failed run. Local workers are
-   fresh interpreters with one BLAS thread each that die with the sweep (``PR_SET_PDEATHSIG``
-   and a thread watching the parent), so a killed sweep leaves no worker behind.
+   forked from a warm fork server (:func:`mlpfac.sweeps.worker.pool_context`) with one BLAS thread
+   each and the sweep's environment, and die with the sweep (``PR_SET_PDEATHSIG`` and threads
+   watching it), so a killed sweep leaves no worker behind.
 3. **Aggregate** (:func:`aggregate`): per scenario, controller and phase ("before" / "after" the
    first event; only "before" when the scenario has no event); and **pair** (:func:`paired_rows`,
    :mod:`mlpfac.sweeps.paired`): per seed against Corradini's law, the oracle and the controller's

@@ -224,7 +224,7 @@ def _pool_results(
             max_workers=min(workers, len(tasks)),
             mp_context=pool_context(),
             initializer=_worker_init,
-            initargs=(os.getpid(),),
+            initargs=(os.getpid(), dict(os.environ)),
         )
     pending: set[cf.Future] = set()
     queue = iter(tasks)

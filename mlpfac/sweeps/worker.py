@@ -141,12 +141,35 @@ def start_pool_server() -> None:
             forkserver.ensure_running()
 
 
-def _worker_init(parent: int) -> None:
+IN_WORKER = "MLPFAC_SWEEP_WORKER"  # set in a local pool's workers
+
+
+def not_in_a_worker(what: str) -> None:
+    """A script whose class a sweep's workers import (``path/to/script.py:Class``) is run by each
+    of them: a call of the API at its top level would start runs, or pools of workers, in every
+    worker. MlpfacError there, which the worker reports as that run's error."""
+    if os.environ.get(IN_WORKER):
+        from mlpfac.exceptions import MlpfacError
+
+        raise MlpfacError(
+            f"mlpfac.{what} was called while a sweep worker imported your script (for its controller class): "
+            'put the script\'s calls under `if __name__ == "__main__":`'
+        )
+
+
+def _worker_init(parent: int, environ: dict[str, str] | None = None) -> None:
     """Pool workers leave Ctrl-C and SIGTERM to the parent (the sweep's process), which stops them
     (a half run is never returned), and die with it: a killed sweep leaves no worker behind. A
-    worker forked by the fork server watches the sweep's process and dies with the fork server."""
+    worker forked by the fork server watches the sweep's process and dies with the fork server.
+    ``environ``: the sweep's environment now (the fork server has the one it was started with)."""
     import signal
+    import tempfile
 
+    if environ is not None:
+        os.environ.clear()
+        os.environ.update(environ)
+        tempfile.tempdir = None  # found again from TMPDIR
+    os.environ[IN_WORKER] = "1"
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_IGN)
     if os.getppid() != parent:  # the fork server's child: it lives as long as its children do
