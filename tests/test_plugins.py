@@ -435,6 +435,7 @@ def test_a_seed_that_stopped_is_not_asked_for_telemetry_again(tmp_path):
     scns = [mlpfac.parse({**tomllib.loads(KINEMATIC), "seed": s, "controller": {"name": spec}}) for s in range(8)]
     for rec, d in zip(run_batch(scns), draws, strict=True):
         assert rec.status == ("diverged" if d < 0.5 else "ok"), (d, rec.reason)
+<<<<<<< Updated upstream
 
 
 def test_sweep_workers_see_the_environment_of_the_sweep_that_uses_them(tmp_path, monkeypatch):
@@ -452,3 +453,5 @@ def test_sweep_workers_see_the_environment_of_the_sweep_that_uses_them(tmp_path,
         assert not rows.errors, rows.errors
         got.append(rows[0]["pos_rms_m_median"])
     assert got[0] != got[1]
+=======
+>>>>>>> Stashed changes
