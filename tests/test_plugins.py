@@ -435,7 +435,6 @@ def test_a_seed_that_stopped_is_not_asked_for_telemetry_again(tmp_path):
     scns = [mlpfac.parse({**tomllib.loads(KINEMATIC), "seed": s, "controller": {"name": spec}}) for s in range(8)]
     for rec, d in zip(run_batch(scns), draws, strict=True):
         assert rec.status == ("diverged" if d < 0.5 else "ok"), (d, rec.reason)
-<<<<<<< Updated upstream
 
 
 def test_sweep_workers_see_the_environment_of_the_sweep_that_uses_them(tmp_path, monkeypatch):
@@ -445,7 +444,9 @@ def test_sweep_workers_see_the_environment_of_the_sweep_that_uses_them(tmp_path,
         LAW + "\n\nclass EnvLaw(Law):\n    def __init__(self, T):\n"
         "        import os\n        super().__init__(T, kx=float(os.environ['MLPFAC_TEST_KX']))\n"
     )
-    (tmp_path / "k.toml").write_text(KINEMATIC + "[initial]\nerror = [0.05, 0.0, 0.0]\n")
+    (tmp_path / "k.toml").write_text(
+        'duration = 3.0\n[plant]\nkind = "kinematic"\n[initial]\nerror = [0.05, 0.0, 0.0]\n'
+    )
     got = []
     for kx in ("2.0", "20.0"):
         monkeypatch.setenv("MLPFAC_TEST_KX", kx)
@@ -453,5 +454,3 @@ def test_sweep_workers_see_the_environment_of_the_sweep_that_uses_them(tmp_path,
         assert not rows.errors, rows.errors
         got.append(rows[0]["pos_rms_m_median"])
     assert got[0] != got[1]
-=======
->>>>>>> Stashed changes
