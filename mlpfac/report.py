@@ -31,13 +31,13 @@ import argparse
 import json
 import re
 import shlex
-import shutil
 import subprocess
 import sys
 from datetime import UTC, datetime
 from pathlib import Path
 
 from mlpfac.exceptions import ConfigError
+from mlpfac.outputs import write_atomic
 
 MARKER = re.compile(r"^<!-- table: (?P<spec>.+?) -->\n(?P<body>.*?)^<!-- /table -->$", re.M | re.S)
 VIEWS = ("sweep", "compare", "paired", "summary", "text")
@@ -47,7 +47,10 @@ OPTIONS = ("view", "scenarios", "controllers", "labels")
 
 def parse_spec(spec: str, where: str) -> tuple[str, dict[str, str]]:
     """``data/NAME key=value ...`` -> (the data path, its options); ConfigError naming the page."""
-    words = shlex.split(spec)
+    try:
+        words = shlex.split(spec)
+    except ValueError as err:
+        raise ConfigError(where, f"table marker {spec!r}: {err}") from None
     opts = dict(w.split("=", 1) for w in words[1:] if "=" in w)
     bad = [w for w in words[1:] if "=" not in w or w.split("=", 1)[0] not in OPTIONS]
     if not words or bad:
@@ -61,7 +64,22 @@ def _read(folder: Path, name: str) -> str:
     path = folder / name
     if not path.is_file():
         raise ConfigError(str(path), "missing: the data folder holds no such file")
-    return path.read_text()
+    try:
+        return path.read_text()
+    except (OSError, UnicodeDecodeError) as err:
+        raise ConfigError(str(path), f"cannot read: {err}") from None
+
+
+def _json(folder: Path, name: str) -> dict:
+    """A data file's JSON; ConfigError naming it when it is not what a sweep writes."""
+    text = _read(folder, name)
+    try:
+        data = json.loads(text)
+    except ValueError as err:
+        raise ConfigError(str(folder / name), f"not valid JSON: {err}") from None
+    if not isinstance(data, dict):
+        raise ConfigError(str(folder / name), "expected a JSON object")
+    return data
 
 
 def select(rows: list[dict], scenarios: str | None, controllers: str | None) -> list[dict]:
@@ -69,7 +87,11 @@ def select(rows: list[dict], scenarios: str | None, controllers: str | None) -> 
     each in the listed order, else in the data's; the phases of one keep their order."""
     order = {}
     for key, wanted in (("scenario", scenarios), ("controller", controllers)):
-        names = wanted.split(",") if wanted else list(dict.fromkeys(r[key] for r in rows))
+        there = list(dict.fromkeys(r[key] for r in rows))
+        names = wanted.split(",") if wanted else there
+        unknown = [n for n in names if n not in there]
+        if unknown:
+            raise ConfigError(f"{key}s={wanted}", f"{', '.join(unknown)} not in the data ({', '.join(there)})")
         order[key] = {n: i for i, n in enumerate(names)}
     kept = [r for r in rows if r["scenario"] in order["scenario"] and r["controller"] in order["controller"]]
     return sorted(kept, key=lambda r: (order["scenario"][r["scenario"]], order["controller"][r["controller"]]))
@@ -83,10 +105,18 @@ def render(folder: Path, opts: dict[str, str]) -> str:
     view = opts.get("view", "summary")
     if view == "text":
         return _read(folder, "table.md")
-    rows = json.loads(_read(folder, {"sweep": "sweep.json", "compare": "compare.json"}.get(view, "paired.json")))[
-        "rows"
-    ]
-    rows = select(rows, opts.get("scenarios"), opts.get("controllers"))
+    name = {"sweep": "sweep.json", "compare": "compare.json"}.get(view, "paired.json")
+    rows = _json(folder, name).get("rows")
+    if not isinstance(rows, list) or not all(
+        isinstance(r, dict) and "scenario" in r and "controller" in r for r in rows
+    ):
+        raise ConfigError(
+            str(folder / name), "expected the rows a sweep writes (each with its scenario and controller)"
+        )
+    try:
+        rows = select(rows, opts.get("scenarios"), opts.get("controllers"))
+    except ConfigError as err:
+        raise ConfigError(f"{folder} {err.where}", err.what) from None
     if "labels" in opts:
         kept = list(dict.fromkeys(r["scenario"] for r in rows))
         labels = opts["labels"].split(",")
@@ -133,7 +163,7 @@ def write(docs: Path) -> list[tuple[Path, int, bool]]:
         if n:
             changed = text != p.read_text()
             if changed:
-                p.write_text(text)
+                write_atomic(p, text)
             done.append((p, n, changed))
     return done
 
@@ -152,7 +182,7 @@ def collect(folder: Path, results: Path, command: str | None = None, version: st
     write its meta.json: the command (kept from the earlier meta.json unless given), the code
     version and the date the results were written."""
     old = folder / "meta.json"
-    meta = json.loads(old.read_text()) if old.is_file() else {}
+    meta = _json(folder, "meta.json") if old.is_file() else {}
     command = command or meta.get("command")
     if not command:
         raise ConfigError("--command", f"{folder} has no meta.json yet: give the command that made {results}")
@@ -162,16 +192,22 @@ def collect(folder: Path, results: Path, command: str | None = None, version: st
         sources = {n: results / n for n in DATA_FILES if (results / n).is_file()}
         if "paired.json" not in sources:
             raise ConfigError(str(results), "not a finished results folder of `mlpfac sweep` or `mlpfac compare`")
-    folder.mkdir(parents=True, exist_ok=True)
-    for name, src in sources.items():
-        shutil.copyfile(src, folder / name)
-    made = max(src.stat().st_mtime for src in sources.values())
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        for name, src in sources.items():
+            write_atomic(folder / name, src.read_bytes())
+        made = max(src.stat().st_mtime for src in sources.values())
+    except OSError as err:
+        raise ConfigError(str(err.filename or folder), f"cannot copy the results ({err.strerror or err})") from None
     meta = {
         "command": command,
         "code_version": version or code_version(),
         "date": datetime.fromtimestamp(made, UTC).strftime("%Y-%m-%dT%H:%M:%SZ"),
     }
-    old.write_text(json.dumps(meta, indent=2) + "\n")
+    try:
+        write_atomic(old, json.dumps(meta, indent=2) + "\n")
+    except OSError as err:
+        raise ConfigError(str(old), f"cannot write ({err.strerror or err})") from None
     return folder
 
 

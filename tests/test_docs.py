@@ -179,3 +179,36 @@ def test_collect_keeps_the_command_and_stamps_the_version_and_date(tmp_path: Pat
     script.write_text("| a |\n|---|\n| 1 |\n")
     report.collect(docs / "data" / "script", script, command="python script.py")
     assert report.render(docs / "data" / "script", {"view": "text"}) == script.read_text()
+
+
+# name: (what to break in a copy of the docs, text the one line holds)
+BAD_DATA = {
+    "meta.json not JSON": (lambda d: (d / "data" / "compare" / "meta.json").write_text("{"), "not valid JSON"),
+    "compare.json not JSON": (lambda d: (d / "data" / "compare" / "compare.json").write_text("[1,"), "not valid JSON"),
+    "compare.json no rows": (lambda d: (d / "data" / "compare" / "compare.json").write_text("{}"), "expected the rows"),
+    "marker with an open quote": (
+        lambda d: (d / "results-dynamics.md").write_text(
+            '<!-- table: data/compare view="compare -->\n<!-- /table -->\n'
+        ),
+        "No closing quotation",
+    ),
+    "marker naming no such controller": (
+        lambda d: (d / "results-dynamics.md").write_text(
+            "<!-- table: data/compare view=compare controllers=nosuch -->\n<!-- /table -->\n"
+        ),
+        "nosuch not in the data",
+    ),
+}
+
+
+@pytest.mark.parametrize("case", BAD_DATA)
+def test_bad_data_or_markers_are_one_line_and_exit_2(tmp_path: Path, capsys, case):
+    docs = _copy(tmp_path)
+    breaks, text = BAD_DATA[case]
+    breaks(docs)
+    argv = ["report", str(docs)]
+    if case.startswith("meta.json"):
+        argv += ["--collect", f"compare={docs / 'data' / 'compare'}"]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and text in err and "Traceback" not in err, err
