@@ -302,3 +302,28 @@ def test_shipped_scenarios_resolve_inside_the_package():
     scn = load("eight-nominal")
     assert Path(scn.plant_config.model).is_file() and Path(scn.plant_config.model).parent.name == "models"
     assert (shipped_dir() / "eight-nominal.toml").is_file()
+
+
+def test_one_wheel_named_takes_the_other_or_says_which_to_name(tmp_path, capsys):
+    """left_actuator named alone: with one other wheel servo that is the right one (whatever side the
+    geometry puts it on); with two others, one line naming right_actuator and the candidates."""
+    (tmp_path / "robot.xml").write_text(wheeled("a 0 0.2, b 0 -0.2, c -0.2 0.2"))
+    path = tmp_path / "scenario.toml"
+    path.write_text(ROBOT + 'model = "robot.xml"\nleft_actuator = "a"\n')
+    assert main(["run", str(path), "--no-log", "--no-plot", "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and f"{path} [plant] right_actuator: left_actuator = 'a' is named" in err, err
+    assert "b (joint b_hinge), c (joint c_hinge)" in err
+    import mujoco
+
+    from mlpfac.exceptions import ConfigError
+    from mlpfac.plants.config import MujocoConfig
+    from mlpfac.plants.detect import resolve
+
+    m = mujoco.MjModel.from_xml_string(wheeled("a 0 0.2, b 0 -0.2, c -0.2 0.2"))
+    for named, found in ((dict(right_actuator="b"), "left_actuator"), (dict(left_actuator="b"), "right_actuator")):
+        with pytest.raises(ConfigError, match=f"^{found}: "):
+            resolve(MujocoConfig(**named), m, m.qpos0)
+    m = mujoco.MjModel.from_xml_string(wheeled("a 0 0.2, b 0 -0.2"))
+    got = resolve(MujocoConfig(right_actuator="b"), m, m.qpos0)
+    assert (got.config.left_actuator, got.config.right_actuator, got.keys[0]) == ("a", "b", "left_actuator")

@@ -73,7 +73,18 @@ def resolve(config: MujocoConfig, m: mujoco.MjModel, qpos: np.ndarray) -> Found:
     d.qpos[:] = qpos
     mujoco.mj_kinematics(m, d)
     changes: dict = {}
-    if config.left_actuator is None or config.right_actuator is None:
+    if (config.left_actuator is None) != (config.right_actuator is None):  # one side named: the other is the one left
+        named, missing = (
+            ("left_actuator", "right_actuator") if config.left_actuator else ("right_actuator", "left_actuator")
+        )
+        others = [a for a in _candidates(m, d) if m.actuator(a).name != getattr(config, named)]
+        if len(others) != 1:
+            which = f"one of {_listed(m, others)}" if others else "not found among the wheel servos"
+            raise ConfigError(
+                missing, f"{named} = {getattr(config, named)!r} is named; the other wheel is {which}: name it"
+            )
+        changes[missing] = m.actuator(others[0]).name
+    elif config.left_actuator is None:
         left, right = _wheel_pair(m, d, config)
         changes |= {
             k: m.actuator(a).name
