@@ -73,19 +73,18 @@ def resolve(config: MujocoConfig, m: mujoco.MjModel, qpos: np.ndarray) -> Found:
     d.qpos[:] = qpos
     mujoco.mj_kinematics(m, d)
     changes: dict = {}
-    if (config.left_actuator is None) != (config.right_actuator is None):  # one side named: the other is the one left
-        named, missing = (
-            ("left_actuator", "right_actuator") if config.left_actuator else ("right_actuator", "left_actuator")
-        )
-        others = [a for a in _candidates(m, d) if m.actuator(a).name != getattr(config, named)]
-        if len(others) != 1:
-            which = f"one of {_listed(m, others)}" if others else "not found among the wheel servos"
-            raise ConfigError(
-                missing, f"{named} = {getattr(config, named)!r} is named; the other wheel is {which}: name it"
+    named = [k for k in ("left_actuator", "right_actuator") if getattr(config, k) is not None]
+    if len(named) < 2:
+        found = _candidates(m, d)
+        if len(named) == 1 and len(found) > 2 and getattr(config, named[0]) in {m.actuator(a).name for a in found}:
+            # more than two wheel servos, one named: the other side must be named too
+            missing = "right_actuator" if named[0] == "left_actuator" else "left_actuator"
+            others = [a for a in found if m.actuator(a).name != getattr(config, named[0])]
+            what = (
+                f"{named[0]} = {getattr(config, named[0])!r} is named; the other wheel is one of {_listed(m, others)}"
             )
-        changes[missing] = m.actuator(others[0]).name
-    elif config.left_actuator is None:
-        left, right = _wheel_pair(m, d, config)
+            raise ConfigError(missing, f"{what}: name it")
+        left, right = _wheel_pair(m, d, config, found)
         changes |= {
             k: m.actuator(a).name
             for k, a in (("left_actuator", left), ("right_actuator", right))
@@ -143,9 +142,8 @@ def _root(m: mujoco.MjModel, a: int) -> int:
     return int(m.body_rootid[m.jnt_bodyid[m.actuator_trnid[a, 0]]])
 
 
-def _wheel_pair(m: mujoco.MjModel, d: mujoco.MjData, config: MujocoConfig) -> tuple[int, int]:
-    """The (left, right) wheel servos: the model's only two, on one axle, one on either side."""
-    found = _candidates(m, d)
+def _wheel_pair(m: mujoco.MjModel, d: mujoco.MjData, config: MujocoConfig, found: list[int]) -> tuple[int, int]:
+    """The (left, right) wheel servos: the model's only two (``found``), on one axle, one on either side."""
     roots = sorted({_root(m, a) for a in found})
     if len(roots) > 1:
         bodies = "; ".join(
