@@ -64,12 +64,12 @@ def check(
     Bad input (the budget, a flag) is a ConfigError naming the file and key before anything runs.
     """
     from mlpfac.outputs import write_atomic
+    from mlpfac.sweeps.engine import SWEEP_COLUMNS, check_execution_flags, report, sweep_into, sweep_meta
+    from mlpfac.sweeps.folders import OutputError, _oserror
+    from mlpfac.sweeps.plan import check_writable
     from mlpfac.sweeps.worker import not_in_a_worker
 
     not_in_a_worker("check")
-    from mlpfac.sweeps.engine import SWEEP_COLUMNS, check_execution_flags, report, sweep_into
-    from mlpfac.sweeps.folders import OutputError, _oserror
-    from mlpfac.sweeps.plan import check_writable
 
     path = Path(budget)
     out = DEFAULT_OUT if out is None else Path(out)
@@ -91,8 +91,7 @@ def check(
     check_writable(out)
     argv = ["mlpfac", "check", str(budget), "--out", str(out), "--workers", str(n_workers)]
     argv += ["--baseline", str(baseline)] if baseline is not None else []
-    meta = {"command": "check", "budget": str(path), "scenarios": b.scenarios, "seeds": b.seeds_text}
-    meta |= {"controllers": sorted({j.controller for j in jobs}), "duration": b.duration, "runs": len(jobs)}
+    meta = sweep_meta("check", b.scenarios, b.seeds_text, b.duration, jobs) | {"budget": str(path)}
     done = sweep_into(jobs, out, "sweep", SWEEP_COLUMNS, meta, shlex.join(argv), workers=n_workers)
     result = CheckResult(path, out, EXIT_MISS, files=list(done.paths), duration=b.duration)
     if done.code is not None:

@@ -224,14 +224,7 @@ def sweep_folder(
         start_pool_server()  # the workers' fork server warms up while the runs are planned
     jobs = plan(scenarios, names, seed_list, duration)
     check_writable(out)
-    meta = {
-        "command": stem,
-        "scenarios": list(scenarios),
-        "controllers": sorted({j.controller for j in jobs}),
-        "seeds": seeds,
-        "duration": duration,
-        "runs": len(jobs),
-    }
+    meta = sweep_meta(stem, scenarios, seeds, duration, jobs)
     client = connect(scheduler, scheduler_timeout) if scheduler else None
     try:
         return sweep_into(jobs, out, stem, columns, meta, command or f"mlpfac {stem} ...", workers=workers,
@@ -240,6 +233,18 @@ def sweep_folder(
     finally:
         if client is not None:
             client.close()
+
+
+def sweep_meta(command: str, scenarios: list[str], seeds: str, duration: float | None, jobs: list[Job]) -> dict:
+    """What sweep.json and paired.json say of how they were made (their ``meta``)."""
+    return {
+        "command": command,
+        "scenarios": list(scenarios),
+        "controllers": sorted({j.controller for j in jobs}),
+        "seeds": seeds,
+        "duration": duration,
+        "runs": len(jobs),
+    }
 
 
 def report(done: Swept) -> int:
