@@ -15,7 +15,7 @@ import signal
 import stat
 import tempfile
 import threading
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from contextlib import contextmanager, suppress
 from pathlib import Path
 
@@ -113,14 +113,42 @@ def folder_lock(target: Path, what: str = "--out") -> Iterator[None]:
         os.close(fd)  # closing the descriptor releases the lock
 
 
-def write_run_folder(out: Path, config: str, metrics: dict, rrd: bytes | None = None) -> None:
-    """config.toml, run.rrd (if given), then metrics.json: its presence means the folder is whole."""
+def write_run_folder(out: Path, config: str, metrics: dict) -> None:
+    """config.toml, then metrics.json: its presence means the folder is whole."""
     with sigint_deferred():
         (out / "metrics.json").unlink(missing_ok=True)  # a run being replaced is not whole meanwhile
         write_atomic(out / "config.toml", config)
-        if rrd is not None:
-            write_atomic(out / "run.rrd", rrd)
         write_atomic(out / "metrics.json", json.dumps(metrics, indent=2) + "\n")
+
+
+def write_folder_whole(target: Path, files: dict[str, str | bytes]) -> None:
+    """The folder ``target`` holding just ``files`` (name -> text or bytes), written beside it at
+    ``.NAME.tmp-XXXX`` and renamed into place: even a killed process leaves ``target`` as it was or
+    whole, never half written. What a killed write leaves is removed by :func:`remove_staged`."""
+    target.parent.mkdir(parents=True, exist_ok=True)
+    with sigint_deferred():
+        staged = Path(tempfile.mkdtemp(dir=target.parent, prefix=f".{target.name}.tmp-"))
+        try:
+            os.chmod(staged, 0o777 & ~_umask())
+            for name, data in files.items():
+                try:
+                    (staged / name).write_bytes(data.encode() if isinstance(data, str) else data)
+                except OSError as err:  # name the file as it will be, not its staging place
+                    raise OSError(err.errno, err.strerror, str(target / name)) from err
+            _replace(staged, target)
+        except BaseException:
+            _remove(staged)
+            raise
+
+
+def remove_staged(folders: Iterable[Path]) -> None:
+    """Remove what :func:`write_folder_whole` or :class:`Stage` left in ``folders`` when killed
+    (``.NAME.tmp-*``); hold the folder's lock."""
+    for folder in folders:
+        with suppress(OSError):
+            for name in os.listdir(folder):
+                if name.startswith(".") and ".tmp-" in name:
+                    _remove(folder / name)
 
 
 def write_run(out: Path, scn, rec) -> dict:

@@ -10,6 +10,7 @@ import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import pytest
 
@@ -96,9 +97,35 @@ def test_workers_die_with_the_sweep(tmp_path, sig):
     if sig == signal.SIGKILL:  # the next sweep into the folder removes what the killed one left
         (out / ".tmp").mkdir(exist_ok=True)
         (out / ".tmp" / "mlpfac-stale.rrd").write_bytes(b"RRF2")
+        staged = out / "paper" / "adaptive" / ".seed-0150.tmp-killed"  # a folder killed half written
+        staged.mkdir(parents=True)
+        (staged / "config.toml").write_text("")
         jobs = sweep.plan(["paper"], ["adaptive"], [0], 1.0)
         sweep.execute(jobs, out, save_rrd=True)
-        assert not (out / ".tmp").exists()
+        assert not (out / ".tmp").exists() and not staged.exists()
+
+
+def test_a_folder_is_replaced_whole_or_not_at_all(tmp_path, monkeypatch):
+    """A write that fails (or a process killed) half way through a run folder leaves the folder it
+    replaces as it was, and nothing beside it."""
+    out = tmp_path / "o"
+    jobs = sweep.plan(["paper"], ["adaptive"], [0], 0.5)
+    sweep.execute(jobs, out, save_rrd=True)
+    d = jobs[0].folder(out)
+    before = {f.name: f.read_bytes() for f in d.iterdir()}
+    assert set(before) == {"config.toml", "run.rrd", "metrics.json"}
+    real = Path.write_bytes
+
+    def fail_on_the_recording(path, data):
+        if path.name == "run.rrd":
+            raise OSError(28, "No space left on device", str(path))
+        return real(path, data)
+
+    monkeypatch.setattr(Path, "write_bytes", fail_on_the_recording)
+    with pytest.raises(sweep.OutputError, match=r"seed-0000/run.rrd"):
+        sweep.write_result(out, jobs[0], {"error": None, "metrics": {"status": "ok"}, "rrd": b"RRF2"})
+    assert {f.name: f.read_bytes() for f in d.iterdir()} == before
+    assert sorted(p.name for p in d.parent.iterdir()) == ["seed-0000"]
 
 
 # A signal that lands while cf.wait takes its futures' locks one by one (a window a loaded machine

@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from mlpfac.exceptions import ConfigError, MlpfacError
-from mlpfac.outputs import Terminated, folder_lock, sigint_deferred
+from mlpfac.outputs import Terminated, folder_lock, remove_staged, sigint_deferred
 from mlpfac.sweeps.folders import _oserror, check_done, write_result
 from mlpfac.sweeps.plan import Job
 from mlpfac.sweeps.worker import _worker_init, pool_context, run_task
@@ -115,6 +115,7 @@ def _execute(jobs, out, workers, client, batched, batch_size, save_rrd, progress
     out.mkdir(parents=True, exist_ok=True)
     tmp = out / TMP_DIR
     shutil.rmtree(tmp, ignore_errors=True)  # what a killed sweep left; we hold the lock
+    remove_staged({j.folder(out).parent for j in jobs})
     done: dict[tuple, dict] = {}
     todo: list[Job] = []
     redo: dict[str, int] = {}

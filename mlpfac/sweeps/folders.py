@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from mlpfac.exceptions import MlpfacError
-from mlpfac.outputs import sigint_deferred, write_atomic, write_run_folder
+from mlpfac.outputs import write_folder_whole
 
 if TYPE_CHECKING:
     from mlpfac.sweeps.plan import Job
@@ -21,10 +21,11 @@ class OutputError(MlpfacError):
 
 
 def write_result(out: Path, job: Job, result: dict) -> None:
-    """config.toml, run.rrd, then metrics.json (its presence means the folder is whole); or error.txt.
+    """The folder of one run, config.toml, run.rrd and metrics.json (or config.toml and error.txt),
+    put in place whole in one rename: a killed sweep leaves each folder as it was or whole.
 
     With a recording, metrics.json also holds its size and sha256 ("rrd"), checked on resume.
-    An OSError (a full disk) leaves the folder without metrics.json: not done, run again on resume.
+    An OSError (a full disk) leaves the folder as it was: run again on resume if not done.
     """
     d = job.folder(out)
     try:
@@ -34,18 +35,16 @@ def write_result(out: Path, job: Job, result: dict) -> None:
 
 
 def _write_result(d: Path, job: Job, result: dict) -> None:
-    with sigint_deferred():  # a Ctrl-C now waits for the folder to be whole
-        d.mkdir(parents=True, exist_ok=True)
-        if result["error"] is not None:
-            (d / "metrics.json").unlink(missing_ok=True)  # a stale run being replaced is not whole
-            write_atomic(d / "config.toml", job.config)
-            write_atomic(d / "error.txt", result["error"])
-            return
-        (d / "error.txt").unlink(missing_ok=True)
-        m, rrd = result["metrics"], result.get("rrd")
-        if rrd is not None:
-            m = m | {"rrd": {"bytes": len(rrd), "sha256": hashlib.sha256(rrd).hexdigest()}}
-        write_run_folder(d, job.config, m, rrd)
+    if result["error"] is not None:
+        write_folder_whole(d, {"config.toml": job.config, "error.txt": result["error"]})
+        return
+    m, rrd = result["metrics"], result.get("rrd")
+    files: dict[str, str | bytes] = {"config.toml": job.config}
+    if rrd is not None:
+        m = m | {"rrd": {"bytes": len(rrd), "sha256": hashlib.sha256(rrd).hexdigest()}}
+        files["run.rrd"] = rrd
+    files["metrics.json"] = json.dumps(m, indent=2) + "\n"
+    write_folder_whole(d, files)
 
 
 def _number(x) -> bool:
