@@ -7,7 +7,8 @@ written independently in numpy) are ``benchmarks/perf_floor.py``'s job. This scr
 what a sweep adds, side by side in one process (interleaved repeats, the minimum kept):
 
 1. sweep throughput with 2 workers vs 1 (adaptive runs on the MuJoCo robot, eight-nominal), the
-   fixed cost of starting fresh worker processes included (imports and numba's cache, about 1 s);
+   fixed cost of starting the workers included, and the CPU time of the sweep and every process
+   under it (its fork server's workers too);
 2. batched seeds: ``runner.run_batch`` of 64 seeds of ``adaptive`` and ``adaptive-best``, CPU time
    per seed-step against one reference short-form EKF update of the same size (``perf_floor``'s
    ``UpdateFloor``, alpha = 171, m = 3; target <= 1.2: everything but the update amortised), and
@@ -19,6 +20,7 @@ what a sweep adds, side by side in one process (interleaved repeats, the minimum
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import subprocess
 import sys
@@ -63,6 +65,52 @@ def side_by_side(fns: dict, repeat: int) -> dict[str, float]:
 # --------------------------------------------------------------------------------------------
 
 
+@contextlib.contextmanager
+def process_tree_cpu(every: float = 0.05):
+    """CPU seconds of this process and of every process under it while the block runs (a list
+    holding one number, filled on exit). Workers forked by a fork server are the server's children,
+    never reaped by this process, so getrusage's RUSAGE_CHILDREN misses them: each descendant's
+    CPU time is sampled every ``every`` seconds and its last value kept (psutil; without it, this
+    process and the children it reaped only)."""
+    import resource
+
+    def own() -> float:
+        r = [resource.getrusage(w) for w in (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN)]
+        return sum(x.ru_utime + x.ru_stime for x in r)
+
+    try:
+        import psutil
+    except ImportError:
+        psutil = None
+    spent, seen, stop = [0.0], {}, threading.Event()
+    before = {c.pid: sum(c.cpu_times()[:2]) for c in psutil.Process().children(recursive=True)} if psutil else {}
+
+    def sample():
+        while not stop.is_set():
+            for c in psutil.Process().children(recursive=True):
+                try:
+                    seen[c.pid] = sum(c.cpu_times()[:2]) - before.get(c.pid, 0.0)
+                except psutil.Error:
+                    pass
+            stop.wait(every)
+
+    th = threading.Thread(target=sample, daemon=True) if psutil else None
+    c0 = resource.getrusage(resource.RUSAGE_SELF) if psutil else None
+    t0 = own()
+    if th:
+        th.start()
+    try:
+        yield spent
+    finally:
+        stop.set()
+        if th:
+            th.join()
+            c1 = resource.getrusage(resource.RUSAGE_SELF)
+            spent[0] = (c1.ru_utime + c1.ru_stime - c0.ru_utime - c0.ru_stime) + sum(seen.values())
+        else:
+            spent[0] = own() - t0
+
+
 def bench_sweep(seeds: int, duration: float, repeat: int) -> None:
     print(f"1. sweep throughput ({os.cpu_count()} CPUs)")
     jobs = sweep.plan(["eight-nominal"], ["adaptive"], list(range(seeds)), duration)
@@ -72,21 +120,15 @@ def bench_sweep(seeds: int, duration: float, repeat: int) -> None:
     def once(workers: int):
         return lambda: sweep.execute(jobs, tmp / f"w{workers}-{next(i)}", workers=workers, progress=False)
 
-    import resource
-
-    def cpu() -> float:
-        r = [resource.getrusage(w) for w in (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN)]
-        return sum(x.ru_utime + x.ru_stime for x in r)
-
     cpu_s = {}
 
     def timed(workers: int):
         fn = once(workers)
 
         def go():
-            c0 = cpu()
-            fn()
-            cpu_s[workers] = cpu() - c0
+            with process_tree_cpu() as spent:
+                fn()
+            cpu_s[workers] = spent[0]
 
         return go
 

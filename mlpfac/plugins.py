@@ -20,9 +20,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from mlpfac.exceptions import ConfigError
+from mlpfac.toml_data import FOLDER_NAME
 
 GROUP = "mlpfac.controllers"  # the entry-point group an installed package registers controllers in
-NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._+-]*")  # a controller's name is a folder name
 _LOCAL: dict[str, type] = {}  # classes handed to the Python API that no file or module names
 
 
@@ -136,7 +136,7 @@ def _name(cls: type, entry: str | None, where: str) -> str:
     name = entry or getattr(cls, "name", None)
     if not isinstance(name, str):
         name = cls.__name__
-    if not NAME.fullmatch(name):
+    if not FOLDER_NAME.fullmatch(name):
         raise ConfigError(
             where, f"the controller's name {name!r} must be letters, digits and . _ + - (it names folders)"
         )

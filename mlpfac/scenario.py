@@ -11,7 +11,6 @@ import dataclasses
 import importlib.resources
 import math
 import os
-import re
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
@@ -28,9 +27,8 @@ from mlpfac.law import Law
 from mlpfac.networks import Networks
 from mlpfac.plugins import Plugin, absolute_spec, is_plugin_spec, resolve
 from mlpfac.reference import make_reference
-from mlpfac.toml_data import build, check_keys, number, subtable, to_toml, typed  # noqa: F401 (mlpfac.scenario.to_toml)
+from mlpfac.toml_data import FOLDER_NAME, build, check_keys, number, subtable, to_toml, typed  # noqa: F401 (mlpfac.scenario.to_toml)
 
-NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._+-]*")  # a scenario's name is a folder name in runs/ and sweeps
 MEMORY_SHARE = 0.8  # a run may plan to use at most this share of the memory available now
 
 TOP_KEYS = {
@@ -273,7 +271,7 @@ def parse(table: dict, source: str = "<scenario>", check_model: bool = True) -> 
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise ConfigError(f"{source} seed", f"expected a whole number >= 0, got {seed!r}")
     name = table.get("name", "scenario")
-    if not isinstance(name, str) or not NAME.fullmatch(name):
+    if not isinstance(name, str) or not FOLDER_NAME.fullmatch(name):
         raise ConfigError(
             f"{source} name", f"a scenario name is letters, digits and . _ + - (it names folders), got {name!r}"
         )

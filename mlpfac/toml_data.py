@@ -6,10 +6,15 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import re
 import types
 import typing
 
 from mlpfac.exceptions import ConfigError
+
+FOLDER_NAME = re.compile(
+    r"[A-Za-z0-9][A-Za-z0-9._+-]*"
+)  # a scenario's or a controller's name: a folder in runs/ and sweeps
 
 NO_LIMIT = {"v_max", "omega_max"}  # keys where inf means "no limit" (None)
 INF_OK = NO_LIMIT | {
