@@ -88,10 +88,8 @@ def process_tree_cpu(every: float = 0.05):
     def sample():
         while not stop.is_set():
             for c in psutil.Process().children(recursive=True):
-                try:
+                with contextlib.suppress(psutil.Error):
                     seen[c.pid] = sum(c.cpu_times()[:2]) - before.get(c.pid, 0.0)
-                except psutil.Error:
-                    pass
             stop.wait(every)
 
     th = threading.Thread(target=sample, daemon=True) if psutil else None

@@ -118,7 +118,7 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     from mlpfac.exceptions import MlpfacError, PluginError
-    from mlpfac.outputs import Terminated, handle_sigterm
+    from mlpfac.signals import Terminated, handle_sigterm
 
     handle_sigterm()
 
@@ -197,12 +197,12 @@ def cmd_check(args: argparse.Namespace) -> int:
 
 
 def cmd_view(args: argparse.Namespace) -> int:
-    from mlpfac.log import sinks
+    from mlpfac.log import compare
 
     if args.save is not None:
-        print(f"{len(args.runs)} runs -> {sinks.save_comparison(args.runs, args.save)}")
+        print(f"{len(args.runs)} runs -> {compare.save_comparison(args.runs, args.save)}")
     else:
-        sinks.view(args.runs, bind=args.bind)
+        compare.view(args.runs, bind=args.bind)
     return 0
 
 

@@ -12,10 +12,10 @@ from typing import Protocol
 
 import numpy as np
 
-from mlpfac.adaptive import VARIANTS
 from mlpfac.exceptions import ConfigError, PluginError
 from mlpfac.law import Law
 from mlpfac.plugins import Plugin, one_line
+from mlpfac.variants import CONTROLLERS  # noqa: F401 (the shipped names, as mlpfac.controllers.CONTROLLERS)
 
 MAX_TELEMETRY = 256  # values per telemetry key of a user's controller
 
@@ -154,9 +154,6 @@ class Kanayama:
         from mlpfac.kernels import KANAYAMA
 
         return KANAYAMA, np.array(self._consts, dtype=float)
-
-
-CONTROLLERS = (*VARIANTS, "corradini", "kanayama", "oracle", "oracle-kanayama")  # the oracles: mlpfac/oracle.py
 
 
 class PluginController:

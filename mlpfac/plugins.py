@@ -21,6 +21,7 @@ from pathlib import Path
 
 from mlpfac.exceptions import ConfigError
 from mlpfac.toml_data import FOLDER_NAME
+from mlpfac.variants import CONTROLLERS
 
 GROUP = "mlpfac.controllers"  # the entry-point group an installed package registers controllers in
 _LOCAL: dict[str, type] = {}  # classes handed to the Python API that no file or module names
@@ -46,8 +47,6 @@ class Plugin:
 
 def is_plugin_spec(text: str) -> bool:
     """Whether a controller name is a plug-in (not one of the shipped controllers)."""
-    from mlpfac.controllers import CONTROLLERS
-
     return text not in CONTROLLERS
 
 
@@ -120,8 +119,6 @@ def resolve(spec: str, params: dict | None, T: float, where: str, params_where: 
 
 
 def _choices() -> str:
-    from mlpfac.controllers import CONTROLLERS
-
     eps = sorted(entry_points())
     return (
         f"choose one of {', '.join(CONTROLLERS)}"
@@ -131,8 +128,6 @@ def _choices() -> str:
 
 
 def _name(cls: type, entry: str | None, where: str) -> str:
-    from mlpfac.controllers import CONTROLLERS
-
     name = entry or getattr(cls, "name", None)
     if not isinstance(name, str):
         name = cls.__name__

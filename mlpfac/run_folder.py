@@ -149,8 +149,9 @@ def _open_sink(recording: Recording, scn, save: tuple[Path, Path] | None):
 def _run_into(folder: Stage, out: Path, scn, built, sink, baseline, painter) -> tuple:
     """The run, then its folder (config.toml, metrics.json, figure1.png) in the stage. A write that
     fails is a ConfigError naming the file where it would have gone."""
-    from mlpfac.outputs import Terminated, write_run
+    from mlpfac.outputs import write_run
     from mlpfac.runner import run
+    from mlpfac.signals import Terminated
 
     rec = run(scn, sink=sink, built=built)
     writing = folder.path / "metrics.json"

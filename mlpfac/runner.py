@@ -10,11 +10,11 @@ import numpy as np
 
 from mlpfac.factory import make_controller, make_plant
 from mlpfac.kernels import bad_seeds, tracking_errors
-from mlpfac.outputs import Terminated
 from mlpfac.record import RunRecord
 from mlpfac.reference import sample
 from mlpfac.scenario import Scenario
 from mlpfac.segment import BAD, segment
+from mlpfac.signals import Terminated
 
 FLUSH_EVERY = 250  # steps between sends to a log sink
 

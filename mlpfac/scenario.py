@@ -205,7 +205,7 @@ def load(name_or_path: str | Path, build: bool = True) -> Scenario:
 def _provenance(scn: Scenario) -> tuple[dict, dict]:
     """Build the plant once (every check made): what it simulates, and the [plant] keys it found."""
     from mlpfac import __version__
-    from mlpfac.factory import make_plant
+    from mlpfac.plants import make_plant
     from mlpfac.reference import sample
 
     plant = make_plant(scn, sample(scn.reference, np.arange(2) * scn.T))

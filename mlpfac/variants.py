@@ -1,5 +1,7 @@
-"""The named variants of the adaptive controller (:class:`~mlpfac.adaptive.AdaptiveConfig` fields,
-and :class:`~mlpfac.networks.Networks` fields under "networks"); :mod:`mlpfac.adaptive` exports them."""
+"""The shipped controllers' names (:data:`CONTROLLERS`), and the named variants of the adaptive
+controller (:class:`~mlpfac.adaptive.AdaptiveConfig` fields, and :class:`~mlpfac.networks.Networks`
+fields under "networks"); :mod:`mlpfac.adaptive` exports them. No imports of the package: the
+controllers and the plug-in loader both read these names."""
 
 from __future__ import annotations
 
@@ -43,3 +45,6 @@ VARIANTS["adaptive-real"] = VARIANTS["adaptive-input-delay"] | {
     "law_gains": (10.0, 150.0, 16.0),
     "delay_finder": "bank",
 }
+
+# Every shipped controller (the oracles: mlpfac/oracle.py); any other name is a plug-in's.
+CONTROLLERS = (*VARIANTS, "corradini", "kanayama", "oracle", "oracle-kanayama")

@@ -18,7 +18,7 @@ import pytest
 
 from mlpfac import log
 from mlpfac.exceptions import ConfigError
-from mlpfac.log import sinks
+from mlpfac.log import compare, sinks
 
 WEIGHT_LAYERS = {"NN_f/output": (0, 54), "NN_f/hidden": (54, 162), "NN_G/output": (162, 168), "NN_G/hidden": (168, 171)}
 POSE_ENTITIES = ("/world/robot", "/world/reference_now", "/top/plane/robot", "/top/plane/reference_now")
@@ -304,7 +304,7 @@ def test_no_display_for_spawn_or_view(tmp_path, monkeypatch):
         log.make_sink(spawn=True)
     (tmp_path / "run.rrd").write_bytes(b"")
     with pytest.raises(ConfigError, match="no display"):
-        sinks.view([tmp_path])
+        compare.view([tmp_path])
 
 
 def test_view_needs_a_run_in_each_folder(tmp_path):
@@ -312,7 +312,7 @@ def test_view_needs_a_run_in_each_folder(tmp_path):
     (tmp_path / "good" / "run.rrd").write_bytes(b"")
     (tmp_path / "empty").mkdir()
     with pytest.raises(ConfigError) as err:
-        sinks.view([tmp_path / "good", tmp_path / "empty"])
+        compare.view([tmp_path / "good", tmp_path / "empty"])
     assert err.value.where == str(tmp_path / "empty")
     assert err.value.what == "no run.rrd in this folder"
 
@@ -346,7 +346,7 @@ def test_recording_check_finds_a_file_cut_short(record, tmp_path, save_rrd):
 
 
 def test_moved_names_still_reach_log():
-    assert log.make_sink is sinks.make_sink and log.view is sinks.view
+    assert log.make_sink is sinks.make_sink and log.view is compare.view
 
 
 @pytest.mark.parametrize("scenario", ["paper", "eight-nominal"])  # the kinematic plant, the MuJoCo robot

@@ -3,13 +3,13 @@ network weight, the EKF's covariance, the plant events and the final status, wit
 
 The only package that imports rerun: import it lazily, so runs without logging do not pay for it.
 
-- :mod:`~mlpfac.log.sinks`: opening outputs (file, viewer, web viewer) and viewers; ``make_sink``
+- :mod:`~mlpfac.log.sinks`: opening outputs (file, viewer, web viewer) and starting viewers; ``make_sink``
 - :mod:`~mlpfac.log.recorder`: ``RerunSink``, the runner's ``begin`` / ``flush`` / ``end``
 - :mod:`~mlpfac.log.schema`: what each record array and telemetry key becomes (paths, names, colours)
 - :mod:`~mlpfac.log.series`: a record's rows as scalar columns, sent in batches
 - :mod:`~mlpfac.log.scene`: robot shapes, poses and paths in the 3D world and the top view
 - :mod:`~mlpfac.log.layout`: the default blueprint; :mod:`~mlpfac.log.about`: its text panel
-- :mod:`~mlpfac.log.compare`: several saved runs in one recording (``mlpfac view A B``)
+- :mod:`~mlpfac.log.compare`: saved runs opened in a viewer, several as one recording (``mlpfac view A B``)
 
 No wall-clock time is recorded, so the same run gives the same decoded contents. The bytes of two
 .rrd files still differ: rerun stamps every chunk and row with a time-based unique id.
@@ -21,6 +21,7 @@ import os
 # (sinks.check_recording) and reports one line. An explicit RUST_LOG is left alone.
 os.environ.setdefault("RUST_LOG", "warn,re_log_encoding::rrd=off,re_sdk::recording_stream=off")
 
+from mlpfac.log.compare import view  # noqa: E402
 from mlpfac.log.layout import blueprint  # noqa: E402
 from mlpfac.log.recorder import (  # noqa: E402
     APPLICATION_ID,
@@ -33,7 +34,7 @@ from mlpfac.log.recorder import (  # noqa: E402
 from mlpfac.log.scene import PATH_POINT_STRIDE, PATH_STRIDE, POSE_STRIDE, driven_path  # noqa: E402
 from mlpfac.log.schema import PATH_COLOR, REF_COLOR, ROBOT_COLOR, SCHEMA, WEIGHT_COLORS, Row  # noqa: E402
 from mlpfac.log.series import Series, plan_series  # noqa: E402
-from mlpfac.log.sinks import check_recording, make_sink, rerun_executable, view  # noqa: E402
+from mlpfac.log.sinks import check_recording, make_sink, rerun_executable  # noqa: E402
 
 __all__ = [
     "APPLICATION_ID",

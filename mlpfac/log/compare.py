@@ -1,4 +1,5 @@
-"""Several saved runs in one recording, to compare them in one viewer with the default layout.
+"""Saved runs in a viewer: one run's recording as it is; several in one recording, to compare them
+with the default layout.
 
 Each run's recording is read back and sent again under ``runs/<controller>-s<seed>/``; its plotted
 lines, driven path and heading arrow take its controller's colour (a second run of one controller
@@ -10,6 +11,7 @@ their figures (from each folder's metrics.json).
 from __future__ import annotations
 
 import json
+import subprocess
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -20,6 +22,15 @@ from mlpfac.exceptions import ConfigError
 from mlpfac.log.layout import ABOUT, layout
 from mlpfac.log.recorder import APPLICATION_ID
 from mlpfac.log.schema import REFSPEED_COLOR, RGB, entity_part
+from mlpfac.log.sinks import (
+    LOCALHOST,
+    _check_display,
+    _check_writable,
+    _free_port,
+    _start_viewer,
+    _url_host,
+    check_recording,
+)
 from mlpfac.plots.colors import NAMES, controller_colors
 
 COMPARE_REF_COLOR: RGB = (110, 110, 110)  # the reference, when the runs' colours include orange
@@ -45,10 +56,33 @@ def run_files(runs: Sequence[Path | str]) -> list[tuple[Path, dict]]:
     return out
 
 
+def view(run_dirs: Sequence[Path | str], bind: str = LOCALHOST) -> subprocess.Popen:
+    """Open one native rerun viewer with the run.rrd of each folder; returns the viewer process.
+    Several runs are sent as one comparison (:mod:`mlpfac.log.compare`): the same layout, every
+    run overlaid in its controller's colour.
+
+    The viewer runs on its own (it outlives this process) once it listens. Raises ConfigError for
+    a folder without run.rrd, when there is no display, and when the viewer exits at once or
+    never listens.
+    """
+    files = run_files(run_dirs)
+    _check_display("view")
+    port = _free_port()
+    if len(files) == 1:
+        return _start_viewer("view", ["--bind", bind, "--port", str(port), str(files[0][0])], ports=(port,), host=bind)
+    proc = _start_viewer("view", ["--bind", bind, "--port", str(port)], ports=(port,), host=bind)
+    rec = rr.RecordingStream(APPLICATION_ID, recording_id="compare", send_properties=False)
+    rec.set_log_time_enabled(False)
+    rec.set_log_tick_enabled(False)
+    rec.set_sinks(rr.GrpcSink(f"rerun+http://{_url_host(bind)}:{port}/proxy"))
+    send_comparison(rec, files)
+    rec.flush()
+    rec.disconnect()
+    return proc
+
+
 def save_comparison(runs: Sequence[Path | str], path: Path | str) -> Path:
     """Write the runs' comparison recording to ``path`` (checked and read back like a run's)."""
-    from mlpfac.log.sinks import _check_writable, check_recording
-
     files = run_files(runs)
     path = Path(path)
     _check_writable(path)

@@ -259,37 +259,3 @@ def _free_port() -> int:
 def _first_line(err: BaseException) -> str:
     lines = str(err).strip().splitlines()
     return lines[0] if lines else type(err).__name__
-
-
-def view(run_dirs: Sequence[Path | str], bind: str = LOCALHOST) -> subprocess.Popen:
-    """Open one native rerun viewer with the run.rrd of each folder; returns the viewer process.
-    Several runs are sent as one comparison (:mod:`mlpfac.log.compare`): the same layout, every
-    run overlaid in its controller's colour.
-
-    The viewer runs on its own (it outlives this process) once it listens. Raises ConfigError for
-    a folder without run.rrd, when there is no display, and when the viewer exits at once or
-    never listens.
-    """
-    from mlpfac.log.compare import run_files, send_comparison
-
-    files = run_files(run_dirs)
-    _check_display("view")
-    port = _free_port()
-    if len(files) == 1:
-        return _start_viewer("view", ["--bind", bind, "--port", str(port), str(files[0][0])], ports=(port,), host=bind)
-    proc = _start_viewer("view", ["--bind", bind, "--port", str(port)], ports=(port,), host=bind)
-    rec = rr.RecordingStream(APPLICATION_ID, recording_id="compare", send_properties=False)
-    rec.set_log_time_enabled(False)
-    rec.set_log_tick_enabled(False)
-    rec.set_sinks(rr.GrpcSink(f"rerun+http://{_url_host(bind)}:{port}/proxy"))
-    send_comparison(rec, files)
-    rec.flush()
-    rec.disconnect()
-    return proc
-
-
-def save_comparison(run_dirs: Sequence[Path | str], path: Path | str) -> Path:
-    """The comparison of several runs (:func:`view`'s) written to an .rrd file instead."""
-    from mlpfac.log.compare import save_comparison as save
-
-    return save(run_dirs, path)

@@ -1,0 +1,43 @@
+"""The plants a run drives: the kinematic unicycle (:mod:`~mlpfac.plants.kinematic`) and a MuJoCo
+robot (:mod:`~mlpfac.plants.mujoco`); :func:`make_plant` builds the one a scenario names.
+
+Only this package imports mujoco, and only in its modules, not here: importing the package is cheap.
+"""
+
+from __future__ import annotations
+
+from typing import Protocol
+
+import numpy as np
+
+from mlpfac.exceptions import ConfigError
+
+
+class PlantSpec(Protocol):
+    """What :func:`make_plant` reads of a :class:`~mlpfac.scenario.Scenario`."""
+
+    plant_kind: str
+    plant_config: object
+    T: float
+    source: str
+    events: tuple
+
+
+def make_plant(scn: PlantSpec, ref: np.ndarray):
+    """The scenario's plant; ``ref`` (N + 1, 5) are the reference samples the kinematic plant needs.
+    A plant that cannot be built, or cannot apply an event, is a ConfigError naming the file."""
+    try:
+        if scn.plant_kind == "kinematic":
+            from mlpfac.plants.kinematic import KinematicPlant
+
+            plant = KinematicPlant(scn.plant_config, scn.T, ref)
+        else:
+            from mlpfac.plants.mujoco import MujocoPlant
+
+            plant = MujocoPlant(scn.plant_config, scn.T)
+    except ConfigError as err:
+        where = err.where if err.where.startswith(scn.source) else f"{scn.source} [plant] {err.where}".rstrip()
+        raise ConfigError(where, err.what) from None
+    for i, ev in enumerate(scn.events):
+        plant.check_event(ev, f"{scn.source} [[events]] #{i + 1}")
+    return plant

@@ -60,14 +60,12 @@ from pathlib import Path
 from mlpfac.exceptions import ConfigError
 from mlpfac.outputs import folder_lock
 from mlpfac.sweeps.execute import (  # noqa: F401  (the engine's API, used as mlpfac.sweeps.engine.*)
-    BLAS_THREAD_VARIABLES,
     TMP_DIR,
     Outcome,
     WorkerLostError,
     connect,
     execute,
     make_tasks,
-    one_blas_thread,
 )
 from mlpfac.sweeps.folders import (  # noqa: F401
     PHASES,
@@ -89,7 +87,7 @@ from mlpfac.sweeps.tables import (  # noqa: F401
     write_paired,
     write_tables,
 )
-from mlpfac.sweeps.worker import rrd_is_whole, run_task  # noqa: F401
+from mlpfac.sweeps.worker import BLAS_THREAD_VARIABLES, one_blas_thread, rrd_is_whole, run_task  # noqa: F401  # noqa: F401
 
 EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_TERMINATED = 0, 1, 2, 130, 143
 WORKERS_PER_CORE = 4  # --workers above this many per core is refused (each worker holds ~130 MB)

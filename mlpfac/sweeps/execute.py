@@ -11,13 +11,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from mlpfac.exceptions import ConfigError, MlpfacError
-from mlpfac.outputs import Terminated, folder_lock, remove_staged, sigint_deferred
+from mlpfac.outputs import folder_lock, remove_staged
+from mlpfac.signals import Terminated, sigint_deferred
 from mlpfac.sweeps.folders import _oserror, check_done, write_result
 from mlpfac.sweeps.plan import Job
-from mlpfac.sweeps.worker import _worker_init, pool_context, run_task
+from mlpfac.sweeps.worker import _worker_init, one_blas_thread, pool_context, run_task
 
 TMP_DIR = ".tmp"  # OUT/.tmp: recordings being made; removed when the sweep ends and when the next one starts
-BLAS_THREAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
 EXIT_GRACE_S = 15.0  # how long a finished worker may take to exit before it is killed
 POLL_S = 0.2  # the longest a Ctrl-C or SIGTERM waits while a local pool is waited on
 
@@ -67,7 +67,7 @@ def execute(
 
     ``client`` is a ``dask.distributed.Client`` or None (local). ``progress``: None shows a bar
     only when stderr is a terminal. KeyboardInterrupt (Ctrl-C, or SIGTERM as
-    :class:`~mlpfac.outputs.Terminated`) stops the workers and returns with ``interrupted=True``;
+    :class:`~mlpfac.signals.Terminated`) stops the workers and returns with ``interrupted=True``;
     every folder written so far is whole. ``out`` is locked for the sweep (``folder_lock``) unless
     the caller holds the lock (``locked``); recordings are made in ``out/.tmp``, which is removed at
     the end and, left by a killed sweep, at the start. A failed write raises :class:`OutputError`.
@@ -184,20 +184,6 @@ def _progress(total: int, progress: bool | None):
     return tqdm(
         total=total, unit="run", desc="runs", disable=None if progress is None else not progress, dynamic_ncols=True
     )
-
-
-@contextlib.contextmanager
-def one_blas_thread() -> Iterator[None]:
-    """Worker processes started in this block run BLAS on one thread each (unless the user set the
-    variables): N workers on N cores with multi-threaded BLAS are several times slower than their sum."""
-    added = [v for v in BLAS_THREAD_VARIABLES if v not in os.environ]
-    try:
-        for v in added:
-            os.environ[v] = "1"
-        yield
-    finally:
-        for v in added:
-            os.environ.pop(v, None)
 
 
 def _pool_results(

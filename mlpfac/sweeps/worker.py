@@ -7,11 +7,13 @@ import os
 import sys
 import tempfile
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 from mlpfac.sweeps.plan import Job
 
 POOL_TMP_VARIABLE = "MLPFAC_POOL_TMP"
+BLAS_THREAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
 
 
 def run_task(jobs: list[Job], batched: bool = False, save_rrd: bool = False, tmp_dir: str | None = None) -> list[dict]:
@@ -129,13 +131,25 @@ def pool_context():
     return ctx
 
 
+@contextlib.contextmanager
+def one_blas_thread() -> Iterator[None]:
+    """Worker processes started in this block run BLAS on one thread each (unless the user set the
+    variables): N workers on N cores with multi-threaded BLAS are several times slower than their sum."""
+    added = [v for v in BLAS_THREAD_VARIABLES if v not in os.environ]
+    try:
+        for v in added:
+            os.environ[v] = "1"
+        yield
+    finally:
+        for v in added:
+            os.environ.pop(v, None)
+
+
 def start_pool_server() -> None:
     """Start the fork server of :func:`pool_context` now, with one BLAS thread: it imports and warms
     up while this process plans the sweep."""
     if pool_context().get_start_method() == "forkserver":
         from multiprocessing import forkserver
-
-        from mlpfac.sweeps.execute import one_blas_thread
 
         with one_blas_thread():
             forkserver.ensure_running()

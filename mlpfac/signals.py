@@ -1,0 +1,49 @@
+"""SIGINT and SIGTERM as a run and a sweep meet them: SIGTERM raised like Ctrl-C (exit code 143
+instead of 130), and both held back while a file or folder is being written.
+
+Only the standard library: the sweep's parent process imports this module too.
+"""
+
+from __future__ import annotations
+
+import signal
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised where Python delivers signals: handled like Ctrl-C, but the exit code is 143."""
+
+
+def _raise_terminated(signum: int, frame) -> None:
+    raise Terminated()
+
+
+def handle_sigterm() -> None:
+    """Make SIGTERM raise :class:`Terminated` (a KeyboardInterrupt) in the main thread, as SIGINT does."""
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGTERM, _raise_terminated)
+
+
+@contextmanager
+def sigint_deferred() -> Iterator[None]:
+    """Hold a Ctrl-C (SIGINT) or a SIGTERM back until the block has run, then deliver it: a folder
+    being written is finished, not left with its config and without its metrics. Only in the main
+    thread, the one Python delivers signals to; elsewhere the block runs as it is."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    held: list[int] = []
+    previous = {s: signal.signal(s, lambda signum, frame: held.append(signum)) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+        for s in dict.fromkeys(held):
+            handler = previous[s]
+            if callable(handler):
+                handler(s, None)  # the default SIGINT handler raises KeyboardInterrupt here
+            elif handler == signal.SIG_DFL:
+                signal.raise_signal(s)
