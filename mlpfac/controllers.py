@@ -74,7 +74,8 @@ class Corradini:
         )
 
     def reset(self, rng) -> None:
-        from mlpfac.kernels import corradini_step, seeds  # numba: imported by a run, not by reading a scenario
+        from mlpfac.kernels import seeds  # numba: imported by a run, not by reading a scenario
+        from mlpfac.loop_kernels import corradini_step
 
         rngs, self.single = seeds(rng)
         T = self.T
@@ -96,8 +97,8 @@ class Corradini:
         return self._tele
 
     def law_kernel(self) -> tuple[int, np.ndarray]:
-        """The law for the compiled closed loop: (its number, its constants) (:func:`mlpfac.kernels.law_step`)."""
-        from mlpfac.kernels import CORRADINI
+        """The law for the compiled closed loop: (its number, its constants) (:func:`mlpfac.loop_kernels.law_step`)."""
+        from mlpfac.loop_kernels import CORRADINI
 
         return CORRADINI, np.array([self.T, *self.law.lambdas, *self._limits], dtype=float)
 
@@ -133,7 +134,8 @@ class Kanayama:
         )
 
     def reset(self, rng) -> None:
-        from mlpfac.kernels import kanayama_step, seeds
+        from mlpfac.kernels import seeds
+        from mlpfac.loop_kernels import kanayama_step
 
         rngs, self.single = seeds(rng)
         self._kernel = kanayama_step
@@ -150,8 +152,8 @@ class Kanayama:
         return self._tele
 
     def law_kernel(self) -> tuple[int, np.ndarray]:
-        """The law for the compiled closed loop: (its number, its constants) (:func:`mlpfac.kernels.law_step`)."""
-        from mlpfac.kernels import KANAYAMA
+        """The law for the compiled closed loop: (its number, its constants) (:func:`mlpfac.loop_kernels.law_step`)."""
+        from mlpfac.loop_kernels import KANAYAMA
 
         return KANAYAMA, np.array(self._consts, dtype=float)
 

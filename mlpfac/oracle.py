@@ -44,8 +44,9 @@ from collections import deque
 import numpy as np
 
 from mlpfac.events import ControlPeriod, DelayLine, Event, SensorDelay, WheelRadius
-from mlpfac.kernels import corradini_step, kanayama_step, seeds, tracking_errors
+from mlpfac.kernels import seeds
 from mlpfac.law import Law
+from mlpfac.loop_kernels import corradini_step, kanayama_step, tracking_errors
 
 GAIN_KINDS = ("wheel_radius", "control_period")
 

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from mlpfac.factory import make_controller, make_plant
-from mlpfac.kernels import bad_seeds, tracking_errors
+from mlpfac.loop_kernels import bad_seeds, tracking_errors
 from mlpfac.record import RunRecord
 from mlpfac.reference import sample
 from mlpfac.scenario import Scenario
@@ -342,7 +342,7 @@ def _clear_after(rec: RunRecord, stop: tuple[int, int] | None, plant_store: dict
 
 
 def _diverged(q: np.ndarray, u: np.ndarray, e_true: np.ndarray, z: np.ndarray | None, limit_m: float) -> str | None:
-    """Why one seed's step diverged (the reasons of :func:`mlpfac.kernels.bad_seeds`), or None."""
+    """Why one seed's step diverged (the reasons of :func:`mlpfac.loop_kernels.bad_seeds`), or None."""
     err = float(np.hypot(e_true[0], e_true[1]))
     if not (np.isfinite(q).all() and np.isfinite(u).all()):
         return "non-finite pose or command"

@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from mlpfac import provenance
 from mlpfac.adaptive import VARIANTS, AdaptiveConfig
 from mlpfac.controllers import KanayamaGains
 from mlpfac.error_model import pose_from_error
@@ -195,45 +196,11 @@ def load(name_or_path: str | Path, build: bool = True) -> Scenario:
     scn = parse(table, str(path))
     if not build:  # the file's data only (a listing): no robot is read, none downloaded
         return scn
-    table["provenance"], found = _provenance(scn)
+    table["provenance"], found = provenance.recorded(scn)
     if found:  # the robot's parts the file left to the model: written in, so its config.toml re-runs the same
         table["plant"] = table["plant"] | found
         return parse(table, str(path), check_model=False)
     return dataclasses.replace(scn, table=table)
-
-
-def _provenance(scn: Scenario) -> tuple[dict, dict]:
-    """Build the plant once (every check made): what it simulates, and the [plant] keys it found."""
-    from mlpfac import __version__
-    from mlpfac.plants import make_plant
-    from mlpfac.reference import sample
-
-    plant = make_plant(scn, sample(scn.reference, np.arange(2) * scn.T))
-    out = {"mlpfac": __version__, "numpy": np.__version__}
-    if hasattr(plant, "provenance"):
-        out |= plant.provenance()
-    if scn.plugin is not None:
-        out["controller"] = scn.plugin.provenance()
-    return out, plant.found() if hasattr(plant, "found") else {}
-
-
-def _check_provenance(recorded, config, where: str) -> None:
-    """A config.toml's [provenance] against the model it names now: the compiled model must be the same."""
-    if not isinstance(recorded, dict):
-        raise ConfigError(where, f"expected a table, got {recorded!r}")
-    want = recorded.get("model_sha256")
-    if want is None or not hasattr(config, "path"):
-        return
-    from mlpfac.plants.model_file import model_fingerprint
-
-    got = model_fingerprint(config.model)
-    if got != want:
-        raise ConfigError(
-            f"{where} model_sha256",
-            f"{config.path} is not the model this configuration was made with (compiled sha256 {got[:12]}..., "
-            f"recorded {str(want)[:12]}...): the file changed, or another MuJoCo compiles it differently; "
-            "remove [provenance] to run it with the model as it is now",
-        )
 
 
 def _memory_available() -> int:
@@ -309,7 +276,7 @@ def parse(table: dict, source: str = "<scenario>", check_model: bool = True) -> 
     else:
         raise ConfigError(f"{where} kind", f"unknown plant {plant_kind!r}; choose kinematic or mujoco")
     if "provenance" in table and check_model:
-        _check_provenance(table["provenance"], plant_config, f"{source} [provenance]")
+        provenance.check_model(table["provenance"], plant_config, f"{source} [provenance]")
 
     ctrl = subtable(table, "controller", source)
     where = f"{source} [controller]"
@@ -321,7 +288,7 @@ def parse(table: dict, source: str = "<scenario>", check_model: bool = True) -> 
     if is_plugin_spec(name_c):
         plugin = _plugin(ctrl, T, f"{where} name", source)
         name_c = plugin.name
-        table = _plugin_provenance(table, plugin, source, check_model)
+        table = provenance.with_controller(table, plugin, source, check_model)
     elif "params" in ctrl:
         raise ConfigError(
             f"{where} params", f"[controller.params] is for a plug-in controller; {name_c} takes its own keys"
@@ -380,19 +347,3 @@ def _plugin(ctrl: dict, T: float, where: str, source: str) -> Plugin:
     if not isinstance(params, dict):
         raise ConfigError(f"{source} [controller] params", f"expected a table ([controller.params]), got {params!r}")
     return resolve(ctrl["name"], params, T, where, f"{source} [controller.params]")
-
-
-def _plugin_provenance(table: dict, plugin: Plugin, source: str, check: bool) -> dict:
-    """The table with ``[provenance] controller`` naming what runs; a config.toml whose plug-in file
-    changed since it was made is refused (``check``), as a changed robot model is."""
-    prov = table.get("provenance")
-    if not isinstance(prov, dict):
-        return table
-    was = prov.get("controller")
-    if check and isinstance(was, dict) and was.get("target") == plugin.target and was.get("sha256") != plugin.sha256:
-        raise ConfigError(
-            f"{source} [provenance] controller",
-            f"{plugin.target} is not the code this configuration was made with (sha256 {str(plugin.sha256)[:12]}..., "
-            f"recorded {str(was.get('sha256'))[:12]}...); remove [provenance.controller] to run it as it is now",
-        )
-    return {**table, "provenance": {**prov, "controller": plugin.provenance()}}

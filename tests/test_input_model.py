@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from mlpfac.input_model import InputModel
-from mlpfac.kernels import tracking_errors
+from mlpfac.loop_kernels import tracking_errors
 
 T = 0.01
 R0 = np.zeros(5)  # a reference fixed at the origin: e is the pose seen from it

@@ -47,7 +47,8 @@ class KinematicPlant:
 
     def reset(self, q0: np.ndarray, rng, u0: np.ndarray | None = None) -> None:
         """``u0`` is ignored: the error model (7) has no velocity state."""
-        from mlpfac.kernels import kinematic_step, seeds  # numba: imported by a run, not by reading a scenario
+        from mlpfac.kernels import seeds  # numba: imported by a run, not by reading a scenario
+        from mlpfac.loop_kernels import kinematic_step
 
         rngs, self.single = seeds(rng)
         B, N = len(rngs), len(self.ref) - 1

@@ -19,7 +19,7 @@ if _folder and _owner == str(os.getppid()):
 try:
     import numpy as np
 
-    from mlpfac.kernels import tracking_errors
+    from mlpfac.loop_kernels import tracking_errors
     from mlpfac.run_metrics import metrics  # noqa: F401
     from mlpfac.runner import run  # noqa: F401
     from mlpfac.scenario import parse  # noqa: F401

@@ -1,0 +1,75 @@
+"""A scenario's ``[provenance]``: what a run simulates and runs, recorded in its config.toml, and
+checked when a config.toml is run again (the same compiled robot model, the same plug-in code).
+
+:func:`recorded` builds the plant once, through :func:`mlpfac.plants.make_plant`: every check of
+the robot and of the events it must apply is made before anything runs.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Protocol
+
+import numpy as np
+
+from mlpfac.exceptions import ConfigError
+from mlpfac.plants import PlantSpec
+
+if TYPE_CHECKING:
+    from mlpfac.plugins import Plugin
+
+
+class Recorded(PlantSpec, Protocol):
+    """What :func:`recorded` reads of a :class:`~mlpfac.scenario.Scenario`."""
+
+    reference: object
+    plugin: Plugin | None
+
+
+def recorded(scn: Recorded) -> tuple[dict, dict]:
+    """Build the plant once (every check made): what it simulates, and the [plant] keys it found."""
+    from mlpfac import __version__
+    from mlpfac.plants import make_plant
+    from mlpfac.reference import sample
+
+    plant = make_plant(scn, sample(scn.reference, np.arange(2) * scn.T))
+    out = {"mlpfac": __version__, "numpy": np.__version__}
+    if hasattr(plant, "provenance"):
+        out |= plant.provenance()
+    if scn.plugin is not None:
+        out["controller"] = scn.plugin.provenance()
+    return out, plant.found() if hasattr(plant, "found") else {}
+
+
+def check_model(recorded, config, where: str) -> None:
+    """A config.toml's [provenance] against the model it names now: the compiled model must be the same."""
+    if not isinstance(recorded, dict):
+        raise ConfigError(where, f"expected a table, got {recorded!r}")
+    want = recorded.get("model_sha256")
+    if want is None or not hasattr(config, "path"):
+        return
+    from mlpfac.plants.model_file import model_fingerprint
+
+    got = model_fingerprint(config.model)
+    if got != want:
+        raise ConfigError(
+            f"{where} model_sha256",
+            f"{config.path} is not the model this configuration was made with (compiled sha256 {got[:12]}..., "
+            f"recorded {str(want)[:12]}...): the file changed, or another MuJoCo compiles it differently; "
+            "remove [provenance] to run it with the model as it is now",
+        )
+
+
+def with_controller(table: dict, plugin: Plugin, source: str, check: bool) -> dict:
+    """The table with ``[provenance] controller`` naming what runs; a config.toml whose plug-in file
+    changed since it was made is refused (``check``), as a changed robot model is."""
+    prov = table.get("provenance")
+    if not isinstance(prov, dict):
+        return table
+    was = prov.get("controller")
+    if check and isinstance(was, dict) and was.get("target") == plugin.target and was.get("sha256") != plugin.sha256:
+        raise ConfigError(
+            f"{source} [provenance] controller",
+            f"{plugin.target} is not the code this configuration was made with (sha256 {str(plugin.sha256)[:12]}..., "
+            f"recorded {str(was.get('sha256'))[:12]}...); remove [provenance.controller] to run it as it is now",
+        )
+    return {**table, "provenance": {**prov, "controller": plugin.provenance()}}
