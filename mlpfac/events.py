@@ -204,11 +204,16 @@ class DelayLine:
         self.hist = np.empty((1, *first.shape), dtype=first.dtype)
         self.hist[0] = first
         self.fill = np.ones(1, dtype=np.int64)
-        self._push = delay_push_kernel()
+        self._push = delay_push_kernel(rows=self.hist.ndim > 1)
 
     def push(self, measurement) -> None:
         h = self.hist
-        self._push(h, self.fill, h.dtype.type(measurement) if h.ndim == 1 else np.asarray(measurement, dtype=h.dtype))
+        if h.ndim == 1:
+            self._push(h, self.fill, h.dtype.type(measurement))
+            return
+        rows = h.view()
+        rows.shape = (len(h), -1)  # each measurement one flat row of the same memory (never a copy)
+        self._push(rows, self.fill, np.asarray(measurement, dtype=h.dtype).reshape(-1))
 
     def read(self):
         """The oldest measurement held (a copy; a number for a line of numbers)."""
@@ -229,20 +234,37 @@ class DelayLine:
 
 
 @functools.cache
-def delay_push_kernel():
-    """:func:`delay_push` compiled (numba is imported here, by a run, not by reading a scenario)."""
+def delay_push_kernel(rows: bool = False):
+    """:func:`delay_push` (``rows``: :func:`delay_push_rows`) compiled (numba is imported here, by a
+    run, not by reading a scenario)."""
     from numba import njit
 
-    return njit(cache=True)(delay_push)
+    return njit(cache=True)(delay_push_rows if rows else delay_push)
 
 
 def delay_push(hist: np.ndarray, fill: np.ndarray, x) -> None:
-    """Append x to a delay line (see :class:`DelayLine`): the oldest row drops out when it is full."""
+    """Append the number x to a delay line of numbers (see :class:`DelayLine`): the oldest drops
+    out when it is full."""
     n, cap = fill[0], hist.shape[0]
     if n < cap:
-        hist[n] = x
         fill[0] = n + 1
     else:
-        for i in range(cap - 1):
+        n = cap - 1
+        for i in range(n):
             hist[i] = hist[i + 1]
-        hist[cap - 1] = x
+    hist[n] = x
+
+
+def delay_push_rows(hist: np.ndarray, fill: np.ndarray, x: np.ndarray) -> None:
+    """:func:`delay_push` for a line of rows, hist (cap, k) and x (k,), copied number by number (a
+    row assignment makes numba compile its shape-mismatch message: about a second of a first run)."""
+    n, cap, k = fill[0], hist.shape[0], hist.shape[1]
+    if n < cap:
+        fill[0] = n + 1
+    else:
+        n = cap - 1
+        for i in range(n):
+            for j in range(k):
+                hist[i, j] = hist[i + 1, j]
+    for j in range(k):
+        hist[n, j] = x[j]

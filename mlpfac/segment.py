@@ -38,7 +38,9 @@ def segment(k0, k1, ref, law, c, limit, pose, pose_meas, e, e_true, u, ctele, pt
         tracking_errors(qm, r, ek)
         law_step(law, c, ek, r[3], r[4], uk, ctele[k : k + 1])
         tracking_errors(q, r, etk)
-        pose[k], pose_meas[k], e[k], e_true[k], u[k] = q[0], qm[0], ek[0], etk[0], uk[0]
+        for j in range(3):  # number by number: a row assignment compiles numba's shape-mismatch message
+            pose[k, j], pose_meas[k, j], e[k, j], e_true[k, j] = q[0, j], qm[0, j], ek[0, j], etk[0, j]
+        u[k, 0], u[k, 1] = uk[0, 0], uk[0, 1]
         if bad_seeds(q, uk, etk, no_z, limit, bad):
             return k, BAD
         why = plant_step(uk[0, 0], uk[0, 1], draws[k - k0], ptele[k], robot)

@@ -118,6 +118,19 @@ def test_delay_line_keeps_the_newest_and_repeats_the_oldest():
     assert ints.read() == 1 and isinstance(ints.read(), int)
 
 
+def test_a_delay_line_of_a_batch_holds_each_measurement_whole():
+    """A batch's measurements (B, 3) are pushed as flat rows of the same memory: what comes out is
+    what went in, steps late, seed by seed and coordinate by coordinate."""
+    rng = np.random.default_rng(0)
+    xs = rng.normal(size=(12, 4, 3))
+    line = DelayLine(xs[0])
+    line.delay(3)
+    for k in range(1, len(xs)):
+        line.push(xs[k])
+        assert np.array_equal(line.read(), xs[max(k - 3, 0)])
+    assert line.hist.shape == (4, 4, 3)
+
+
 def test_a_fatal_mujoco_error_in_a_compiled_step_is_one_line_and_exit_1():
     script = textwrap.dedent(
         """
