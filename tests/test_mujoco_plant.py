@@ -671,3 +671,26 @@ def test_scenario_builds_a_plant_and_its_events_pass(path):
         plant.apply(event)
     hold(plant, (1.0, 0.5), 20)
     assert plant.diverged() is None
+
+
+def test_a_scenario_robot_is_read_once_by_its_load_and_its_run(monkeypatch):
+    """``load`` writes the parts it found into the scenario ([plant] left_actuator, ...): the run's
+    configuration then names them, and is the same robot, not read (and compiled) a second time."""
+    from mlpfac.plants import robot
+    from mlpfac.runner import run
+    from mlpfac.scenario import load
+
+    reads = []
+    real = robot._read_robot
+    monkeypatch.setattr(robot, "_read_robot", lambda c, s: reads.append(c) or real(c, s))
+    monkeypatch.setattr(robot, "_ROBOTS", {})
+    scn = load("eight-nominal").with_overrides(duration=0.1)
+    assert scn.plant_config.left_actuator is not None and reads[0].left_actuator is None  # found, written in
+    run(scn)
+    run(scn.with_overrides(controller="corradini"))
+    assert len(reads) == 1
+    again = robot.read_robot(scn.plant_config)
+    monkeypatch.setattr(robot, "_ROBOTS", {})
+    fresh = robot.read_robot(scn.plant_config)  # read from the file with every part named
+    assert len(reads) == 2 and again.found == fresh.found == () and again.config == fresh.config
+    assert again.description == fresh.description and again.sha256 == fresh.sha256

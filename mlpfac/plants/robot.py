@@ -10,7 +10,7 @@ timestep) as :class:`mujoco.MjSpec` edits (:mod:`mlpfac.plants.edits`); the step
 
 from __future__ import annotations
 
-import functools
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -85,21 +85,32 @@ class Robot:
         return int(round(n))
 
 
+_ROBOTS: dict[tuple, Robot] = {}  # (configuration, model file's stamp) -> its robot, newest last
+CACHED = 8
+
+
 def read_robot(config: MujocoConfig) -> Robot:
     """Load, check and describe the robot of ``config``; each problem a ConfigError naming its key.
 
     Read once per process for a configuration and model file (its size and time of change): the
-    plants of a sweep share it and copy what they change (the spec; events compile new models)."""
+    plants of a sweep share it and copy what they change (the spec; events compile new models).
+    The configuration with the parts it found named (``Robot.config``, what a scenario's load
+    writes into config.toml) is the same robot with nothing left to find: it is not read again."""
     st = config.path.stat()
     stamp = (st.st_mtime_ns, st.st_size)
     try:
         hash(config)
     except TypeError:  # made in Python with lists: not cached
-        return _read_robot.__wrapped__(config, stamp)
-    return _read_robot(config, stamp)
+        return _read_robot(config, stamp)
+    robot = _ROBOTS.pop((config, stamp), None) or _read_robot(config, stamp)
+    _ROBOTS[config, stamp] = robot
+    if robot.found and (robot.config, stamp) not in _ROBOTS:
+        _ROBOTS[robot.config, stamp] = dataclasses.replace(robot, found=())
+    while len(_ROBOTS) > CACHED:
+        del _ROBOTS[next(iter(_ROBOTS))]
+    return robot
 
 
-@functools.lru_cache(maxsize=4)
 def _read_robot(config: MujocoConfig, stamp: tuple[int, int]) -> Robot:
     spec, path = load_spec(config.model)
     where = config.model if is_menagerie(config.model) else str(path)
