@@ -42,6 +42,8 @@ class AdaptiveConfig:
       between poses (:mod:`mlpfac.input_model`) and send u / g, so the law's u reaches the robot as
       the kinematic model (7) assumes; ``input_P0``, ``input_forgetting``; ``detect = h > 0`` reopens
       their covariance when a CUSUM on the normalised innovation exceeds h (a change detected);
+      ``detect_mean > 0`` also when a channel's leaky sum of innovations shows a bias, and
+      ``input_P_alarm > 0`` reopens such a channel to that variance instead of ``input_P0``;
       ``input_delay = D > 0``: find a measurement delay of up to D control steps from the commands'
       correlation with the measured motion, and give the law the error of the pose predicted over it.
     - ``law_form = "kanayama"``: the certainty-equivalence law takes Kanayama's structure, with the
@@ -74,6 +76,8 @@ class AdaptiveConfig:
     input_P0: float = 1e-4  # noqa: N815 -- the input gains' initial (and reopened) variance
     input_forgetting: float = 0.999  # the input gains' forgetting factor (1: none)
     detect: float = 0.0  # CUSUM threshold on the input gains' normalised innovation that reopens their P (0: off)
+    detect_mean: float = 0.0  # > 0: also an alarm on a persistent bias of the innovation (0: off)
+    input_P_alarm: float = 0.0  # noqa: N815 -- > 0: reopen a biased channel's P to this at an alarm (0: P0)
     law_form: str = "35"  # "35": the law (35); "kanayama": Kanayama's structure fed by (34)
     delay_finder: str = "correlation"  # how input_delay is found: "correlation" or "bank" (of predictors)
     law_gains: tuple[float, float, float] | None = None  # (Kx, Ky, Ktheta) of law_form "kanayama"; None: the scenario's
@@ -109,6 +113,10 @@ class AdaptiveConfig:
             raise ConfigError("input_forgetting", f"must be in (0, 1] (1: none), got {self.input_forgetting}")
         if not self.detect >= 0:
             raise ConfigError("detect", f"the CUSUM threshold must be >= 0 (0: off), got {self.detect}")
+        if not self.detect_mean >= 0:
+            raise ConfigError("detect_mean", f"the bias threshold must be >= 0 (0: off), got {self.detect_mean}")
+        if not self.input_P_alarm >= 0:
+            raise ConfigError("input_P_alarm", f"must be >= 0 (0: reopen to input_P0), got {self.input_P_alarm}")
         for name, allowed in (("law_form", ("35", "kanayama")), ("delay_finder", ("correlation", "bank"))):
             if getattr(self, name) not in allowed:
                 raise ConfigError(name, f"choose one of {', '.join(map(repr, allowed))}, got {getattr(self, name)!r}")
@@ -211,7 +219,16 @@ class Adaptive:
         self.input = None
         if c.input_gains or c.input_delay > 0:
             self.input = InputModel(
-                B, T, c.input_gains, c.input_delay, c.input_P0, c.input_forgetting, c.detect, c.delay_finder == "bank"
+                B,
+                T,
+                c.input_gains,
+                c.input_delay,
+                c.input_P0,
+                c.input_forgetting,
+                c.detect,
+                c.delay_finder == "bank",
+                c.input_P_alarm,
+                c.detect_mean,
             )
         if not self.compiled:
             self.seeds = [_NumpySeed(self, self._estimator(z0[b]), T) for b in range(B)]

@@ -28,6 +28,21 @@ while the model holds; a CUSUM s = max(0, s + nu^2 - 2) sums its excess, and whe
 changed plant within a few tenths of a second. A pose held over (a measurement delay growing) is no
 new motion: skipped.
 
+Two options for a faster re-adaptation (both 0, off, but in ``adaptive-real``). ``detect_mean > 0``:
+an alarm also when a channel's leaky sum of the innovations over ``MEAN_WINDOW`` steps,
+m = sum a^j i_k-j, has m^2 above ``detect_mean`` times its running mean (over ``R_WINDOW`` steps):
+the pose noise in the innovations telescopes in m, so a persistent bias (a gain that is off) shows
+in m within a few steps, where nu^2 must first outgrow the noise of one step (the cart's smaller
+wheel-radius change was not detected by the CUSUM on every seed). ``input_P_alarm > 0``: at an
+alarm, a channel whose m shows the change by that same test has its covariance reopened to
+``input_P_alarm`` instead of P0 (then capped at P0 again once it has shrunk below it); a channel that
+does not show it yet at the alarm gets ``input_P_alarm`` as soon as it does within ``HOLDOFF`` steps.
+Opening both channels to it regardless made the heading rate's gain run away on the eight (omega
+little excited there, the robot's lag read as a gain); the speed's channel alone was slower on the
+cart, whose heading rate matters. Only an alarm after ``QUIET`` samples without one opens a channel
+so (a step change, not a slip that keeps raising alarms: on eight-friction every half second), and
+with ``input_P_alarm`` the gains are kept within ``GAINS`` (the range the command is divided by).
+
 The delay (``input_delay = D > 0``): the measured pose may be d <= D steps old. d is found from the
 correlations of the heading-rate increments with the command increments j steps back (:func:`_delay`),
 and the law is then given the error (2) of the measured pose moved over the last d commands sent,
@@ -50,7 +65,9 @@ from mlpfac.kernels import JIT
 Y, U, G, P, R, CUSUM = 0, 2, 4, 6, 8, 10
 N, HOLD, ALARMS = 12, 13, 14
 DY, DELAY, NC, CAND, RUN = 15, 16, 17, 18, 19  # last y_omega, delay found, samples, candidate, its run
-WIDTH = 20
+M, RM, ARM = 20, 22, 24  # per channel: the leaky sum of the innovations, the running mean of its square, armed
+SINCE = 26  # samples since the last alarm
+WIDTH = 27
 CORR_WINDOW = 200  # steps in the exponential window of the delay's correlations
 CORR_MIN = 100  # samples in the correlations before they decide
 ACCEPT = 2.0  # a lag j >= 2 is the delay when its step C_j - C_j-1 exceeds this multiple of |C_0|
@@ -61,6 +78,8 @@ DRIFT = 2.0  # the CUSUM's allowance: nu^2 has mean about 1 while the model hold
 R_WINDOW = 1000  # steps in the running mean of the innovation's square (the noise variance, learned)
 WARMUP = 100  # steps before the first alarm
 HOLDOFF = 50  # steps between alarms
+QUIET = 200  # samples without an alarm before one may open a channel to input_P_alarm (a step, not a drift)
+MEAN_WINDOW = 20  # steps in the leaky sum of the innovations (``detect_mean``)
 GAINS = (0.8, 2.0)  # the input gains sent are kept within these (the law divides by them)
 
 
@@ -71,10 +90,13 @@ def observe(e, r, first, hist, q_prev, S, C, e_hat, params):
 
     e (B, 3), r (>= 3,); hist (B, 2, H) the commands sent, newest first (H = max(2, D + 2));
     q_prev (B, 3) the last measured pose; S (B, WIDTH) the scalars (columns above); C (B, D + 1)
-    the correlations of the delay. params = (T, P0, forgetting, detect, held): a pose within ``held``
-    of the last one (0: equal to it) is the same measurement held over.
+    the correlations of the delay. params = (T, P0, forgetting, detect, held, P_alarm, detect_mean):
+    a pose within ``held`` of the last one (0: equal to it) is the same measurement held over;
+    P_alarm, detect_mean: 0 off (the module docstring).
     """
     T, P0, forgetting, detect, tol = params[0], params[1], params[2], params[3], params[4]
+    P_alarm, detect_mean = params[5], params[6]
+    am = 1.0 - 1.0 / MEAN_WINDOW
     D = C.shape[1] - 1
     a = 1.0 - 1.0 / WINDOW
     ac = 1.0 - 1.0 / CORR_WINDOW
@@ -87,6 +109,7 @@ def observe(e, r, first, hist, q_prev, S, C, e_hat, params):
         if not first and not held:
             motion(q, q_prev[b], T, y)
             Sb[N] += 1.0
+            Sb[SINCE] += 1.0
             w = 1.0 / min(Sb[N], R_WINDOW)
             alarm = False
             for c in range(2):
@@ -98,6 +121,13 @@ def observe(e, r, first, hist, q_prev, S, C, e_hat, params):
                 if Sb[N] > 1.0:
                     Sb[CUSUM + c] = max(0.0, Sb[CUSUM + c] + i * i / max(rc, 1e-12) - DRIFT)
                 alarm = alarm or Sb[CUSUM + c] > detect
+                if detect_mean > 0.0:  # a persistent bias: the leaky sum of the innovations, normalised
+                    mc = am * Sb[M + c] + i
+                    rm = Sb[RM + c]
+                    m2 = mc * mc if Sb[N] == 1.0 else min(mc * mc, 25.0 * rm)
+                    Sb[M + c], Sb[RM + c] = mc, rm + (m2 - rm) * w
+                    if Sb[N] > MEAN_WINDOW:
+                        alarm = alarm or mc * mc > detect_mean * max(rm, 1e-12)
                 # RLS on the windowed sums
                 Yc = a * Sb[Y + c] + y[c]
                 Uc = a * Sb[U + c] + u2
@@ -105,12 +135,29 @@ def observe(e, r, first, hist, q_prev, S, C, e_hat, params):
                 Pc = Sb[P + c]
                 s = Uc * Pc * Uc + max(Sb[R + c], 1e-12)
                 Sb[G + c] += Pc * Uc * (Yc - Sb[G + c] * Uc) / s
-                Sb[P + c] = min((Pc - Pc * Uc * Uc * Pc / s) / forgetting, P0)
+                if P_alarm > 0.0:  # kept within the gains the command may be divided by
+                    Sb[G + c] = min(max(Sb[G + c], GAINS[0]), GAINS[1])
+                if P_alarm > 0.0:  # reopened above P0 (below): capped at P0 once it has shrunk below it
+                    Sb[P + c] = min((Pc - Pc * Uc * Uc * Pc / s) / forgetting, max(P0, Pc))
+                else:
+                    Sb[P + c] = min((Pc - Pc * Uc * Uc * Pc / s) / forgetting, P0)
             if Sb[HOLD] > 0.0 or Sb[N] <= WARMUP:
                 Sb[HOLD] = max(Sb[HOLD] - 1.0, 0.0)
                 Sb[CUSUM], Sb[CUSUM + 1] = 0.0, 0.0
+                for c in range(2):  # a channel whose bias shows within HOLDOFF steps of the alarm: P_alarm
+                    if Sb[ARM + c] > 0.0 and _biased(Sb, c, detect_mean):
+                        Sb[P + c] = max(Sb[P + c], P_alarm)
+                        Sb[ARM + c] = 0.0
+                    if Sb[HOLD] == 0.0:
+                        Sb[ARM + c] = 0.0
             elif detect > 0.0 and alarm:  # open the covariance, and start the sums again from the change
-                Sb[P], Sb[P + 1] = P0, P0
+                fresh = P_alarm > 0.0 and Sb[SINCE] > QUIET
+                for c in range(2):  # to P_alarm where the channel's leaky sum shows the change, else P0
+                    boost = fresh and _biased(Sb, c, detect_mean)
+                    Sb[P + c] = P_alarm if boost else P0
+                    Sb[ARM + c] = 1.0 if fresh and not boost else 0.0
+                Sb[SINCE] = 0.0
+                Sb[M], Sb[M + 1] = 0.0, 0.0
                 Sb[Y], Sb[Y + 1], Sb[U], Sb[U + 1] = 0.0, 0.0, 0.0, 0.0
                 Sb[HOLD], Sb[CUSUM], Sb[CUSUM + 1], Sb[ALARMS] = HOLDOFF, 0.0, 0.0, Sb[ALARMS] + 1.0
                 Sb[NC] = 0.0  # the delay's correlations start again too
@@ -124,6 +171,12 @@ def observe(e, r, first, hist, q_prev, S, C, e_hat, params):
             e_hat[b, 0], e_hat[b, 1], e_hat[b, 2] = e[b, 0], e[b, 1], e[b, 2]
         else:
             _predict(q, r, hist[b], Sb, d, T, e_hat[b])
+
+
+@njit(**JIT)
+def _biased(Sb, c, detect_mean):
+    """Channel c's leaky sum of the innovations shows a bias (``detect_mean``'s test)."""
+    return detect_mean > 0.0 and Sb[M + c] * Sb[M + c] > detect_mean * max(Sb[RM + c], 1e-12)
 
 
 @njit(**JIT)
@@ -192,9 +245,20 @@ class InputModel:
     law, ``command`` after it (the command sent)."""
 
     def __init__(
-        self, B: int, T: float, gains: bool, delay: int, P0: float, forgetting: float, detect: float, bank: bool = False
+        self,
+        B: int,
+        T: float,
+        gains: bool,
+        delay: int,
+        P0: float,
+        forgetting: float,
+        detect: float,
+        bank: bool = False,
+        P_alarm: float = 0.0,
+        detect_mean: float = 0.0,
     ) -> None:
-        """``bank``: the delay is found by :class:`~mlpfac.delay_bank.DelayBank` instead of the correlations."""
+        """``bank``: the delay is found by :class:`~mlpfac.delay_bank.DelayBank` instead of the correlations;
+        ``P_alarm``, ``detect_mean`` (0: off): see the module docstring."""
         self.gains = gains
         self.hist = np.zeros((B, 2, max(2, delay + 2)))
         self.C = np.zeros((B, 1 if bank else delay + 1))  # one column: no correlation search in the kernel
@@ -206,7 +270,7 @@ class InputModel:
         self.S[:, P : P + 2] = P0
         self.u = np.zeros((B, 2))
         # with the bank, a held pose is told apart from a new one as the bank does (rebuilt from e and r)
-        self.params = np.array([T, P0, forgetting, detect, HELD if bank else 0.0], dtype=float)
+        self.params = np.array([T, P0, forgetting, detect, HELD if bank else 0.0, P_alarm, detect_mean], dtype=float)
         z = (self.hist, self.q_prev, self.S, self.C, self.e_hat)  # load (or compile) now, not mid-run
         observe(np.zeros((0, 3)), np.zeros(5), True, *(x[:0] for x in z), self.params)
         command(self.u[:0], gains, self.S[:0], self.hist[:0], self.u[:0])
