@@ -59,6 +59,23 @@ def test_a_detected_change_reopens_the_covariance_and_is_learned_faster():
     assert abs(slow[1050, 0] - 1.5) > 0.15
 
 
+def test_a_small_gain_change_is_seen_as_a_bias_and_relearnt_at_once_with_input_P_alarm():
+    """A 10 % gain change (1 -> 1.1 at step 1500) under 1 mm of pose noise: nu^2 of one step hardly
+    grows and the CUSUM at 50 stays quiet; the leaky sum of the innovations (detect_mean) shows the
+    bias and raises the alarm, and with input_P_alarm the gain is within 3 % 50 steps later (and
+    nearer after 20 steps than with P reopened to P0 only)."""
+    kw = {"steps": 1600, "gain": 1.0, "gain_after": 1.1, "change_at": 1500, "noise": 1e-3}
+    cusum = drive(InputModel(1, T, True, 0, P0=1e-4, forgetting=0.999, detect=50.0), **kw)
+    bias = drive(InputModel(1, T, True, 0, P0=1e-4, forgetting=0.999, detect=50.0, detect_mean=20.0), **kw)
+    wide = drive(
+        InputModel(1, T, True, 0, P0=1e-4, forgetting=0.999, detect=50.0, detect_mean=20.0, P_alarm=2e-2), **kw
+    )
+    assert cusum[-1, 3] == cusum[1499, 3]  # the CUSUM alone: no alarm after the change
+    assert bias[-1, 3] > bias[1499, 3] and wide[-1, 3] > wide[1499, 3]  # the bias test: an alarm
+    assert abs(wide[1550, 0] - 1.1) < 0.033
+    assert abs(wide[1520, 0] - 1.1) < abs(bias[1520, 0] - 1.1) < abs(cusum[1520, 0] - 1.1)  # wider: faster
+
+
 @pytest.mark.parametrize("delay", [0, 3, 5])
 def test_the_delay_is_found(delay):
     m = InputModel(1, T, True, 6, P0=1e-4, forgetting=0.999, detect=20.0)
