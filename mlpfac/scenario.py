@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from mlpfac import provenance
-from mlpfac.adaptive import VARIANTS, AdaptiveConfig
+from mlpfac.adaptive_config import AdaptiveConfig
 from mlpfac.controllers import KanayamaGains
 from mlpfac.error_model import pose_from_error
 from mlpfac.events import Event, parse_event
@@ -29,6 +29,7 @@ from mlpfac.networks import Networks
 from mlpfac.plugins import Plugin, absolute_spec, is_plugin_spec, resolve
 from mlpfac.reference import make_reference
 from mlpfac.toml_data import FOLDER_NAME, build, check_keys, number, subtable, to_toml, typed  # noqa: F401 (mlpfac.scenario.to_toml)
+from mlpfac.variants import VARIANTS
 
 MEMORY_SHARE = 0.8  # a run may plan to use at most this share of the memory available now
 
