@@ -116,8 +116,7 @@ def bench_workers(repeats: int) -> None:
     import multiprocessing as mp
 
     from mlpfac.sweeps import engine as sweep
-    from mlpfac.sweeps.execute import one_blas_thread
-    from mlpfac.sweeps.worker import _worker_init, pool_context
+    from mlpfac.sweeps.worker import _worker_init, one_blas_thread, pool_context
 
     jobs = sweep.plan(["eight-nominal"], ["adaptive"], list(range(3)), 25.0)
     c0 = time.process_time()

@@ -107,8 +107,16 @@ class AdaptiveConfig:
             raise ConfigError("detect", f"the CUSUM threshold must be >= 0 (0: off), got {self.detect}")
         if not self.detect_mean >= 0:
             raise ConfigError("detect_mean", f"the bias threshold must be >= 0 (0: off), got {self.detect_mean}")
-        if not self.input_P_alarm >= 0:
-            raise ConfigError("input_P_alarm", f"must be >= 0 (0: reopen to input_P0), got {self.input_P_alarm}")
+        if not 0 <= self.input_P_alarm < math.inf:
+            raise ConfigError(
+                "input_P_alarm", f"must be >= 0 and finite (0: reopen to input_P0), got {self.input_P_alarm}"
+            )
+        if self.detect_mean > 0 and not self.detect > 0:
+            raise ConfigError("detect_mean", "the bias test raises the alarm of 'detect': set detect > 0 too")
+        if self.input_P_alarm > 0 and not self.detect_mean > 0:
+            raise ConfigError(
+                "input_P_alarm", "a channel is reopened wide when the bias test sees it: set detect_mean > 0 too"
+            )
         for name, allowed in (("law_form", ("35", "kanayama")), ("delay_finder", ("correlation", "bank"))):
             if getattr(self, name) not in allowed:
                 raise ConfigError(name, f"choose one of {', '.join(map(repr, allowed))}, got {getattr(self, name)!r}")

@@ -211,9 +211,11 @@ class DelayLine:
         if h.ndim == 1:
             self._push(h, self.fill, h.dtype.type(measurement))
             return
-        rows = h.view()
-        rows.shape = (len(h), -1)  # each measurement one flat row of the same memory (never a copy)
-        self._push(rows, self.fill, np.asarray(measurement, dtype=h.dtype).reshape(-1))
+        rows = h.reshape(len(h), -1)  # each measurement one flat row of the same memory
+        x = np.asarray(measurement, dtype=h.dtype).reshape(-1)
+        if not np.shares_memory(rows, h) or x.size != rows.shape[1]:
+            raise ValueError(f"a delay line of {h.shape[1:]} measurements was pushed {np.shape(measurement)}")
+        self._push(rows, self.fill, x)
 
     def read(self):
         """The oldest measurement held (a copy; a number for a line of numbers)."""

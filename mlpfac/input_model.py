@@ -34,7 +34,7 @@ m = sum a^j i_k-j, has m^2 above ``detect_mean`` times its running mean (over ``
 the pose noise in the innovations telescopes in m, so a persistent bias (a gain that is off) shows
 in m within a few steps, where nu^2 must first outgrow the noise of one step (the cart's smaller
 wheel-radius change was not detected by the CUSUM on every seed). ``input_P_alarm > 0``: at an
-alarm, a channel whose m shows the change by that same test has its covariance reopened to
+alarm, a channel whose m shows the change by that test (its running mean updated by this step) has its covariance reopened to
 ``input_P_alarm`` instead of P0 (then capped at P0 again once it has shrunk below it); a channel that
 does not show it yet at the alarm gets ``input_P_alarm`` as soon as it does within ``HOLDOFF`` steps.
 Opening both channels to it regardless made the heading rate's gain run away on the eight (omega

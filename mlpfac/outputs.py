@@ -10,6 +10,7 @@ from __future__ import annotations
 import errno
 import json
 import os
+import re
 import shutil
 import stat
 import tempfile
@@ -87,11 +88,13 @@ def write_run_folder(out: Path, config: str, metrics: dict) -> None:
 def write_folder_whole(target: Path, files: dict[str, str | bytes]) -> None:
     """The folder ``target`` holding just ``files`` (name -> text or bytes), written beside it at
     ``.NAME.tmp-XXXX`` and renamed into place: even a killed process leaves ``target`` as it was or
-    whole, never half written. What a killed write leaves is removed by :func:`remove_staged`."""
+    whole, never half written. What a killed write leaves is cleared by :func:`remove_staged`. An
+    OSError names ``target`` (or its file), never the temporary."""
     target.parent.mkdir(parents=True, exist_ok=True)
     with sigint_deferred():
-        staged = Path(tempfile.mkdtemp(dir=target.parent, prefix=f".{target.name}.tmp-"))
+        staged = None
         try:
+            staged = Path(tempfile.mkdtemp(dir=target.parent, prefix=f".{target.name}.tmp-"))
             os.chmod(staged, 0o777 & ~_umask())
             for name, data in files.items():
                 try:
@@ -99,19 +102,34 @@ def write_folder_whole(target: Path, files: dict[str, str | bytes]) -> None:
                 except OSError as err:  # name the file as it will be, not its staging place
                     raise OSError(err.errno, err.strerror, str(target / name)) from err
             _replace(staged, target)
-        except BaseException:
-            _remove(staged)
-            raise
+            staged = None
+        except OSError as err:
+            if err.filename is not None and str(target) in str(err.filename):
+                raise
+            raise OSError(err.errno, err.strerror, str(target)) from err
+        finally:
+            if staged is not None:
+                _remove(staged)
+
+
+STAGED = re.compile(r"\.(?P<name>seed-\d+)\.tmp-[A-Za-z0-9_]+(?P<old>-old)?")  # a sweep's run folder, staged
 
 
 def remove_staged(folders: Iterable[Path]) -> None:
-    """Remove what :func:`write_folder_whole` or :class:`Stage` left in ``folders`` when killed
-    (``.NAME.tmp-*``); hold the folder's lock."""
+    """Clear what :func:`write_folder_whole` left in ``folders`` (a sweep's controller folders) when
+    killed: a staged folder is removed; a finished run renamed aside (``-old``, where the system
+    cannot exchange two folders) is put back if its place is empty. Hold the sweep's lock."""
     for folder in folders:
         with suppress(OSError):
             for name in os.listdir(folder):
-                if name.startswith(".") and ".tmp-" in name:
-                    _remove(folder / name)
+                m = STAGED.fullmatch(name)
+                if m is None:
+                    continue
+                if m["old"] and not os.path.lexists(folder / m["name"]):
+                    with suppress(OSError):
+                        os.rename(folder / name, folder / m["name"])
+                        continue
+                _remove(folder / name)
 
 
 def write_run(out: Path, scn, rec) -> dict:
@@ -204,7 +222,8 @@ class Stage:
     """The new version of ``target`` (a run folder, or with ``folder=False`` a file), written at
     ``.NAME.tmp-XXXX`` beside it (same folder, so renames are atomic). :meth:`commit` puts it in
     place; leaving the ``with`` block without a commit removes it, and the target is untouched.
-    Entering also removes ``.NAME.tmp-*`` left by a killed run: hold :func:`folder_lock` first."""
+    Entering also clears ``.NAME.tmp-*`` left by a killed run (a finished one renamed aside is put
+    back): hold :func:`folder_lock` first."""
 
     def __init__(self, target: Path, what: str, folder: bool = True) -> None:
         self.target = resolved(target, f"{what} {target}")  # a symlink's folder is replaced, not the link
@@ -219,8 +238,11 @@ class Stage:
         try:
             parent.mkdir(parents=True, exist_ok=True)
             for name in os.listdir(parent):
-                if name.startswith(prefix):
-                    _remove(parent / name)
+                if name.startswith(prefix):  # a killed run's: put a finished run renamed aside back
+                    if name.endswith("-old") and not os.path.lexists(self.target):
+                        os.rename(parent / name, self.target)
+                    else:
+                        _remove(parent / name)
             if self.folder:
                 self.path = Path(tempfile.mkdtemp(dir=parent, prefix=prefix))
                 os.chmod(self.path, 0o777 & ~_umask())
@@ -280,9 +302,13 @@ def _replace(new: Path, target: Path) -> None:
     if _exchange(new, target):
         _remove(new)  # now the old folder
         return
-    old = new.with_name(f"{new.name}-old")  # still .NAME.tmp-*: removed by the next run if we die here
+    old = new.with_name(f"{new.name}-old")  # killed in between: the next sweep puts it back (remove_staged)
     os.rename(target, old)
-    os.rename(new, target)
+    try:
+        os.rename(new, target)
+    except BaseException:
+        os.rename(old, target)
+        raise
     _remove(old)
 
 

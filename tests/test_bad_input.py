@@ -74,6 +74,8 @@ BAD_FILES: dict[str, tuple[str | bytes, str]] = {
     "detect_mean nan": ("[controller.adaptive]\ndetect_mean = nan\n", "detect_mean"),
     "input_P_alarm negative": ("[controller.adaptive]\ninput_P_alarm = -0.1\n", "input_P_alarm"),
     "input_P_alarm text": ('[controller.adaptive]\ninput_P_alarm = "wide"\n', "input_P_alarm"),
+    "detect_mean without detect": ("[controller.adaptive]\ndetect_mean = 20.0\n", "detect_mean"),
+    "input_P_alarm without detect_mean": ("[controller.adaptive]\ndetect = 50.0\ninput_P_alarm = 0.02\n", "input_P_alarm"),
     "kanayama gain": ("[controller.kanayama]\nKx = -1.0\n", "Kx"),
     "events not tables": ("events = [1, 2]\n", "events"),
     "events a table": ("[events]\ntime = 1\n", "events"),

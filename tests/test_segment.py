@@ -129,6 +129,8 @@ def test_a_delay_line_of_a_batch_holds_each_measurement_whole():
         line.push(xs[k])
         assert np.array_equal(line.read(), xs[max(k - 3, 0)])
     assert line.hist.shape == (4, 4, 3)
+    with pytest.raises(ValueError, match="delay line"):
+        line.push(xs[0][:3])  # a measurement of another size: refused, not cut
 
 
 def test_a_fatal_mujoco_error_in_a_compiled_step_is_one_line_and_exit_1():

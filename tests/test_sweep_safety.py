@@ -128,6 +128,64 @@ def test_a_folder_is_replaced_whole_or_not_at_all(tmp_path, monkeypatch):
     assert sorted(p.name for p in d.parent.iterdir()) == ["seed-0000"]
 
 
+def test_where_two_folders_cannot_be_exchanged_a_failed_swap_keeps_the_old_folder(tmp_path, monkeypatch):
+    """Without renameat2's exchange the old folder is renamed aside first: if the new one then
+    cannot take its place, the old one goes back; a sweep killed in between finds it aside and the
+    next sweep puts it back (not removed as a temporary)."""
+    from mlpfac import outputs
+
+    target = tmp_path / "paper" / "adaptive" / "seed-0000"
+    outputs.write_folder_whole(target, {"metrics.json": "old"})
+    monkeypatch.setattr(outputs, "_exchange", lambda a, b: False)
+    real_rename = os.rename
+
+    def second_rename_fails(src, dst):
+        if str(dst) == str(target) and ".tmp-" in str(src) and not str(src).endswith("-old"):
+            raise OSError(5, "Input/output error", str(src))
+        return real_rename(src, dst)
+
+    monkeypatch.setattr(os, "rename", second_rename_fails)
+    with pytest.raises(OSError) as err:
+        outputs.write_folder_whole(target, {"metrics.json": "new"})
+    assert err.value.filename == str(target)  # named as it would be, not its temporary
+    assert (target / "metrics.json").read_text() == "old" and os.listdir(target.parent) == ["seed-0000"]
+    monkeypatch.setattr(os, "rename", real_rename)
+    aside = target.parent / ".seed-0000.tmp-killed01-old"  # killed between the two renames
+    real_rename(target, aside)
+    (target.parent / ".seed-0001.tmp-killed02").mkdir()  # killed while writing
+    outputs.remove_staged([target.parent])
+    assert (target / "metrics.json").read_text() == "old" and os.listdir(target.parent) == ["seed-0000"]
+
+
+def test_a_folder_that_cannot_be_made_is_named_as_the_run_folder(tmp_path, monkeypatch):
+    from mlpfac import outputs
+
+    def full(dir, prefix):
+        raise OSError(28, "No space left on device", str(Path(dir) / f"{prefix}abcd1234"))
+
+    monkeypatch.setattr(outputs.tempfile, "mkdtemp", full)
+    target = tmp_path / "s" / "c" / "seed-0003"
+    with pytest.raises(OSError) as err:
+        outputs.write_folder_whole(target, {"metrics.json": "{}"})
+    assert err.value.filename == str(target) and err.value.errno == 28
+
+
+def test_a_run_folder_to_be_replaced_that_holds_other_files_is_refused(tmp_path):
+    """A run run again replaces its whole folder: a file of someone else's in it is one line naming
+    it, before anything runs, and stays."""
+    from mlpfac.exceptions import ConfigError
+
+    out = tmp_path / "o"
+    jobs = sweep.plan(["paper"], ["adaptive"], [0], 0.5)
+    sweep.execute(jobs, out)
+    d = jobs[0].folder(out)
+    (d / "metrics.json").write_text("{}")  # not whole: to be run again
+    (d / "notes.txt").write_text("mine")
+    with pytest.raises(ConfigError, match="notes.txt"):
+        sweep.execute(jobs, out)
+    assert (d / "notes.txt").read_text() == "mine" and (d / "metrics.json").read_text() == "{}"
+
+
 # A signal that lands while cf.wait takes its futures' locks one by one (a window a loaded machine
 # widens): the pool's thread would wait for the lock left taken, and the stopped sweep with it.
 SIGNAL_INSIDE_THE_POOLS_LOCKS = """

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import threading
 from dataclasses import dataclass
 
 import mujoco
@@ -87,6 +88,7 @@ class Robot:
 
 _ROBOTS: dict[tuple, Robot] = {}  # (configuration, model file's stamp) -> its robot, newest last
 CACHED = 8
+_LOCK = threading.Lock()
 
 
 def read_robot(config: MujocoConfig) -> Robot:
@@ -102,12 +104,16 @@ def read_robot(config: MujocoConfig) -> Robot:
         hash(config)
     except TypeError:  # made in Python with lists: not cached
         return _read_robot(config, stamp)
-    robot = _ROBOTS.pop((config, stamp), None) or _read_robot(config, stamp)
-    _ROBOTS[config, stamp] = robot
-    if robot.found and (robot.config, stamp) not in _ROBOTS:
-        _ROBOTS[robot.config, stamp] = dataclasses.replace(robot, found=())
-    while len(_ROBOTS) > CACHED:
-        del _ROBOTS[next(iter(_ROBOTS))]
+    with _LOCK:  # a Dask worker may run several tasks in threads
+        robot = _ROBOTS.pop((config, stamp), None)
+    if robot is None:
+        robot = _read_robot(config, stamp)
+    with _LOCK:
+        _ROBOTS[config, stamp] = robot
+        if robot.found and (robot.config, stamp) not in _ROBOTS:
+            _ROBOTS[robot.config, stamp] = dataclasses.replace(robot, found=())
+        while len(_ROBOTS) > CACHED:
+            del _ROBOTS[next(iter(_ROBOTS))]
     return robot
 
 

@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from mlpfac.exceptions import ConfigError, MlpfacError
-from mlpfac.outputs import folder_lock, remove_staged
+from mlpfac.outputs import check_run_folder, folder_lock, remove_staged
 from mlpfac.signals import Terminated, sigint_deferred
 from mlpfac.sweeps.folders import _oserror, check_done, write_result
 from mlpfac.sweeps.plan import Job
@@ -115,12 +115,14 @@ def _execute(jobs, out, workers, client, batched, batch_size, save_rrd, progress
     out.mkdir(parents=True, exist_ok=True)
     tmp = out / TMP_DIR
     shutil.rmtree(tmp, ignore_errors=True)  # what a killed sweep left; we hold the lock
-    remove_staged({j.folder(out).parent for j in jobs})
+    remove_staged(d for d in out.glob("*/*") if d.is_dir())
     done: dict[tuple, dict] = {}
     todo: list[Job] = []
     redo: dict[str, int] = {}
     for j in jobs:
         m, why = check_done(out, j, save_rrd)
+        if m is None and os.path.lexists(j.folder(out)):  # replaced whole: nothing but a run's files in it
+            check_run_folder(j.folder(out), "run folder")
         if m is None:
             todo.append(j)
             if why is not None:
