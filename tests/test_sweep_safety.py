@@ -2,6 +2,7 @@
 worker and no temporary file, a full disk is a failed run or one line, resume trusts only whole
 folders of the same run, one sweep per folder, and plans or flags that cannot work are refused."""
 
+import contextlib
 import json
 import os
 import resource
@@ -37,9 +38,12 @@ def wait_for(cond, timeout=60.0):
 def pool_workers(pid: int) -> list:
     """The pool's worker processes of the sweep ``pid``: spawned, or forked by its fork server (not
     multiprocessing's resource tracker, nor the fork server itself)."""
-    procs = psutil.Process(pid).children(recursive=True)
-    servers = {c.pid for c in procs if c.ppid() == pid and "forkserver" in " ".join(c.cmdline())}
-    return [c for c in procs if "spawn_main" in " ".join(c.cmdline()) or c.ppid() in servers]
+    seen = {}
+    for c in psutil.Process(pid).children(recursive=True):
+        with contextlib.suppress(psutil.Error):  # a short-lived child may be gone by now
+            seen[c] = (c.ppid(), " ".join(c.cmdline()))
+    servers = {c.pid for c, (ppid, cmd) in seen.items() if ppid == pid and "forkserver" in cmd}
+    return [c for c, (ppid, cmd) in seen.items() if "spawn_main" in cmd or ppid in servers]
 
 
 def gone(pids, timeout=5.0) -> list[int]:
