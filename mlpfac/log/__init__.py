@@ -18,8 +18,10 @@ No wall-clock time is recorded, so the same run gives the same decoded contents.
 import os
 
 # rerun's file sink logs its own write errors (and keeps going); mlpfac reads the file back instead
-# (sinks.check_recording) and reports one line. An explicit RUST_LOG is left alone.
-os.environ.setdefault("RUST_LOG", "warn,re_log_encoding::rrd=off,re_sdk::recording_stream=off")
+# (sinks.check_recording) and reports one line. Its log sink warns when it drops what it still
+# held at a close that timed out: a stopped run discards its recording anyway, and a finished one
+# whose recording cannot be closed fails with its own line. An explicit RUST_LOG is left alone.
+os.environ.setdefault("RUST_LOG", "warn,re_log_encoding::rrd=off,re_sdk::recording_stream=off,re_sdk::log_sink=error")
 
 from mlpfac.log.compare import view  # noqa: E402
 from mlpfac.log.layout import blueprint  # noqa: E402

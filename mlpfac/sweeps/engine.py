@@ -16,10 +16,10 @@ below is importable from here:
 
        DIR/<scenario>/<controller>/seed-0003/config.toml    the scenario as resolved
        DIR/<scenario>/<controller>/seed-0003/run.rrd        only with save_rrd
-       DIR/<scenario>/<controller>/seed-0003/metrics.json   = run_metrics.metrics(rec), written last
+       DIR/<scenario>/<controller>/seed-0003/metrics.json   = run_metrics.metrics(rec)
 
-   Each file goes through a temporary file and ``os.replace``; metrics.json comes last, so a
-   folder with metrics.json is whole. A run counts as done (:func:`check_done`) when config.toml
+   Each folder is written beside its place and renamed into it whole
+   (:func:`mlpfac.outputs.write_folder_whole`): a killed sweep leaves it as it was or whole. A run counts as done (:func:`check_done`) when config.toml
    equals the resolved scenario, metrics.json is a metrics dict of this scenario, controller and
    seed, and with ``save_rrd`` run.rrd has the size and sha256 recorded in metrics.json; any other
    folder is run again, and the summary says how many and why.
