@@ -74,9 +74,9 @@ def process_tree_cpu(every: float = 0.05):
     process and the children it reaped only)."""
     import resource
 
-    def own() -> float:
-        r = [resource.getrusage(w) for w in (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN)]
-        return sum(x.ru_utime + x.ru_stime for x in r)
+    def cpu(who: int) -> float:
+        r = resource.getrusage(who)
+        return r.ru_utime + r.ru_stime
 
     try:
         import psutil
@@ -93,8 +93,7 @@ def process_tree_cpu(every: float = 0.05):
             stop.wait(every)
 
     th = threading.Thread(target=sample, daemon=True) if psutil else None
-    c0 = resource.getrusage(resource.RUSAGE_SELF) if psutil else None
-    t0 = own()
+    own0, reaped0 = cpu(resource.RUSAGE_SELF), cpu(resource.RUSAGE_CHILDREN)
     if th:
         th.start()
     try:
@@ -103,10 +102,8 @@ def process_tree_cpu(every: float = 0.05):
         stop.set()
         if th:
             th.join()
-            c1 = resource.getrusage(resource.RUSAGE_SELF)
-            spent[0] = (c1.ru_utime + c1.ru_stime - c0.ru_utime - c0.ru_stime) + sum(seen.values())
-        else:
-            spent[0] = own() - t0
+        children = sum(seen.values()) if th else cpu(resource.RUSAGE_CHILDREN) - reaped0
+        spent[0] = cpu(resource.RUSAGE_SELF) - own0 + children
 
 
 def bench_sweep(seeds: int, duration: float, repeat: int) -> None:

@@ -204,16 +204,13 @@ class DelayLine:
         self.hist = np.empty((1, *first.shape), dtype=first.dtype)
         self.hist[0] = first
         self.fill = np.ones(1, dtype=np.int64)
-        self._push = delay_push_kernel(rows=self.hist.ndim > 1)
+        self._push = delay_push_kernel()
 
     def push(self, measurement) -> None:
         h = self.hist
-        if h.ndim == 1:
-            self._push(h, self.fill, h.dtype.type(measurement))
-            return
-        rows = h.reshape(len(h), -1)  # each measurement one flat row of the same memory
+        rows = h.reshape(len(h), -1)  # each measurement one flat row of the same memory (a number: of one)
         x = np.asarray(measurement, dtype=h.dtype).reshape(-1)
-        if not np.shares_memory(rows, h) or x.size != rows.shape[1]:
+        if not np.may_share_memory(rows, h) or x.size != rows.shape[1]:
             raise ValueError(f"a delay line of {h.shape[1:]} measurements was pushed {np.shape(measurement)}")
         self._push(rows, self.fill, x)
 
@@ -236,30 +233,17 @@ class DelayLine:
 
 
 @functools.cache
-def delay_push_kernel(rows: bool = False):
-    """:func:`delay_push` (``rows``: :func:`delay_push_rows`) compiled (numba is imported here, by a
-    run, not by reading a scenario)."""
+def delay_push_kernel():
+    """:func:`delay_push` compiled (numba is imported here, by a run, not by reading a scenario)."""
     from numba import njit
 
-    return njit(cache=True)(delay_push_rows if rows else delay_push)
+    return njit(cache=True)(delay_push)
 
 
-def delay_push(hist: np.ndarray, fill: np.ndarray, x) -> None:
-    """Append the number x to a delay line of numbers (see :class:`DelayLine`): the oldest drops
-    out when it is full."""
-    n, cap = fill[0], hist.shape[0]
-    if n < cap:
-        fill[0] = n + 1
-    else:
-        n = cap - 1
-        for i in range(n):
-            hist[i] = hist[i + 1]
-    hist[n] = x
-
-
-def delay_push_rows(hist: np.ndarray, fill: np.ndarray, x: np.ndarray) -> None:
-    """:func:`delay_push` for a line of rows, hist (cap, k) and x (k,), copied number by number (a
-    row assignment makes numba compile its shape-mismatch message: about a second of a first run)."""
+def delay_push(hist: np.ndarray, fill: np.ndarray, x: np.ndarray) -> None:
+    """Append x (k,) to a delay line hist (cap, k) (see :class:`DelayLine`): the oldest row drops
+    out when it is full. Copied number by number: a row assignment makes numba compile its
+    shape-mismatch message, about a second of a first run."""
     n, cap, k = fill[0], hist.shape[0], hist.shape[1]
     if n < cap:
         fill[0] = n + 1

@@ -135,10 +135,9 @@ def observe(e, r, first, hist, q_prev, S, C, e_hat, params):
                 Pc = Sb[P + c]
                 s = Uc * Pc * Uc + max(Sb[R + c], 1e-12)
                 Sb[G + c] += Pc * Uc * (Yc - Sb[G + c] * Uc) / s
-                if P_alarm > 0.0:  # kept within the gains the command may be divided by
-                    Sb[G + c] = min(max(Sb[G + c], GAINS[0]), GAINS[1])
-                if P_alarm > 0.0:  # reopened above P0 (below): capped at P0 once it has shrunk below it
-                    Sb[P + c] = min((Pc - Pc * Uc * Uc * Pc / s) / forgetting, max(P0, Pc))
+                if P_alarm > 0.0:  # the gain kept within those the command may be divided by; P
+                    Sb[G + c] = min(max(Sb[G + c], GAINS[0]), GAINS[1])  # reopened above P0 (below)
+                    Sb[P + c] = min((Pc - Pc * Uc * Uc * Pc / s) / forgetting, max(P0, Pc))  # shrinks to it
                 else:
                     Sb[P + c] = min((Pc - Pc * Uc * Uc * Pc / s) / forgetting, P0)
             if Sb[HOLD] > 0.0 or Sb[N] <= WARMUP:

@@ -123,13 +123,19 @@ def remove_staged(folders: Iterable[Path]) -> None:
         with suppress(OSError):
             for name in os.listdir(folder):
                 m = STAGED.fullmatch(name)
-                if m is None:
-                    continue
-                if m["old"] and not os.path.lexists(folder / m["name"]):
-                    with suppress(OSError):
-                        os.rename(folder / name, folder / m["name"])
-                        continue
-                _remove(folder / name)
+                if m is not None:
+                    with suppress(OSError):  # one that cannot be cleared now is tried by the next sweep
+                        _clear_staged(folder / name, folder / m["name"])
+
+
+def _clear_staged(path: Path, target: Path) -> None:
+    """A temporary of ``target`` left by a killed write: a finished folder renamed aside
+    (``-old``, where two folders could not be exchanged) goes back if its place is empty; anything
+    else is removed."""
+    if path.name.endswith("-old") and not os.path.lexists(target):
+        os.rename(path, target)
+    else:
+        _remove(path)
 
 
 def write_run(out: Path, scn, rec) -> dict:
@@ -238,11 +244,8 @@ class Stage:
         try:
             parent.mkdir(parents=True, exist_ok=True)
             for name in os.listdir(parent):
-                if name.startswith(prefix):  # a killed run's: put a finished run renamed aside back
-                    if name.endswith("-old") and not os.path.lexists(self.target):
-                        os.rename(parent / name, self.target)
-                    else:
-                        _remove(parent / name)
+                if name.startswith(prefix):  # a killed run's
+                    _clear_staged(parent / name, self.target)
             if self.folder:
                 self.path = Path(tempfile.mkdtemp(dir=parent, prefix=prefix))
                 os.chmod(self.path, 0o777 & ~_umask())

@@ -36,7 +36,7 @@ from mlpfac.ik import body_velocity_vw, wheel_speeds_lr
 from mlpfac.plants.robot import yaw
 
 JIT = {"cache": True, "error_model": "numpy"}
-delay_push = delay_push_kernel(rows=True)  # what plant_step calls
+delay_push = delay_push_kernel()  # what plant_step calls
 
 # ints
 I_AL, I_AR, I_DL, I_DR, I_SITE, I_NSUB, I_TORQUE, I_NOISE = range(8)
