@@ -513,6 +513,35 @@ def test_one_blas_thread_leaves_the_users_choice(monkeypatch):
     assert "OPENBLAS_NUM_THREADS" not in os.environ and os.environ["OMP_NUM_THREADS"] == "3"
 
 
+def test_a_pool_found_broken_when_a_run_is_submitted_is_a_lost_worker(monkeypatch):
+    """A killed worker breaks the pool: the next result or the next submit, whichever comes first,
+    raises BrokenProcessPool; both are the same lost worker (seen in CI: the submit came first)."""
+    import concurrent.futures as cf
+    from concurrent.futures.process import BrokenProcessPool
+
+    from mlpfac.sweeps import execute
+
+    class KilledAfterOne:
+        def __init__(self, *a, **k):
+            self.submitted = 0
+
+        def submit(self, *a, **k):
+            self.submitted += 1
+            if self.submitted > 1:
+                raise BrokenProcessPool("A child process terminated abruptly")
+            f = cf.Future()
+            f.set_result([])
+            return f
+
+        def shutdown(self, *a, **k):
+            pass
+
+    monkeypatch.setattr(cf, "ProcessPoolExecutor", KilledAfterOne)
+    jobs = sweep.plan(["paper"], ["adaptive"], [0, 1, 2], 0.5)
+    with pytest.raises(sweep.WorkerLostError, match="a worker process died"):
+        list(execute._pool_results([[j] for j in jobs], 1, False, False))
+
+
 def test_a_worker_killed_from_outside_is_one_line(tmp_path):
     out = tmp_path / "o"
     p = subprocess.Popen(sweep_cmd(out, "--workers", "2"), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)

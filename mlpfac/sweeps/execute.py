@@ -231,13 +231,7 @@ def _pool_results(
             with sigint_deferred():  # Ctrl-C / SIGTERM come between the pool's calls, not inside them (see below)
                 finished, pending = cf.wait(pending, timeout=POLL_S, return_when=cf.FIRST_COMPLETED)
             for f in finished:
-                try:
-                    res = f.result()
-                except BrokenProcessPool:
-                    raise WorkerLostError(
-                        "a worker process died (killed from outside, or out of memory: see `dmesg`); "
-                        "the runs it was computing were not written"
-                    ) from None
+                res = f.result()
                 nxt = next(queue, None)
                 if nxt is not None:
                     submit(nxt)
@@ -247,7 +241,7 @@ def _pool_results(
             p.join(EXIT_GRACE_S)
             if p.is_alive():
                 p.kill()
-    except BaseException:  # also GeneratorExit: the consumer stopped
+    except BaseException as err:  # also GeneratorExit: the consumer stopped
         workers_now = set(mp.active_children()) - before
         for p in workers_now:  # this pool's workers: they ignore SIGINT and SIGTERM
             p.kill()
@@ -258,6 +252,11 @@ def _pool_results(
                 p.join(EXIT_GRACE_S)  # killed: at once, unless the machine is swamped
             _end_result_pipe(pool)
             pool.shutdown(wait=False, cancel_futures=True)  # its thread sees the workers gone and ends
+        if isinstance(err, BrokenProcessPool):  # seen by a result or by a submit, whichever comes first
+            raise WorkerLostError(
+                "a worker process died (killed from outside, or out of memory: see `dmesg`); "
+                "the runs it was computing were not written"
+            ) from None
         raise
 
 
