@@ -50,9 +50,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
-from mlpfac.kernels import JIT
+from mlpfac.jit import kernel
 
 # columns of the per-seed state S
 N, S2, DELAY = 0, 1, 3  # samples, the noise variances s_v^2 and s_omega^2 (1, 2), the delay chosen
@@ -69,7 +68,7 @@ WARMUP = 200  # samples before the first decision by likelihood (50: a delay of 
 QUIET_STEPS = 300  # steps without a decision after the input model's alarm (g settles within about 2 s)
 
 
-@njit(**JIT)
+@kernel()
 def pose_of(e, r, q):
     """The pose q whose error (2) to r is e: (2) inverted."""
     th = r[2] - e[2]
@@ -79,7 +78,7 @@ def pose_of(e, r, q):
     q[2] = th
 
 
-@njit(**JIT)
+@kernel()
 def motion(q, qp, T, y):
     """The velocity realised between the poses qp and q one step apart: y = (the chord over T at the
     mid heading, the heading increment over T)."""
@@ -89,7 +88,9 @@ def motion(q, qp, T, y):
     y[1] = dth / T
 
 
-@njit(**JIT)
+@kernel(
+    "void(f8[:, ::1], f8[::1], b1, f8[:, :, ::1], f8[:, ::1], f8[:, ::1], f8[::1], f8[:, ::1], f8[:, ::1], f8[:, :, ::1], f8)"
+)
 def bank_step(e, r, first, hist, q_prev, g, alarms, S, L, M, T):
     """One step for B seeds: e (B, 3) the measured error (2), r (>= 3,) the reference sample;
     hist (B, 2, >= D + 2) the commands sent, newest first; q_prev (B, 3) the last measured pose;

@@ -89,9 +89,10 @@ class EKF(_WeightFilter):
         h, H = jac(self.z)
         z = np.ascontiguousarray(self.z, dtype=float).reshape(-1, a)
         P = self._P.reshape(-1, a, a)
-        y2 = np.ascontiguousarray(np.broadcast_to(y, self.z.shape[:-1] + (3,)), dtype=float).reshape(-1, 3)
-        h2 = np.ascontiguousarray(np.broadcast_to(h, y2.shape), dtype=float).reshape(-1, 3)
-        H2 = np.ascontiguousarray(np.broadcast_to(H, (len(z), 3, a)), dtype=float)
+        # copies: a broadcast view is read-only, and the kernel's signature names writable arrays
+        y2 = np.array(np.broadcast_to(y, self.z.shape[:-1] + (3,)), dtype=float).reshape(-1, 3)
+        h2 = np.array(np.broadcast_to(h, y2.shape), dtype=float)
+        H2 = np.array(np.broadcast_to(H, (len(z), 3, a)), dtype=float)
         innov = np.empty_like(y2)
         Q = self.Q if self.Q is not None else np.zeros((1, 1))
         P_max = np.inf if self.P_max is None else float(self.P_max)

@@ -10,7 +10,6 @@ the event's class. The one delay line of every plant (what ``sensor_delay`` chan
 from __future__ import annotations
 
 import dataclasses
-import functools
 import math
 from dataclasses import dataclass, field
 from typing import ClassVar
@@ -18,6 +17,7 @@ from typing import ClassVar
 import numpy as np
 
 from mlpfac.exceptions import ConfigError
+from mlpfac.jit import kernel
 
 
 @dataclass(frozen=True)
@@ -201,18 +201,18 @@ class DelayLine:
 
     def __init__(self, first) -> None:
         first = np.asarray(first)
-        self.hist = np.empty((1, *first.shape), dtype=first.dtype)
+        integral = np.issubdtype(first.dtype, np.integer) or first.dtype == bool
+        self.hist = np.empty((1, *first.shape), dtype=np.int64 if integral else np.float64)
         self.hist[0] = first
         self.fill = np.ones(1, dtype=np.int64)
-        self._push = delay_push_kernel()
 
     def push(self, measurement) -> None:
         h = self.hist
         rows = h.reshape(len(h), -1)  # each measurement one flat row of the same memory (a number: of one)
-        x = np.asarray(measurement, dtype=h.dtype).reshape(-1)
+        x = np.ascontiguousarray(measurement, dtype=h.dtype).reshape(-1)
         if not np.may_share_memory(rows, h) or x.size != rows.shape[1]:
             raise ValueError(f"a delay line of {h.shape[1:]} measurements was pushed {np.shape(measurement)}")
-        self._push(rows, self.fill, x)
+        (delay_push_int if h.dtype == np.int64 else delay_push)(rows, self.fill, x)
 
     def read(self):
         """The oldest measurement held (a copy; a number for a line of numbers)."""
@@ -232,15 +232,7 @@ class DelayLine:
         return f"sensor delay {old} -> {steps} control steps"
 
 
-@functools.cache
-def delay_push_kernel():
-    """:func:`delay_push` compiled (numba is imported here, by a run, not by reading a scenario)."""
-    from numba import njit
-
-    return njit(cache=True)(delay_push)
-
-
-def delay_push(hist: np.ndarray, fill: np.ndarray, x: np.ndarray) -> None:
+def _delay_push(hist: np.ndarray, fill: np.ndarray, x: np.ndarray) -> None:
     """Append x (k,) to a delay line hist (cap, k) (see :class:`DelayLine`): the oldest row drops
     out when it is full. Copied number by number: a row assignment makes numba compile its
     shape-mismatch message, about a second of a first run."""
@@ -254,3 +246,7 @@ def delay_push(hist: np.ndarray, fill: np.ndarray, x: np.ndarray) -> None:
                 hist[i, j] = hist[i + 1, j]
     for j in range(k):
         hist[n, j] = x[j]
+
+
+delay_push = kernel("void(f8[:, ::1], i8[::1], f8[::1])", name="delay_push")(_delay_push)
+delay_push_int = kernel("void(i8[:, ::1], i8[::1], i8[::1])", name="delay_push_int")(_delay_push)

@@ -18,7 +18,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+
+from mlpfac.jit import kernel
 
 
 def wheel_speeds(
@@ -34,7 +35,7 @@ def wheel_speeds(
     return np.array(wheel_speeds_lr(float(v), float(omega), float(radius), float(track), limit))
 
 
-@njit(cache=True)
+@kernel("UniTuple(f8, 2)(f8, f8, f8, f8, f8)", error_model="python")
 def wheel_speeds_lr(v: float, omega: float, radius: float, track: float, max_wheel_speed: float) -> tuple[float, float]:
     """:func:`wheel_speeds` as two floats, compiled (the plant's control step calls it); no limit: inf."""
     half = 0.5 * omega * track
@@ -55,7 +56,7 @@ def body_velocity(wheel_lr: np.ndarray, radius: float, track: float) -> np.ndarr
     return np.array(body_velocity_vw(float(wheel_lr[0]), float(wheel_lr[1]), float(radius), float(track)))
 
 
-@njit(cache=True)
+@kernel("UniTuple(f8, 2)(f8, f8, f8, f8)", error_model="python")
 def body_velocity_vw(w_l: float, w_r: float, radius: float, track: float) -> tuple[float, float]:
     """:func:`body_velocity` as two floats, compiled."""
     return 0.5 * radius * (w_l + w_r), radius * (w_r - w_l) / track

@@ -56,10 +56,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
 from mlpfac.delay_bank import HELD, DelayBank, motion, pose_of
-from mlpfac.kernels import JIT
+from mlpfac.jit import kernel
 
 # columns of the per-seed state S, per channel c (v: +0, omega: +1)
 Y, U, G, P, R, CUSUM = 0, 2, 4, 6, 8, 10
@@ -83,7 +82,61 @@ MEAN_WINDOW = 20  # steps in the leaky sum of the innovations (``detect_mean``)
 GAINS = (0.8, 2.0)  # the input gains sent are kept within these (the law divides by them)
 
 
-@njit(**JIT)
+@kernel()
+def _biased(Sb, c, detect_mean):
+    """Channel c's leaky sum of the innovations shows a bias (``detect_mean``'s test)."""
+    return detect_mean > 0.0 and Sb[M + c] * Sb[M + c] > detect_mean * max(Sb[RM + c], 1e-12)
+
+
+@kernel()
+def _delay(Sb, C, h, y_w, ac):
+    """The delay from the correlations C_j of the omega channel's increments, Delta y_omega,k with
+    Delta u_omega,k-1-j = u_k-1-j - u_k-2-j: the closed loop's pose noise makes the commands' increments
+    nearly white, so C_j is the increment response: for a delay d it steps from negative at d - 1 to
+    positive at d (measured on the robot: C_d - C_d-1 = 2.7-5.6 |C_0| with 30 ms, at most 0.9 |C_0|
+    after the payload, actuator, friction and drive changes, whose slower response spreads over the
+    lags without a step). Lags 0 and 1 share pose noise with Delta y_k (biased); a lag j >= 2 is taken
+    when C_j - C_j-1 exceeds ACCEPT |C_0|, after CORR_MIN samples since the last alarm (which restarts
+    them), and replaces the current choice only when SWITCH times larger for PERSIST steps in a row."""
+    if Sb[N] > 1.0:
+        dy = y_w - Sb[DY]
+        for j in range(C.shape[0]):
+            C[j] = ac * C[j] + dy * (h[j] - h[j + 1])
+        Sb[NC] += 1.0
+        if Sb[NC] >= CORR_MIN:
+            cur = int(Sb[DELAY])
+            best, arg = ACCEPT * abs(C[0]), 0  # no delay stands for itself
+            for j in range(2, C.shape[0]):
+                if C[j] - C[j - 1] > best:
+                    best, arg = C[j] - C[j - 1], j
+            now = C[cur] - C[cur - 1] if cur > 0 else ACCEPT * abs(C[0])
+            cand = arg if arg != cur and best > SWITCH * now else cur
+            Sb[RUN] = Sb[RUN] + 1.0 if cand == Sb[CAND] else 0.0
+            Sb[CAND] = cand
+            if cand != cur and Sb[RUN] >= PERSIST:
+                Sb[DELAY] = cand
+    Sb[DY] = y_w
+
+
+@kernel()
+def _predict(q, r, h, Sb, d, T, out):
+    """The error (2) to r of the pose q moved over the last d commands sent (h, newest first), each a
+    unicycle step at g u: the measured pose is d steps old (a Smith predictor)."""
+    x, y, th = q[0], q[1], q[2]
+    for j in range(d - 1, -1, -1):
+        v, om = Sb[G] * h[0, j], Sb[G + 1] * h[1, j]
+        mid = th + 0.5 * T * om
+        x += T * v * math.cos(mid)
+        y += T * v * math.sin(mid)
+        th += T * om
+    c, s = math.cos(th), math.sin(th)
+    dx, dy = r[0] - x, r[1] - y
+    out[0] = c * dx + s * dy
+    out[1] = -s * dx + c * dy
+    out[2] = math.pi - ((math.pi - (r[2] - th)) % (2.0 * math.pi))
+
+
+@kernel("void(f8[:, ::1], f8[::1], b1, f8[:, :, ::1], f8[:, ::1], f8[:, ::1], f8[:, ::1], f8[:, ::1], f8[::1])")
 def observe(e, r, first, hist, q_prev, S, C, e_hat, params):
     """Update the gains (and the delay) with the motion measured since the last step; e_hat the
     error (2) of the pose predicted over the delay (e itself when it is 0).
@@ -172,61 +225,7 @@ def observe(e, r, first, hist, q_prev, S, C, e_hat, params):
             _predict(q, r, hist[b], Sb, d, T, e_hat[b])
 
 
-@njit(**JIT)
-def _biased(Sb, c, detect_mean):
-    """Channel c's leaky sum of the innovations shows a bias (``detect_mean``'s test)."""
-    return detect_mean > 0.0 and Sb[M + c] * Sb[M + c] > detect_mean * max(Sb[RM + c], 1e-12)
-
-
-@njit(**JIT)
-def _delay(Sb, C, h, y_w, ac):
-    """The delay from the correlations C_j of the omega channel's increments, Delta y_omega,k with
-    Delta u_omega,k-1-j = u_k-1-j - u_k-2-j: the closed loop's pose noise makes the commands' increments
-    nearly white, so C_j is the increment response: for a delay d it steps from negative at d - 1 to
-    positive at d (measured on the robot: C_d - C_d-1 = 2.7-5.6 |C_0| with 30 ms, at most 0.9 |C_0|
-    after the payload, actuator, friction and drive changes, whose slower response spreads over the
-    lags without a step). Lags 0 and 1 share pose noise with Delta y_k (biased); a lag j >= 2 is taken
-    when C_j - C_j-1 exceeds ACCEPT |C_0|, after CORR_MIN samples since the last alarm (which restarts
-    them), and replaces the current choice only when SWITCH times larger for PERSIST steps in a row."""
-    if Sb[N] > 1.0:
-        dy = y_w - Sb[DY]
-        for j in range(C.shape[0]):
-            C[j] = ac * C[j] + dy * (h[j] - h[j + 1])
-        Sb[NC] += 1.0
-        if Sb[NC] >= CORR_MIN:
-            cur = int(Sb[DELAY])
-            best, arg = ACCEPT * abs(C[0]), 0  # no delay stands for itself
-            for j in range(2, C.shape[0]):
-                if C[j] - C[j - 1] > best:
-                    best, arg = C[j] - C[j - 1], j
-            now = C[cur] - C[cur - 1] if cur > 0 else ACCEPT * abs(C[0])
-            cand = arg if arg != cur and best > SWITCH * now else cur
-            Sb[RUN] = Sb[RUN] + 1.0 if cand == Sb[CAND] else 0.0
-            Sb[CAND] = cand
-            if cand != cur and Sb[RUN] >= PERSIST:
-                Sb[DELAY] = cand
-    Sb[DY] = y_w
-
-
-@njit(**JIT)
-def _predict(q, r, h, Sb, d, T, out):
-    """The error (2) to r of the pose q moved over the last d commands sent (h, newest first), each a
-    unicycle step at g u: the measured pose is d steps old (a Smith predictor)."""
-    x, y, th = q[0], q[1], q[2]
-    for j in range(d - 1, -1, -1):
-        v, om = Sb[G] * h[0, j], Sb[G + 1] * h[1, j]
-        mid = th + 0.5 * T * om
-        x += T * v * math.cos(mid)
-        y += T * v * math.sin(mid)
-        th += T * om
-    c, s = math.cos(th), math.sin(th)
-    dx, dy = r[0] - x, r[1] - y
-    out[0] = c * dx + s * dy
-    out[1] = -s * dx + c * dy
-    out[2] = math.pi - ((math.pi - (r[2] - th)) % (2.0 * math.pi))
-
-
-@njit(**JIT)
+@kernel("void(f8[:, ::1], b1, f8[:, ::1], f8[:, :, ::1], f8[:, ::1])")
 def command(u, gains, S, hist, out):
     """The command sent, u / g per channel (g within GAINS) with ``gains`` (else u), and the history pushed."""
     lo, hi = GAINS

@@ -5,11 +5,10 @@ laws, divergence test) is in :mod:`mlpfac.loop_kernels`.
 
 Every kernel takes a leading batch dimension B and loops over it inside, one seed after another,
 so a seed's arithmetic does not depend on B or on the other seeds: a seed in a batch of 64 gets
-the same bits as the same seed run alone (B = 1). They are compiled by numba on first use and
-cached on disk (``cache=True``: beside this file in ``__pycache__`` when that folder is writable,
-else in numba's user-wide cache, ``~/.cache/numba`` or ``$NUMBA_CACHE_DIR``). With
-``error_model="numpy"`` a division by zero gives inf or NaN as numpy does: a diverging run is
-detected by the runner, not by an exception here.
+the same bits as the same seed run alone (B = 1). They are built when mlpfac is installed, or
+compiled by numba on first use (:mod:`mlpfac.jit`). With ``error_model="numpy"`` a division by
+zero gives inf or NaN as numpy does: a diverging run is detected by the runner, not by an
+exception here.
 
 Weight layout (16)-(18), as :mod:`mlpfac.networks`: z = [W_f (3, L_f), S_f (L_f, n_f), W_G (3, 2, L_G),
 S_G (L_G, 3)], row-major blocks.
@@ -20,7 +19,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+
+from mlpfac.jit import kernel
 
 
 def seeds(rng) -> tuple[list[np.random.Generator], bool]:
@@ -31,16 +31,15 @@ def seeds(rng) -> tuple[list[np.random.Generator], bool]:
     return list(rng), False
 
 
-JIT = {"cache": True, "error_model": "numpy", "nogil": True}
 V_R_MIN = 1e-3  # as mlpfac.law.V_R_MIN
 
 
-@njit(**JIT)
+@kernel()
 def _sigmoid(a):
     return 0.5 * (1.0 + math.tanh(0.5 * a))
 
 
-@njit(**JIT)
+@kernel()
 def _hidden(z, Lf, LG, xf, xG, phif, phiG):
     """(10)-(11): phi_f (L_f,), phi_G (L_G,) at weights z (alpha,) and inputs x_f (n_f,), x_G (3,)."""
     nf = xf.shape[0]
@@ -58,7 +57,7 @@ def _hidden(z, Lf, LG, xf, xG, phif, phiG):
         phiG[i] = _sigmoid(a)
 
 
-@njit(**JIT)
+@kernel()
 def _f_G(z, Lf, LG, nf, phif, phiG, f, G):
     """(14)-(15): NN_f (3,) and NN_G (3, 2) from the hidden layers (without the residual e); n_f inputs of NN_f."""
     for j in range(3):
@@ -75,7 +74,7 @@ def _f_G(z, Lf, LG, nf, phif, phiG, f, G):
             G[j, n] = a
 
 
-@njit(**JIT)
+@kernel()
 def _jacobian(z, Lf, LG, xf, xG, phif, phiG, u, H):
     """nabla_h (3, alpha), (19)-(24), at the hidden layers phi_f, phi_G of (z, x_f, x_G); H is all written."""
     alpha, nf = H.shape[1], xf.shape[0]
@@ -104,7 +103,7 @@ def _jacobian(z, Lf, LG, xf, xG, phif, phiG, u, H):
                 H[j, o3 + 3 * i + m] = w * xG[m]  # (24)
 
 
-@njit(**JIT)
+@kernel()
 def _ekf(z, P, innov, H, R, forgetting, Q, has_Q, P_max, PHt, W):
     """One EKF update (29)-(32) of z (alpha,), P (alpha, alpha) in place, innovation i (3,) given.
 
@@ -193,7 +192,9 @@ def _ekf(z, P, innov, H, R, forgetting, Q, has_Q, P_max, PHt, W):
                 pr[c] *= s
 
 
-@njit(**JIT)
+@kernel(
+    "void(f8[:, ::1], f8[:, :, ::1], f8[:, ::1], f8[:, ::1], f8[:, :, ::1], f8[:, ::1], f8, f8[:, ::1], b1, f8, f8[:, ::1])"
+)
 def ekf_update(z, P, y, h, H, R, forgetting, Q, has_Q, P_max, innov):
     """:func:`_ekf` for a batch: z (B, alpha), P (B, alpha, alpha), y, h (B, 3), H (B, 3, alpha); innov (B, 3) out."""
     a = z.shape[1]
@@ -205,7 +206,7 @@ def ekf_update(z, P, y, h, H, R, forgetting, Q, has_Q, P_max, innov):
         _ekf(z[b], P[b], innov[b], H[b], R, forgetting, Q, has_Q, P_max, PHt, W)
 
 
-@njit(**JIT)
+@kernel()
 def _law(e0, e1, e2, h1, h2, h5, v_r, T, l1, l2, l3, v_max, omega_max, u):
     """(35) with the corrected gains (36); omega first, limited, then v with the omega sent."""
     k2 = (1.0 - l2) * (1.0 - l3) / (T * max(v_r, V_R_MIN))
@@ -216,7 +217,7 @@ def _law(e0, e1, e2, h1, h2, h5, v_r, T, l1, l2, l3, v_max, omega_max, u):
     u[1] = omega
 
 
-@njit(**JIT)
+@kernel()
 def _law_kanayama(e0, e1, e2, h2, h5, v_r, T, Kx, Ky, Ktheta, v_max, omega_max, u):
     """Kanayama's structure with the estimates of (34) in its feedforward: v = h2 / T + Kx e1,
     omega = h5 / T + v_r (Ky e2 + Ktheta sin e3); with the nominal h2 = T v_r cos e3, h5 = T omega_r
@@ -227,7 +228,9 @@ def _law_kanayama(e0, e1, e2, h2, h5, v_r, T, Kx, Ky, Ktheta, v_max, omega_max, 
     u[1] = min(max(omega, -omega_max), omega_max)
 
 
-@njit(**JIT)
+@kernel(
+    "void(f8[:, ::1], f8, f8, b1, f8[:, ::1], f8[:, :, ::1], f8[:, ::1], f8[:, :, ::1], f8[:, ::1], f8[:, ::1], f8[:, ::1], f8[::1], i8[::1], f8[::1], f8[:, ::1], f8[:, ::1])"
+)
 def adaptive_step(e, v_r, omega_r, first, z, P, S, H, u, innov, h_hat, trace, ints, params, R, Q):
     """One step of the adaptive controller for B seeds, e (B, 3) -> u (B, 2).
 
@@ -307,7 +310,7 @@ def adaptive_step(e, v_r, omega_r, first, z, P, S, H, u, innov, h_hat, trace, in
         e_prev[0], e_prev[1], e_prev[2] = eb[0], eb[1], eb[2]
 
 
-@njit(**JIT)
+@kernel("void(f8[:, ::1], f8[:, ::1], f8[:, ::1], f8[:, ::1], f8[:, ::1], i8, i8, b1, f8[:, ::1], f8[:, :, ::1])")
 def networks_h_jacobian(z, xf, xG, e, u, Lf, LG, residual, h, H):
     """h (B, 3) and nabla_h (B, 3, alpha) of (26), (19)-(24): for tests against :mod:`mlpfac.networks`."""
     phif = np.empty(Lf)

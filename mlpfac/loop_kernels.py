@@ -8,12 +8,11 @@ from __future__ import annotations
 
 import math
 
-from numba import njit
+from mlpfac.jit import kernel
+from mlpfac.kernels import _law
 
-from mlpfac.kernels import JIT, _law
 
-
-@njit(**JIT)
+@kernel("void(f8[:, ::1], f8[::1], f8[:, ::1])")
 def tracking_errors(q, r, out):
     """Eq. (2) for poses q (B, 3) and one reference sample r (>= 3,): out (B, 3), e3 wrapped to (-pi, pi]."""
     for b in range(q.shape[0]):
@@ -24,7 +23,7 @@ def tracking_errors(q, r, out):
         out[b, 2] = math.pi - ((math.pi - (r[2] - q[b, 2])) % (2.0 * math.pi))
 
 
-@njit(**JIT)
+@kernel("void(f8[:, ::1], f8[::1], f8[::1], f8, f8[:, ::1], f8[:, ::1], f8[:, ::1], f8[:, ::1], f8[:, ::1])")
 def kinematic_step(e, r, r_next, Tp, u, noise, e_out, pose_out, h_true):
     """Model (7) for B seeds: e_out = f(e) + G(e) u + noise with the true f, G (5)-(6) at period Tp;
     pose_out the pose whose error (2) to r_next is e_out; h_true (B, 3) the true (34) at e."""
@@ -43,7 +42,7 @@ def kinematic_step(e, r, r_next, Tp, u, noise, e_out, pose_out, h_true):
         pose_out[b, 2] = th
 
 
-@njit(**JIT)
+@kernel("void(f8[:, ::1], f8, f8, f8, f8, f8, f8, f8, f8, f8[:, ::1], f8[:, ::1])")
 def corradini_step(e, v_r, omega_r, T, l1, l2, l3, v_max, omega_max, h_hat, u):
     """(35) given the nominal h1 = T e2, h2 = T v_r cos e3, h5 = T omega_r, for B seeds."""
     for b in range(e.shape[0]):
@@ -53,7 +52,7 @@ def corradini_step(e, v_r, omega_r, T, l1, l2, l3, v_max, omega_max, h_hat, u):
         _law(e0, e1, e2, h1, h2, h5, v_r, T, l1, l2, l3, v_max, omega_max, u[b])
 
 
-@njit(**JIT)
+@kernel("void(f8[:, ::1], f8, f8, f8, f8, f8, f8, f8, f8[:, ::1])")
 def kanayama_step(e, v_r, omega_r, Kx, Ky, Ktheta, v_max, omega_max, u):
     """Kanayama's law for B seeds: v = v_r cos e3 + Kx e1, omega = omega_r + v_r (Ky e2 + Ktheta sin e3)."""
     for b in range(e.shape[0]):
@@ -63,7 +62,7 @@ def kanayama_step(e, v_r, omega_r, Kx, Ky, Ktheta, v_max, omega_max, u):
         u[b, 1] = min(max(omega, -omega_max), omega_max)
 
 
-@njit(**JIT)
+@kernel("i8(f8[:, ::1], f8[:, ::1], f8[:, ::1], f8[:, ::1], f8, b1[::1])")
 def bad_seeds(q, u, e_true, z, limit, bad):
     """The runner's divergence test for B seeds: bad[b] when the pose or the command is not finite, the
     weights z (B, alpha) (or (B, 0)) are not, or the position error exceeds ``limit``. Returns the count."""
@@ -81,7 +80,7 @@ def bad_seeds(q, u, e_true, z, limit, bad):
 KANAYAMA, CORRADINI = 1, 2  # the laws the compiled closed loop runs (mlpfac.segment), by number
 
 
-@njit(**JIT)
+@kernel()
 def law_step(law, c, e, v_r, omega_r, u, tele):
     """One step of a law given by number, for B seeds: :func:`kanayama_step` with c = (Kx, Ky,
     Ktheta, v_max, omega_max) or :func:`corradini_step` with c = (T, lambda_1..3, v_max, omega_max)

@@ -12,15 +12,18 @@ gives (tests/test_segment.py).
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
+from mlpfac.jit import kernel
 from mlpfac.loop_kernels import bad_seeds, law_step, tracking_errors
-from mlpfac.plants.compiled import S_POSE, plant_step
+from mlpfac.plants.compiled import S_POSE, plant_step, with_robot
 
 BAD = -1  # the runner's test stopped the seed (a plant's own reasons are its codes, > 0)
 
 
-@njit(cache=True, error_model="numpy")
+@kernel(
+    lambda: with_robot(f"UniTuple(i8, 2)(i8, i8, f8[:, ::1], i8, f8[::1], f8, {', '.join(['f8[:, ::1]'] * 8)})"),
+    ext="mujoco",
+)
 def segment(k0, k1, ref, law, c, limit, pose, pose_meas, e, e_true, u, ctele, ptele, draws, robot):
     """Steps k0 .. k1 - 1 of one seed. Records (N, ...) are written at row k; ``ctele``, ``ptele``
     (N, W) the controller's and the plant's telemetry rows; ``draws`` (k1 - k0, 3) the plant's

@@ -26,17 +26,12 @@ import os
 import sys
 from typing import NamedTuple
 
-import llvmlite.binding as llvm
 import mujoco
 import numpy as np
-from numba import njit, types
 
-from mlpfac.events import delay_push_kernel
+from mlpfac.events import delay_push
 from mlpfac.ik import body_velocity_vw, wheel_speeds_lr
-from mlpfac.plants.robot import yaw
-
-JIT = {"cache": True, "error_model": "numpy"}
-delay_push = delay_push_kernel()  # what plant_step calls
+from mlpfac.jit import built, kernel
 
 # ints
 I_AL, I_AR, I_DL, I_DR, I_SITE, I_NSUB, I_TORQUE, I_NOISE = range(8)
@@ -91,19 +86,36 @@ def _library() -> str:
 
 
 _LIB_PATH = _library()
-_LIB = ctypes.CDLL(_LIB_PATH)
-llvm.load_library_permanently(_LIB_PATH)  # the kernels call its functions by name (so numba can cache them)
-_P = types.intp  # pointers are passed as addresses (MjModel._address, ndarray.ctypes.data)
-mj_step = types.ExternalFunction("mj_step", types.void(_P, _P))
-mj_step1 = types.ExternalFunction("mj_step1", types.void(_P, _P))
-mj_step2 = types.ExternalFunction("mj_step2", types.void(_P, _P))
-mj_objectVelocity = types.ExternalFunction(  # noqa: N816 - MuJoCo's name
-    "mj_objectVelocity", types.void(_P, _P, types.int32, types.int32, _P, types.int32)
-)
-mj_getState = types.ExternalFunction(  # noqa: N816 - MuJoCo's name
-    "mj_getState", types.void(_P, _P, _P, types.uint32)
-)
-_remainder = types.ExternalFunction("remainder", types.float64(types.float64, types.float64))  # IEEE remainder, exact
+# The kernels call MuJoCo's functions by name: the built module (mlpfac.plants._kernels) finds them in
+# the library loaded here, numba (when it compiles them) through llvmlite.
+_LIB = ctypes.CDLL(_LIB_PATH, mode=ctypes.RTLD_GLOBAL)
+if built("mujoco") is None:
+    import llvmlite.binding as llvm
+    from numba import types
+
+    llvm.load_library_permanently(_LIB_PATH)
+    _P = types.intp  # pointers are passed as addresses (MjModel._address, ndarray.ctypes.data)
+    mj_step = types.ExternalFunction("mj_step", types.void(_P, _P))
+    mj_step1 = types.ExternalFunction("mj_step1", types.void(_P, _P))
+    mj_step2 = types.ExternalFunction("mj_step2", types.void(_P, _P))
+    mj_objectVelocity = types.ExternalFunction(  # noqa: N816 - MuJoCo's name
+        "mj_objectVelocity", types.void(_P, _P, types.int32, types.int32, _P, types.int32)
+    )
+    mj_getState = types.ExternalFunction(  # noqa: N816 - MuJoCo's name
+        "mj_getState", types.void(_P, _P, _P, types.uint32)
+    )
+    _remainder = types.ExternalFunction("remainder", types.float64(types.float64, types.float64))  # IEEE, exact
+
+
+def with_robot(signature: str):
+    """numba's ``signature`` with a last argument of :class:`Robot`, for :func:`~mlpfac.jit.kernel`."""
+    from numba import types
+    from numba.core.sigutils import normalize_signature
+
+    args, ret = normalize_signature(signature)
+    f1, i1 = types.float64[::1], types.int64[::1]
+    robot = types.NamedTuple((types.int64, types.int64, *[f1] * 7, i1, f1, f1, types.float64[:, ::1], i1, f1), Robot)
+    return ret(*args, robot)
 
 
 @ctypes.CFUNCTYPE(None, ctypes.c_char_p)
@@ -117,7 +129,13 @@ def _fatal(msg: bytes) -> None:
 ctypes.c_void_p.in_dll(_LIB, "mju_user_error").value = ctypes.cast(_fatal, ctypes.c_void_p).value
 
 
-@njit(**JIT)
+@kernel("f8(f8[::1])", ext="mujoco", error_model="python")
+def yaw(xmat: np.ndarray) -> float:
+    """Heading of a frame: the angle of its x axis projected on the floor, atan2(R[1, 0], R[0, 0])."""
+    return math.atan2(xmat[3], xmat[0])
+
+
+@kernel()
 def _physics(mp, dp, ctrl, qvel, ints, fl, st, wl, wr):
     """One control period: the wheel commands held for n physics steps, each ``mj_step2`` (actuation,
     integration) then ``mj_step1`` (the new state's positions, velocities, sensors). The velocity
@@ -158,7 +176,7 @@ def _physics(mp, dp, ctrl, qvel, ints, fl, st, wl, wr):
     st[S_TIME] += n * fl[F_DT]
 
 
-@njit(**JIT)
+@kernel("void(f8[::1], f8[::1], f8[::1])", ext="mujoco")
 def read_pose(site_xpos, site_xmat, st):
     """The pose (x, y, theta) at the site into st, theta the heading atan2(R10, R00) unwrapped across steps."""
     th = st[S_THETA]
@@ -167,7 +185,7 @@ def read_pose(site_xpos, site_xmat, st):
     st[S_POSE], st[S_POSE + 1], st[S_POSE + 2] = site_xpos[0], site_xpos[1], th
 
 
-@njit(**JIT)
+@kernel("void(i8[::1], f8[::1], f8[::1], f8[::1], f8[:, ::1], i8[::1])", ext="mujoco")
 def measure(ints, fl, st, draw, hist, fill):
     """The true pose plus noise (std * one standard normal draw per coordinate), into the delay line."""
     m = np.empty(3)
@@ -178,30 +196,7 @@ def measure(ints, fl, st, draw, hist, fill):
     delay_push(hist, fill, m)
 
 
-@njit(**JIT)
-def plant_step(u0, u1, draw, tele, robot):
-    """One control step of the robot for the command u = (v, omega): the IK (wheel speeds the nominal
-    radius and track give, scaled together under the wheel-speed limit), the physics, the pose and
-    its measurement (noise ``draw`` (3,) of standard normals), the telemetry row ``tele`` (see
-    TELEMETRY). Returns why it diverged (0: it did not)."""
-    ints, fl, st, qvel, vel = robot.ints, robot.fl, robot.st, robot.qvel, robot.vel
-    wl, wr = wheel_speeds_lr(u0, u1, fl[F_IK_R], fl[F_IK_TRACK], fl[F_WMAX])
-    _physics(robot.mp, robot.dp, robot.ctrl, qvel, ints, fl, st, wl, wr)
-    read_pose(robot.site_xpos, robot.site_xmat, st)
-    measure(ints, fl, st, draw, robot.hist, robot.fill)
-    dl, dr, sl, sr = ints[I_DL], ints[I_DR], fl[F_SL], fl[F_SR]
-    ml, mr = sl * qvel[dl], sr * qvel[dr]
-    mj_objectVelocity(robot.mp, robot.dp, OBJ_SITE, ints[I_SITE], vel.ctypes.data, 0)  # (angular, linear), world
-    th = st[S_THETA]
-    tele[0], tele[1] = body_velocity_vw(ml, mr, fl[F_IK_R], fl[F_IK_TRACK])
-    tele[2], tele[3] = vel[3] * math.cos(th) + vel[4] * math.sin(th), vel[2]
-    tele[4], tele[5] = wl, wr
-    tele[6], tele[7] = ml, mr
-    tele[8], tele[9] = sl * robot.qfrc[dl], sr * robot.qfrc[dr]  # as applied: joint limits included
-    return diverged(robot)
-
-
-@njit(**JIT)
+@kernel(lambda: with_robot("i8()"), ext="mujoco")
 def diverged(robot):
     """RESET when MuJoCo reset the data on a bad state (its time no longer ours), NOT_FINITE, LIFTED
     when the axle rose half a wheel radius above its rest height, TIPPED when the chassis' up axis is
@@ -223,3 +218,26 @@ def diverged(robot):
     if robot.root_xmat[8] < 0.5:
         return TIPPED
     return 0
+
+
+@kernel(lambda: with_robot("i8(f8, f8, f8[::1], f8[::1])"), ext="mujoco")
+def plant_step(u0, u1, draw, tele, robot):
+    """One control step of the robot for the command u = (v, omega): the IK (wheel speeds the nominal
+    radius and track give, scaled together under the wheel-speed limit), the physics, the pose and
+    its measurement (noise ``draw`` (3,) of standard normals), the telemetry row ``tele`` (see
+    TELEMETRY). Returns why it diverged (0: it did not)."""
+    ints, fl, st, qvel, vel = robot.ints, robot.fl, robot.st, robot.qvel, robot.vel
+    wl, wr = wheel_speeds_lr(u0, u1, fl[F_IK_R], fl[F_IK_TRACK], fl[F_WMAX])
+    _physics(robot.mp, robot.dp, robot.ctrl, qvel, ints, fl, st, wl, wr)
+    read_pose(robot.site_xpos, robot.site_xmat, st)
+    measure(ints, fl, st, draw, robot.hist, robot.fill)
+    dl, dr, sl, sr = ints[I_DL], ints[I_DR], fl[F_SL], fl[F_SR]
+    ml, mr = sl * qvel[dl], sr * qvel[dr]
+    mj_objectVelocity(robot.mp, robot.dp, OBJ_SITE, ints[I_SITE], vel.ctypes.data, 0)  # (angular, linear), world
+    th = st[S_THETA]
+    tele[0], tele[1] = body_velocity_vw(ml, mr, fl[F_IK_R], fl[F_IK_TRACK])
+    tele[2], tele[3] = vel[3] * math.cos(th) + vel[4] * math.sin(th), vel[2]
+    tele[4], tele[5] = wl, wr
+    tele[6], tele[7] = ml, mr
+    tele[8], tele[9] = sl * robot.qfrc[dl], sr * robot.qfrc[dr]  # as applied: joint limits included
+    return diverged(robot)

@@ -55,17 +55,17 @@ class KinematicPlant:
         self.k = 0
         self.T_p = self.T
         self.e = np.tile(tracking_error(q0, self.ref[0]), (B, 1))
-        self.noise = np.zeros((B, max(N, 1), 3))
+        self.noise = np.zeros((max(N, 1), B, 3))  # step k's noise: one contiguous (B, 3)
         if self.L is not None:
             for b, g in enumerate(rngs):  # each seed alone: L eps_k, eps_k ~ N(0, I)
-                self.noise[b] = g.standard_normal((N, 3)) @ self.L.T
+                self.noise[:, b] = g.standard_normal((N, 3)) @ self.L.T
         self._pose = np.array([pose_from_error(e, self.ref[0]) for e in self.e])
         self.history = DelayLine(self._pose)
         self._u, self._h = np.zeros((B, 2)), np.zeros((B, 3))
         self._tele = {"u_meas": self._u, "h_true": self._h}
         e0 = np.empty((0, 3))  # load (or compile) the kernel now, not mid-run
         self._kernel = kinematic_step
-        kinematic_step(e0, self.ref[0], self.ref[0], self.T, self._u[:0], self.noise[:0, 0], e0, e0, e0)
+        kinematic_step(e0, self.ref[0], self.ref[0], self.T, self._u[:0], e0, e0, e0, e0)
 
     def true_pose(self) -> np.ndarray:
         return self._pose[0] if self.single else self._pose
@@ -75,10 +75,10 @@ class KinematicPlant:
 
     def step(self, u: np.ndarray) -> None:
         k = self.k
-        U = np.asarray(u, dtype=float).reshape(-1, 2)
+        U = np.ascontiguousarray(u, dtype=float).reshape(-1, 2)
         self._u[:] = U
         e, pose = np.empty_like(self.e), np.empty_like(self._pose)
-        self._kernel(self.e, self.ref[k], self.ref[k + 1], self.T_p, U, self.noise[:, k], e, pose, self._h)
+        self._kernel(self.e, self.ref[k], self.ref[k + 1], self.T_p, U, self.noise[k], e, pose, self._h)
         self.e, self._pose = e, pose
         self.k = k + 1
         self.history.push(pose)

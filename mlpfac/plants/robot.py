@@ -11,16 +11,15 @@ timestep) as :class:`mujoco.MjSpec` edits (:mod:`mlpfac.plants.edits`); the step
 from __future__ import annotations
 
 import dataclasses
-import math
 import threading
 from dataclasses import dataclass
 
 import mujoco
 import numpy as np
-from numba import njit
 
 from mlpfac.exceptions import ConfigError
 from mlpfac.plants import edits
+from mlpfac.plants.compiled import yaw
 from mlpfac.plants.config import MujocoConfig
 from mlpfac.plants.detect import ROUND, WHEEL_SHAPES, collision_geoms, describe, is_velocity_servo, names, resolve
 from mlpfac.plants.model_file import fingerprint, is_menagerie, load_spec
@@ -360,9 +359,3 @@ def _static_geometry(m: mujoco.MjModel, d: mujoco.MjData, site: int, root: int, 
             shape |= edits.mesh_shape(m, g)
         shapes.append(shape)
     return shapes
-
-
-@njit(cache=True)
-def yaw(xmat: np.ndarray) -> float:
-    """Heading of a frame: the angle of its x axis projected on the floor, atan2(R[1, 0], R[0, 0])."""
-    return math.atan2(xmat[3], xmat[0])

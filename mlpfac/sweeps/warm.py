@@ -1,7 +1,7 @@
 """Imported by the fork server of a local pool (:func:`mlpfac.sweeps.worker.pool_context`), once:
-what a run needs, and numba started (its compiler and cache), so that every worker forked from it
-starts warm instead of importing numpy, MuJoCo and numba and starting numba itself (about 0.6 s
-of CPU a worker). Importing this module elsewhere does the same work in that process.
+what a run needs and the compiled kernels (:mod:`mlpfac.jit`; numba started, where it compiles
+them), so that every worker forked from it starts warm instead of importing numpy, MuJoCo and the
+rest itself. Importing this module elsewhere does the same work in that process.
 """
 
 from __future__ import annotations
@@ -20,6 +20,7 @@ try:
     import numpy as np
 
     from mlpfac.loop_kernels import tracking_errors
+    from mlpfac.plants import compiled  # noqa: F401
     from mlpfac.run_metrics import metrics  # noqa: F401
     from mlpfac.runner import run  # noqa: F401
     from mlpfac.scenario import parse  # noqa: F401

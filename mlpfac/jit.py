@@ -1,0 +1,144 @@
+"""The compiled kernels: built once when mlpfac is installed, or compiled by numba on first use.
+
+Every kernel of the loop (the networks, the EKF, the laws, the error, the delay lines, the MuJoCo
+plant's step, the compiled closed loop) is a plain Python function marked :func:`kernel`. Those that
+Python calls are marked with their one signature; ``pip install`` compiles them ahead of time
+(numba's AOT compiler, from ``setup.py``) into two extension modules: :data:`EXTENSIONS`, the second
+holding the kernels that call MuJoCo's C functions, so that only the plants load it. A run then
+imports neither numba nor its compiler, and the first run after an install is as fast as any other.
+
+A built module is used only when it was built from these very files (:data:`FILES`) for this kind of
+processor (``target_cpu="host"``, as numba compiles on the fly): both are hashed into it at build
+time (:func:`stamp`). Otherwise, after an edit in a checkout, say, numba compiles the same functions
+on their first call and caches them (``cache=True``): the same code either way. ``MLPFAC_KERNELS=jit``
+asks for numba always (the build itself, and the test that both give the same bits);
+``MLPFAC_KERNELS=aot`` refuses to start without current built modules.
+
+A kernel built ahead of time does not check the types of what it is given, as numba's dispatcher
+does: its signature is the contract. Numba is given the same signature, so a call that would not
+match it is refused under ``MLPFAC_KERNELS=jit`` (tests/test_kernels_aot.py runs the loop so).
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import importlib
+import inspect
+import os
+import platform
+from collections.abc import Callable
+from pathlib import Path
+
+ENV = "MLPFAC_KERNELS"
+HERE = Path(__file__).resolve().parent
+EXTENSIONS = {"core": "mlpfac._kernels", "mujoco": "mlpfac.plants._kernels"}
+MODULES = {  # the modules whose kernels each extension holds
+    "core": (
+        "mlpfac.kernels",
+        "mlpfac.loop_kernels",
+        "mlpfac.input_model",
+        "mlpfac.delay_bank",
+        "mlpfac.events",
+        "mlpfac.ik",
+    ),
+    "mujoco": ("mlpfac.plants.compiled", "mlpfac.segment"),
+}
+FILES = tuple(m.removeprefix("mlpfac.").replace(".", "/") + ".py" for ms in MODULES.values() for m in ms) + ("jit.py",)
+JIT = {"cache": True, "error_model": "numpy"}  # a division by zero gives inf or NaN, as numpy does
+EXPORTS: dict[str, list[tuple[str, Callable, object, Callable]]] = {ext: [] for ext in EXTENSIONS}
+
+
+def _cpu() -> bytes:
+    """What the code built for this processor needs of it: its instruction set extensions."""
+    try:
+        with open("/proc/cpuinfo", "rb") as f:
+            for line in f:
+                if line.startswith((b"flags", b"Features")):
+                    return line
+    except OSError:
+        pass
+    return f"{platform.machine()} {platform.processor()}".encode()
+
+
+@functools.cache
+def stamp() -> int:
+    """A hash of the kernels' files and of the processor, as a signed 64-bit number."""
+    h = hashlib.sha256(_cpu())
+    for name in FILES:
+        h.update((HERE / name).read_bytes())
+    return int.from_bytes(h.digest()[:8], "little", signed=True)
+
+
+@functools.cache
+def built(ext: str):
+    """The built module of ``ext`` when it is current (``None``: numba compiles the kernels)."""
+    mode = os.environ.get(ENV, "")
+    if mode in ("jit", "build"):
+        return None
+    name = EXTENSIONS[ext]
+    try:
+        if ext == "mujoco":  # its kernels call MuJoCo's library, which this module loads first
+            importlib.import_module("mlpfac.plants.compiled")
+        module = importlib.import_module(name)
+    except ImportError as exc:
+        why = f"could not be imported ({exc})"
+    else:
+        if module.stamp() == stamp():
+            return module
+        why = "was built from other sources or for another processor"
+    if mode == "aot":
+        raise ImportError(f"mlpfac: {ENV}=aot, but {name} {why}: reinstall mlpfac (pip install .)")
+    return None
+
+
+def kernel(
+    signature: str | Callable[[], object] | None = None, *, ext: str = "core", name: str | None = None, **options
+):
+    """Mark a kernel. ``signature`` (numba's, or a function giving it) for one that Python calls:
+    it is built into ``ext``'s module (as ``name``, by default the function's); without one, it is
+    called only by other kernels. ``options``: numba's, over :data:`JIT`."""
+
+    def mark(fn: Callable) -> Callable:
+        symbol = f"{fn.__module__.rsplit('.', 1)[-1]}__{name or fn.__name__}"
+        module = built(ext)
+        if module is not None:
+            return getattr(module, symbol) if signature is not None else fn
+        from numba import njit
+
+        opts = {**JIT, **options}
+        if os.environ.get(ENV) == "build":
+            opts["cache"] = False  # a kernel loaded from numba's cache cannot be linked into a module
+        if signature is None:
+            return njit(**opts)(fn)
+        sig = signature() if callable(signature) else signature
+        compiled = njit(sig, **opts)(fn)
+        EXPORTS[ext].append((symbol, fn, sig, compiled))
+        return compiled
+
+    return mark
+
+
+def build(ext: str, path: str) -> None:
+    """Compile the kernels of ``ext`` into the extension module file ``path`` (``setup.py``).
+
+    Each exported function is a call of the numba-compiled kernel, so it keeps the kernel's own
+    options (``error_model="numpy"``); ``stamp()`` returns :func:`stamp` as it is at build time."""
+    if os.environ.get(ENV) != "build":
+        raise RuntimeError(f"set {ENV}=build before mlpfac's kernels are imported")
+    from numba.pycc import CC
+
+    for m in MODULES[ext]:
+        importlib.import_module(m)
+    cc = CC(EXTENSIONS[ext].rsplit(".", 1)[1])
+    cc.output_dir, cc.output_file = os.path.dirname(path) or ".", os.path.basename(path)
+    cc.target_cpu = "host"
+    for symbol, fn, sig, compiled in EXPORTS[ext]:
+        args = ", ".join(inspect.signature(fn).parameters)
+        ns = {"kernel": compiled}
+        exec(f"def {symbol}({args}):\n    return kernel({args})", ns)
+        cc.export(symbol, sig)(ns[symbol])
+    ns = {}
+    exec(f"def stamp():\n    return {stamp()}", ns)
+    cc.export("stamp", "i8()")(ns["stamp"])
+    cc.compile()
