@@ -72,14 +72,13 @@ def stamp() -> int:
 
 @functools.cache
 def built(ext: str):
-    """The built module of ``ext`` when it is current (``None``: numba compiles the kernels)."""
+    """The built module of ``ext`` when it is current (``None``: numba compiles the kernels).
+    ``"mujoco"``'s calls MuJoCo's library by name: :mod:`mlpfac.plants.compiled` loads it first."""
     mode = os.environ.get(ENV, "")
     if mode in ("jit", "build"):
         return None
     name = EXTENSIONS[ext]
     try:
-        if ext == "mujoco":  # its kernels call MuJoCo's library, which this module loads first
-            importlib.import_module("mlpfac.plants.compiled")
         module = importlib.import_module(name)
     except ImportError as exc:
         why = f"could not be imported ({exc})"

@@ -39,6 +39,8 @@ def test_the_wheel_holds_every_shipped_scenario_and_robot_file(wheel):
                 assert f"{package}/{f.name}" in names, f.name
     for f in (ROOT / "mlpfac").rglob("*.py"):  # every module, in every subpackage
         assert f.relative_to(ROOT).as_posix() in names, f
+    for module in ("mlpfac/_kernels", "mlpfac/plants/_kernels"):  # the kernels built at install (mlpfac.jit)
+        assert any(n.startswith(module + ".") and n.endswith((".so", ".pyd")) for n in names), module
 
 
 @pytest.mark.slow
@@ -63,6 +65,18 @@ def test_a_fresh_install_lists_and_runs_every_shipped_scenario(wheel, tmp_path):
         [str(py), "-c", "import mlpfac; print(mlpfac.__file__)"], capture_output=True, text=True, cwd=work, env=env
     )
     assert where.stdout.startswith(str(venv)), where.stdout  # not the checkout
+    built = subprocess.run(  # the wheel's built kernels are used: a run imports no numba
+        [
+            str(py),
+            "-c",
+            "import sys, mlpfac; mlpfac.run('eight-nominal', duration=0.3, figure=None); print('numba' in sys.modules)",
+        ],
+        capture_output=True,
+        text=True,
+        cwd=work,
+        env={**env, "MLPFAC_KERNELS": "aot"},
+    )
+    assert built.returncode == 0 and built.stdout.strip() == "False", built.stderr
     listed = mlpfac("list")
     assert listed.returncode == 0, listed.stderr
     shipped = sorted(p.stem for p in (ROOT / "sims").glob("*.toml"))

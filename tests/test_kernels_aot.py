@@ -76,6 +76,8 @@ def _hashes(mode: str) -> dict:
 @pytest.mark.skipif(os.environ.get(jit.ENV) == "jit", reason="MLPFAC_KERNELS=jit: numba compiles them")
 def test_the_installed_kernels_are_current_and_used():
     """An install (editable or not) builds them: a run imports neither numba nor its compiler."""
+    import mlpfac.plants.compiled  # noqa: F401  (loads MuJoCo's library, which the second module calls)
+
     for ext, name in jit.EXTENSIONS.items():
         assert jit.built(ext) is not None, f"{name} is missing or stale: reinstall (pip install -e .)"
     got = _hashes("aot")

@@ -76,6 +76,27 @@ def figure1(rec: RunRecord, baseline: RunRecord | None, path: Path) -> list[str]
     return sorted([*axes, "e", "f"])
 
 
+def warm_up() -> None:
+    """Do ahead what the first figure of a process does once: matplotlib's figure, axes and
+    projections imported (their docstrings processed), the font and its glyphs loaded, PIL's PNG
+    writer registered. The painter's child does it while the run is computed."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+    from matplotlib.ticker import LogFormatter
+    from PIL import Image
+
+    Image.preinit()
+    fig = Figure(figsize=(1, 1), dpi=10)
+    FigureCanvasAgg(fig)
+    ax = fig.add_subplot()
+    ax.semilogy([0.0, 1.0], [1e-2, 1.0], label="x")
+    ax.yaxis.set_major_formatter(LogFormatter())
+    ax.set(title="(x) 0.1", xlabel="t [s]")
+    ax.legend(fontsize=7)
+    ax.add_patch(_box(np.zeros(2), 0.1))
+    fig.canvas.draw()
+
+
 def _layout(height: float) -> dict[str, float]:
     """A fixed layout (what constrained layout found for this figure, without its solver's passes):
     margins in inches, room on the right for the legend of (d)."""
