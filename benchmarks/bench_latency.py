@@ -1,14 +1,16 @@
 """Time to result of whole commands, as a user waits for them. Not a test.
 
-    python benchmarks/bench_latency.py [--repeats 5] [--cold N] [--only run|quick|workers]
+    python benchmarks/bench_latency.py [--repeats 5] [--cold N] [--before MLPFAC] [--only run|quick|workers]
 
 1. ``mlpfac run eight-nominal`` with every output written (metrics.json, config.toml, figure1.png,
    run.rrd) against the floor process of ``../shared/tools/latency_floor.py`` (start Python, import
    numpy and MuJoCo, load the robot, 2500 x (4 mj_step + one reference EKF update)), interleaved
    repeats, median wall time and the CPU time of each process and its children; the same with a
-   fresh, empty ``NUMBA_CACHE_DIR`` for every run of the command; with ``--cold N``, the first run
-   in a new venv right after ``pip install .`` (N installs, each a sample). Targets: <= 2x the
-   floor warm, <= 5x on the first run after an install.
+   fresh, empty ``NUMBA_CACHE_DIR`` for every run of the command (all from this checkout's
+   install; with ``--before MLPFAC``, another install's command in the same rounds); with
+   ``--cold N``, N regular installs (``pip install .`` into a new venv), each timed
+   on its first run and then warm. Targets: <= 2x the floor warm, <= 5x on the first run after an
+   install.
 2. ``mlpfac list``, ``mlpfac --help`` and two bad inputs (an unknown scenario, a bad flag value):
    median wall time, target < 0.3 s each.
 3. A sweep worker's fixed cost: the CPU time (its own clock, so other load on the machine does not
@@ -66,36 +68,46 @@ def line(name: str, samples: list[tuple[float, float]], ref: float | None = None
     return wall
 
 
-def bench_run(repeats: int, cold: bool) -> None:
+def bench_run(repeats: int, cold: int, before: str | None) -> None:
     floor = [sys.executable, str(floor_script()), str(MODEL), "--child"]
     out = Path(tempfile.mkdtemp(prefix="bench-latency-"))
-    run = [*MLPFAC, "run", "eight-nominal", "--out", str(out / "run")]
-    timed(run)  # the files read once (warm case)
-    fl, warm, fresh = [], [], []
+    runs = {"": [*MLPFAC, "run", "eight-nominal", "--out", str(out / "run")]}
+    if before:  # another install's command, timed in the same rounds
+        runs["before: "] = [before, "run", "eight-nominal", "--out", str(out / "before")]
+    for cmd in runs.values():
+        timed(cmd)  # the files read once (warm case)
+    fl, warm, fresh = [], {k: [] for k in runs}, {k: [] for k in runs}
     for i in range(repeats):
         fl.append(timed(floor))
-        warm.append(timed(run))
-        cache = out / f"numba-{i}"
-        fresh.append(timed(run, env=dict(os.environ, NUMBA_CACHE_DIR=str(cache))))
-        shutil.rmtree(cache, ignore_errors=True)
+        for k, cmd in runs.items():
+            warm[k].append(timed(cmd))
+            cache = out / f"numba-{i}"
+            fresh[k].append(timed(cmd, env=dict(os.environ, NUMBA_CACHE_DIR=str(cache))))
+            shutil.rmtree(cache, ignore_errors=True)
     print(f"mlpfac run eight-nominal, all outputs, {repeats} interleaved repeats (median):")
     ref = line("floor process", fl)
-    line("warm", warm, ref, "target <= 2x")
-    line("fresh NUMBA_CACHE_DIR", fresh, ref, "target <= 5x")
+    for k in runs:
+        line(f"{k}warm", warm[k], ref, "target <= 2x")
+        line(f"{k}fresh NUMBA_CACHE_DIR", fresh[k], ref, "target <= 5x")
     if cold:
-        first, fl = [], []
-        for i in range(cold):  # a new venv, `pip install .` (not timed), then its first run
+        first, again, fl = [], [], []
+        for i in range(cold):  # a new venv, `pip install .` (not timed), its first run, then warm runs
             venv = out / f"venv-{i}"
             subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True)
             subprocess.run([str(venv / "bin" / "pip"), "install", "-q", str(ROOT)], check=True, capture_output=True)
+            cmd = [str(venv / "bin" / "mlpfac"), "run", "eight-nominal", "--out", str(out / f"installed-{i}")]
             fl.append(timed(floor))
-            first.append(
-                timed([str(venv / "bin" / "mlpfac"), "run", "eight-nominal", "--out", str(out / f"first-{i}")])
-            )
+            first.append(timed(cmd))
+            for _ in range(repeats):
+                fl.append(timed(floor))
+                again.append(timed(cmd))
             shutil.rmtree(venv, ignore_errors=True)
-        print(f"the first run after `pip install .` into a new venv, {cold} install(s) (median):")
-        line("floor process", fl)
-        line("first run after the install", first, statistics.median(w for w, _ in fl), "target <= 5x")
+        print(
+            f"a regular install (`pip install .` into a new venv), {cold} install(s), {repeats} warm runs each (median):"
+        )
+        ref = line("floor process", fl)
+        line("the first run after the install", first, ref, "target <= 5x")
+        line("warm", again, ref, "target <= 2x")
     shutil.rmtree(out, ignore_errors=True)
 
 
@@ -161,10 +173,11 @@ def main() -> int:
         metavar="N",
         help="also the first run after N fresh installs (needs the package index)",
     )
+    ap.add_argument("--before", metavar="MLPFAC", help="another install's mlpfac command, timed beside this one")
     ap.add_argument("--only", choices=("run", "quick", "workers"))
     a = ap.parse_args()
     if a.only in (None, "run"):
-        bench_run(a.repeats, a.cold)
+        bench_run(a.repeats, a.cold, a.before)
     if a.only in (None, "quick"):
         bench_quick(a.repeats)
     if a.only in (None, "workers"):

@@ -30,6 +30,8 @@ import platform
 from collections.abc import Callable
 from pathlib import Path
 
+from mlpfac.exceptions import ConfigError
+
 ENV = "MLPFAC_KERNELS"
 HERE = Path(__file__).resolve().parent
 EXTENSIONS = {"core": "mlpfac._kernels", "mujoco": "mlpfac.plants._kernels"}
@@ -75,6 +77,8 @@ def built(ext: str):
     """The built module of ``ext`` when it is current (``None``: numba compiles the kernels).
     ``"mujoco"``'s calls MuJoCo's library by name: :mod:`mlpfac.plants.compiled` loads it first."""
     mode = os.environ.get(ENV, "")
+    if mode not in ("", "jit", "aot", "build"):
+        raise ConfigError(ENV, f"{mode!r} is neither jit (numba compiles the kernels) nor aot (the built ones only)")
     if mode in ("jit", "build"):
         return None
     name = EXTENSIONS[ext]
@@ -87,7 +91,7 @@ def built(ext: str):
             return module
         why = "was built from other sources or for another processor"
     if mode == "aot":
-        raise ImportError(f"mlpfac: {ENV}=aot, but {name} {why}: reinstall mlpfac (pip install .)")
+        raise ConfigError(f"{ENV}=aot", f"{name} {why}: reinstall mlpfac (pip install .)")
     return None
 
 

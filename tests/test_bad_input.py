@@ -3,6 +3,7 @@ traceback, and nothing written. Add a row for each new case found."""
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -249,6 +250,25 @@ def test_a_bad_file_from_the_command_line_has_no_traceback(tmp_path):
     )
     assert proc.returncode == 2 and "Traceback" not in proc.stderr
     assert proc.stderr.strip() == f"mlpfac: error: {path}: not a text file (TOML is UTF-8 text)"
+
+
+BAD_ENVIRONMENT = {  # a variable of ours with a value it does not take: one line, exit 2, nothing written
+    "MLPFAC_KERNELS=fast": ({"MLPFAC_KERNELS": "fast"}, "mlpfac: error: MLPFAC_KERNELS: 'fast' is neither jit"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD_ENVIRONMENT))
+def test_bad_environment(tmp_path, case):
+    env, needle = BAD_ENVIRONMENT[case]
+    proc = subprocess.run(
+        [sys.executable, "-m", "mlpfac.cli", "run", "eight-nominal", "--out", str(tmp_path / "D")],
+        capture_output=True,
+        text=True,
+        env={**os.environ, **env},
+    )
+    assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1, proc.stderr
+    assert proc.stderr.startswith(needle), proc.stderr
+    assert not any(tmp_path.iterdir())
 
 
 def test_a_minimal_mujoco_file_runs_bounded_on_the_default_robot(tmp_path):

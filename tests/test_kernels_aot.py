@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from mlpfac import jit
+from mlpfac.exceptions import ConfigError
 from mlpfac.variants import CONTROLLERS
 
 # Short runs that call every exported kernel between them: every shipped controller (the adaptive
@@ -102,7 +103,11 @@ def test_stale_or_missing_kernels_are_compiled_or_refused(monkeypatch):
         assert jit.built("core") is None
         jit.built.cache_clear()
         monkeypatch.setenv("MLPFAC_KERNELS", "aot")
-        with pytest.raises(ImportError, match="built from other sources"):
+        with pytest.raises(ConfigError, match="built from other sources"):
+            jit.built("core")
+        jit.built.cache_clear()
+        monkeypatch.setenv("MLPFAC_KERNELS", "fast")
+        with pytest.raises(ConfigError, match="MLPFAC_KERNELS: 'fast' is neither"):
             jit.built("core")
     finally:
         jit.built.cache_clear()
