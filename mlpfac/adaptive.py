@@ -151,16 +151,14 @@ class Adaptive:
         adaptive_step(np.zeros((0, 3)), 1.0, 0.0, True, *(x[:0] for x in self._args), *self._consts)
 
     def step(self, e: np.ndarray, r: np.ndarray) -> np.ndarray:
-        E = e[None] if self.single else e
+        E = np.ascontiguousarray(e, dtype=float).reshape(-1, 3)  # the kernels' type, whatever e is
         if self.input is not None:  # the input model's update; the error of the pose predicted over the delay
             E = self.input.observe(E, r, self.first)
         if not self.compiled:
             u = np.stack([s.step(E[b], r, self.first) for b, s in enumerate(self.seeds)])
         else:
             u = self._u
-            self._kernel(
-                np.ascontiguousarray(E, dtype=float), float(r[3]), float(r[4]), self.first, *self._args, *self._consts
-            )
+            self._kernel(E, float(r[3]), float(r[4]), self.first, *self._args, *self._consts)
         self.first = False
         if self.input is not None:  # the command sent: u / g
             u = self.input.command(u)

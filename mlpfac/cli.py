@@ -298,19 +298,23 @@ def _print_summary(m: dict, out: Path) -> None:
 
 
 def entry() -> None:
-    """The ``mlpfac`` command: :func:`main`, then the process ends without the interpreter's
-    teardown, which takes about 0.1 s once rerun is imported and only frees what the system frees
-    anyway. As at a normal exit, the standard streams are flushed and the exit handlers run first
-    (rerun's flush of a stream still open among them); with another thread still alive (a pool's),
-    or a stream that cannot be flushed, the exit is the normal one."""
+    """The ``mlpfac`` command: :func:`main`, then the process ends. When only mlpfac's own code ran
+    (no controller of the user's was loaded, no other thread is alive), it ends without the
+    interpreter's teardown, which takes about 0.1 s once rerun is imported and only frees what the
+    system frees anyway: the exit handlers run first (rerun's flush of a stream still open among
+    them), then the standard streams are flushed, as at a normal exit. A user's code may hold
+    buffered files that only the teardown closes: then, and when a stream cannot be flushed, the
+    exit is the normal one."""
     code = main()
-    if threading.active_count() == 1:
+    code = 0 if code is None else code
+    plugins = sys.modules.get("mlpfac.plugins")
+    if threading.active_count() == 1 and not getattr(plugins, "USER_CODE", False):
+        atexit._run_exitfuncs()
         try:
             sys.stdout.flush()
             sys.stderr.flush()
         except (OSError, ValueError):
             sys.exit(code)
-        atexit._run_exitfuncs()
         os._exit(code)
     sys.exit(code)
 

@@ -85,7 +85,7 @@ class Corradini:
         corradini_step(np.zeros((0, 3)), 1.0, 0.0, T, *self.law.lambdas, *self._limits, self._h[:0], self._u[:0])
 
     def step(self, e: np.ndarray, r: np.ndarray) -> np.ndarray:
-        E = e[None] if self.single else e
+        E = np.ascontiguousarray(e, dtype=float).reshape(-1, 3)  # the kernels' type, whatever e is
         self._kernel(E, float(r[3]), float(r[4]), self.T, *self.law.lambdas, *self._limits, self._h, self._u)
         return self._u[0].copy() if self.single else self._u
 
@@ -144,7 +144,7 @@ class Kanayama:
         kanayama_step(np.zeros((0, 3)), 1.0, 0.0, *self._consts, self._u[:0])  # load the kernel before the run
 
     def step(self, e: np.ndarray, r: np.ndarray) -> np.ndarray:
-        E = e[None] if self.single else e
+        E = np.ascontiguousarray(e, dtype=float).reshape(-1, 3)  # the kernels' type, whatever e is
         self._kernel(E, float(r[3]), float(r[4]), *self._consts, self._u)
         return self._u[0].copy() if self.single else self._u
 

@@ -274,7 +274,7 @@ class InputModel:
         command(self.u[:0], gains, self.S[:0], self.hist[:0], self.u[:0])
 
     def observe(self, e: np.ndarray, r: np.ndarray, first: bool) -> np.ndarray:
-        e = np.ascontiguousarray(e, dtype=float)
+        e, r = np.ascontiguousarray(e, dtype=float), np.ascontiguousarray(r, dtype=float)  # the kernels' types
         if self.bank is not None:  # the delay, into S[:, DELAY], before the kernel predicts over it
             self.S[:, DELAY] = self.bank.update(
                 e, r, first, self.hist, self.q_prev, self.S[:, G : G + 2], self.S[:, ALARMS]

@@ -8,11 +8,13 @@ holding the kernels that call MuJoCo's C functions, so that only the plants load
 imports neither numba nor its compiler, and the first run after an install is as fast as any other.
 
 A built module is used only when it was built from these very files (:data:`FILES`) for this kind of
-processor (``target_cpu="host"``, as numba compiles on the fly): both are hashed into it at build
-time (:func:`stamp`). Otherwise, after an edit in a checkout, say, numba compiles the same functions
-on their first call and caches them (``cache=True``): the same code either way. ``MLPFAC_KERNELS=jit``
-asks for numba always (the build itself, and the test that both give the same bits);
-``MLPFAC_KERNELS=aot`` refuses to start without current built modules.
+processor (``target_cpu="host"`` where the processor's flags tell kinds apart, as numba compiles on
+the fly; a generic build elsewhere) and, for the MuJoCo kernels, this MuJoCo version: all are
+hashed into it at build time (:func:`stamp`). The two modules are used together or not at all
+(numba cannot compile a MuJoCo kernel that calls a built one). Otherwise, after an edit in a checkout, say, numba compiles the same functions
+on their first call and caches them (``cache=True``): the same code either way, and a one-line
+note says so. ``MLPFAC_KERNELS=jit`` asks for numba always (the test that both give the same bits);
+``MLPFAC_KERNELS=aot`` refuses to start without current built modules; the build sets ``build``.
 
 A kernel built ahead of time does not check the types of what it is given, as numba's dispatcher
 does: its signature is the contract. Numba is given the same signature, so a call that would not
@@ -27,6 +29,7 @@ import importlib
 import inspect
 import os
 import platform
+import sys
 from collections.abc import Callable
 from pathlib import Path
 
@@ -47,8 +50,10 @@ MODULES = {  # the modules whose kernels each extension holds
     "mujoco": ("mlpfac.plants.compiled", "mlpfac.segment"),
 }
 FILES = tuple(m.removeprefix("mlpfac.").replace(".", "/") + ".py" for ms in MODULES.values() for m in ms) + ("jit.py",)
-JIT = {"cache": True, "error_model": "numpy"}  # a division by zero gives inf or NaN, as numpy does
+JIT = {"cache": True, "error_model": "numpy", "nogil": True}  # numpy's inf or NaN for a division by zero
 EXPORTS: dict[str, list[tuple[str, Callable, object, Callable]]] = {ext: [] for ext in EXTENSIONS}
+SALT: dict[str, str] = {}  # what else an extension's built code depends on (see built)
+WHY: dict[str, str] = {}  # why an extension's built module is not used
 
 
 def _cpu() -> bytes:
@@ -64,9 +69,10 @@ def _cpu() -> bytes:
 
 
 @functools.cache
-def stamp() -> int:
-    """A hash of the kernels' files and of the processor, as a signed 64-bit number."""
-    h = hashlib.sha256(_cpu())
+def stamp(salt: str = "") -> int:
+    """A hash of the kernels' files, of the processor and of ``salt`` (what else the built code
+    depends on: the MuJoCo version for ``"mujoco"``), as a signed 64-bit number."""
+    h = hashlib.sha256(_cpu() + salt.encode())
     for name in FILES:
         h.update((HERE / name).read_bytes())
     return int.from_bytes(h.digest()[:8], "little", signed=True)
@@ -74,24 +80,30 @@ def stamp() -> int:
 
 @functools.cache
 def built(ext: str):
-    """The built module of ``ext`` when it is current (``None``: numba compiles the kernels).
-    ``"mujoco"``'s calls MuJoCo's library by name: :mod:`mlpfac.plants.compiled` loads it first."""
+    """The built module of ``ext`` when it is current (``None``: numba compiles the kernels; why
+    in :data:`WHY`). ``"mujoco"``'s calls MuJoCo's library by name and depends on its version:
+    :mod:`mlpfac.plants.compiled` loads the library and sets :data:`SALT` first."""
     mode = os.environ.get(ENV, "")
     if mode not in ("", "jit", "aot", "build"):
         raise ConfigError(ENV, f"{mode!r} is neither jit (numba compiles the kernels) nor aot (the built ones only)")
     if mode in ("jit", "build"):
+        WHY[ext] = f"{ENV}={mode}"
         return None
     name = EXTENSIONS[ext]
     try:
         module = importlib.import_module(name)
+        if module.stamp() == stamp(SALT.get(ext, "")):
+            return module
+        why = "was built from other sources, for another processor or another MuJoCo"
     except ImportError as exc:
         why = f"could not be imported ({exc})"
-    else:
-        if module.stamp() == stamp():
-            return module
-        why = "was built from other sources or for another processor"
+    except OSError as exc:
+        why = f"cannot be checked against its sources ({exc})"
+    WHY[ext] = f"{name} {why}"
     if mode == "aot":
         raise ConfigError(f"{ENV}=aot", f"{name} {why}: reinstall mlpfac (pip install .)")
+    if ext == "core":  # said once a process: the first run will wait for numba
+        sys.stderr.write(f"mlpfac: note: {name} {why}; numba compiles the kernels on first use\n")
     return None
 
 
@@ -126,22 +138,31 @@ def build(ext: str, path: str) -> None:
     """Compile the kernels of ``ext`` into the extension module file ``path`` (``setup.py``).
 
     Each exported function is a call of the numba-compiled kernel, so it keeps the kernel's own
-    options (``error_model="numpy"``); ``stamp()`` returns :func:`stamp` as it is at build time."""
+    options (``error_model="numpy"``) and releases the GIL; ``stamp()`` returns :func:`stamp` as it
+    is at build time."""
     if os.environ.get(ENV) != "build":
         raise RuntimeError(f"set {ENV}=build before mlpfac's kernels are imported")
-    from numba.pycc import CC
+    from numba.pycc import CC, compiler
 
+    class Flags(compiler.Flags):  # the exported functions release the GIL, as a kernel may (threads)
+        def __init__(self, *args, **kwargs) -> None:
+            super().__init__(*args, **kwargs)
+            self.release_gil = True
+
+    compiler.Flags = Flags
     for m in MODULES[ext]:
         importlib.import_module(m)
     cc = CC(EXTENSIONS[ext].rsplit(".", 1)[1])
     cc.output_dir, cc.output_file = os.path.dirname(path) or ".", os.path.basename(path)
-    cc.target_cpu = "host"
+    # this processor's instructions where the stamp can tell processors apart (their flags), else a
+    # generic build that runs on any processor of the kind
+    cc.target_cpu = "host" if _cpu().startswith((b"flags", b"Features")) else ""
     for symbol, fn, sig, compiled in EXPORTS[ext]:
         args = ", ".join(inspect.signature(fn).parameters)
         ns = {"kernel": compiled}
         exec(f"def {symbol}({args}):\n    return kernel({args})", ns)
         cc.export(symbol, sig)(ns[symbol])
     ns = {}
-    exec(f"def stamp():\n    return {stamp()}", ns)
+    exec(f"def stamp():\n    return {stamp(SALT.get(ext, ''))}", ns)
     cc.export("stamp", "i8()")(ns["stamp"])
     cc.compile()

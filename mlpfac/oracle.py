@@ -118,7 +118,7 @@ class Oracle:
             self.pose_step.delay(int(value))
 
     def step(self, e: np.ndarray, r: np.ndarray) -> np.ndarray:
-        E = e[None] if self.single else e
+        E = np.ascontiguousarray(e, dtype=float).reshape(-1, 3)  # the kernels' type, whatever e is
         k, T = self.k, self.T
         if k > 0:
             self.pose_step.push(k)

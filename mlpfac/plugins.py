@@ -25,6 +25,7 @@ from mlpfac.variants import CONTROLLERS
 
 GROUP = "mlpfac.controllers"  # the entry-point group an installed package registers controllers in
 _LOCAL: dict[str, type] = {}  # classes handed to the Python API that no file or module names
+USER_CODE = False  # a controller of the user's was resolved in this process (see mlpfac.cli.entry)
 
 
 @dataclass(frozen=True)
@@ -90,6 +91,8 @@ def resolve(spec: str, params: dict | None, T: float, where: str, params_where: 
     (the flag, or the file and key) for a missing file, module or class, a class without ``step``,
     or parameters it does not accept (``params`` None: not checked). Nothing of the controller runs
     here but its module's import."""
+    global USER_CODE
+    USER_CODE = True
     origin = "module"
     target = spec
     if spec in _LOCAL:

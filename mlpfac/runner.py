@@ -240,7 +240,10 @@ def _loop(scns, ref, plant, ctrl, sink, on_step, full: bool) -> list[RunRecord]:
                         ctrl_store[key][:, k] = val
                 for b in live:
                     recs[b].n = k + 1
-                if bad_seeds(q, u, et, no_z if z is None else z, base.divergence_m, bad):
+                zk = (
+                    no_z if z is None else np.ascontiguousarray(z, dtype=float).reshape(len(q), -1)
+                )  # a plug-in's: any shape
+                if bad_seeds(q, u, et, zk, base.divergence_m, bad):
                     for b in [b for b in live if bad[b]]:
                         why = getattr(ctrl, "why", {}).get(b) or _diverged(
                             q[b], u[b], et[b], None if z is None else z[b], base.divergence_m

@@ -93,14 +93,16 @@ def test_built_and_numba_compiled_kernels_give_the_same_bits():
     assert built["runs"] == compiled["runs"]
 
 
-def test_stale_or_missing_kernels_are_compiled_or_refused(monkeypatch):
-    """A module built from other sources is not used: numba compiles instead, or, with
-    MLPFAC_KERNELS=aot, one line says so."""
+def test_stale_or_missing_kernels_are_compiled_or_refused(monkeypatch, capsys):
+    """A module built from other sources is not used: numba compiles instead, and a note says so
+    once, or, with MLPFAC_KERNELS=aot, one line refuses."""
     jit.built.cache_clear()
-    monkeypatch.setattr(jit, "stamp", lambda: 12345)
+    monkeypatch.setattr(jit, "stamp", lambda salt="": 12345)
     try:
         monkeypatch.setenv("MLPFAC_KERNELS", "")
-        assert jit.built("core") is None
+        assert jit.built("core") is None and jit.built("core") is None
+        note = capsys.readouterr().err.splitlines()
+        assert len(note) == 1 and note[0].startswith("mlpfac: note: mlpfac._kernels was built from other sources")
         jit.built.cache_clear()
         monkeypatch.setenv("MLPFAC_KERNELS", "aot")
         with pytest.raises(ConfigError, match="built from other sources"):
@@ -136,3 +138,14 @@ def test_a_delay_line_of_integers_or_strided_rows_pushes_what_it_was_given():
     x = np.arange(6.0)[::2]  # not contiguous: copied before the kernel reads it
     rows.push(x)
     assert np.array_equal(rows.read(), [0.0, 2.0, 4.0])
+
+
+@pytest.mark.skipif(os.environ.get(jit.ENV) == "jit", reason="MLPFAC_KERNELS=jit: numba compiles them")
+def test_a_mujoco_other_than_the_built_ones_asks_for_a_reinstall():
+    """The MuJoCo kernels were built against one MuJoCo's functions and enums; the core kernels
+    built, they cannot be compiled by numba instead (they call the built ones): one line."""
+    script = "import mujoco; mujoco.__version__ = '0.0.0'; import mlpfac.plants.compiled"
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=300)
+    assert out.returncode != 0
+    assert "mlpfac.plants._kernels was built from other sources, for another processor or another MuJoCo" in out.stderr
+    assert "pip install --force-reinstall --no-deps mlpfac" in out.stderr

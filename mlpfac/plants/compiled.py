@@ -30,8 +30,9 @@ import mujoco
 import numpy as np
 
 from mlpfac.events import delay_push
+from mlpfac.exceptions import ConfigError
 from mlpfac.ik import body_velocity_vw, wheel_speeds_lr
-from mlpfac.jit import built, kernel
+from mlpfac.jit import SALT, WHY, built, kernel
 
 # ints
 I_AL, I_AR, I_DL, I_DR, I_SITE, I_NSUB, I_TORQUE, I_NOISE = range(8)
@@ -89,6 +90,9 @@ _LIB_PATH = _library()
 # The kernels call MuJoCo's functions by name: the built module (mlpfac.plants._kernels) finds them in
 # the library loaded here, numba (when it compiles them) through llvmlite.
 _LIB = ctypes.CDLL(_LIB_PATH, mode=ctypes.RTLD_GLOBAL)
+SALT["mujoco"] = mujoco.__version__  # its enums and functions, as the module was built against them
+if built("mujoco") is None and built("core") is not None:  # numba cannot call the built core kernels
+    raise ConfigError(WHY["mujoco"], "reinstall mlpfac (pip install --force-reinstall --no-deps mlpfac)")
 if built("mujoco") is None:
     import llvmlite.binding as llvm
     from numba import types
@@ -114,8 +118,9 @@ def with_robot(signature: str):
 
     args, ret = normalize_signature(signature)
     f1, i1 = types.float64[::1], types.int64[::1]
-    robot = types.NamedTuple((types.int64, types.int64, *[f1] * 7, i1, f1, f1, types.float64[:, ::1], i1, f1), Robot)
-    return ret(*args, robot)
+    fields = (types.int64, types.int64, *[f1] * 7, i1, f1, f1, types.float64[:, ::1], i1, f1)
+    assert len(fields) == len(Robot._fields), "with_robot names a type for each field of Robot, in order"
+    return ret(*args, types.NamedTuple(fields, Robot))
 
 
 @ctypes.CFUNCTYPE(None, ctypes.c_char_p)
