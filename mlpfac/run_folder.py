@@ -85,7 +85,13 @@ def run_into_folder(scn, out: Path, built, recording: Recording, baseline=None, 
             rec, m = _run_into(folder, out, scn, built, sink, baseline, painter)
             if recording.to_file:
                 if isinstance(sink, DeferredSink):
-                    sink.replay()
+                    try:
+                        sink.replay()
+                    except OSError as err:  # rerun could not write or close the file (a full disk, say)
+                        why = err.strerror or str(err)
+                        raise ConfigError(
+                            str(rrd_shown), f"cannot write ({why}); nothing was changed in {out}"
+                        ) from None
                 from mlpfac.log.sinks import check_recording
 
                 check_recording(rrd_path, rrd_shown)

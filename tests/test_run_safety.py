@@ -317,3 +317,17 @@ def test_a_stage_replaces_a_full_folder_whole(tmp_path, monkeypatch, exchange):
     with outputs.Stage(target, "--out") as stage:
         (stage.path / "metrics.json").write_text("discarded")
     assert files(target) == {"metrics.json": b"new"} and leftovers(tmp_path) == []
+
+
+def test_a_recording_that_cannot_be_closed_is_a_failed_write(tmp_path):
+    """rerun's file closed too late (a full disk can stall it): one line naming the file, exit 2."""
+    out = tmp_path / "run"
+    script = (
+        "import sys; import mlpfac.log.recorder as r; r.CLOSE_TIMEOUT_S = 0.0; from mlpfac.cli import entry; "
+        f"sys.argv = ['mlpfac', 'run', 'paper', '--no-plot', '--duration', '0.3', '--out', {str(out)!r}]; entry()"
+    )
+    proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 2, proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"mlpfac: error: {out / 'run.rrd'}: cannot write"), proc.stderr
+    assert not out.exists()
