@@ -299,16 +299,19 @@ def _print_summary(m: dict, out: Path) -> None:
 
 def entry() -> None:
     """The ``mlpfac`` command: :func:`main`, then the process ends. When only mlpfac's own code ran
-    (no controller of the user's was loaded, no other thread is alive), it ends without the
+    (no controller of the user's was loaded, no thread alive but daemons), it ends without the
     interpreter's teardown, which takes about 0.1 s once rerun is imported and only frees what the
     system frees anyway: the exit handlers run first (rerun's flush of a stream still open among
     them), then the standard streams are flushed, as at a normal exit. A user's code may hold
-    buffered files that only the teardown closes: then, and when a stream cannot be flushed, the
-    exit is the normal one."""
+    buffered files that only the teardown closes: then, with a thread alive that the normal exit
+    would wait for, and when a stream cannot be flushed, the exit is the normal one. (A daemon
+    thread, which the normal exit does not wait for, is ended either way: a recording that could
+    not be closed leaves one, stuck in rerun, which the teardown would abort on.)"""
     code = main()
     code = 0 if code is None else code
     plugins = sys.modules.get("mlpfac.plugins")
-    if threading.active_count() == 1 and not getattr(plugins, "USER_CODE", False):
+    others = [t for t in threading.enumerate() if t is not threading.current_thread()]
+    if all(t.daemon for t in others) and not getattr(plugins, "USER_CODE", False):
         atexit._run_exitfuncs()
         try:
             sys.stdout.flush()

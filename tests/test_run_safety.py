@@ -322,8 +322,11 @@ def test_a_stage_replaces_a_full_folder_whole(tmp_path, monkeypatch, exchange):
 def test_a_recording_that_cannot_be_closed_is_a_failed_write(tmp_path):
     """rerun's file closed too late (a full disk can stall it): one line naming the file, exit 2."""
     out = tmp_path / "run"
-    script = (
-        "import sys; import mlpfac.log.recorder as r; r.CLOSE_TIMEOUT_S = 0.0; from mlpfac.cli import entry; "
+    script = (  # rerun's close stalls for 3 s, the recorder waits 0.2 s
+        "import sys, time; import rerun as rr; import mlpfac.log.recorder as r; r.CLOSE_TIMEOUT_S = 0.2; "
+        "close = rr.RecordingStream.disconnect; "
+        "rr.RecordingStream.disconnect = lambda self: (time.sleep(3), close(self)); "
+        "from mlpfac.cli import entry; "
         f"sys.argv = ['mlpfac', 'run', 'paper', '--no-plot', '--duration', '0.3', '--out', {str(out)!r}]; entry()"
     )
     proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=300)
