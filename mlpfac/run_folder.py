@@ -13,6 +13,7 @@ from pathlib import Path
 from mlpfac.exceptions import ConfigError, PluginError
 from mlpfac.outputs import Stage, check_run_folder, check_save_file, folder_lock, holds_finished_run
 from mlpfac.replay import DEFER_MAX_S, DeferredSink
+from mlpfac.signals import raise_swallowed
 
 
 @dataclass
@@ -95,6 +96,7 @@ def run_into_folder(scn, out: Path, built, recording: Recording, baseline=None, 
                 from mlpfac.log.sinks import check_recording
 
                 check_recording(rrd_path, rrd_shown)
+            raise_swallowed()  # a Ctrl-C that landed in a __del__ (rerun's) stops the run's folder too
         except BaseException as err:
             if sink is not None:
                 sink.close()  # a web viewer started for --serve stops with the run

@@ -14,7 +14,7 @@ from mlpfac.record import RunRecord
 from mlpfac.reference import sample
 from mlpfac.scenario import Scenario
 from mlpfac.segment import BAD, segment
-from mlpfac.signals import Terminated
+from mlpfac.signals import Terminated, raise_swallowed
 
 FLUSH_EVERY = 250  # steps between sends to a log sink
 
@@ -204,6 +204,7 @@ def _loop(scns, ref, plant, ctrl, sink, on_step, full: bool) -> list[RunRecord]:
     try:
         if compiled:
             while k < N and live:
+                raise_swallowed()
                 _apply_due(pending, k, T, plant, recs, live)
                 k1 = min(N, (k // FLUSH_EVERY + 1) * FLUSH_EVERY)
                 if pending:  # up to the next event
@@ -223,6 +224,7 @@ def _loop(scns, ref, plant, ctrl, sink, on_step, full: bool) -> list[RunRecord]:
                     sink.flush(rec0, k)
         else:
             for k in range(N):
+                raise_swallowed()
                 _apply_due(pending, k, T, plant, recs, live)
                 q, q_meas, r = plant.true_pose(), plant.measure(), ref[k]
                 tracking_errors(q_meas, r, e)

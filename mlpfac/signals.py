@@ -7,6 +7,7 @@ Only the standard library: the sweep's parent process imports this module too.
 from __future__ import annotations
 
 import signal
+import sys
 import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -20,10 +21,32 @@ def _raise_terminated(signum: int, frame) -> None:
     raise Terminated()
 
 
+_swallowed: list[BaseException] = []  # interrupts raised inside a __del__, which Python only reports
+
+
+def _unraisable(unraisable) -> None:
+    if unraisable.exc_type is not None and issubclass(unraisable.exc_type, KeyboardInterrupt):
+        _swallowed.append(unraisable.exc_value or unraisable.exc_type())
+    else:
+        sys.__unraisablehook__(unraisable)
+
+
 def handle_sigterm() -> None:
-    """Make SIGTERM raise :class:`Terminated` (a KeyboardInterrupt) in the main thread, as SIGINT does."""
+    """Make SIGTERM raise :class:`Terminated` (a KeyboardInterrupt) in the main thread, as SIGINT
+    does, and keep an interrupt that lands in a ``__del__`` (rerun's recording streams flush in
+    theirs), where Python would print it as ignored and go on: :func:`raise_swallowed` raises it."""
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGTERM, _raise_terminated)
+        sys.unraisablehook = _unraisable
+
+
+def raise_swallowed() -> None:
+    """Raise the interrupt a ``__del__`` swallowed since the last call, if any: called between
+    steps and before a run's folder is put in place, so that no Ctrl-C or SIGTERM is lost."""
+    if _swallowed:
+        err = _swallowed[-1]
+        _swallowed.clear()
+        raise err
 
 
 @contextmanager

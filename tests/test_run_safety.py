@@ -9,6 +9,7 @@ import resource
 import signal
 import subprocess
 import sys
+import textwrap
 import time
 from pathlib import Path
 
@@ -334,3 +335,37 @@ def test_a_recording_that_cannot_be_closed_is_a_failed_write(tmp_path):
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith(f"mlpfac: error: {out / 'run.rrd'}: cannot write"), proc.stderr
     assert not out.exists()
+
+
+def test_a_ctrl_c_that_lands_in_a_del_still_stops_the_run(tmp_path):
+    """Python reports an exception raised in a ``__del__`` (rerun's streams flush in theirs) as
+    ignored and goes on: a Ctrl-C delivered there stops the run at its next step all the same."""
+    out = tmp_path / "run"
+    script = textwrap.dedent(
+        f"""
+        import sys
+        import mlpfac.runner as runner
+
+        class Dropped:
+            def __del__(self):
+                raise KeyboardInterrupt  # as SIGINT's handler does, wherever Python is
+
+        apply_due = runner._apply_due
+
+        def step(pending, k, *args):
+            if k == 100:
+                Dropped()
+            return apply_due(pending, k, *args)
+
+        runner._apply_due = step
+        from mlpfac.cli import entry
+
+        sys.argv = ["mlpfac", "run", "eight-nominal", "--no-plot", "--duration", "5", "--out", {str(out)!r}]
+        entry()
+        """
+    )
+    proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 130, proc.stderr
+    assert "ignored" not in proc.stderr and "Traceback" not in proc.stderr, proc.stderr
+    m = json.loads((out / "metrics.json").read_text())
+    assert m["status"] == "interrupted" and m["reason"] == "interrupted at t = 1.01 s", m["reason"]  # after step 100

@@ -12,7 +12,7 @@ from pathlib import Path
 
 from mlpfac.exceptions import ConfigError, MlpfacError
 from mlpfac.outputs import check_run_folder, folder_lock, remove_staged
-from mlpfac.signals import Terminated, sigint_deferred
+from mlpfac.signals import Terminated, raise_swallowed, sigint_deferred
 from mlpfac.sweeps.folders import _oserror, check_done, write_result
 from mlpfac.sweeps.plan import Job
 from mlpfac.sweeps.worker import _worker_init, one_blas_thread, pool_context, run_task
@@ -147,6 +147,7 @@ def _execute(jobs, out, workers, client, batched, batch_size, save_rrd, progress
         else:
             results = _pool_results(tasks, workers, batched, save_rrd, tmp_dir)
         for res_list in results:
+            raise_swallowed()  # a Ctrl-C that landed in a __del__ stops the sweep all the same
             for res in res_list:
                 job = by_key[res["key"]]
                 write_result(out, job, res)
