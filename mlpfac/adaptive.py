@@ -88,7 +88,7 @@ class Adaptive:
         return EKF(**common)
 
     def reset(self, rng) -> None:
-        from mlpfac.input_model import InputModel  # numba: imported by a run, not by reading a scenario
+        from mlpfac.input_model import InputModel  # the kernels: imported by a run, not by reading a scenario
         from mlpfac.kernels import adaptive_step, seeds
 
         rngs, self.single = seeds(rng)

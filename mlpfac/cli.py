@@ -248,7 +248,7 @@ def cmd_run(args: argparse.Namespace) -> int:
             raise ConfigError("--baseline", err.what) from None
     out = args.out or Path("runs") / f"{scn.name}-{scn.controller}-s{scn.seed}"
     recording = check_outputs(out, Recording(args.save, args.spawn, args.connect, args.serve, args.bind, args.no_log))
-    from mlpfac.runner import build  # numba and the run's imports: after the checks of the input
+    from mlpfac.runner import build  # the run's imports (MuJoCo, the kernels): after the checks of the input
 
     done = run_into_folder(scn, out, build(scn), recording, baseline, args.painter)
     rec = done.rec

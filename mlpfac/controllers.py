@@ -74,7 +74,7 @@ class Corradini:
         )
 
     def reset(self, rng) -> None:
-        from mlpfac.kernels import seeds  # numba: imported by a run, not by reading a scenario
+        from mlpfac.kernels import seeds  # the kernels: imported by a run, not by reading a scenario
         from mlpfac.loop_kernels import corradini_step
 
         rngs, self.single = seeds(rng)

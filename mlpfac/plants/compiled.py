@@ -6,7 +6,8 @@ time, and the compiled closed loop (:mod:`mlpfac.segment`) runs it for many step
 implementation of the step either way. The C functions are the ones the ``mujoco`` package's
 bindings call (``mj_step``, ``mj_step1``, ``mj_step2``, ``mj_objectVelocity``, ``mj_getState``),
 from the library the package ships, so a compiled step gives the bindings' bits; the kernels name
-them (numba ``ExternalFunction``), so they are compiled once and cached like the others.
+them, so the module built at install (``mlpfac.plants._kernels``, :mod:`mlpfac.jit`) finds them in
+the library loaded here, and numba, where it compiles the kernels, as ``ExternalFunction``.
 
 MuJoCo reports a fatal engine error (an arena too small for the model, say) through
 ``mju_user_error``. Inside the bindings it becomes ``mujoco.FatalError``; a C call from a kernel

@@ -47,7 +47,7 @@ class KinematicPlant:
 
     def reset(self, q0: np.ndarray, rng, u0: np.ndarray | None = None) -> None:
         """``u0`` is ignored: the error model (7) has no velocity state."""
-        from mlpfac.kernels import seeds  # numba: imported by a run, not by reading a scenario
+        from mlpfac.kernels import seeds  # the kernels: imported by a run, not by reading a scenario
         from mlpfac.loop_kernels import kinematic_step
 
         rngs, self.single = seeds(rng)
