@@ -1,7 +1,7 @@
 """Imported by the fork server of a local pool (:func:`mlpfac.sweeps.worker.pool_context`), once:
-what a run needs and the compiled kernels (:mod:`mlpfac.jit`; numba started, where it compiles
-them), so that every worker forked from it starts warm instead of importing numpy, MuJoCo and the
-rest itself. Importing this module elsewhere does the same work in that process.
+what a run needs, the compiled kernels (:mod:`mlpfac.jit`; numba started, where it compiles
+them) and the shipped robot, so that every worker forked from it starts warm instead of importing
+numpy, MuJoCo and the rest and reading the robot itself. Importing this module elsewhere does the same work in that process.
 """
 
 from __future__ import annotations
