@@ -12,6 +12,7 @@ import numpy as np
 from mlpfac.adaptive_config import AdaptiveConfig  # noqa: F401 -- exported here too
 from mlpfac.error_model import G_true, f_true, wrap
 from mlpfac.estimators import EKF, UKF, covariance
+from mlpfac.jit import as_rows
 from mlpfac.law import GAIN_RANGE, Law
 from mlpfac.variants import VARIANTS  # noqa: F401 -- exported here too (factory, scenario, controllers)
 
@@ -151,7 +152,7 @@ class Adaptive:
         adaptive_step(np.zeros((0, 3)), 1.0, 0.0, True, *(x[:0] for x in self._args), *self._consts)
 
     def step(self, e: np.ndarray, r: np.ndarray) -> np.ndarray:
-        E = np.ascontiguousarray(e, dtype=float).reshape(-1, 3)  # the kernels' type, whatever e is
+        E = as_rows(e, 3)
         if self.input is not None:  # the input model's update; the error of the pose predicted over the delay
             E = self.input.observe(E, r, self.first)
         if not self.compiled:

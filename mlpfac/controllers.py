@@ -13,6 +13,7 @@ from typing import Protocol
 import numpy as np
 
 from mlpfac.exceptions import ConfigError, PluginError
+from mlpfac.jit import as_rows
 from mlpfac.law import Law
 from mlpfac.plugins import Plugin, one_line
 from mlpfac.variants import CONTROLLERS  # noqa: F401 (the shipped names, as mlpfac.controllers.CONTROLLERS)
@@ -85,7 +86,7 @@ class Corradini:
         corradini_step(np.zeros((0, 3)), 1.0, 0.0, T, *self.law.lambdas, *self._limits, self._h[:0], self._u[:0])
 
     def step(self, e: np.ndarray, r: np.ndarray) -> np.ndarray:
-        E = np.ascontiguousarray(e, dtype=float).reshape(-1, 3)  # the kernels' type, whatever e is
+        E = as_rows(e, 3)
         self._kernel(E, float(r[3]), float(r[4]), self.T, *self.law.lambdas, *self._limits, self._h, self._u)
         return self._u[0].copy() if self.single else self._u
 
@@ -144,7 +145,7 @@ class Kanayama:
         kanayama_step(np.zeros((0, 3)), 1.0, 0.0, *self._consts, self._u[:0])  # load the kernel before the run
 
     def step(self, e: np.ndarray, r: np.ndarray) -> np.ndarray:
-        E = np.ascontiguousarray(e, dtype=float).reshape(-1, 3)  # the kernels' type, whatever e is
+        E = as_rows(e, 3)
         self._kernel(E, float(r[3]), float(r[4]), *self._consts, self._u)
         return self._u[0].copy() if self.single else self._u
 

@@ -11,14 +11,15 @@ A built module is used only when it was built from these very files (:data:`FILE
 processor (``target_cpu="host"`` where the processor's flags tell kinds apart, as numba compiles on
 the fly; a generic build elsewhere) and, for the MuJoCo kernels, this MuJoCo version: all are
 hashed into it at build time (:func:`stamp`). The two modules are used together or not at all
-(numba cannot compile a MuJoCo kernel that calls a built one). Otherwise, after an edit in a checkout, say, numba compiles the same functions
-on their first call and caches them (``cache=True``): the same code either way, and a one-line
-note says so. ``MLPFAC_KERNELS=jit`` asks for numba always (the test that both give the same bits);
+(numba cannot compile a MuJoCo kernel that calls a built one). Otherwise, after an edit in a
+checkout, say, numba compiles the same functions on their first call and caches them
+(``cache=True``): the same code either way, and a one-line note says so. ``MLPFAC_KERNELS=jit`` asks for numba always (the test that both give the same bits);
 ``MLPFAC_KERNELS=aot`` refuses to start without current built modules; the build sets ``build``.
 
 A kernel built ahead of time does not check the types of what it is given, as numba's dispatcher
 does: its signature is the contract. Numba is given the same signature, so a call that would not
-match it is refused under ``MLPFAC_KERNELS=jit`` (tests/test_kernels_aot.py runs the loop so).
+match it is refused under ``MLPFAC_KERNELS=jit`` (tests/test_kernels_aot.py runs the loop so), and
+what Python hands a kernel from outside mlpfac goes through :func:`as_rows`.
 """
 
 from __future__ import annotations
@@ -32,6 +33,8 @@ import platform
 import sys
 from collections.abc import Callable
 from pathlib import Path
+
+import numpy as np
 
 from mlpfac.exceptions import ConfigError
 
@@ -51,9 +54,18 @@ MODULES = {  # the modules whose kernels each extension holds
 }
 FILES = tuple(m.removeprefix("mlpfac.").replace(".", "/") + ".py" for ms in MODULES.values() for m in ms) + ("jit.py",)
 JIT = {"cache": True, "error_model": "numpy", "nogil": True}  # numpy's inf or NaN for a division by zero
-EXPORTS: dict[str, list[tuple[str, Callable, object, Callable]]] = {ext: [] for ext in EXTENSIONS}
+EXPORTS: dict[str, list[tuple[str, object, Callable]]] = {ext: [] for ext in EXTENSIONS}  # symbol, signature, kernel
 SALT: dict[str, str] = {}  # what else an extension's built code depends on (see built)
 WHY: dict[str, str] = {}  # why an extension's built module is not used
+
+
+CPU_FLAGS = (b"flags", b"Features")  # /proc/cpuinfo's line of instruction set extensions (x86, Arm)
+
+
+def as_rows(x, width: int) -> np.ndarray:
+    """``x``, one row (width,) or a batch (B, width) of any numbers, as the kernels take it: (B, width)
+    float64 in C order (a built kernel reads memory as its signature says, whatever it is given)."""
+    return np.ascontiguousarray(x, dtype=float).reshape(-1, width)
 
 
 def _cpu() -> bytes:
@@ -61,7 +73,7 @@ def _cpu() -> bytes:
     try:
         with open("/proc/cpuinfo", "rb") as f:
             for line in f:
-                if line.startswith((b"flags", b"Features")):
+                if line.startswith(CPU_FLAGS):
                     return line
     except OSError:
         pass
@@ -69,13 +81,19 @@ def _cpu() -> bytes:
 
 
 @functools.cache
+def _sources() -> bytes:
+    """A hash of the processor and of the kernels' files, read once a process."""
+    h = hashlib.sha256(_cpu())
+    for name in FILES:
+        h.update((HERE / name).read_bytes())
+    return h.digest()
+
+
+@functools.cache
 def stamp(salt: str = "") -> int:
     """A hash of the kernels' files, of the processor and of ``salt`` (what else the built code
     depends on: the MuJoCo version for ``"mujoco"``), as a signed 64-bit number."""
-    h = hashlib.sha256(_cpu() + salt.encode())
-    for name in FILES:
-        h.update((HERE / name).read_bytes())
-    return int.from_bytes(h.digest()[:8], "little", signed=True)
+    return int.from_bytes(hashlib.sha256(_sources() + salt.encode()).digest()[:8], "little", signed=True)
 
 
 @functools.cache
@@ -128,7 +146,7 @@ def kernel(
             return njit(**opts)(fn)
         sig = signature() if callable(signature) else signature
         compiled = njit(sig, **opts)(fn)
-        EXPORTS[ext].append((symbol, fn, sig, compiled))
+        EXPORTS[ext].append((symbol, sig, compiled))
         return compiled
 
     return mark
@@ -156,9 +174,9 @@ def build(ext: str, path: str) -> None:
     cc.output_dir, cc.output_file = os.path.dirname(path) or ".", os.path.basename(path)
     # this processor's instructions where the stamp can tell processors apart (their flags), else a
     # generic build that runs on any processor of the kind
-    cc.target_cpu = "host" if _cpu().startswith((b"flags", b"Features")) else ""
-    for symbol, fn, sig, compiled in EXPORTS[ext]:
-        args = ", ".join(inspect.signature(fn).parameters)
+    cc.target_cpu = "host" if _cpu().startswith(CPU_FLAGS) else ""
+    for symbol, sig, compiled in EXPORTS[ext]:
+        args = ", ".join(inspect.signature(compiled.py_func).parameters)
         ns = {"kernel": compiled}
         exec(f"def {symbol}({args}):\n    return kernel({args})", ns)
         cc.export(symbol, sig)(ns[symbol])

@@ -44,6 +44,7 @@ from collections import deque
 import numpy as np
 
 from mlpfac.events import ControlPeriod, DelayLine, Event, SensorDelay, WheelRadius
+from mlpfac.jit import as_rows
 from mlpfac.kernels import seeds
 from mlpfac.law import Law
 from mlpfac.loop_kernels import corradini_step, kanayama_step, tracking_errors
@@ -118,7 +119,7 @@ class Oracle:
             self.pose_step.delay(int(value))
 
     def step(self, e: np.ndarray, r: np.ndarray) -> np.ndarray:
-        E = np.ascontiguousarray(e, dtype=float).reshape(-1, 3)  # the kernels' type, whatever e is
+        E = as_rows(e, 3)
         k, T = self.k, self.T
         if k > 0:
             self.pose_step.push(k)

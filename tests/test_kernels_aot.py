@@ -124,7 +124,10 @@ def test_the_stamp_covers_every_kernel_file_and_the_processor():
     h = hashlib.sha256(jit._cpu())
     for name in jit.FILES:
         h.update((jit.HERE / name).read_bytes())
-    assert jit.stamp() == int.from_bytes(h.digest()[:8], "little", signed=True)
+    for salt in ("", "4.0.0"):  # the salt (MuJoCo's version for the MuJoCo kernels) over the files' hash
+        expected = hashlib.sha256(h.digest() + salt.encode()).digest()[:8]
+        assert jit.stamp(salt) == int.from_bytes(expected, "little", signed=True)
+    assert jit.stamp("4.0.0") != jit.stamp("4.0.1")
 
 
 def test_a_delay_line_of_integers_or_strided_rows_pushes_what_it_was_given():

@@ -15,6 +15,7 @@ from mlpfac.error_model import pose_from_error, tracking_error
 from mlpfac.estimators import covariance
 from mlpfac.events import ControlPeriod, DelayLine, Event, SensorDelay
 from mlpfac.exceptions import ConfigError
+from mlpfac.jit import as_rows
 
 
 @dataclass(frozen=True)
@@ -75,7 +76,7 @@ class KinematicPlant:
 
     def step(self, u: np.ndarray) -> None:
         k = self.k
-        U = np.ascontiguousarray(u, dtype=float).reshape(-1, 2)
+        U = as_rows(u, 2)
         self._u[:] = U
         e, pose = np.empty_like(self.e), np.empty_like(self._pose)
         self._kernel(self.e, self.ref[k], self.ref[k + 1], self.T_p, U, self.noise[k], e, pose, self._h)
