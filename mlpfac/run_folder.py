@@ -89,10 +89,7 @@ def run_into_folder(scn, out: Path, built, recording: Recording, baseline=None, 
                     try:
                         sink.replay()
                     except OSError as err:  # rerun could not write or close the file (a full disk, say)
-                        why = err.strerror or str(err)
-                        raise ConfigError(
-                            str(rrd_shown), f"cannot write ({why}); nothing was changed in {out}"
-                        ) from None
+                        raise _unwritten(str(rrd_shown), err, out) from None
                 from mlpfac.log.sinks import check_recording
 
                 check_recording(rrd_path, rrd_shown)
@@ -177,6 +174,10 @@ def _run_into(folder: Stage, out: Path, scn, built, sink, baseline, painter) -> 
             else:
                 painter.figure1(rec, base, writing)
     except OSError as err:
-        name = folder.shown(err.filename or writing)
-        raise ConfigError(name, f"cannot write ({err.strerror or err}); nothing was changed in {out}") from None
+        raise _unwritten(folder.shown(err.filename or writing), err, out) from None
     return rec, m
+
+
+def _unwritten(name: str, err: OSError, out: Path) -> ConfigError:
+    """A write that failed, as one line naming the file where it would have gone."""
+    return ConfigError(name, f"cannot write ({err.strerror or err}); nothing was changed in {out}")

@@ -1,6 +1,7 @@
 """Figure 1 drawn beside the run: a child process, forked before the run's own imports, imports
 matplotlib and does its first-figure work while this process imports MuJoCo and simulates, then
-draws the records it is sent. On a platform without ``fork`` (or if the child is gone) the figure is drawn here.
+draws the records it is sent. On a platform without ``fork`` (or if the child is gone) the figure
+is drawn here.
 
 The child takes no part in Ctrl-C (this process handles it and closes the pipe, which ends the
 child); an error writing the figure comes back as the same OSError, naming the same file.
@@ -90,8 +91,9 @@ def painting(wanted: bool) -> Iterator[Painter | None]:
 
 
 def _child(receive_fd: int, send_fd: int) -> None:
-    """Import matplotlib and warm it up, draw what arrives, answer ("ok", panels), ("oserror", errno, strerror,
-    filename) or ("error", text), and exit without running the parent's exit handlers."""
+    """Import matplotlib and warm it up, draw what arrives, answer ("ok", panels), ("oserror",
+    errno, strerror, filename) or ("error", text), and exit without running the parent's exit
+    handlers."""
     code = 0
     try:
         signal.signal(signal.SIGINT, signal.SIG_IGN)

@@ -1,7 +1,8 @@
 """Imported by the fork server of a local pool (:func:`mlpfac.sweeps.worker.pool_context`), once:
 what a run needs, the compiled kernels (:mod:`mlpfac.jit`; numba started, where it compiles
 them) and the shipped robot, so that every worker forked from it starts warm instead of importing
-numpy, MuJoCo and the rest and reading the robot itself. Importing this module elsewhere does the same work in that process.
+numpy, MuJoCo and the rest and reading the robot itself. Importing this module elsewhere does the
+same work in that process.
 """
 
 from __future__ import annotations
@@ -23,12 +24,10 @@ try:
     from mlpfac.plants import compiled  # noqa: F401
     from mlpfac.run_metrics import metrics  # noqa: F401
     from mlpfac.runner import run  # noqa: F401
-    from mlpfac.scenario import parse  # noqa: F401
+    from mlpfac.scenario import load, parse  # noqa: F401
     from mlpfac.sweeps.worker import run_task  # noqa: F401
 
     tracking_errors(np.zeros((0, 3)), np.zeros(5), np.zeros((0, 3)))
-    from mlpfac.scenario import load
-
     load("eight-nominal")  # the shipped robot read (and checked) once, for every worker of every sweep
 except Exception:  # a worker imports (and reports) what failed here itself
     pass
