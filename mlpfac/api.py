@@ -22,10 +22,26 @@ from mlpfac.plugins import local_spec
 from mlpfac.record import RunRecord
 from mlpfac.scenario import Scenario, load
 from mlpfac.sweeps.worker import not_in_a_worker
+from mlpfac.targets import user_path
 
 
-def _scenario(scenario: Scenario | str | Path) -> Scenario:
-    return scenario if isinstance(scenario, Scenario) else load(scenario)
+def _scenario(scenario: Scenario | str | Path, where: str = "scenario") -> Scenario:
+    if isinstance(scenario, Scenario):
+        return scenario
+    if isinstance(scenario, bool) or not isinstance(scenario, str | Path):
+        raise ConfigError(where, f"expected a Scenario, a shipped scenario's name or a .toml path, got {scenario!r}")
+    return load(scenario)
+
+
+def _seeds(seeds) -> str:
+    """``seeds`` as the text --seeds takes: "0-9", a whole number, or a list of whole numbers."""
+    if isinstance(seeds, str):
+        return seeds
+    if isinstance(seeds, int) and not isinstance(seeds, bool):
+        return str(seeds)
+    if isinstance(seeds, list | tuple | range) and all(isinstance(s, int) and not isinstance(s, bool) for s in seeds):
+        return ",".join(str(s) for s in seeds)
+    raise ConfigError("seeds", f'expected "0-9", a whole number or a list of whole numbers, got {seeds!r}')
 
 
 def _spec(controller, where: str) -> str:
@@ -70,6 +86,8 @@ def run(
         instance, controller = controller, type(controller)
     spec = None if controller is None else _spec(controller, "controller")
     scn = scn.with_overrides(spec, seed, duration, flag="controller")
+    if out is not None:
+        out = user_path(out, "out")
     if out is None:
         return run_scenario(scn, sink=sink, on_step=on_step, built=build(scn, instance))
     if sink is not None or on_step is not None:
@@ -113,15 +131,19 @@ def sweep(
     not_in_a_worker("sweep")
     if isinstance(scenarios, str | Path):
         scenarios = [scenarios]
-    if isinstance(seeds, int):
-        seeds = str(seeds)
-    elif not isinstance(seeds, str):
-        seeds = ",".join(str(s) for s in seeds)
+    if not isinstance(scenarios, list | tuple) or not all(isinstance(s, str | Path) for s in scenarios):
+        raise ConfigError("scenarios", f"expected a scenario's name or path, or a list of them, got {scenarios!r}")
+    seeds = _seeds(seeds)
+    for name, value in (("workers", workers), ("batch_size", batch_size)):
+        if value is not None and (isinstance(value, bool) or not isinstance(value, int)):
+            raise ConfigError(name, f"expected a whole number, got {value!r}")
+    if out is not None:
+        out = user_path(out, "out")
     text = None
     if controllers is not None:
         specs = [
             _spec(c, "controllers")
-            for c in ([controllers] if isinstance(controllers, str | Path | type) else controllers)
+            for c in ([controllers] if isinstance(controllers, str | Path | type) else _listed(controllers))
         ]
         workers = 2 if workers is None else workers
         if any(s.startswith("<local>:") for s in specs) and (scheduler or workers > 1):
@@ -153,6 +175,12 @@ def sweep(
     rows = Rows(result.rows)
     rows.errors, rows.paired = dict(result.outcome.errors), result.paired
     return rows
+
+
+def _listed(controllers) -> list:
+    if not isinstance(controllers, list | tuple):
+        raise ConfigError("controllers", f"expected a controller, or a list of them, got {controllers!r}")
+    return list(controllers)
 
 
 class Rows(list):

@@ -9,10 +9,14 @@ from __future__ import annotations
 
 import argparse
 import atexit
+import contextlib
+import errno
 import os
 import sys
 import threading
 from pathlib import Path
+
+from mlpfac.targets import cli_path
 
 EXIT_FAILED = 1  # a run diverged, or a user's controller raised
 EXIT_BAD_INPUT = 2
@@ -32,7 +36,7 @@ class Parser(argparse.ArgumentParser):
 def _sink_args(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("rerun logging (default: save run.rrd in --out)")
     x = g.add_mutually_exclusive_group()
-    x.add_argument("--save", metavar="FILE.rrd", type=Path, help="save the recording to this file")
+    x.add_argument("--save", metavar="FILE.rrd", type=cli_path, help="save the recording to this file")
     x.add_argument("--spawn", action="store_true", help="open a rerun viewer and stream to it")
     x.add_argument(
         "--connect", metavar="URL", help="stream to a running viewer, e.g. rerun+http://127.0.0.1:9876/proxy"
@@ -62,7 +66,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--seed", type=int, help="override the scenario's seed")
     p.add_argument("--duration", type=float, help="override the duration in seconds")
-    p.add_argument("--out", type=Path, help="output folder (default runs/SCENARIO-CONTROLLER-sSEED)")
+    p.add_argument("--out", type=cli_path, help="output folder (default runs/SCENARIO-CONTROLLER-sSEED)")
     p.add_argument("--baseline", default="corradini", help="controller for panel (h) of the figure, or 'none'")
     p.add_argument("--no-plot", action="store_true", help="skip figure1.png")
     _sink_args(p)
@@ -80,16 +84,16 @@ def build_parser() -> argparse.ArgumentParser:
         description="Run the sweep a budget file names, then judge it against the budget's limits "
         "(exit 0 every budget holds, 1 at least one does not, 2 a bad budget: nothing run). See docs/ci.md.",
     )
-    p.add_argument("budget", type=Path, help="the budget file (TOML)")
-    p.add_argument("--junit", type=Path, metavar="FILE.xml", help="write JUnit XML for a CI page")
-    p.add_argument("--summary", type=Path, metavar="FILE.md", help="write a Markdown summary (a CI job summary)")
+    p.add_argument("budget", type=cli_path, help="the budget file (TOML)")
+    p.add_argument("--junit", type=cli_path, metavar="FILE.xml", help="write JUnit XML for a CI page")
+    p.add_argument("--summary", type=cli_path, metavar="FILE.md", help="write a Markdown summary (a CI job summary)")
     p.add_argument(
         "--baseline",
         metavar="DIR_OR_SWEEP_JSON",
         help="a previous sweep (folder or its sweep.json) to compare per seed",
     )
     p.add_argument(
-        "--out", type=Path, default=Path("runs/check"), help="results folder (default runs/check); resumable"
+        "--out", type=cli_path, default=Path("runs/check"), help="results folder (default runs/check); resumable"
     )
     p.add_argument("--workers", type=int, default=2, help="local worker processes (default 2)")
 
@@ -98,10 +102,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="open saved runs in one rerun viewer",
         description="Open one run, or several side by side and overlaid (one colour per controller), in rerun.",
     )
-    p.add_argument("runs", nargs="+", type=Path, help="run folders (each with a run.rrd) or .rrd files")
+    p.add_argument("runs", nargs="+", type=cli_path, help="run folders (each with a run.rrd) or .rrd files")
     p.add_argument("--bind", metavar="ADDRESS", default="127.0.0.1", help=BIND_HELP)
     p.add_argument(
-        "--save", metavar="FILE.rrd", type=Path, help="write the comparison of several runs to this file, open nothing"
+        "--save",
+        metavar="FILE.rrd",
+        type=cli_path,
+        help="write the comparison of several runs to this file, open nothing",
     )
 
     p = sub.add_parser(
@@ -109,7 +116,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="draw a sweep's or comparison's plots again",
         description="Draw sweep.png / compare.png beside the tables of finished sweep folders.",
     )
-    p.add_argument("folders", nargs="+", type=Path, help="results folders of `mlpfac sweep` or `mlpfac compare`")
+    p.add_argument("folders", nargs="+", type=cli_path, help="results folders of `mlpfac sweep` or `mlpfac compare`")
 
     from mlpfac import report
 
@@ -155,8 +162,26 @@ def main(argv: list[str] | None = None) -> int:
         print("mlpfac: terminated" if isinstance(err, Terminated) else "mlpfac: interrupted", file=sys.stderr)
         return EXIT_TERMINATED if isinstance(err, Terminated) else EXIT_INTERRUPTED
     except BrokenPipeError:  # stdout closed early (`mlpfac ... | head`): what was written stays, no traceback
-        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        _drop_stdout()
         return EXIT_BROKEN_PIPE
+    except OSError as err:  # a write no check could foresee (stdout on a full disk, a name too long): one line
+        if err.errno == errno.EPIPE:
+            _drop_stdout()
+            return EXIT_BROKEN_PIPE
+        print(f"mlpfac: error: {_os_error(err)}", file=sys.stderr)
+        _drop_stdout()
+        return EXIT_BAD_INPUT
+
+
+def _os_error(err: OSError) -> str:
+    """An OSError in one line, naming the file (stdout when it names none)."""
+    return f"{err.filename or 'stdout'}: cannot write ({err.strerror or err})"
+
+
+def _drop_stdout() -> None:
+    """Send what is left of stdout nowhere: nothing more to say there, and nothing to fail at exit."""
+    with contextlib.suppress(OSError, ValueError):
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
 
 
 def cmd_list() -> int:
@@ -220,6 +245,10 @@ def cmd_plot(args: argparse.Namespace) -> int:
             written = sweep_plots(folder)
         except OSError as err:
             raise ConfigError(str(err.filename or folder), f"cannot write ({err.strerror or err})") from None
+        except (TypeError, ValueError, KeyError, AttributeError, IndexError) as err:  # a metrics.json edited by hand
+            raise ConfigError(
+                str(folder), f"a metrics.json under it is not what a run writes ({type(err).__name__}: {err})"
+            ) from None
         if not written:
             raise ConfigError(str(folder), "holds no finished runs (<scenario>/<controller>/seed-*/metrics.json)")
         print(" ".join(map(str, written)))
@@ -307,7 +336,21 @@ def entry() -> None:
     would wait for, and when a stream cannot be flushed, the exit is the normal one. (A daemon
     thread, which the normal exit does not wait for, is ended either way: a recording that could
     not be closed leaves one, stuck in rerun, which the teardown would abort on.)"""
-    code = main()
+    try:
+        code = main()
+        sys.stdout.flush()  # stdout on a full disk (/dev/full) fails here, said in one line
+    except KeyboardInterrupt as err:  # a signal before main's own handling began (while importing)
+        from mlpfac.signals import Terminated
+
+        print("mlpfac: terminated" if isinstance(err, Terminated) else "mlpfac: interrupted", file=sys.stderr)
+        code = EXIT_TERMINATED if isinstance(err, Terminated) else EXIT_INTERRUPTED
+    except BrokenPipeError:
+        _drop_stdout()
+        code = EXIT_BROKEN_PIPE
+    except OSError as err:
+        print(f"mlpfac: error: {_os_error(err)}", file=sys.stderr)
+        _drop_stdout()
+        code = EXIT_BAD_INPUT
     code = 0 if code is None else code
     plugins = sys.modules.get("mlpfac.plugins")
     others = [t for t in threading.enumerate() if t is not threading.current_thread()]

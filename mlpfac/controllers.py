@@ -178,7 +178,7 @@ class PluginController:
             return fn(*args)
         except (KeyboardInterrupt, PluginError):
             raise
-        except Exception as err:
+        except (Exception, SystemExit) as err:  # sys.exit() in a controller is its failure, not the command's
             raise PluginError(self.name, what, err) from err
 
     def reset(self, rngs) -> None:

@@ -19,6 +19,15 @@ import numpy as np
 from mlpfac.exceptions import ConfigError
 from mlpfac.jit import kernel
 
+# The physically sensible range of each event parameter (checked when the event is made): beyond
+# these a robot is not a robot any more, MuJoCo blows up, or a delay line would not fit in memory.
+SCALE_MIN, SCALE_MAX = 1e-3, 1e3  # mass, servo gain and torque limit scaled by at most a thousand
+MASS_KG_MAX = 1e4  # a payload of at most ten tonnes
+MU_MIN, MU_MAX = 1e-4, 10.0  # sliding friction coefficient
+RADIUS_SCALE_MIN, RADIUS_SCALE_MAX = 0.1, 10.0  # a real wheel a tenth to ten times the nominal one
+PERIOD_FACTOR_MIN, PERIOD_FACTOR_MAX = 1e-3, 100.0  # the command held 0.001 T to 100 T
+DELAY_STEPS_MAX = 10_000  # control steps of sensor delay (100 s at T = 0.01 s)
+
 
 @dataclass(frozen=True)
 class Param:
@@ -28,6 +37,7 @@ class Param:
     required: bool = True
     minimum: float | None = None  # inclusive lower bound
     positive: bool = False  # > 0
+    maximum: float | None = None  # inclusive upper bound: beyond it the value is not physics (or not memory)
 
     def check(self, value, where: str) -> float | int | str:
         if self.kind is str:
@@ -43,6 +53,8 @@ class Param:
             raise ConfigError(where, f"must be positive, got {value!r}")
         if self.minimum is not None and value < self.minimum:
             raise ConfigError(where, f"must be >= {self.minimum:g}, got {value!r}")
+        if self.maximum is not None and value > self.maximum:
+            raise ConfigError(where, f"must be <= {self.maximum:g}, got {value!r}")
         return value
 
 
@@ -99,8 +111,8 @@ class Payload(Event):
     (``body = "*"``)."""
 
     kind: ClassVar[str] = "payload"
-    mass_scale: float | None = _param(float, required=False, positive=True)
-    mass_kg: float | None = _param(float, required=False, positive=True)
+    mass_scale: float | None = _param(float, required=False, minimum=SCALE_MIN, maximum=SCALE_MAX)
+    mass_kg: float | None = _param(float, required=False, positive=True, maximum=MASS_KG_MAX)
     body: str | None = _param(str, required=False)
 
     def validate(self) -> None:
@@ -113,7 +125,7 @@ class Friction(Event):
     """Tyre/floor sliding friction set to ``mu``."""
 
     kind: ClassVar[str] = "friction"
-    mu: float = _param(float, positive=True)
+    mu: float = _param(float, minimum=MU_MIN, maximum=MU_MAX)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -121,7 +133,7 @@ class WheelRadius(Event):
     """Real wheel radius scaled by ``scale`` while the IK keeps the nominal one."""
 
     kind: ClassVar[str] = "wheel_radius"
-    scale: float = _param(float, positive=True)
+    scale: float = _param(float, minimum=RADIUS_SCALE_MIN, maximum=RADIUS_SCALE_MAX)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -129,8 +141,8 @@ class Actuator(Event):
     """Wheel drive weakened: servo gain (``kv_scale``) and/or torque limit (``force_scale``) scaled."""
 
     kind: ClassVar[str] = "actuator"
-    kv_scale: float | None = _param(float, required=False, positive=True)
-    force_scale: float | None = _param(float, required=False, positive=True)
+    kv_scale: float | None = _param(float, required=False, minimum=SCALE_MIN, maximum=SCALE_MAX)
+    force_scale: float | None = _param(float, required=False, minimum=SCALE_MIN, maximum=SCALE_MAX)
 
     def validate(self) -> None:
         if self.kv_scale is None and self.force_scale is None:
@@ -142,7 +154,7 @@ class ControlPeriod(Event):
     """The plant holds each command ``factor`` T."""
 
     kind: ClassVar[str] = "control_period"
-    factor: float = _param(float, positive=True)
+    factor: float = _param(float, minimum=PERIOD_FACTOR_MIN, maximum=PERIOD_FACTOR_MAX)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -150,7 +162,7 @@ class SensorDelay(Event):
     """The measured pose is ``steps`` control steps old."""
 
     kind: ClassVar[str] = "sensor_delay"
-    steps: int = _param(int, minimum=0)
+    steps: int = _param(int, minimum=0, maximum=DELAY_STEPS_MAX)
 
 
 EVENTS: dict[str, type[Event]] = {

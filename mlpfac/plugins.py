@@ -184,7 +184,7 @@ def _load(target: str, where: str) -> tuple[object, str | None, str]:
             module = importlib.import_module(left)
         except ModuleNotFoundError as err:
             raise ConfigError(where, f"no module named {err.name!r} (importing {left})") from None
-        except Exception as err:
+        except (Exception, SystemExit) as err:
             raise ConfigError(where, f"importing {left} raised {one_line(err)}") from None
         file = getattr(module, "__file__", None)
         sha = _file_sha(file)

@@ -107,20 +107,48 @@ def sample(curve: Eight | Circle | Line | Lemniscate, t: np.ndarray) -> np.ndarr
     return np.stack([x, y, theta, v, omega], axis=-1)
 
 
+# The physically sensible size of a reference's parameters, by key (absolute values; lengths in m,
+# rates in rad/s, speeds in m/s), and of the speeds it asks of a wheeled robot.
+RATE_KEYS, SPEED_KEYS = frozenset({"wx", "wy", "rate"}), frozenset({"speed"})
+LENGTH_MAX, RATE_MAX, SPEED_MAX, ANGLE_MAX = 1e4, 10.0, 20.0, 1e3
+OMEGA_MAX = 100.0  # rad/s of omega_r along the curve
+
+
+def _limit(key: str) -> tuple[float, str]:
+    if key in RATE_KEYS:
+        return RATE_MAX, "rad/s"
+    if key in SPEED_KEYS:
+        return SPEED_MAX, "m/s"
+    if key == "heading":
+        return ANGLE_MAX, "rad"
+    return LENGTH_MAX, "m"
+
+
 def make_reference(kind: str, params: dict, where: str = "[reference]"):
     """Build a reference curve from its scenario table (``kind`` plus the curve's parameters)."""
-    cls = REFERENCES.get(kind)
+    cls = REFERENCES.get(kind) if isinstance(kind, str) else None
     if cls is None:
         raise ConfigError(where, f"unknown reference kind {kind!r}; choose one of {', '.join(REFERENCES)}")
     fields = cls.__dataclass_fields__
     for key in params:
         if key not in fields:
             raise ConfigError(f"{where} {key}", f"not a parameter of {kind!r} (it takes {', '.join(fields)})")
+    for key, value in params.items():
+        most, unit = _limit(key)
+        if isinstance(value, int | float) and not isinstance(value, bool) and not abs(value) <= most:
+            raise ConfigError(f"{where} {key}", f"must lie within +-{most:g} {unit}, got {value!r}")
     try:
         curve = cls(**{k: float(v) for k, v in params.items()})
     except (TypeError, ValueError) as err:
         raise ConfigError(where, f"bad parameter value: {err}") from None
-    ok = sample(curve, np.linspace(0.0, 60.0, 601))
+    with np.errstate(all="ignore"):
+        ok = sample(curve, np.linspace(0.0, 60.0, 601))
+    if not np.all(np.isfinite(ok)) or np.max(ok[:, 3]) > SPEED_MAX or np.max(np.abs(ok[:, 4])) > OMEGA_MAX:
+        raise ConfigError(
+            where,
+            f"the reference asks for speeds beyond a wheeled robot's (v_r up to {SPEED_MAX:g} m/s, |omega_r| up to "
+            f"{OMEGA_MAX:g} rad/s; this one: {np.nanmax(ok[:, 3]):.3g} m/s, {np.nanmax(np.abs(ok[:, 4])):.3g} rad/s)",
+        )
     if not np.all(ok[:, 3] > 1e-6):
         raise ConfigError(where, "the reference speed v_r must stay above zero (the gains divide by T v_r)")
     return curve

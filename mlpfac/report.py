@@ -38,6 +38,7 @@ from pathlib import Path
 
 from mlpfac.exceptions import ConfigError
 from mlpfac.outputs import write_atomic
+from mlpfac.targets import cli_path
 
 MARKER = re.compile(r"^<!-- table: (?P<spec>.+?) -->\n(?P<body>.*?)^<!-- /table -->$", re.M | re.S)
 VIEWS = ("sweep", "compare", "paired", "summary", "text")
@@ -75,7 +76,7 @@ def _json(folder: Path, name: str) -> dict:
     text = _read(folder, name)
     try:
         data = json.loads(text)
-    except ValueError as err:
+    except (ValueError, RecursionError) as err:
         raise ConfigError(str(folder / name), f"not valid JSON: {err}") from None
     if not isinstance(data, dict):
         raise ConfigError(str(folder / name), "expected a JSON object")
@@ -131,16 +132,32 @@ def render(folder: Path, opts: dict[str, str]) -> str:
 
 def rewrite(page: Path) -> tuple[str, int]:
     """The page's text with every marked table written from its data, and the number of tables."""
-    text = page.read_text()
+    try:
+        text = page.read_text()
+    except (OSError, UnicodeDecodeError) as err:
+        raise ConfigError(str(page), f"cannot read this page ({getattr(err, 'strerror', None) or err})") from None
     count = 0
 
     def table(m: re.Match) -> str:
         nonlocal count
         count += 1
         path, opts = parse_spec(m["spec"], str(page))
-        return f"<!-- table: {m['spec']} -->\n\n{render(page.parent / path, opts)}\n<!-- /table -->"  # blank lines: a table block
+        try:
+            body = render(page.parent / path, opts)
+        except (TypeError, ValueError, KeyError, AttributeError, IndexError) as err:
+            if isinstance(err, ConfigError):
+                raise
+            raise ConfigError(
+                str(page.parent / path), f"its data are not what a sweep writes ({type(err).__name__}: {err})"
+            ) from None
+        return f"<!-- table: {m['spec']} -->\n\n{body}\n<!-- /table -->"  # blank lines: a table block
 
-    return MARKER.sub(table, text), count
+    new = MARKER.sub(table, text)
+    matched = {text.count("\n", 0, m.start()) for m in MARKER.finditer(text)}
+    for i, line in enumerate(text.splitlines()):
+        if line.startswith("<!-- table:") and i not in matched:
+            raise ConfigError(f"{page}:{i + 1}", "a table marker without its closing <!-- /table --> line")
+    return new, count
 
 
 def pages(docs: Path) -> list[Path]:
@@ -163,7 +180,10 @@ def write(docs: Path) -> list[tuple[Path, int, bool]]:
         if n:
             changed = text != p.read_text()
             if changed:
-                write_atomic(p, text)
+                try:
+                    write_atomic(p, text)
+                except OSError as err:
+                    raise ConfigError(str(p), f"cannot write ({err.strerror or err}); the page is as it was") from None
             done.append((p, n, changed))
     return done
 
@@ -213,7 +233,7 @@ def collect(folder: Path, results: Path, command: str | None = None, version: st
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.description = "Write every marked table of DOCS/*.md from the data folder it names (mlpfac/report.py)."
-    p.add_argument("docs", nargs="?", type=Path, default=Path("docs"), help="the folder of pages (default docs)")
+    p.add_argument("docs", nargs="?", type=cli_path, default=Path("docs"), help="the folder of pages (default docs)")
     p.add_argument("--check", action="store_true", help="write nothing; exit 1 if a table differs from its data")
     p.add_argument(
         "--collect",

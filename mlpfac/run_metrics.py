@@ -3,6 +3,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from mlpfac.record import RunRecord
@@ -45,7 +47,25 @@ def phase_bounds(rec: RunRecord) -> dict[str, tuple[int, int]]:
 
 
 def metrics(rec: RunRecord) -> dict:
-    """The run's figures: whole-run and per-phase position/heading RMS, weights, P, timing, status."""
+    """The run's figures: whole-run and per-phase position/heading RMS, weights, P, timing, status.
+    A figure that is not finite (a run that blew up) is None: metrics.json is JSON, and the
+    overflow on the way is no warning."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        return _finite(_metrics(rec))
+
+
+def _finite(x):
+    """``x`` with every float that is not finite (inf, nan) replaced by None, in dicts and lists."""
+    if isinstance(x, dict):
+        return {k: _finite(v) for k, v in x.items()}
+    if isinstance(x, list | tuple):
+        return [_finite(v) for v in x]
+    if isinstance(x, float) and not math.isfinite(x):
+        return None
+    return x
+
+
+def _metrics(rec: RunRecord) -> dict:
     n = rec.n
     out = {
         "status": rec.status,

@@ -17,6 +17,7 @@ from mlpfac.segment import BAD, segment
 from mlpfac.signals import Terminated, raise_swallowed
 
 FLUSH_EVERY = 250  # steps between sends to a log sink
+SEGMENT_PHYSICS = 20_000  # physics steps of one compiled segment, at most: a signal waits for no more
 
 
 def seeded_generators(seed: int) -> tuple[np.random.Generator, np.random.Generator]:
@@ -207,6 +208,7 @@ def _loop(scns, ref, plant, ctrl, sink, on_step, full: bool) -> list[RunRecord]:
                 raise_swallowed()
                 _apply_due(pending, k, T, plant, recs, live)
                 k1 = min(N, (k // FLUSH_EVERY + 1) * FLUSH_EVERY)
+                k1 = min(k1, k + max(1, SEGMENT_PHYSICS // max(p._n for p in plant.plants)))  # signals seen
                 if pending:  # up to the next event
                     k1 = next((j for j in range(k + 1, k1) if pending[0].time <= j * T + 1e-9), k1)
                 for b in list(live):

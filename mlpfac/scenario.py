@@ -163,6 +163,8 @@ def read_toml(path: Path, kind: str) -> dict:
         raise ConfigError(str(path), "not a text file (TOML is UTF-8 text)") from None
     except tomllib.TOMLDecodeError as err:
         raise ConfigError(str(path), f"not valid TOML: {err}") from None
+    except RecursionError:  # arrays or tables nested thousands deep
+        raise ConfigError(str(path), "not a scenario: its arrays or tables are nested too deep to read") from None
 
 
 def load(name_or_path: str | Path, build: bool = True) -> Scenario:

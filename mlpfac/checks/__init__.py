@@ -63,16 +63,17 @@ def check(
 
     Bad input (the budget, a flag) is a ConfigError naming the file and key before anything runs.
     """
-    from mlpfac.outputs import write_atomic
     from mlpfac.sweeps.engine import SWEEP_COLUMNS, check_execution_flags, report, sweep_into, sweep_meta
     from mlpfac.sweeps.folders import OutputError, _oserror
     from mlpfac.sweeps.plan import check_writable
+    from mlpfac.sweeps.tables import table_files
     from mlpfac.sweeps.worker import not_in_a_worker
+    from mlpfac.targets import check_report_file, check_results_folder, user_path, write_report_file
 
     not_in_a_worker("check")
 
-    path = Path(budget)
-    out = DEFAULT_OUT if out is None else Path(out)
+    path = user_path(budget, "budget")
+    out = DEFAULT_OUT if out is None else user_path(out, "out")
     n_workers = check_execution_flags(DEFAULT_WORKERS if workers is None else workers)
     b = read_budget(path)
     needs = b.needs_baseline()
@@ -82,13 +83,12 @@ def check(
             f"{path} {needs.where} {figure}", "compares with a baseline: give --baseline DIR_OR_SWEEP_JSON"
         )
     base_dir = baseline_folder(baseline) if baseline is not None else None
-    reports = [(Path(p), flag) for p, flag in ((junit, "--junit"), (summary, "--summary")) if p is not None]
+    reports = [(user_path(p, flag), flag) for p, flag in ((junit, "--junit"), (summary, "--summary")) if p is not None]
     for p, flag in reports:
-        if p.is_dir():
-            raise ConfigError(f"{flag} {p}", "is a folder; name a file")
-        check_writable(p.parent)
+        check_report_file(p, flag)
     jobs, groups = b.plan()
     check_writable(out)
+    check_results_folder(out, table_files("sweep"))
     argv = ["mlpfac", "check", str(budget), "--out", str(out), "--workers", str(n_workers)]
     argv += ["--baseline", str(baseline)] if baseline is not None else []
     meta = sweep_meta("check", b.scenarios, b.seeds_text, b.duration, jobs) | {"budget": str(path)}
@@ -104,9 +104,9 @@ def check(
     for p, flag in reports:
         try:
             if flag == "--junit":
-                write_atomic(p, junit_xml(result.cases, path.stem, b.duration))
+                write_report_file(p, junit_xml(result.cases, path.stem, b.duration))
             else:
-                write_atomic(p, summary_md(result.cases, path, plots, p.absolute().parent, base_dir))
+                write_report_file(p, summary_md(result.cases, path, plots, p.absolute().parent, base_dir))
         except OSError as err:
             raise OutputError(f"{_oserror(err, str(p))}; the runs in {out} are whole, run the check again") from None
         result.files.append(p)

@@ -48,7 +48,9 @@ def run_files(runs: Sequence[Path | str]) -> list[tuple[Path, dict]]:
         try:
             m = json.loads((f.parent / "metrics.json").read_text())
             m = m if isinstance(m, dict) else {}
-        except (OSError, ValueError):
+            if not isinstance(m.get("phases", {}), dict) or not isinstance(m.get("events", []), list):
+                m = {}  # a metrics.json of another shape: the run is shown without its figures
+        except (OSError, ValueError, UnicodeDecodeError):
             m = {}
         out.append((f, m))
     if not out:
@@ -82,24 +84,48 @@ def view(run_dirs: Sequence[Path | str], bind: str = LOCALHOST) -> subprocess.Po
 
 
 def save_comparison(runs: Sequence[Path | str], path: Path | str) -> Path:
-    """Write the runs' comparison recording to ``path`` (checked and read back like a run's)."""
+    """Write the runs' comparison recording to ``path`` (checked and read back like a run's): made
+    beside it and renamed into place when whole, so a failure (a broken run.rrd, a full disk, a
+    signal) leaves an earlier file at ``path`` as it was."""
+    from mlpfac.outputs import Stage, check_save_file
+
     files = run_files(runs)
     path = Path(path)
-    _check_writable(path)
-    rec = rr.RecordingStream(APPLICATION_ID, recording_id=f"compare-{path.stem}", send_properties=False)
-    rec.set_log_time_enabled(False)
-    rec.set_log_tick_enabled(False)
-    rec.set_sinks(rr.FileSink(path))
-    send_comparison(rec, files)
-    rec.disconnect()
-    check_recording(path)
+    check_save_file(path, "--save")
+    with Stage(path, "--save", folder=False) as stage:
+        _check_writable(stage.path)
+        rec = rr.RecordingStream(APPLICATION_ID, recording_id=f"compare-{path.stem}", send_properties=False)
+        rec.set_log_time_enabled(False)
+        rec.set_log_tick_enabled(False)
+        try:
+            rec.set_sinks(rr.FileSink(stage.path))
+        except RuntimeError as err:  # the file sink writes its header at once: a full disk fails here
+            raise ConfigError(f"--save {path}", f"cannot write the recording ({str(err).splitlines()[0]})") from None
+        try:
+            send_comparison(rec, files)
+        finally:
+            rec.disconnect()
+        check_recording(stage.path, path)
+        stage.commit()
     return path
+
+
+def _chunks(f: Path) -> list:
+    """Every chunk of the recording ``f``; a ConfigError naming it when it is not a whole recording."""
+    import warnings
+
+    from rerun.chunk import RrdReader
+
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")  # "RRD file has no footer": cut short
+            return list(RrdReader(f).store().stream().to_chunks())
+    except Exception:  # rerun raises its own errors (and ValueError, OSError) on a file that is not whole
+        raise ConfigError(str(f), "is not a whole rerun recording (truncated, or not an .rrd file)") from None
 
 
 def send_comparison(rec: rr.RecordingStream, files: list[tuple[Path, dict]]) -> None:
     """Every run's chunks under its own prefix, recoloured; the text panel; the layout."""
-    from rerun.chunk import RrdReader
-
     labels = _labels([m for _, m in files], [f for f, _ in files])
     colors = _colors([m.get("controller", label) for (_, m), label in zip(files, labels, strict=True)])
     rec.send_recording_name(" vs ".join(labels))
@@ -108,7 +134,7 @@ def send_comparison(rec: rr.RecordingStream, files: list[tuple[Path, dict]]) -> 
     for i, ((f, _), label, (color, _)) in enumerate(zip(files, labels, colors, strict=True)):
         prefix = f"runs/{label}/"
         chunks = []
-        for chunk in RrdReader(f).store().stream().to_chunks():
+        for chunk in _chunks(f):
             p = str(chunk.entity_path).lstrip("/")
             if p.startswith("__") or p == ABOUT:
                 continue
@@ -196,11 +222,12 @@ def _about(files: list[tuple[Path, dict]], labels: list[str], colors: list[tuple
     lines = ["**runs compared**: one colour per controller (pale: measured); grey: the reference", ""]
     for (f, m), label, (_, name) in zip(files, labels, colors, strict=True):
         after = (m.get("phases") or {}).get("after") or (m.get("phases") or {}).get("before") or {}
-        rms = after.get("rms_position_error_m")
-        fig = f", position RMS {'after the event' if 'after' in (m.get('phases') or {}) else ''} {rms * 1e3:.1f} mm"
+        rms = after.get("rms_position_error_m") if isinstance(after, dict) else None
+        fig = ""
+        if isinstance(rms, int | float) and not isinstance(rms, bool):  # None: a run shorter than its warm-up
+            fig = f", position RMS {'after the event' if 'after' in (m.get('phases') or {}) else ''} {rms * 1e3:.1f} mm"
         lines.append(
-            f"- **{label}** ({name}): {m.get('scenario', f.parent)}, {m.get('status', '?')}"
-            + (fig.replace("  ", " ") if isinstance(rms, int | float) else "")
+            f"- **{label}** ({name}): {m.get('scenario', f.parent)}, {m.get('status', '?')}" + fig.replace("  ", " ")
         )
     events = {(ev.get("time"), ev.get("text")) for _, m in files for ev in m.get("events") or []}
     for t, text in sorted(events, key=str):

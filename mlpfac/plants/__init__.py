@@ -40,4 +40,24 @@ def make_plant(scn: PlantSpec, ref: np.ndarray):
         raise ConfigError(where, err.what) from None
     for i, ev in enumerate(scn.events):
         plant.check_event(ev, f"{scn.source} [[events]] #{i + 1}")
+    _check_size(scn, plant)
     return plant
+
+
+MAX_PHYSICS_STEPS = 10**9  # physics steps of one run, at most (hours of simulation)
+
+
+def _check_size(scn: PlantSpec, plant) -> None:
+    """A run of more than MAX_PHYSICS_STEPS physics steps is refused before it starts, naming the
+    key that made it so (``[plant] timestep``, or ``duration``)."""
+    n = getattr(plant, "n_substeps", None)
+    steps = getattr(scn, "steps", None)
+    if n is None or steps is None:
+        return
+    most = max([n] + [plant._substeps(ev.factor * scn.T, "factor") for ev in scn.events if ev.kind == "control_period"])
+    if steps * most > MAX_PHYSICS_STEPS:
+        raise ConfigError(
+            f"{scn.source} [plant] timestep",
+            f"{steps} control steps of up to {most} physics steps of {scn.T / n:g} s are {steps * most:.3g} physics "
+            f"steps; the limit is {MAX_PHYSICS_STEPS:.0e} per run: lengthen the timestep or shorten the duration",
+        )

@@ -42,15 +42,17 @@ N_INTS = 8
 F_CL, F_CR, F_SL, F_SR, F_IK_R, F_IK_TRACK, F_WMAX, F_DT, F_KP, F_KI, F_TLMAX, F_TRMAX, F_RADIUS, F_ZREST = range(14)
 F_STD = 14  # three pose-noise standard deviations
 N_FL = 17
-# st: the unwrapped heading, simulated time, the PI integrals, the true pose (x, y, theta)
+# st: the unwrapped heading, simulated time, the PI integrals, the true pose (x, y, theta), and 1
+# once MuJoCo warned during a step of this robot (set by the warning handler below)
 S_THETA, S_TIME, S_IL, S_IR = range(4)
 S_POSE = 4
-N_ST = 7
+S_WARN = 7
+N_ST = 8
 # one row of telemetry: u_meas, u_true, wheel_cmd, wheel_meas, torque (two each)
 TELEMETRY = ("u_meas", "u_true", "wheel_cmd", "wheel_meas", "torque")
 N_TELE = 2 * len(TELEMETRY)
 # why a step diverged (0: it did not)
-RESET, NOT_FINITE, LIFTED, TIPPED = 1, 2, 3, 4
+RESET, NOT_FINITE, LIFTED, TIPPED, WARNED = 1, 2, 3, 4, 5
 STATE_TIME = int(mujoco.mjtState.mjSTATE_TIME)
 OBJ_SITE = int(mujoco.mjtObj.mjOBJ_SITE)
 
@@ -134,6 +136,29 @@ def _fatal(msg: bytes) -> None:
 
 ctypes.c_void_p.in_dll(_LIB, "mju_user_error").value = ctypes.cast(_fatal, ctypes.c_void_p).value
 
+WARNINGS: list[str] = []  # MuJoCo's warnings in this process, newest last (at most a few kept)
+_WATCHED: list[np.ndarray | None] = [None]  # the st array of the robot stepping now (watch)
+
+
+def watch(st: np.ndarray | None) -> None:
+    """Name the robot (its ``st``) that steps next: a warning of MuJoCo marks it (``st[S_WARN]``),
+    and its next divergence test ends its run (WARNED)."""
+    _WATCHED[0] = st
+
+
+@ctypes.CFUNCTYPE(None, ctypes.c_char_p)
+def _warning(msg: bytes) -> None:
+    """MuJoCo's warnings (an unstable simulation it resets, a control it zeroes, a full arena):
+    kept here, neither printed nor written to MUJOCO_LOG.TXT in the current folder."""
+    WARNINGS.append(" ".join(msg.decode(errors="replace").split()))
+    del WARNINGS[:-4]
+    st = _WATCHED[0]
+    if st is not None:
+        st[S_WARN] = 1.0
+
+
+ctypes.c_void_p.in_dll(_LIB, "mju_user_warning").value = ctypes.cast(_warning, ctypes.c_void_p).value
+
 
 @kernel("f8(f8[::1])", ext="mujoco", error_model="python")
 def yaw(xmat: np.ndarray) -> float:
@@ -204,10 +229,12 @@ def measure(ints, fl, st, draw, hist, fill):
 
 @kernel(lambda: with_robot("i8()"), ext="mujoco")
 def diverged(robot):
-    """RESET when MuJoCo reset the data on a bad state (its time no longer ours), NOT_FINITE, LIFTED
+    """WARNED when MuJoCo warned during a step of this robot, RESET when MuJoCo reset the data on a bad state (its time no longer ours), NOT_FINITE, LIFTED
     when the axle rose half a wheel radius above its rest height, TIPPED when the chassis' up axis is
     more than 60 deg from vertical; 0 when none."""
     fl, st = robot.fl, robot.st
+    if st[S_WARN] != 0.0:
+        return WARNED
     t = np.empty(1)
     mj_getState(robot.mp, robot.dp, t.ctypes.data, STATE_TIME)
     if abs(t[0] - st[S_TIME]) > 0.5 * fl[F_DT]:

@@ -16,6 +16,7 @@ from mlpfac.exceptions import ConfigError
 from mlpfac.plants.model_file import is_menagerie, menagerie_name, model_path, shipped_model
 
 LIMITS = ("wheel_radius", "track", "max_wheel_speed", "timestep")
+TIMESTEP_MIN, TIMESTEP_MAX = 1e-5, 0.1  # physics timestep (s): finer would take hours, coarser is not physics
 
 
 def _positive(name: str, value, optional: bool = False, inf: bool = False) -> None:
@@ -25,6 +26,16 @@ def _positive(name: str, value, optional: bool = False, inf: bool = False) -> No
         return
     if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value) or value <= 0:
         raise ConfigError(name, f"must be a positive number, got {value!r}")
+
+
+def check_timestep(dt: float | None, where: str, whose: str = "") -> None:
+    """A physics timestep (s) inside [TIMESTEP_MIN, TIMESTEP_MAX]; a ConfigError naming ``where`` else."""
+    if dt is not None and not TIMESTEP_MIN <= dt <= TIMESTEP_MAX:
+        raise ConfigError(
+            where,
+            f"{whose}{dt:g} s is outside {TIMESTEP_MIN:g} .. {TIMESTEP_MAX:g} s (a finer one would take hours to "
+            "simulate, a coarser one is not physics)",
+        )
 
 
 @dataclass(frozen=True)
@@ -70,6 +81,7 @@ class MujocoConfig:
             raise ConfigError("frame_offset", f"expected three finite numbers (m), got {self.frame_offset!r}")
         for name in LIMITS:
             _positive(name, getattr(self, name), optional=True, inf=name == "max_wheel_speed")
+        check_timestep(self.timestep, "timestep")
         _positive("pi_kp", self.pi_kp)
         ki = self.pi_ki
         if isinstance(ki, bool) or not isinstance(ki, int | float) or not math.isfinite(ki) or ki < 0:

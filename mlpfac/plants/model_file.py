@@ -87,7 +87,7 @@ def load_spec(model: str) -> tuple[mujoco.MjSpec, Path]:
     try:
         return mujoco.MjSpec.from_file(str(path)), path
     except ValueError as err:
-        raise ConfigError(str(path), f"MuJoCo cannot load the model: {err}") from None
+        raise ConfigError(str(path), f"MuJoCo cannot load the model: {' '.join(str(err).split())}") from None
 
 
 def model_fingerprint(model: str) -> str:
@@ -97,7 +97,7 @@ def model_fingerprint(model: str) -> str:
     try:
         return fingerprint(spec.compile())
     except ValueError as err:
-        raise ConfigError(str(path), f"MuJoCo cannot load the model: {err}") from None
+        raise ConfigError(str(path), f"MuJoCo cannot load the model: {' '.join(str(err).split())}") from None
 
 
 def fingerprint(model: mujoco.MjModel) -> str:

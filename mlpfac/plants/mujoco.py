@@ -168,7 +168,9 @@ class MujocoPlant(MujocoEvents):
                              self._history.fill, np.empty(6))  # fmt: skip
 
     def kernel_args(self) -> K.Robot:
-        """The robot as :func:`mlpfac.plants.compiled.plant_step` takes it (valid until the next event)."""
+        """The robot as :func:`mlpfac.plants.compiled.plant_step` takes it (valid until the next event),
+        watched for MuJoCo's warnings until another robot is."""
+        K.watch(self.st)
         return self._args
 
     @property
@@ -219,6 +221,7 @@ class MujocoPlant(MujocoEvents):
 
     def step(self, u: np.ndarray) -> None:
         """One control step (:func:`mlpfac.plants.compiled.plant_step`)."""
+        K.watch(self.st)
         K.plant_step(float(u[0]), float(u[1]), self.draws(1)[0], self.tele, self._args)
 
     def _force_limits(self) -> tuple[float, float]:
@@ -245,6 +248,9 @@ class MujocoPlant(MujocoEvents):
 
     def why(self, code: int) -> str | None:
         """The words for a divergence code of the compiled step, with the current state's numbers."""
+        if code == K.WARNED:
+            said = K.WARNINGS[-1].rstrip(".") if K.WARNINGS else "a warning"
+            return f"MuJoCo warned: {said}; the simulation is not to be trusted from here"
         if code == K.RESET:
             bad = [w for w in DIVERGENCE_WARNINGS if self.data.warning[getattr(mujoco.mjtWarning, w)].number]
             return f"MuJoCo {' '.join(bad) or 'reset'}: the simulation became unstable and was reset"

@@ -20,10 +20,11 @@ import numpy as np
 from mlpfac.exceptions import ConfigError
 from mlpfac.plants import edits
 from mlpfac.plants.compiled import yaw
-from mlpfac.plants.config import MujocoConfig
+from mlpfac.plants.config import MujocoConfig, check_timestep
 from mlpfac.plants.detect import ROUND, WHEEL_SHAPES, collision_geoms, describe, is_velocity_servo, names, resolve
 from mlpfac.plants.model_file import fingerprint, is_menagerie, load_spec
 
+MAX_SUBSTEPS = 10_000  # physics steps in one control period, at most
 SETTLE_S = 0.5  # seconds the robot settles on its wheels at least, at construction (the rest pose)
 SETTLE_MAX_S = 10.0  # ... and at most: then it must be at rest
 REST_SPEED = 1e-4  # at rest: the free body moves no faster than this (m/s, rad/s)
@@ -74,13 +75,20 @@ class Robot:
     locked: tuple[str, ...] = ()  # joints fixed at the keyframe (other_actuators = "lock")
 
     def substeps(self, period: float, where: str) -> int:
-        """Physics steps in ``period`` seconds; a ConfigError unless it is a whole number of them."""
+        """Physics steps in ``period`` seconds; a ConfigError unless it is a whole number of them, at
+        most MAX_SUBSTEPS (one control step is one compiled call, which no signal interrupts)."""
         n = period / self.dt
         if round(n) < 1 or abs(n - round(n)) > 1e-6 * n:
             raise ConfigError(
                 where,
                 f"{period:g} s is not a whole number of physics steps of {self.dt:g} s (the model's timestep; "
                 "[plant] timestep can set another)",
+            )
+        if round(n) > MAX_SUBSTEPS:
+            raise ConfigError(
+                where,
+                f"{period:g} s is {round(n)} physics steps of {self.dt:g} s; the limit is {MAX_SUBSTEPS} per control "
+                "period: shorten the period or lengthen [plant] timestep",
             )
         return int(round(n))
 
@@ -172,8 +180,12 @@ def _read_robot(config: MujocoConfig, stamp: tuple[int, int]) -> Robot:
     wheel_bodies = tuple(int(m.jnt_bodyid[j]) for j in joints)
     tyres = tuple(g for b in wheel_bodies for g in collision_geoms(m, b) if int(m.geom_type[g]) in WHEEL_SHAPES)
     dt = float(m.opt.timestep)
-    d = mujoco.MjData(m)
-    _settle(m, d, dt, qpos0, ctrl0, int(m.jnt_dofadr[jnt]), where)
+    check_timestep(dt, "timestep", "the model's timestep ")
+    try:
+        d = mujoco.MjData(m)
+        _settle(m, d, dt, qpos0, ctrl0, int(m.jnt_dofadr[jnt]), where)
+    except mujoco.FatalError as err:  # an arena too small for the model (<size memory>), say
+        raise ConfigError(where, f"MuJoCo cannot simulate the model: {' '.join(str(err).split())}") from None
     anchors = [d.xanchor[j].copy() for j in joints]
     sign = _wheel_signs(config, d, site, joints, anchors)
     c = [s * g for s, g in zip(sign, m.actuator_gear[list(acts), 0], strict=True)]
@@ -212,7 +224,7 @@ def _compile(spec: mujoco.MjSpec, where: str) -> mujoco.MjModel:
     try:
         return spec.compile()
     except ValueError as err:
-        raise ConfigError(where, f"MuJoCo cannot load the model: {err}") from None
+        raise ConfigError(where, f"MuJoCo cannot load the model: {' '.join(str(err).split())}") from None
 
 
 def _keyframe(m: mujoco.MjModel, config: MujocoConfig, where: str) -> tuple[np.ndarray, np.ndarray]:
@@ -296,8 +308,12 @@ def _settle(
     mujoco.mj_resetData(m, d)
     d.qpos[:], d.ctrl[:] = qpos, ctrl
     mujoco.mj_forward(m, d)
-    mujoco.mj_step(m, d, nstep=int(round(SETTLE_S / dt)))
     chunk = max(1, int(round(0.1 / dt)))
+    left = int(round(SETTLE_S / dt))
+    while left > 0:  # in pieces of 0.1 s of simulated time: a signal is seen between two
+        mujoco.mj_step(m, d, nstep=min(chunk, left))
+        left -= chunk
+        _no_warning(d, where)
     while np.max(np.abs(d.qvel[droot : droot + 6])) > REST_SPEED:
         if d.time > SETTLE_MAX_S:
             raise ConfigError(
@@ -306,7 +322,17 @@ def _settle(
                 f'{np.max(np.abs(d.qvel[droot : droot + 6])):.2g}); lock what moves (other_actuators = "lock") or start from a keyframe',
             )
         mujoco.mj_step(m, d, nstep=chunk)
+        _no_warning(d, where)
     mujoco.mj_forward(m, d)
+
+
+def _no_warning(d: mujoco.MjData, where: str) -> None:
+    """A ConfigError naming MuJoCo's warnings of ``d`` (an unstable model, an arena too small), if any."""
+    warned = [mujoco.mjtWarning(i).name for i, w in enumerate(d.warning) if w.number]
+    if warned:
+        raise ConfigError(
+            where, f"MuJoCo warned ({', '.join(warned)}) as the robot settled at rest: the model is not stable as it is"
+        )
 
 
 def _wheel_signs(

@@ -20,6 +20,9 @@ RUN_COLOR = "tab:blue"
 def figure1(rec: RunRecord, baseline: RunRecord | None, path: Path) -> list[str]:
     """Write Figure 1 for ``rec`` (and ``baseline`` for panel h) to ``path`` (PNG); the letters of
     the panels drawn."""
+    from mlpfac.plots.mplconfig import quiet_config
+
+    quiet_config()
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
     from matplotlib.ticker import LogFormatter

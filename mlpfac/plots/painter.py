@@ -22,6 +22,9 @@ class Painter:
     """``figure1`` of :mod:`mlpfac.plots.figure1`, drawn by a child process started now."""
 
     def __init__(self) -> None:
+        from mlpfac.plots.mplconfig import quiet_config
+
+        quiet_config()  # before the child starts: it inherits the environment
         self.pid: int | None = None
         self.meanwhile: list[Callable[[], None]] = []  # done here while the child draws
         if sys.platform != "linux":  # fork is safe to use here only where it is the default

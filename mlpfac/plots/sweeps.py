@@ -42,7 +42,7 @@ def load_runs(out: Path) -> dict[tuple[str, str], list[dict]]:
     for f in sorted(out.glob("*/*/seed-*/metrics.json")):
         try:
             m = json.loads(f.read_text())
-        except (OSError, ValueError):
+        except (OSError, ValueError, RecursionError):
             continue
         if isinstance(m, dict) and m.get("status") in ("ok", "diverged") and "phases" in m:
             runs.setdefault((str(m.get("scenario")), str(m.get("controller"))), []).append(m)
@@ -77,6 +77,9 @@ def sweep_plots(out: Path, stems: tuple[str, ...] = STEMS) -> list[Path]:
 
 def draw(path: Path, pairs: list[tuple[str, str]], runs: dict) -> Path:
     """One row per scenario: the error distribution per controller and the error over time."""
+    from mlpfac.plots.mplconfig import quiet_config
+
+    quiet_config()
     import matplotlib
 
     matplotlib.use("Agg")

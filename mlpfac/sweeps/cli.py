@@ -9,6 +9,7 @@ import sys
 from pathlib import Path
 
 from mlpfac.sweeps.engine import COMPARE_COLUMNS, SWEEP_COLUMNS, markdown, report, summary, sweep_folder
+from mlpfac.targets import cli_path
 
 COMPARE_CONTROLLERS = ("adaptive", "corradini", "kanayama")
 CONTROLLERS_HELP = "shipped names, path/to/file.py:Class, package.module:Class or installed names"
@@ -18,7 +19,7 @@ def _add_common(p: argparse.ArgumentParser, seeds: str, out: str) -> None:
     p.add_argument("--seeds", default=seeds, help=f"seeds: 0-99, 3, 0,2,5 or 0-4,10 (default {seeds})")
     p.add_argument("--duration", type=float, help="override every scenario's duration in seconds")
     p.add_argument(
-        "--out", type=Path, default=Path(out), help=f"results folder (default {out}); re-running skips whole runs"
+        "--out", type=cli_path, default=Path(out), help=f"results folder (default {out}); re-running skips whole runs"
     )
     g = p.add_argument_group("execution")
     g.add_argument("--workers", type=int, default=None, help="local worker processes (default: number of CPUs)")

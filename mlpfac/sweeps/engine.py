@@ -84,10 +84,12 @@ from mlpfac.sweeps.tables import (  # noqa: F401
     SWEEP_COLUMNS,
     aggregate,
     markdown,
+    table_files,
     write_paired,
     write_tables,
 )
 from mlpfac.sweeps.worker import BLAS_THREAD_VARIABLES, one_blas_thread, rrd_is_whole, run_task  # noqa: F401  # noqa: F401
+from mlpfac.targets import check_results_folder
 
 EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_TERMINATED = 0, 1, 2, 130, 143
 WORKERS_PER_CORE = 4  # --workers above this many per core is refused (each worker holds ~130 MB)
@@ -97,6 +99,10 @@ def check_execution_flags(
     workers: int | None, batch_size: int = 64, scheduler: str | None = None, scheduler_timeout: float = 10.0
 ) -> int:
     """The number of local workers; ConfigError naming the flag for a value that cannot work."""
+    for flag, value, kind in (("--workers", workers, int), ("--batch-size", batch_size, int),
+                              ("--scheduler-timeout", scheduler_timeout, int | float)):  # fmt: skip
+        if (value is not None or flag != "--workers") and (isinstance(value, bool) or not isinstance(value, kind)):
+            raise ConfigError(flag, f"expected a {'whole ' if kind is int else ''}number, got {value!r}")
     cores = os.cpu_count() or 1
     workers = cores if workers is None else workers
     most = WORKERS_PER_CORE * cores
@@ -222,6 +228,7 @@ def sweep_folder(
         start_pool_server()  # the workers' fork server warms up while the runs are planned
     jobs = plan(scenarios, names, seed_list, duration)
     check_writable(out)
+    check_results_folder(out, table_files(stem))
     meta = sweep_meta(stem, scenarios, seeds, duration, jobs)
     client = connect(scheduler, scheduler_timeout) if scheduler else None
     try:

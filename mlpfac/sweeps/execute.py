@@ -294,10 +294,23 @@ def connect(address: str, timeout: float = 10.0):
         from dask.distributed import Client
     except ImportError:
         raise ConfigError("--scheduler", "needs dask[distributed]: pip install 'mlpfac[dask]'") from None
-    try:
-        return Client(address, timeout=timeout)
-    except (OSError, TimeoutError, ValueError) as err:
-        msg = str(err).splitlines()[0] if str(err) else type(err).__name__
-        raise ConfigError(
-            "--scheduler", f"cannot reach a Dask scheduler at {address} within {timeout:g} s ({msg})"
-        ) from None
+    import threading
+
+    got: dict = {}
+
+    def attempt() -> None:  # in a thread: an address that accepts and never answers may hang Dask's handshake
+        try:
+            got["client"] = Client(address, timeout=timeout)
+        except BaseException as err:
+            got["error"] = err
+
+    t = threading.Thread(target=attempt, name="mlpfac-dask-connect", daemon=True)
+    t.start()
+    t.join(timeout)
+    err = got.get("error")
+    if "client" in got:
+        return got["client"]
+    if err is not None and not isinstance(err, OSError | TimeoutError | ValueError):
+        raise err
+    msg = (str(err).splitlines()[0] if str(err) else type(err).__name__) if err is not None else "no answer"
+    raise ConfigError("--scheduler", f"cannot reach a Dask scheduler at {address} within {timeout:g} s ({msg})")

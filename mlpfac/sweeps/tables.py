@@ -127,6 +127,14 @@ def markdown(rows: list[dict], columns: list[tuple[str, Callable[[dict], str]]])
     return "\n".join(lines) + "\n"
 
 
+def table_files(stem: str) -> tuple[str, ...]:
+    """The files a sweep writes at the top of its folder (:func:`write_tables`, :func:`write_paired`, the plot)."""
+    return tuple(f"{stem}{ext}" for ext in (".csv", ".md", ".json", ".png")) + PAIRED_FILES
+
+
+PAIRED_FILES = ("paired.csv", "paired.md", "paired.json", "summary.md")
+
+
 def write_tables(out: Path, stem: str, rows: list[dict], columns, meta: dict) -> list[Path]:
     """``stem``.csv (every statistic, SI units), .md (the readable table), .json (rows + how they were made)."""
     import csv
@@ -173,7 +181,7 @@ def write_paired(out: Path, rows: list[dict], meta: dict) -> list[Path]:
     for r in rows:
         w.writerow({k: ("" if r[k] is None else r[k]) for k in PAIRED_FIELDS})
     note = "\n" + " ".join(" ".join((paired.__doc__ or "").split("\n\n")[1:]).split()) + "\n"
-    paths = [out / "paired.csv", out / "paired.md", out / "paired.json", out / "summary.md"]
+    paths = [out / name for name in PAIRED_FILES]
     write_atomic(paths[0], buf.getvalue())
     write_atomic(paths[1], markdown(rows, PAIRED_COLUMNS) + note)
     write_atomic(paths[2], json.dumps({"meta": meta, "rows": rows}, indent=2) + "\n")
