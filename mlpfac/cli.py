@@ -168,14 +168,21 @@ def main(argv: list[str] | None = None) -> int:
         if err.errno == errno.EPIPE:
             _drop_stdout()
             return EXIT_BROKEN_PIPE
-        print(f"mlpfac: error: {_os_error(err)}", file=sys.stderr)
+        print(f"mlpfac: error: {_os_error(err, _stdout_failing(err))}", file=sys.stderr)
         _drop_stdout()
         return EXIT_BAD_INPUT
 
 
-def _os_error(err: OSError) -> str:
-    """An OSError in one line, naming the file (stdout when it names none)."""
-    return f"{err.filename or 'stdout'}: cannot write ({err.strerror or err})"
+def _stdout_failing(err: OSError) -> str:
+    """What an OSError naming no file was about: stdout when it carries a system error number (our
+    own writes name their files), else nothing (a message of ours, such as a recording not closed)."""
+    return "stdout" if err.errno is not None else ""
+
+
+def _os_error(err: OSError, unnamed: str = "stdout") -> str:
+    """An OSError in one line, naming the file (``unnamed`` when it names none)."""
+    where = err.filename or unnamed
+    return f"{where + ': ' if where else ''}cannot write ({err.strerror or err})"
 
 
 def _drop_stdout() -> None:

@@ -16,6 +16,7 @@ from mlpfac.scenario import scenario_names
 MINIMAL = 'duration = 0.5\n[plant]\nkind = "kinematic"\n'
 EVENT = '[[events]]\ntime = 0.2\nkind = "control_period"\nfactor = 1.5\n'
 ROBOT = '[plant]\nkind = "mujoco"\n'
+EV = '[[events]]\ntime = 0.2\nkind = "{}"\n{}\n'  # an event of a kind, with its parameters
 
 # name: (file content, text the message must hold). The file's path must appear in the message too.
 BAD_FILES: dict[str, tuple[str | bytes, str]] = {
@@ -114,6 +115,27 @@ BAD_FILES: dict[str, tuple[str | bytes, str]] = {
     "menagerie entry unknown": ('[plant]\nkind = "mujoco"\nmodel = "menagerie:pal_tiago/scene_fast"\n', "scene_velocity"),
     "payload on every body of the kinematic": (MINIMAL + '[[events]]\ntime = 0.2\nkind = "payload"\nmass_kg = 2.0\nbody = "*"\n', "kinematic plant cannot"),
     "payload mass and scale": (ROBOT + '[[events]]\ntime = 0.2\nkind = "payload"\nmass_kg = 2.0\nmass_scale = 2.0\n', "either"),
+    "reference kind a list": ('[reference]\nkind = ["eight"]\n', "unknown reference kind ['eight']"),
+    "reference wx huge": ("[reference]\nwx = 1e308\n", "[reference] wx: must lie within"),
+    "reference size huge": ('[reference]\nkind = "circle"\nradius = 1e300\n', "[reference] radius"),
+    "reference faster than a robot": ('[reference]\nkind = "circle"\nradius = 1000.0\nrate = 1.0\n', "beyond a wheeled robot's"),
+    "arrays nested 3000 deep": ("x = " + "[" * 3000 + "]" * 3000 + "\n", "nested too deep"),
+    "timestep 1e-7": (ROBOT + "timestep = 1e-7\n", "[plant] timestep: 1e-07 s is outside"),
+    "timestep 1e-9": (ROBOT + "timestep = 1e-9\n", "[plant] timestep"),
+    "timestep a second": (ROBOT + "timestep = 1.0\n", "[plant] timestep"),
+    "control period factor 1e15": (MINIMAL + EV.format("control_period", "factor = 1e15"), "factor: must be <= 100"),
+    "control period beyond the physics limit": (ROBOT + "timestep = 1e-5\n" + EV.format("control_period", "factor = 20.0"), "limit is 10000 per control period"),
+    "physics steps of the run beyond the limit": ('duration = 11000.0\nT = 0.1\n[controller]\nname = "corradini"\n' + ROBOT + "timestep = 1e-5\n", "physics steps; the limit is 1e+09 per run"),
+    "payload mass_scale 1e300": (MINIMAL + EV.format("payload", "mass_scale = 1e300"), "mass_scale: must be <="),
+    "payload mass_scale 1e-300": (MINIMAL + EV.format("payload", "mass_scale = 1e-300"), "mass_scale: must be >="),
+    "payload mass_kg 1e300": (MINIMAL + EV.format("payload", "mass_kg = 1e300"), "mass_kg: must be <="),
+    "friction 1e300": (MINIMAL + EV.format("friction", "mu = 1e300"), "mu: must be <="),
+    "friction 1e-300": (MINIMAL + EV.format("friction", "mu = 1e-300"), "mu: must be >="),
+    "wheel radius 1e300": (MINIMAL + EV.format("wheel_radius", "scale = 1e300"), "scale: must be <="),
+    "wheel radius 1e-300": (MINIMAL + EV.format("wheel_radius", "scale = 1e-300"), "scale: must be >="),
+    "actuator kv 1e300": (MINIMAL + EV.format("actuator", "kv_scale = 1e300"), "kv_scale: must be <="),
+    "actuator force 1e-300": (MINIMAL + EV.format("actuator", "force_scale = 1e-300"), "force_scale: must be >="),
+    "sensor delay 1e15 steps": (MINIMAL + EV.format("sensor_delay", "steps = 1000000000000000"), "steps: must be <= 10000"),
 }  # fmt: skip
 
 

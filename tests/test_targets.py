@@ -364,3 +364,16 @@ def test_the_api_names_the_argument_of_a_wrong_type(here, case):
         call()
     assert exc.value.where == name and isinstance(exc.value, MlpfacError), exc.value
     assert sorted(p.name for p in here.iterdir()) == ["b.toml", "kin.toml"]
+
+
+def test_connect_to_a_viewer_that_never_answers_is_refused_before_the_run(here, capsys):
+    server = socket.socket()
+    server.bind(("127.0.0.1", 0))
+    server.listen()
+    url = f"rerun+http://127.0.0.1:{server.getsockname()[1]}/proxy"
+    try:
+        assert main(["run", "kin.toml", "--no-plot", "--out", "o", "--connect", url]) == 2
+    finally:
+        server.close()
+    assert "accepts connections there but does not answer" in _one_line(capsys.readouterr().err)
+    assert not (here / "o").exists()

@@ -137,6 +137,28 @@ def _check_reachable(url: str) -> None:
         raise ConfigError(url, f"bad viewer URL ({err})") from None
     if not _listening(host, port):
         raise ConfigError(url, "no rerun viewer is listening there; start one with `rerun` or use --save")
+    if not _answers(host, port):
+        raise ConfigError(
+            url, f"something accepts connections there but does not answer within {ANSWER_S:g} s: not a rerun viewer?"
+        )
+
+
+ANSWER_S = 3.0  # seconds a viewer has to answer a request (or close the connection) before it is given up
+
+
+def _answers(host: str, port: int) -> bool:
+    """Whether what listens at host:port answers an HTTP request (with anything, or by closing the
+    connection) within ANSWER_S: a server that accepts and never answers would hang the run's end."""
+    host = LOCALHOST if host in ("0.0.0.0", "") else "::1" if host == "::" else host  # noqa: S104
+    try:
+        with socket.create_connection((host, port), timeout=ANSWER_S) as conn:
+            conn.sendall(f"GET / HTTP/1.1\r\nHost: {host}\r\nConnection: close\r\n\r\n".encode())
+            conn.recv(1)
+    except TimeoutError:
+        return False
+    except OSError:  # reset, refused: it answered, if not as a viewer would
+        return True
+    return True
 
 
 def _listening(host: str, port: int, timeout: float = 1.0) -> bool:
