@@ -161,6 +161,12 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt as err:
         print("mlpfac: terminated" if isinstance(err, Terminated) else "mlpfac: interrupted", file=sys.stderr)
         return EXIT_TERMINATED if isinstance(err, Terminated) else EXIT_INTERRUPTED
+    except ImportError as err:  # a signal while a compiled module initialised (MuJoCo's) fails its import
+        cause = _interrupt_behind(err)
+        if cause is None:
+            raise
+        print("mlpfac: terminated" if isinstance(cause, Terminated) else "mlpfac: interrupted", file=sys.stderr)
+        return EXIT_TERMINATED if isinstance(cause, Terminated) else EXIT_INTERRUPTED
     except BrokenPipeError:  # stdout closed early (`mlpfac ... | head`): what was written stays, no traceback
         _drop_stdout()
         return EXIT_BROKEN_PIPE
@@ -177,6 +183,17 @@ def _stdout_failing(err: OSError) -> str:
     """What an OSError naming no file was about: stdout when it carries a system error number (our
     own writes name their files), else nothing (a message of ours, such as a recording not closed)."""
     return "stdout" if err.errno is not None else ""
+
+
+def _interrupt_behind(err: BaseException) -> KeyboardInterrupt | None:
+    """The Ctrl-C or SIGTERM an error was raised while handling (an import it interrupted), if any."""
+    seen = set()
+    while err is not None and id(err) not in seen:
+        if isinstance(err, KeyboardInterrupt):
+            return err
+        seen.add(id(err))
+        err = err.__cause__ or err.__context__
+    return None
 
 
 def _os_error(err: OSError, unnamed: str = "stdout") -> str:
@@ -346,11 +363,14 @@ def entry() -> None:
     try:
         code = main()
         sys.stdout.flush()  # stdout on a full disk (/dev/full) fails here, said in one line
-    except KeyboardInterrupt as err:  # a signal before main's own handling began (while importing)
+    except (KeyboardInterrupt, ImportError) as err:  # a signal before main's own handling began (importing)
         from mlpfac.signals import Terminated
 
-        print("mlpfac: terminated" if isinstance(err, Terminated) else "mlpfac: interrupted", file=sys.stderr)
-        code = EXIT_TERMINATED if isinstance(err, Terminated) else EXIT_INTERRUPTED
+        cause = _interrupt_behind(err)
+        if cause is None:
+            raise
+        print("mlpfac: terminated" if isinstance(cause, Terminated) else "mlpfac: interrupted", file=sys.stderr)
+        code = EXIT_TERMINATED if isinstance(cause, Terminated) else EXIT_INTERRUPTED
     except BrokenPipeError:
         _drop_stdout()
         code = EXIT_BROKEN_PIPE

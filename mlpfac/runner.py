@@ -17,7 +17,7 @@ from mlpfac.segment import BAD, segment
 from mlpfac.signals import Terminated, raise_swallowed
 
 FLUSH_EVERY = 250  # steps between sends to a log sink
-SEGMENT_PHYSICS = 20_000  # physics steps of one compiled segment, at most: a signal waits for no more
+SEGMENT_PHYSICS = 5_000  # physics steps of one compiled segment, at most: a signal waits for no more
 
 
 def seeded_generators(seed: int) -> tuple[np.random.Generator, np.random.Generator]:

@@ -1,0 +1,78 @@
+"""SIGINT and SIGTERM at a random time of a run, a sweep and a check (loading, settling the robot,
+compiling, stepping, writing): the command ends within 2 s, with no traceback, and leaves no partial
+folder (a folder is missing, or whole: a run's config.toml and metrics.json, nothing staged).
+
+The times are drawn from MLPFAC_SIGNAL_SEED (default 0): set another to try other times; a failure
+names the seed and the time."""
+
+from __future__ import annotations
+
+import json
+import os
+import random
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+SEED = int(os.environ.get("MLPFAC_SIGNAL_SEED", "0"))
+BUDGET = (
+    'scenarios = ["eight-nominal"]\ncontrollers = ["kanayama"]\nseeds = "0-1"\nduration = 1.0\n[[budget]]\nlost = 0\n'
+)
+COMMANDS = {  # argv, and the seconds it takes here about (the signal falls within them)
+    "run": (["run", "eight-nominal", "--controller", "kanayama", "--duration", "2", "--out", "R"], 5.0),
+    "sweep": (["sweep", "eight-nominal", "--controllers", "kanayama", "--seeds", "0-1", "--duration", "1",
+               "--workers", "2", "--out", "S"], 4.0),
+    "check": (["check", "b.toml", "--workers", "2", "--out", "C"], 4.0),
+}  # fmt: skip
+SIGNALS = {"SIGINT": (signal.SIGINT, 130), "SIGTERM": (signal.SIGTERM, 143)}
+STOP_S = 2.0
+
+
+def _not_partial(root: Path) -> list[str]:
+    """What under ``root`` is a partial folder or a leftover: a staged folder or file, a sweep's
+    temporary folder, a folder with a run's config.toml and no metrics.json (or one that is not JSON)."""
+    bad = []
+    for p in root.rglob("*"):
+        if ".tmp-" in p.name or (p.name == ".tmp" and p.is_dir()):
+            bad.append(f"{p.relative_to(root)} left behind")
+        if p.is_dir() and (p / "config.toml").exists():
+            try:
+                json.loads((p / "metrics.json").read_text())
+            except (OSError, ValueError):
+                bad.append(f"{p.relative_to(root)} holds config.toml without a whole metrics.json")
+    return bad
+
+
+@pytest.mark.parametrize("command", sorted(COMMANDS))
+@pytest.mark.parametrize("name", sorted(SIGNALS))
+def test_a_signal_at_a_random_time_stops_within_2_s_and_leaves_no_partial_folder(tmp_path, command, name):
+    sig, code = SIGNALS[name]
+    argv, span = COMMANDS[command]
+    delay = random.Random(f"{SEED}-{command}-{name}").uniform(0.0, span)
+    (tmp_path / "b.toml").write_text(BUDGET)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "mlpfac.cli", *argv], cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+        text=True,
+    )  # fmt: skip
+    time.sleep(delay)
+    done_before = proc.poll() is not None
+    proc.send_signal(sig)
+    t0 = time.monotonic()
+    try:
+        _, err = proc.communicate(timeout=STOP_S)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        _, err = proc.communicate()
+        pytest.fail(f"{command}: {name} at {delay:.2f} s (seed {SEED}) did not stop it within {STOP_S} s: {err}")
+    took = time.monotonic() - t0
+    where = f"{command}: {name} at {delay:.2f} s (seed {SEED}), exit {proc.returncode} after {took:.2f} s"
+    if "Fatal Python error: init_import_site" in err:  # the interpreter's own start, before any code of ours
+        return
+    assert "Traceback" not in err, f"{where}\n{err}"
+    # the signal's own code; 0 when it came after the end; killed by it before Python set its handlers
+    assert proc.returncode in (code, 0, -sig), f"{where} (done before: {done_before})\n{err}"
+    assert _not_partial(tmp_path) == [], where
