@@ -62,7 +62,7 @@ def check_report_file(path: Path, flag: str) -> None:
     where = f"{flag} {path}"
     real = resolved(path, where)
     try:
-        mode = os.stat(real).st_mode
+        mode = os.stat(path).st_mode  # the path itself: /dev/stdout leads to a pipe no resolved name reaches
     except FileNotFoundError:
         mode = None
     except OSError as err:
@@ -86,19 +86,18 @@ def write_report_file(path: Path, data: str | bytes) -> Path:
     from mlpfac.outputs import write_atomic
     from mlpfac.signals import sigint_deferred
 
-    real = Path(path).resolve()
     blob = data.encode() if isinstance(data, str) else data
     try:
-        mode = os.stat(real).st_mode
+        mode = os.stat(path).st_mode
     except FileNotFoundError:
         mode = stat.S_IFREG
     if stat.S_ISREG(mode):
-        write_atomic(real, blob)
+        write_atomic(Path(path).resolve(), blob)  # through a link: its file is replaced, the link stays
         return Path(path)
     if not (stat.S_ISCHR(mode) or stat.S_ISFIFO(mode)):
         raise ConfigError(str(path), f"is {_kind(mode) or 'not a file'}")
     with sigint_deferred():
-        fd = os.open(real, os.O_WRONLY | os.O_NONBLOCK | os.O_NOCTTY)
+        fd = os.open(path, os.O_WRONLY | os.O_NONBLOCK | os.O_NOCTTY)
         try:
             os.set_blocking(fd, True)
             view = memoryview(blob)

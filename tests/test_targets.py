@@ -377,3 +377,41 @@ def test_connect_to_a_viewer_that_never_answers_is_refused_before_the_run(here, 
         server.close()
     assert "accepts connections there but does not answer" in _one_line(capsys.readouterr().err)
     assert not (here / "o").exists()
+
+
+def _limited(size: int):
+    """A preexec_fn: files of at most ``size`` bytes (a full disk, as far as a writer can tell)."""
+    import resource
+
+    return lambda: resource.setrlimit(resource.RLIMIT_FSIZE, (size, size))
+
+
+def test_view_save_on_a_full_disk_keeps_the_earlier_file(here, capsys):
+    _recorded_run(here, "a")
+    _recorded_run(here, "b")
+    assert main(["view", "a", "b", "--save", "cmp.rrd"]) == 0
+    before = (here / "cmp.rrd").read_bytes()
+    proc = subprocess.run(
+        [sys.executable, "-m", "mlpfac.cli", "view", "a", "b", "--save", "cmp.rrd"],
+        capture_output=True, text=True, cwd=here, preexec_fn=_limited(len(before) // 2),
+    )  # fmt: skip
+    assert proc.returncode == 2 and "cmp.rrd" in _one_line(proc.stderr), proc.stderr
+    assert (here / "cmp.rrd").read_bytes() == before
+    assert not [p for p in here.iterdir() if p.name.startswith(".cmp.rrd")]
+    capsys.readouterr()
+
+
+def test_report_on_a_full_disk_keeps_the_page(here):
+    docs = here / "docs"
+    (docs / "data" / "x").mkdir(parents=True)
+    rows = [{"scenario": "s", "controller": "c", "phase": "before", "runs": 1}]
+    (docs / "data" / "x" / "table.md").write_text("| a |\n| --- |\n" + "| 1 |\n" * 2000)
+    (docs / "data" / "x" / "sweep.json").write_text(json.dumps({"meta": {}, "rows": rows}))
+    page = "# p\n<!-- table: data/x view=text -->\n<!-- /table -->\n"
+    (docs / "page.md").write_text(page)
+    proc = subprocess.run(
+        [sys.executable, "-m", "mlpfac.cli", "report", "docs"],
+        capture_output=True, text=True, cwd=here, preexec_fn=_limited(4096),
+    )  # fmt: skip
+    assert proc.returncode == 2 and "docs/page.md: cannot write" in _one_line(proc.stderr), proc.stderr
+    assert (docs / "page.md").read_text() == page
