@@ -31,6 +31,7 @@ from mlpfac.reference import make_reference
 from mlpfac.toml_data import FOLDER_NAME, build, check_keys, number, subtable, to_toml, typed  # noqa: F401 (mlpfac.scenario.to_toml)
 from mlpfac.variants import VARIANTS
 
+INITIAL_ERROR_MAX = 1e3  # m (e1, e2) and rad (e3): a start beyond this is not a tracking problem
 MEMORY_SHARE = 0.8  # a run may plan to use at most this share of the memory available now
 
 TOP_KEYS = {
@@ -262,8 +263,11 @@ def parse(table: dict, source: str = "<scenario>", check_model: bool = True) -> 
     if not isinstance(moving, bool):
         raise ConfigError(f"{source} [initial] moving", f"expected true or false, got {moving!r}")
     e0 = initial.get("error", [0.0, 0.0, 0.0])
-    if not typed(e0, tuple[float, float, float], "error"):
-        raise ConfigError(f"{source} [initial] error", f"expected three finite numbers (e1, e2, e3), got {e0!r}")
+    if not typed(e0, tuple[float, float, float], "error") or max(map(abs, e0)) > INITIAL_ERROR_MAX:
+        raise ConfigError(
+            f"{source} [initial] error",
+            f"expected three numbers within +-{INITIAL_ERROR_MAX:g} (e1, e2, e3), got {e0!r}",
+        )
 
     plant_table = subtable(table, "plant", source, {"kind": "kinematic"})
     plant_kind = plant_table.pop("kind", "kinematic")

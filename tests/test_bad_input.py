@@ -135,6 +135,8 @@ BAD_FILES: dict[str, tuple[str | bytes, str]] = {
     "wheel radius 1e-300": (MINIMAL + EV.format("wheel_radius", "scale = 1e-300"), "scale: must be >="),
     "actuator kv 1e300": (MINIMAL + EV.format("actuator", "kv_scale = 1e300"), "kv_scale: must be <="),
     "actuator force 1e-300": (MINIMAL + EV.format("actuator", "force_scale = 1e-300"), "force_scale: must be >="),
+    "initial error huge": ("[initial]\nerror = [1e308, 0.0, 0.0]\n", "[initial] error"),
+    "pose noise huge": (ROBOT + "pose_noise_std = 1e300\n", "[plant] pose_noise_std"),
     "sensor delay 1e15 steps": (MINIMAL + EV.format("sensor_delay", "steps = 1000000000000000"), "steps: must be <= 10000"),
 }  # fmt: skip
 

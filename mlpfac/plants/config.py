@@ -16,6 +16,7 @@ from mlpfac.exceptions import ConfigError
 from mlpfac.plants.model_file import is_menagerie, menagerie_name, model_path, shipped_model
 
 LIMITS = ("wheel_radius", "track", "max_wheel_speed", "timestep")
+NOISE_STD_MAX = 10.0  # m and rad of pose noise, at most
 TIMESTEP_MIN, TIMESTEP_MAX = 1e-5, 0.1  # physics timestep (s): finer would take hours, coarser is not physics
 
 
@@ -116,8 +117,9 @@ class MujocoConfig:
             raise ConfigError(
                 "pose_noise_std", f"expected a number or 3 numbers, got {self.pose_noise_std!r}"
             ) from None
-        if not np.all(np.isfinite(std)) or np.any(std < 0):
+        if not np.all(np.isfinite(std)) or np.any(std < 0) or np.any(std > NOISE_STD_MAX):
             raise ConfigError(
-                "pose_noise_std", f"standard deviations must be finite and >= 0, got {self.pose_noise_std!r}"
+                "pose_noise_std",
+                f"standard deviations must lie in 0 .. {NOISE_STD_MAX:g} (m, m, rad), got {self.pose_noise_std!r}",
             )
         return std.copy() if np.any(std > 0) else None
