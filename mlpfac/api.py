@@ -137,6 +137,8 @@ def sweep(
     for name, value in (("workers", workers), ("batch_size", batch_size)):
         if value is not None and (isinstance(value, bool) or not isinstance(value, int)):
             raise ConfigError(name, f"expected a whole number, got {value!r}")
+    if scheduler is not None and not isinstance(scheduler, str):
+        raise ConfigError("scheduler", f"expected a Dask scheduler's address (str), got {scheduler!r}")
     if out is not None:
         out = user_path(out, "out")
     text = None

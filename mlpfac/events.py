@@ -49,7 +49,7 @@ class Param:
                 raise ConfigError(where, f"expected a whole number, got {value!r}")
         elif isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
             raise ConfigError(where, f"expected a finite number, got {value!r}")
-        if self.positive and not value > 0:
+        if (self.positive or (self.minimum or 0) > 0) and not value > 0:
             raise ConfigError(where, f"must be positive, got {value!r}")
         if self.minimum is not None and value < self.minimum:
             raise ConfigError(where, f"must be >= {self.minimum:g}, got {value!r}")

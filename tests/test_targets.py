@@ -352,6 +352,7 @@ API_CALLS = {
     "sweep(workers='2')": (lambda: mlpfac.sweep("paper", workers="2"), "workers"),
     "sweep(controllers=42)": (lambda: mlpfac.sweep("paper", 42), "controllers"),
     "sweep(out=3.5)": (lambda: mlpfac.sweep("paper", out=3.5), "out"),
+    "sweep(scheduler=42)": (lambda: mlpfac.sweep("paper", scheduler=42), "scheduler"),
     "check(42)": (lambda: mlpfac.check(42), "budget"),
     "check(workers='2')": (lambda: mlpfac.check("b.toml", workers="2"), "--workers"),
 }
@@ -415,3 +416,11 @@ def test_report_on_a_full_disk_keeps_the_page(here):
     )  # fmt: skip
     assert proc.returncode == 2 and "docs/page.md: cannot write" in _one_line(proc.stderr), proc.stderr
     assert (docs / "page.md").read_text() == page
+
+
+def test_a_mujoco_compile_error_is_one_line(here, capsys):
+    (here / "bad.xml").write_text('<mujoco><worldbody><body><geom type="sphere"/></body></worldbody></mujoco>')
+    (here / "m.toml").write_text('[plant]\nkind = "mujoco"\nmodel = "bad.xml"\n')
+    assert main(["run", "m.toml", "--no-log", "--no-plot", "--out", "o"]) == 2
+    line = _one_line(capsys.readouterr().err)
+    assert "MuJoCo cannot load the model: Error: size 0 must be positive in geom Element name" in line, line
