@@ -4,8 +4,9 @@ that is not ours is damaged.
 - A path is never empty (``--out ""`` would write into the current folder).
 - A report file (``check --junit``, ``--summary``): a missing or regular file is replaced atomically;
   a symbolic link is written through to its file (the link stays); a character device or a FIFO
-  (``/dev/null``, ``/dev/stdout``, a pipe) is written through, never replaced by a regular file; a
-  folder, a block device (a disk) or a socket is refused.
+  (``/dev/null``, a pipe) is written through, never replaced by a regular file, and so is one of
+  the process's open files (``/dev/stdout`` redirected to a file: appended to); a folder, a block
+  device (a disk) or a socket is refused.
 - A results folder (``sweep``, ``compare``, ``check --out``): the tables a sweep writes at its top
   (``sweep.csv``, ``summary.md``, ...) replace only tables an earlier mlpfac sweep wrote there; a
   folder holding a file of that name that no sweep of ours wrote is refused, whatever it holds.
@@ -17,10 +18,14 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import stat
+import sys
 from pathlib import Path
 
 from mlpfac.exceptions import ConfigError
+
+STREAMS = re.compile(r"/dev/(stdout|stderr|fd/\d+)|/proc/(self|\d+)/fd/\d+")  # a process's open files
 
 
 def cli_path(value: str) -> Path:
@@ -88,16 +93,23 @@ def write_report_file(path: Path, data: str | bytes) -> Path:
 
     blob = data.encode() if isinstance(data, str) else data
     try:
-        mode = os.stat(path).st_mode
+        st = os.stat(path)
+        mode = st.st_mode
     except FileNotFoundError:
-        mode = stat.S_IFREG
-    if stat.S_ISREG(mode):
+        st, mode = None, stat.S_IFREG
+    for stream in (sys.stdout, sys.stderr):  # our own stdout (/dev/stdout): written in turn with what we print
+        if st is not None and _same_file(st, stream):
+            stream.flush()
+            stream.buffer.write(blob)
+            stream.flush()
+            return Path(path)
+    if stat.S_ISREG(mode) and not STREAMS.fullmatch(os.path.abspath(path)):
         write_atomic(Path(path).resolve(), blob)  # through a link: its file is replaced, the link stays
         return Path(path)
-    if not (stat.S_ISCHR(mode) or stat.S_ISFIFO(mode)):
+    if not (stat.S_ISREG(mode) or stat.S_ISCHR(mode) or stat.S_ISFIFO(mode)):
         raise ConfigError(str(path), f"is {_kind(mode) or 'not a file'}")
-    with sigint_deferred():
-        fd = os.open(path, os.O_WRONLY | os.O_NONBLOCK | os.O_NOCTTY)
+    with sigint_deferred():  # a stream redirected to a file is appended to, as the process writes to it
+        fd = os.open(path, os.O_WRONLY | os.O_NONBLOCK | os.O_NOCTTY | os.O_APPEND)
         try:
             os.set_blocking(fd, True)
             view = memoryview(blob)
@@ -106,6 +118,14 @@ def write_report_file(path: Path, data: str | bytes) -> Path:
         finally:
             os.close(fd)
     return Path(path)
+
+
+def _same_file(st: os.stat_result, stream) -> bool:
+    try:
+        other = os.fstat(stream.fileno())
+    except (OSError, ValueError, AttributeError):
+        return False
+    return (st.st_dev, st.st_ino) == (other.st_dev, other.st_ino)
 
 
 def is_our_results_folder(out: Path, tables: tuple[str, ...]) -> bool:

@@ -424,3 +424,20 @@ def test_a_mujoco_compile_error_is_one_line(here, capsys):
     assert main(["run", "m.toml", "--no-log", "--no-plot", "--out", "o"]) == 2
     line = _one_line(capsys.readouterr().err)
     assert "MuJoCo cannot load the model: Error: size 0 must be positive in geom Element name" in line, line
+
+
+def test_a_report_to_dev_stdout_redirected_to_a_file_joins_what_is_printed(here):
+    """`mlpfac check ... --junit /dev/stdout > out.txt`: the file gets the printed lines and the whole
+    XML in turn (not replaced, not written over)."""
+    with open(here / "out.txt", "w") as out:
+        proc = subprocess.run(
+            [sys.executable, "-m", "mlpfac.cli", "check", "b.toml", "--workers", "1", "--out", "C", "--junit", "/dev/stdout"],
+            stdout=out, stderr=subprocess.PIPE, text=True, cwd=here,
+        )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    text = (here / "out.txt").read_text()
+    xml = text[text.index("<?xml") : text.index("</testsuites>") + len("</testsuites>")]
+    import xml.etree.ElementTree as ET
+
+    assert ET.fromstring(xml.split("?>", 1)[1]).tag == "testsuites"
+    assert text.startswith("1 runs (") and text.rstrip().endswith("/dev/stdout")

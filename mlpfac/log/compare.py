@@ -20,7 +20,7 @@ import rerun as rr
 
 from mlpfac.exceptions import ConfigError
 from mlpfac.log.layout import ABOUT, layout
-from mlpfac.log.recorder import APPLICATION_ID
+from mlpfac.log.recorder import APPLICATION_ID, disconnect
 from mlpfac.log.schema import REFSPEED_COLOR, RGB, entity_part
 from mlpfac.log.sinks import (
     LOCALHOST,
@@ -78,8 +78,10 @@ def view(run_dirs: Sequence[Path | str], bind: str = LOCALHOST) -> subprocess.Po
     rec.set_log_tick_enabled(False)
     rec.set_sinks(rr.GrpcSink(f"rerun+http://{_url_host(bind)}:{port}/proxy"))
     send_comparison(rec, files)
-    rec.flush()
-    rec.disconnect()
+    try:
+        disconnect(rec)
+    except OSError as err:
+        raise ConfigError("view", f"the viewer took no data ({err})") from None
     return proc
 
 
@@ -104,7 +106,10 @@ def save_comparison(runs: Sequence[Path | str], path: Path | str) -> Path:
         try:
             send_comparison(rec, files)
         finally:
-            rec.disconnect()
+            try:
+                disconnect(rec)
+            except OSError as err:
+                raise ConfigError(f"--save {path}", f"{err}; nothing was kept") from None
         check_recording(stage.path, path)
         stage.commit()
     return path

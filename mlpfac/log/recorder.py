@@ -29,6 +29,26 @@ BATCH_SECONDS = 1.0  # ... or this much wall time has passed since the last send
 CLOSE_TIMEOUT_S = 10.0  # rerun's disconnect never returns when its file cannot be written (a full disk)
 
 
+def disconnect(rec: rr.RecordingStream) -> None:
+    """Flush and close ``rec``'s outputs, waiting at most CLOSE_TIMEOUT_S: an OSError when they
+    could not be closed by then (rerun's file sink hangs on a write that fails), or what rerun raised."""
+    failed: list[BaseException] = []
+
+    def close() -> None:
+        try:
+            rec.disconnect()
+        except BaseException as err:  # noqa: BLE001 - reported below, in the caller's thread
+            failed.append(err)
+
+    closer = threading.Thread(target=close, name="mlpfac-rerun-close", daemon=True)
+    closer.start()
+    closer.join(CLOSE_TIMEOUT_S)
+    if closer.is_alive():
+        raise OSError(f"the recording could not be closed within {CLOSE_TIMEOUT_S:g} s (was the disk full?)")
+    if failed:
+        raise failed[0]
+
+
 def _bounded_rerun_exit() -> None:
     """rerun flushes every recording when the interpreter exits (its atexit handler), which, like
     disconnect, may never return once a file could not be written: wait for it CLOSE_TIMEOUT_S at
@@ -140,24 +160,12 @@ class RerunSink:
         """Flush and close every output: the file gets its footer, connections and servers stop."""
         if not self.closed:
             self.closed = True
-            failed: list[BaseException] = []
-
-            def disconnect() -> None:
-                try:
-                    self.rec.disconnect()
-                except BaseException as err:  # noqa: BLE001 - reported below, in the caller's thread
-                    failed.append(err)
-
-            closer = threading.Thread(target=disconnect, name="mlpfac-rerun-close", daemon=True)
-            closer.start()
-            closer.join(CLOSE_TIMEOUT_S)
-            if self.server is not None and self.server.poll() is None:
-                self.server.terminate()
-                self.server.wait()
-            if closer.is_alive():
-                raise OSError(f"the recording could not be closed within {CLOSE_TIMEOUT_S:g} s (was the disk full?)")
-            if failed:
-                raise failed[0]
+            try:
+                disconnect(self.rec)
+            finally:
+                if self.server is not None and self.server.poll() is None:
+                    self.server.terminate()
+                    self.server.wait()
 
     def wait(self) -> None:
         """When serving: keep the web viewer up until Ctrl-C, then close. Otherwise return at once."""
