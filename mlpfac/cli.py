@@ -9,20 +9,14 @@ from __future__ import annotations
 
 import argparse
 import atexit
-import contextlib
-import errno
 import os
 import sys
 import threading
 from pathlib import Path
 
+from mlpfac import exits
+from mlpfac.exits import EXIT_BAD_INPUT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_TERMINATED  # noqa: F401 (cli.EXIT_*)
 from mlpfac.targets import cli_path
-
-EXIT_FAILED = 1  # a run diverged, or a user's controller raised
-EXIT_BAD_INPUT = 2
-EXIT_INTERRUPTED = 130  # Ctrl-C (SIGINT)
-EXIT_TERMINATED = 143  # SIGTERM: handled like Ctrl-C
-EXIT_BROKEN_PIPE = 141  # stdout closed by its reader (128 + SIGPIPE), as shell tools exit
 
 
 class Parser(argparse.ArgumentParser):
@@ -127,7 +121,7 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     from mlpfac.exceptions import MlpfacError, PluginError
-    from mlpfac.signals import Terminated, handle_sigterm
+    from mlpfac.signals import handle_sigterm
 
     handle_sigterm()
 
@@ -158,54 +152,13 @@ def main(argv: list[str] | None = None) -> int:
     except PluginError as err:  # the user's controller raised: its traceback, not ours
         print(err.report(), end="", file=sys.stderr)
         return EXIT_FAILED
-    except KeyboardInterrupt as err:
-        print("mlpfac: terminated" if isinstance(err, Terminated) else "mlpfac: interrupted", file=sys.stderr)
-        return EXIT_TERMINATED if isinstance(err, Terminated) else EXIT_INTERRUPTED
-    except ImportError as err:  # a signal while a compiled module initialised (MuJoCo's) fails its import
-        cause = _interrupt_behind(err)
-        if cause is None:
+    except (KeyboardInterrupt, ImportError) as err:  # ImportError: a signal as MuJoCo's module initialised
+        code = exits.interrupted(err)
+        if code is None:
             raise
-        print("mlpfac: terminated" if isinstance(cause, Terminated) else "mlpfac: interrupted", file=sys.stderr)
-        return EXIT_TERMINATED if isinstance(cause, Terminated) else EXIT_INTERRUPTED
-    except BrokenPipeError:  # stdout closed early (`mlpfac ... | head`): what was written stays, no traceback
-        _drop_stdout()
-        return EXIT_BROKEN_PIPE
+        return code
     except OSError as err:  # a write no check could foresee (stdout on a full disk, a name too long): one line
-        if err.errno == errno.EPIPE:
-            _drop_stdout()
-            return EXIT_BROKEN_PIPE
-        print(f"mlpfac: error: {_os_error(err, _stdout_failing(err))}", file=sys.stderr)
-        _drop_stdout()
-        return EXIT_BAD_INPUT
-
-
-def _stdout_failing(err: OSError) -> str:
-    """What an OSError naming no file was about: stdout when it carries a system error number (our
-    own writes name their files), else nothing (a message of ours, such as a recording not closed)."""
-    return "stdout" if err.errno is not None else ""
-
-
-def _interrupt_behind(err: BaseException) -> KeyboardInterrupt | None:
-    """The Ctrl-C or SIGTERM an error was raised while handling (an import it interrupted), if any."""
-    seen = set()
-    while err is not None and id(err) not in seen:
-        if isinstance(err, KeyboardInterrupt):
-            return err
-        seen.add(id(err))
-        err = err.__cause__ or err.__context__
-    return None
-
-
-def _os_error(err: OSError, unnamed: str = "stdout") -> str:
-    """An OSError in one line, naming the file (``unnamed`` when it names none)."""
-    where = err.filename or unnamed
-    return f"{where + ': ' if where else ''}cannot write ({err.strerror or err})"
-
-
-def _drop_stdout() -> None:
-    """Send what is left of stdout nowhere: nothing more to say there, and nothing to fail at exit."""
-    with contextlib.suppress(OSError, ValueError):
-        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return exits.failed_write(err)
 
 
 def cmd_list() -> int:
@@ -364,20 +317,11 @@ def entry() -> None:
         code = main()
         sys.stdout.flush()  # stdout on a full disk (/dev/full) fails here, said in one line
     except (KeyboardInterrupt, ImportError) as err:  # a signal before main's own handling began (importing)
-        from mlpfac.signals import Terminated
-
-        cause = _interrupt_behind(err)
-        if cause is None:
+        code = exits.interrupted(err)
+        if code is None:
             raise
-        print("mlpfac: terminated" if isinstance(cause, Terminated) else "mlpfac: interrupted", file=sys.stderr)
-        code = EXIT_TERMINATED if isinstance(cause, Terminated) else EXIT_INTERRUPTED
-    except BrokenPipeError:
-        _drop_stdout()
-        code = EXIT_BROKEN_PIPE
     except OSError as err:
-        print(f"mlpfac: error: {_os_error(err)}", file=sys.stderr)
-        _drop_stdout()
-        code = EXIT_BAD_INPUT
+        code = exits.failed_write(err, "stdout")
     code = 0 if code is None else code
     plugins = sys.modules.get("mlpfac.plugins")
     others = [t for t in threading.enumerate() if t is not threading.current_thread()]

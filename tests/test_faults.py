@@ -1,0 +1,248 @@
+"""Faults of the unlucky user, each said in one line or ending the run as what it is: MuJoCo's
+warnings end a run as diverged (nothing written outside it), a model MuJoCo cannot simulate, stdout
+on a full disk, a corrupt metrics.json, report's bad pages, a controller's sys.exit, metrics that
+blew up, a read-only HOME, a scheduler that never answers, the Python API's wrong types. Each test
+fails without its fix."""
+
+from __future__ import annotations
+
+import json
+import os
+import socket
+import subprocess
+import sys
+import warnings
+
+import numpy as np
+import pytest
+import test_targets
+from test_targets import _cli, _one_line
+
+import mlpfac
+from mlpfac.cli import main
+from mlpfac.exceptions import ConfigError, MlpfacError
+
+here = test_targets.here  # the fixture: a folder with kin.toml and b.toml, the current one
+
+# --- MuJoCo's warnings --------------------------------------------------------------------------
+
+HUGE = """
+class Huge:
+    def __init__(self, T):
+        self.k = 0
+
+    def reset(self, rng):
+        self.k = 0
+
+    def step(self, e, r):
+        self.k += 1
+        return (1e200, 0.0) if self.k > 20 else (0.1, 0.0)
+"""
+
+
+def test_a_mujoco_warning_ends_the_run_as_diverged_and_writes_nothing_outside(here):
+    """An absurd command: MuJoCo warns (a huge value in CTRL) and zeroes it; the run ends there as
+    diverged with MuJoCo's words, and no MUJOCO_LOG.TXT appears in the current folder."""
+    (here / "huge.py").write_text(HUGE)
+    (here / "w.toml").write_text('duration = 1.0\n[plant]\nkind = "mujoco"\nmax_wheel_speed = inf\n')
+    proc = _cli("run", "w.toml", "--controller", "huge.py:Huge", "--no-log", "--no-plot", "--out", "o", cwd=here)
+    assert proc.returncode == 1, proc.stderr
+    m = json.loads((here / "o" / "metrics.json").read_text())
+    assert m["status"] == "diverged" and m["reason"].startswith("MuJoCo warned: Nan, Inf or huge value in CTRL")
+    assert m["steps"] == 21
+    assert not list(here.rglob("MUJOCO_LOG.TXT")) and "MuJoCo" not in proc.stdout.split("\n", 2)[-1]
+
+
+def test_a_warning_marks_the_robot_stepping_and_ends_a_compiled_segment():
+    """The handler marks the robot whose step warned; its divergence test (compiled, in every step
+    of a segment too) then says so."""
+    from mlpfac.plants import compiled
+    from mlpfac.runner import build
+    from mlpfac.scenario import load
+
+    scn = load("eight-nominal").with_overrides("kanayama", duration=0.5)
+    built = build(scn)
+    plant = built.plant
+    plant.reset(np.zeros(3), np.random.default_rng(0))
+    plant.kernel_args()  # as the compiled loop names the robot before its segment
+    assert plant.diverged() is None
+    compiled._warning(b"Nan, Inf or huge value in QACC at DOF 0. The simulation is unstable. Time = 0.1.")
+    assert plant.diverged().startswith("MuJoCo warned: Nan, Inf or huge value in QACC")
+    rec = mlpfac.run(scn)  # a new reset clears the mark
+    assert rec.status == "ok"
+
+
+def test_a_model_mujoco_cannot_simulate_is_one_line(here, capsys):
+    """A model whose arena is too small (<size memory="4K"/>): MuJoCo's fatal error is one line, exit 2."""
+    from mlpfac.scenario import shipped_dir
+
+    models = shipped_dir().parent / "models"
+    for f in models.glob("*.xml"):
+        (here / f.name).write_text(f.read_text())
+    scene = here / "scene.xml"
+    scene.write_text(
+        scene.read_text().replace(
+            '<include file="diffdrive.xml"/>', '<include file="diffdrive.xml"/><size memory="4K"/>'
+        )
+    )
+    (here / "m.toml").write_text('[plant]\nkind = "mujoco"\nmodel = "scene.xml"\n')
+    assert main(["run", "m.toml", "--no-log", "--no-plot", "--out", "o"]) == 2
+    assert "MuJoCo cannot simulate the model: mj_stackAlloc: out of memory" in _one_line(capsys.readouterr().err)
+    assert not (here / "o").exists()
+
+
+# --- one line instead of a traceback; no silent or wrong answer ---------------------------------
+
+
+SYS_EXIT = """
+import sys
+
+
+class Quits:
+    def __init__(self, T):
+        pass
+
+    def reset(self, rng):
+        pass
+
+    def step(self, e, r):
+        sys.exit(5)
+"""
+
+
+def test_a_controller_that_calls_sys_exit_is_its_failure(here):
+    (here / "quits.py").write_text(SYS_EXIT)
+    proc = _cli("run", "kin.toml", "--controller", "quits.py:Quits", "--no-log", "--no-plot", "--out", "o", cwd=here)
+    assert proc.returncode == 1, proc.stderr
+    assert "controller 'Quits' raised in step: SystemExit: 5" in proc.stderr
+
+
+@pytest.mark.parametrize("command", [["list"], ["run", "kin.toml", "--no-log", "--no-plot", "--out", "o"],
+                                     ["sweep", "kin.toml", "--seeds", "0", "--workers", "1", "--out", "S"],
+                                     ["check", "b.toml", "--workers", "1", "--out", "C"]])  # fmt: skip
+def test_stdout_on_a_full_disk_is_one_line(here, command):
+    with open("/dev/full", "w") as full:
+        proc = subprocess.run(
+            [sys.executable, "-m", "mlpfac.cli", *command], stdout=full, stderr=subprocess.PIPE, text=True, cwd=here
+        )
+    assert proc.returncode == 2, proc.stderr
+    assert _one_line(proc.stderr) == "mlpfac: error: stdout: cannot write (No space left on device)"
+
+
+def test_a_file_size_limit_in_a_run_without_log_or_plot_is_one_line(here):
+    import resource
+
+    def small() -> None:
+        resource.setrlimit(resource.RLIMIT_FSIZE, (200, 200))
+
+    proc = subprocess.run(
+        [sys.executable, "-m", "mlpfac.cli", "run", "kin.toml", "--no-log", "--no-plot", "--out", "o"],
+        capture_output=True, text=True, cwd=here, preexec_fn=small,
+    )  # fmt: skip
+    assert proc.returncode == 2 and "o/" in _one_line(proc.stderr), proc.stderr
+    assert not (here / "o").exists()
+
+
+def test_a_name_too_long_for_out_is_one_line(here, capsys):
+    assert main(["run", "kin.toml", "--no-log", "--no-plot", "--out", "x" * 300]) == 2
+    assert "File name too long" in _one_line(capsys.readouterr().err)
+
+
+def test_plot_of_a_corrupt_metrics_json_is_one_line(here, capsys):
+    assert main(["sweep", "kin.toml", "--seeds", "0", "--workers", "1", "--out", "S"]) == 0
+    (m,) = here.glob("S/*/*/seed-*/metrics.json")
+    data = json.loads(m.read_text())
+    data["phases"] = {"before": "not a table"}
+    m.write_text(json.dumps(data))
+    capsys.readouterr()
+    assert main(["plot", "S"]) == 2
+    assert "a metrics.json under it is not what a run writes" in _one_line(capsys.readouterr().err)
+
+
+REPORT_PAGES = {
+    "unclosed marker": ("# p\n<!-- table: data/x view=summary -->\n| a |\n", "page.md:2: a table marker without"),
+    "wrong-typed rows": (
+        "<!-- table: data/x view=sweep -->\n<!-- /table -->\n",
+        "its data are not what a sweep writes",
+    ),
+}
+
+
+@pytest.mark.parametrize("case", sorted(REPORT_PAGES))
+def test_report_of_a_bad_page_or_data_is_one_line(here, capsys, case):
+    page, needle = REPORT_PAGES[case]
+    docs = here / "docs"
+    (docs / "data" / "x").mkdir(parents=True)
+    (docs / "page.md").write_text(page)
+    rows = [{"scenario": "s", "controller": "c", "phase": "before", "runs": "many", "pos_rms_m_mean": "x"}]
+    (docs / "data" / "x" / "sweep.json").write_text(json.dumps({"meta": {}, "rows": rows}))
+    assert main(["report", "docs"]) == 2
+    assert needle in _one_line(capsys.readouterr().err)
+    assert (docs / "page.md").read_text() == page
+
+
+def test_metrics_of_a_run_that_blew_up_are_json_without_warnings():
+    rec = mlpfac.run("paper", controller="corradini", duration=0.5)
+    rec.e_true[: rec.n] = 1e300  # squares overflow
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        m = mlpfac.metrics(rec)
+    json.dumps(m, allow_nan=False)
+    assert m["rms_position_error_m"] is None
+
+
+def test_a_read_only_home_prints_no_matplotlib_warning(here):
+    env = {k: v for k, v in os.environ.items() if k not in ("MPLCONFIGDIR", "XDG_CONFIG_HOME", "XDG_CACHE_HOME")}
+    home = here / "home"
+    home.mkdir(mode=0o555)
+    proc = _cli("run", "kin.toml", "--no-log", "--out", "o", cwd=here, env=env | {"HOME": str(home)})
+    if os.access(home, os.W_OK):  # root writes anywhere: point HOME at a path nobody can create
+        proc = _cli("run", "kin.toml", "--no-log", "--out", "o", cwd=here, env=env | {"HOME": "/proc/none"})
+    assert proc.returncode == 0 and proc.stderr == "", proc.stderr
+    assert (here / "o" / "figure1.png").is_file()
+
+
+def test_a_scheduler_that_accepts_and_never_answers_times_out(here):
+    server = socket.socket()
+    server.bind(("127.0.0.1", 0))
+    server.listen()
+    port = server.getsockname()[1]
+    try:
+        proc = _cli("sweep", "kin.toml", "--seeds", "0", "--out", "S", "--scheduler", f"tcp://127.0.0.1:{port}",
+                    "--scheduler-timeout", "1", cwd=here, timeout=30)  # fmt: skip
+    finally:
+        server.close()
+    assert proc.returncode == 2 and "--scheduler: cannot reach a Dask scheduler" in _one_line(proc.stderr)
+
+
+# --- the Python API -----------------------------------------------------------------------------
+
+API_CALLS = {
+    "run(42)": (lambda: mlpfac.run(42), "scenario"),
+    "run(out='')": (lambda: mlpfac.run("paper", out=""), "out"),
+    "sweep(42)": (lambda: mlpfac.sweep(42), "scenarios"),
+    "sweep(seeds=None)": (lambda: mlpfac.sweep("paper", seeds=None), "seeds"),
+    "sweep(workers='2')": (lambda: mlpfac.sweep("paper", workers="2"), "workers"),
+    "sweep(controllers=42)": (lambda: mlpfac.sweep("paper", 42), "controllers"),
+    "sweep(out=3.5)": (lambda: mlpfac.sweep("paper", out=3.5), "out"),
+    "sweep(scheduler=42)": (lambda: mlpfac.sweep("paper", scheduler=42), "scheduler"),
+    "check(42)": (lambda: mlpfac.check(42), "budget"),
+    "check(workers='2')": (lambda: mlpfac.check("b.toml", workers="2"), "--workers"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(API_CALLS))
+def test_the_api_names_the_argument_of_a_wrong_type(here, case):
+    call, name = API_CALLS[case]
+    with pytest.raises(ConfigError) as exc:
+        call()
+    assert exc.value.where == name and isinstance(exc.value, MlpfacError), exc.value
+    assert sorted(p.name for p in here.iterdir()) == ["b.toml", "kin.toml"]
+
+
+def test_a_mujoco_compile_error_is_one_line(here, capsys):
+    (here / "bad.xml").write_text('<mujoco><worldbody><body><geom type="sphere"/></body></worldbody></mujoco>')
+    (here / "m.toml").write_text('[plant]\nkind = "mujoco"\nmodel = "bad.xml"\n')
+    assert main(["run", "m.toml", "--no-log", "--no-plot", "--out", "o"]) == 2
+    line = _one_line(capsys.readouterr().err)
+    assert "MuJoCo cannot load the model: Error: size 0 must be positive in geom Element name" in line, line
