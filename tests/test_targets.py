@@ -51,7 +51,7 @@ def test_check_reports_are_written_through_fifos_links_and_devices(here, capsys)
     link.symlink_to("real.md")
     (here / "real.md").write_text("old\n")
     got: list[bytes] = []
-    reader = threading.Thread(target=lambda: got.append(fifo.read_bytes()))
+    reader = threading.Thread(target=lambda: got.append(fifo.read_bytes()), daemon=True)
     reader.start()
     assert main(["check", "b.toml", "--out", "runs", "--workers", "1", "--junit", "fifo", "--summary", "link.md"]) == 0
     reader.join(5)
