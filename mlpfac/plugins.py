@@ -19,7 +19,7 @@ import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from mlpfac.exceptions import ConfigError
+from mlpfac.exceptions import ConfigError, ScriptStopped
 from mlpfac.toml_data import FOLDER_NAME
 from mlpfac.variants import CONTROLLERS
 
@@ -173,6 +173,8 @@ def _load(target: str, where: str) -> tuple[object, str | None, str]:
             sys.modules[mod_name] = module
             try:
                 spec.loader.exec_module(module)
+            except ScriptStopped:  # a sweep worker: the script's classes are defined above its call of mlpfac
+                pass
             except BaseException as err:
                 del sys.modules[mod_name]
                 if isinstance(err, KeyboardInterrupt):
