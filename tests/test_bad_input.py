@@ -226,6 +226,8 @@ BAD_VIEW_PLOT = {
     "view --serve: a port out of range": (["view", "D", "--serve", "--port", "70000"], "--port: 70000 is not a port"),
     "view --serve: a gRPC port of 0": (["view", "D", "--serve", "--grpc-port", "0"], "--grpc-port: 0 is not a port"),
     "view --serve: one port twice": (["view", "D", "--serve", "--port", "9876"], "cannot share port 9876"),
+    "report --verify 0": (["report", "D", "--verify", "0"], "--verify: must be a number of runs >= 1"),
+    "report --verify: no data folder": (["report", "D", "--verify", "1"], "no data folder"),
     "plot: not a folder": (["plot", "missing"], "is not a folder"),
     "plot: no runs": (["plot", "D"], "holds no finished runs"),
     "check: no budget file": (["check", "missing.toml"], "budget file not found"),
