@@ -259,10 +259,11 @@ def run_cli(args: argparse.Namespace) -> int:
     if args.verify is not None:
         from mlpfac.verify import verify
 
-        verdicts = verify(args.docs, args.verify)
-        for v in verdicts:
-            print(v.line())
-        return 1 if any(v.differs for v in verdicts) else 0
+        differs = False
+        for v in verify(args.docs, args.verify):  # a line per dataset as it is done
+            print(v.line(), flush=True)
+            differs |= v.differs
+        return 1 if differs else 0
     if args.check:
         old = stale(args.docs)
         for page in old:

@@ -15,6 +15,7 @@ import hashlib
 import json
 import random
 import shlex
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -167,13 +168,15 @@ def verify_dataset(folder: Path, n: int, root: Path) -> Verdict:
     return v
 
 
-def verify(docs: Path, n: int) -> list[Verdict]:
-    """Every dataset of ``docs/data`` checked by :func:`verify_dataset`, from the repository root
-    (the folder above ``docs``, where the recorded commands run)."""
+def verify(docs: Path, n: int) -> Iterator[Verdict]:
+    """Every dataset of ``docs/data`` checked by :func:`verify_dataset`, one after the other, from
+    the repository root (the folder above ``docs``, where the recorded commands run). Bad input
+    raises ConfigError before the first run."""
     if n < 1:
         raise ConfigError("--verify", f"must be a number of runs >= 1, got {n}")
     data = docs / "data"
     if not data.is_dir():
         raise ConfigError(str(data), "no data folder: nothing to verify")
     root = docs.resolve().parent
-    return [verify_dataset(f, n, root) for f in sorted(data.iterdir()) if (f / "meta.json").is_file()]
+    folders = [f for f in sorted(data.iterdir()) if (f / "meta.json").is_file()]
+    return (verify_dataset(f, n, root) for f in folders)

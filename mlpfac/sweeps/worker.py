@@ -226,13 +226,17 @@ IN_WORKER = "MLPFAC_SWEEP_WORKER"  # set in a local pool's workers
 def not_in_a_worker(what: str) -> None:
     """A script whose class a sweep's workers import (``path/to/script.py:Class``, also a class
     given to the API by the script that calls it) is run by each of them: a call of the API at its
-    top level would start runs, or pools of workers, in every worker. There the call raises
-    :class:`~mlpfac.exceptions.ScriptStopped`, which ends the script's import with what it defined
-    above the call (:mod:`mlpfac.plugins`)."""
+    top level would start runs, or pools of workers, in every worker. There, while the script is
+    imported, the call raises :class:`~mlpfac.exceptions.ScriptStopped`, which ends the import with
+    what the script defined above the call (:mod:`mlpfac.plugins`); anywhere else in a worker (a
+    controller that calls it) it is an MlpfacError, that run's error."""
     if os.environ.get(IN_WORKER):
-        from mlpfac.exceptions import ScriptStopped
+        from mlpfac import plugins
+        from mlpfac.exceptions import MlpfacError, ScriptStopped
 
-        raise ScriptStopped(f"mlpfac.{what}")
+        if plugins.IMPORTING:
+            raise ScriptStopped(f"mlpfac.{what}")
+        raise MlpfacError(f"mlpfac.{what} was called in a sweep worker: a controller cannot start runs")
 
 
 def _worker_init(parent: int, environ: dict[str, str] | None = None) -> None:
