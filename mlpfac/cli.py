@@ -38,13 +38,22 @@ def _sink_args(p: argparse.ArgumentParser) -> None:
     x.add_argument("--serve", action="store_true", help="serve a web viewer on 127.0.0.1 (see --bind)")
     x.add_argument("--no-log", action="store_true", help="no recording")
     g.add_argument("--bind", metavar="ADDRESS", default="127.0.0.1", help=BIND_HELP)
+    _port_args(g)
+
+
+def _port_args(p) -> None:
+    p.add_argument("--port", type=int, default=9090, help="with --serve: the web viewer's page (default 9090)")
+    p.add_argument("--grpc-port", type=int, default=9876, help="with --serve: its gRPC server (default 9876)")
 
 
 BIND_HELP = "address the viewers started here listen on (default 127.0.0.1; 0.0.0.0 is every interface)"
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from mlpfac import __version__
+
     parser = Parser(prog="mlpfac", description=__doc__.splitlines()[0])
+    parser.add_argument("--version", action="version", version=f"mlpfac {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=Parser)
 
     p = sub.add_parser(
@@ -97,13 +106,17 @@ def build_parser() -> argparse.ArgumentParser:
         description="Open one run, or several side by side and overlaid (one colour per controller), in rerun.",
     )
     p.add_argument("runs", nargs="+", type=cli_path, help="run folders (each with a run.rrd) or .rrd files")
-    p.add_argument("--bind", metavar="ADDRESS", default="127.0.0.1", help=BIND_HELP)
-    p.add_argument(
-        "--save",
-        metavar="FILE.rrd",
-        type=cli_path,
-        help="write the comparison of several runs to this file, open nothing",
+    x = p.add_mutually_exclusive_group()
+    x.add_argument(
+        "--save", metavar="FILE.rrd", type=cli_path, help="write the comparison of several runs to this file, open nothing"
     )
+    x.add_argument(
+        "--serve",
+        action="store_true",
+        help="no display needed: serve a web viewer (on 127.0.0.1, see --bind) until Ctrl-C, and say its address",
+    )
+    p.add_argument("--bind", metavar="ADDRESS", default="127.0.0.1", help=BIND_HELP)
+    _port_args(p)
 
     p = sub.add_parser(
         "plot",
@@ -205,6 +218,8 @@ def cmd_view(args: argparse.Namespace) -> int:
 
     if args.save is not None:
         print(f"{len(args.runs)} runs -> {compare.save_comparison(args.runs, args.save)}")
+    elif args.serve:
+        compare.serve(args.runs, args.bind, (args.grpc_port, args.port), say=lambda line: print(line, flush=True))
     else:
         compare.view(args.runs, bind=args.bind)
     return 0
@@ -253,7 +268,10 @@ def cmd_run(args: argparse.Namespace) -> int:
         except ConfigError as err:  # the flag that named it
             raise ConfigError("--baseline", err.what) from None
     out = args.out or Path("runs") / f"{scn.name}-{scn.controller}-s{scn.seed}"
-    recording = check_outputs(out, Recording(args.save, args.spawn, args.connect, args.serve, args.bind, args.no_log))
+    recording = check_outputs(
+        out,
+        Recording(args.save, args.spawn, args.connect, args.serve, args.bind, args.no_log, (args.grpc_port, args.port)),
+    )
     from mlpfac.runner import build  # the run's imports (MuJoCo, the kernels): after the checks of the input
 
     done = run_into_folder(scn, out, build(scn), recording, baseline, args.painter)

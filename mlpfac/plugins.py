@@ -19,13 +19,14 @@ import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from mlpfac.exceptions import ConfigError
+from mlpfac.exceptions import ConfigError, ScriptStopped
 from mlpfac.toml_data import FOLDER_NAME
 from mlpfac.variants import CONTROLLERS
 
 GROUP = "mlpfac.controllers"  # the entry-point group an installed package registers controllers in
 _LOCAL: dict[str, type] = {}  # classes handed to the Python API that no file or module names
 USER_CODE = False  # a controller of the user's was resolved in this process (see mlpfac.cli.entry)
+IMPORTING = 0  # a user's file is being imported (see mlpfac.sweeps.worker.not_in_a_worker)
 
 
 @dataclass(frozen=True)
@@ -148,6 +149,7 @@ def _name(cls: type, entry: str | None, where: str) -> str:
 def _load(target: str, where: str) -> tuple[object, str | None, str]:
     """The object ``module:Class`` or ``/path/file.py:Class`` names; (object, sha256 of its file, kind).
     A file is imported once per content (a module named by its sha256), so an edited file is new code."""
+    global IMPORTING
     left, sep, attr = target.rpartition(":")
     if not sep or not left or not attr:
         raise ConfigError(where, f"{target!r}: name a class as path/to/file.py:Class or package.module:Class")
@@ -171,13 +173,18 @@ def _load(target: str, where: str) -> tuple[object, str | None, str]:
                 raise ConfigError(where, f"{path}: not a Python file")
             module = importlib.util.module_from_spec(spec)
             sys.modules[mod_name] = module
+            IMPORTING += 1
             try:
                 spec.loader.exec_module(module)
+            except ScriptStopped:  # a sweep worker: the script's classes are defined above its call of mlpfac
+                pass
             except BaseException as err:
                 del sys.modules[mod_name]
                 if isinstance(err, KeyboardInterrupt):
                     raise
                 raise ConfigError(where, f"{path}: importing it raised {one_line(err)}") from None
+            finally:
+                IMPORTING -= 1
         kind = "file"
     else:
         try:

@@ -8,7 +8,8 @@ A table in a Markdown page sits between two markers, and everything between them
 
 The path is a data folder relative to the page's own folder. It holds what a documented command
 wrote (``sweep.json`` or ``compare.json``, ``paired.json``; or ``table.md``, the Markdown table a
-script printed) and ``meta.json``: the command, the code version that ran it and the date. Views,
+script printed) and ``meta.json``: the command, the code version that ran it and the date; a sweep's data also
+keeps every run's figures (``runs.json``, :mod:`mlpfac.verify`: ``mlpfac report --verify N``). Views,
 each drawn by the table code the sweep itself uses (:mod:`mlpfac.sweeps.tables`,
 :mod:`mlpfac.sweeps.paired`):
 
@@ -206,16 +207,25 @@ def collect(folder: Path, results: Path, command: str | None = None, version: st
     command = command or meta.get("command")
     if not command:
         raise ConfigError("--command", f"{folder} has no meta.json yet: give the command that made {results}")
+    runs = None
     if results.is_file():
         sources = {"table.md": results}
     else:
         sources = {n: results / n for n in DATA_FILES if (results / n).is_file()}
         if "paired.json" not in sources:
             raise ConfigError(str(results), "not a finished results folder of `mlpfac sweep` or `mlpfac compare`")
+        from mlpfac.verify import RUNS_FILE, per_seed
+
+        runs = per_seed(results)
     try:
         folder.mkdir(parents=True, exist_ok=True)
         for name, src in sources.items():
             write_atomic(folder / name, src.read_bytes())
+        if runs:  # every run's figures, one line each
+            lines = ",\n".join(json.dumps(r, separators=(",", ":")) for r in runs)
+            write_atomic(folder / RUNS_FILE, f'{{"runs": [\n{lines}\n]}}\n')
+        elif runs is not None and (folder / RUNS_FILE).is_file():  # they were of other results
+            (folder / RUNS_FILE).unlink()
         made = max(src.stat().st_mtime for src in sources.values())
     except OSError as err:
         raise ConfigError(str(err.filename or folder), f"cannot copy the results ({err.strerror or err})") from None
@@ -249,6 +259,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="with one --collect: the command that made it (default: the one on record)",
     )
     p.add_argument("--code-version", metavar="SHA", help="with --collect: the code that ran it (default: HEAD)")
+    p.add_argument(
+        "--verify",
+        type=int,
+        nargs="?",
+        const=3,
+        metavar="N",
+        help="run N (default 3) sampled runs of every dataset again from its recorded command; exit 1 if one differs",
+    )
 
 
 def run_cli(args: argparse.Namespace) -> int:
@@ -258,6 +276,14 @@ def run_cli(args: argparse.Namespace) -> int:
         if not (sep and name and results):
             raise ConfigError("--collect", f"expected NAME=RESULTS, got {item!r}")
         print(f"{results} -> {collect(args.docs / 'data' / name, Path(results), args.made_by, args.code_version)}")
+    if args.verify is not None:
+        from mlpfac.verify import verify
+
+        differs = False
+        for v in verify(args.docs, args.verify):  # a line per dataset as it is done
+            print(v.line(), flush=True)
+            differs |= v.differs
+        return 1 if differs else 0
     if args.check:
         old = stale(args.docs)
         for page in old:

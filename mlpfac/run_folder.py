@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import sys
 from contextlib import nullcontext
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from mlpfac.exceptions import ConfigError, PluginError
@@ -27,6 +27,7 @@ class Recording:
     serve: bool = False
     bind: str = "127.0.0.1"
     off: bool = False
+    ports: tuple[int, int] = (9876, 9090)  # with serve: the web viewer's gRPC server and its page
 
     @property
     def to_file(self) -> bool:
@@ -56,7 +57,7 @@ def check_outputs(out: Path, recording: Recording) -> Recording:
         check_save_file(save)
         if out.absolute() in save.absolute().parents:
             raise ConfigError(f"--save {save}", f"is inside --out {out}, which a run replaces whole")
-    return Recording(save, recording.spawn, recording.connect, recording.serve, recording.bind, recording.off)
+    return replace(recording, save=save)
 
 
 def run_into_folder(scn, out: Path, built, recording: Recording, baseline=None, painter=None) -> FolderRun:
@@ -141,6 +142,7 @@ def _open_sink(recording: Recording, scn, save: tuple[Path, Path] | None):
             recording_id=f"{scn.name}-{scn.controller}-{scn.seed}",
             bind=recording.bind,
             description=scn.description,
+            ports=recording.ports,
         )
     except ConfigError as err:
         if save is None or str(save[0]) not in err.where:
@@ -148,6 +150,8 @@ def _open_sink(recording: Recording, scn, save: tuple[Path, Path] | None):
         raise ConfigError(err.where.replace(str(save[0]), str(save[1])), err.what) from None
     if sink is not None and recording.serve:
         print(f"web viewer: {sink.viewer_url}", flush=True)
+        if recording.bind in ("127.0.0.1", "localhost", "::1"):
+            print(sinks.tunnel_line(recording.ports), flush=True)
     return sink
 
 

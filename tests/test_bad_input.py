@@ -247,6 +247,11 @@ def test_bad_flag(tmp_path, capsys, monkeypatch, case):
 BAD_VIEW_PLOT = {
     "view: no run.rrd": (["view", "D"], "no run.rrd"),
     "view --save: folders without run.rrd": (["view", "D", "D", "--save", "x.rrd"], "no run.rrd"),
+    "view --serve: a port out of range": (["view", "D", "--serve", "--port", "70000"], "--port: 70000 is not a port"),
+    "view --serve: a gRPC port of 0": (["view", "D", "--serve", "--grpc-port", "0"], "--grpc-port: 0 is not a port"),
+    "view --serve: one port twice": (["view", "D", "--serve", "--port", "9876"], "cannot share port 9876"),
+    "report --verify 0": (["report", "D", "--verify", "0"], "--verify: must be a number of runs >= 1"),
+    "report --verify: no data folder": (["report", "D", "--verify", "1"], "no data folder"),
     "plot: not a folder": (["plot", "missing"], "is not a folder"),
     "plot: no runs": (["plot", "D"], "holds no finished runs"),
     "check: no budget file": (["check", "missing.toml"], "budget file not found"),

@@ -94,6 +94,15 @@ def test_bad_command_line_is_one_line_and_exit_2(tmp_path, argv, needle):
     assert len(proc.stderr.strip().splitlines()) == 1 and needle in proc.stderr and "Traceback" not in proc.stderr
 
 
+def test_version_is_the_packages(capsys):
+    import mlpfac
+
+    with pytest.raises(SystemExit) as exc:
+        main(["--version"])
+    assert exc.value.code == 0
+    assert capsys.readouterr().out == f"mlpfac {mlpfac.__version__}\n"
+
+
 def test_list_shows_every_scenario(capsys):
     assert main(["list"]) == 0
     out = capsys.readouterr().out

@@ -39,6 +39,10 @@ def test_the_wheel_holds_every_shipped_scenario_and_robot_file(wheel):
                 assert f"{package}/{f.name}" in names, f.name
     for f in (ROOT / "mlpfac").rglob("*.py"):  # every module, in every subpackage
         assert f.relative_to(ROOT).as_posix() in names, f
+    import mlpfac
+
+    assert wheel.name.startswith(f"mlpfac-{mlpfac.__version__}-")  # the version is written once, in mlpfac
+    assert any(n.endswith(("/LICENSE", "/licenses/LICENSE")) and ".dist-info/" in n for n in names)
     for module in ("mlpfac/_kernels", "mlpfac/plants/_kernels"):  # the kernels built at install (mlpfac.jit)
         assert any(n.startswith(module + ".") and n.endswith((".so", ".pyd")) for n in names), module
 

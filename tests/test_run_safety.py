@@ -213,9 +213,9 @@ def free_port() -> int:
 def test_serve_listens_on_localhost_only(tmp_path):
     grpc, web = free_port(), free_port()
     code = (
-        "import sys; from mlpfac.log import sinks; from mlpfac.cli import main; "
-        f"sinks.SERVE_GRPC_PORT, sinks.SERVE_WEB_PORT = {grpc}, {web}; "
-        f"sys.exit(main(['run', 'paper', '--duration', '1', '--no-plot', '--serve', '--out', {str(tmp_path / 'run')!r}]))"
+        "import sys; from mlpfac.cli import main; "
+        f"sys.exit(main(['run', 'paper', '--duration', '1', '--no-plot', '--serve', '--port', '{web}', "
+        f"'--grpc-port', '{grpc}', '--out', {str(tmp_path / 'run')!r}]))"
     )
     proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:

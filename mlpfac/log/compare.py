@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import subprocess
+import time
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -25,11 +26,14 @@ from mlpfac.log.schema import REFSPEED_COLOR, RGB, entity_part
 from mlpfac.log.sinks import (
     LOCALHOST,
     _check_display,
+    _check_ports,
     _check_writable,
     _free_port,
     _start_viewer,
+    _stop,
     _url_host,
     check_recording,
+    start_web_viewer,
 )
 from mlpfac.plots.colors import NAMES, controller_colors
 
@@ -83,6 +87,37 @@ def view(run_dirs: Sequence[Path | str], bind: str = LOCALHOST) -> subprocess.Po
     except OSError as err:
         raise ConfigError("view", f"the viewer took no data ({err})") from None
     return proc
+
+
+def serve(run_dirs: Sequence[Path | str], bind: str, ports: tuple[int, int], say=print) -> None:
+    """Serve the runs in rerun's web viewer on ``bind`` (``ports``: gRPC, web page), for a machine
+    without a display: one run's recording as it is, several as one comparison (as :func:`view`).
+    Says the page's address and the SSH tunnel that shows it elsewhere; serves until Ctrl-C."""
+    from mlpfac.log.sinks import tunnel_line
+
+    _check_ports(bind, ports)
+    files = run_files(run_dirs)
+    server, grpc_url, page = start_web_viewer(bind, ports, [files[0][0]] if len(files) == 1 else [])
+    try:
+        if len(files) > 1:
+            rec = rr.RecordingStream(APPLICATION_ID, recording_id="compare", send_properties=False)
+            rec.set_log_time_enabled(False)
+            rec.set_log_tick_enabled(False)
+            rec.set_sinks(rr.GrpcSink(grpc_url))
+            send_comparison(rec, files)
+            rec.flush()
+            rec.disconnect()
+        say(f"web viewer: {page}")
+        if bind in (LOCALHOST, "localhost", "::1"):
+            say(tunnel_line(ports))
+        say("serving until Ctrl-C")
+        while server.poll() is None:
+            time.sleep(0.5)
+    except KeyboardInterrupt:
+        return
+    finally:
+        _stop(server)
+    raise ConfigError("--serve", f"the rerun web viewer stopped by itself (code {server.returncode})")
 
 
 def save_comparison(runs: Sequence[Path | str], path: Path | str) -> Path:
@@ -227,13 +262,10 @@ def _about(files: list[tuple[Path, dict]], labels: list[str], colors: list[tuple
     lines = ["**runs compared**: one colour per controller (pale: measured); grey: the reference", ""]
     for (f, m), label, (_, name) in zip(files, labels, colors, strict=True):
         after = (m.get("phases") or {}).get("after") or (m.get("phases") or {}).get("before") or {}
-        rms = after.get("rms_position_error_m") if isinstance(after, dict) else None
-        fig = ""
-        if isinstance(rms, int | float) and not isinstance(rms, bool):  # None: a run shorter than its warm-up
-            fig = f", position RMS {'after the event' if 'after' in (m.get('phases') or {}) else ''} {rms * 1e3:.1f} mm"
-        lines.append(
-            f"- **{label}** ({name}): {m.get('scenario', f.parent)}, {m.get('status', '?')}" + fig.replace("  ", " ")
-        )
+        rms = after.get("rms_position_error_m") if isinstance(after, dict) else None  # None: ended within its warm-up
+        where = " after the event" if "after" in (m.get("phases") or {}) else ""
+        fig = f", position RMS{where} {rms * 1e3:.1f} mm" if isinstance(rms, int | float) and not isinstance(rms, bool) else ""
+        lines.append(f"- **{label}** ({name}): {m.get('scenario', f.parent)}, {m.get('status', '?')}{fig}")
     events = {(ev.get("time"), ev.get("text")) for _, m in files for ev in m.get("events") or []}
     for t, text in sorted(events, key=str):
         lines.append(f"\n**event at {t:g} s**: {text} (dark-red diamonds on every plot)")

@@ -44,13 +44,15 @@ def make_sink(
     recording_id: str | None = None,
     bind: str = LOCALHOST,
     description: str = "",
+    ports: tuple[int, int] = (SERVE_GRPC_PORT, SERVE_WEB_PORT),
 ) -> RerunSink | None:
     """A sink for the outputs asked for, or None when none is. Bad outputs raise ConfigError now.
 
     ``save``: write an .rrd file (the folder is created); ``spawn``: start (or reuse) a native
     viewer on port 9876; ``connect``: stream to a running viewer at a ``rerun+http://.../proxy``
-    URL; ``serve``: start a web viewer on http://BIND:9090 (its gRPC server on 9876) that serves
-    the recording until :meth:`RerunSink.wait` returns. Viewers started here listen on ``bind``.
+    URL; ``serve``: start a web viewer on http://BIND:9090 (its gRPC server on 9876; ``ports``:
+    gRPC, web) that serves the recording until :meth:`RerunSink.wait` returns. Viewers started
+    here listen on ``bind``.
     ``description``: the scenario's, for the recording's text panel.
     """
     if save is None and not spawn and connect is None and not serve:
@@ -62,9 +64,7 @@ def make_sink(
         save = Path(save)
         _check_writable(save)
     if serve:
-        for port in (SERVE_GRPC_PORT, SERVE_WEB_PORT):
-            if _listening(bind, port):
-                raise ConfigError("--serve", f"port {port} is in use; stop what listens there or use --save")
+        _check_ports(bind, ports)
     rec = rr.RecordingStream(APPLICATION_ID, recording_id=recording_id, send_properties=False)
     rec.set_log_time_enabled(False)  # no wall clock in the data: same run, same contents
     rec.set_log_tick_enabled(False)
@@ -74,16 +74,8 @@ def make_sink(
         urls.append(_spawn_viewer(bind, SPAWN_PORT))
     server = viewer_url = None
     if serve:
-        server = _start_viewer(
-            "--serve",
-            ["--serve-web", "--bind", bind, "--port", str(SERVE_GRPC_PORT), "--web-viewer-port", str(SERVE_WEB_PORT)],
-            ports=(SERVE_GRPC_PORT, SERVE_WEB_PORT),
-            host=bind,
-            outlive=False,
-            window=False,
-        )
-        urls.append(f"rerun+http://{_url_host(bind)}:{SERVE_GRPC_PORT}/proxy")
-        viewer_url = f"http://{_url_host(bind)}:{SERVE_WEB_PORT}/?url={quote(urls[-1], safe='')}"
+        server, grpc_url, viewer_url = start_web_viewer(bind, ports)
+        urls.append(grpc_url)
     sinks += [rr.GrpcSink(url) for url in dict.fromkeys(urls)]  # --spawn and --connect may name one viewer
     try:
         rec.set_sinks(*sinks)
@@ -93,6 +85,40 @@ def make_sink(
     sink = RerunSink(rec, recording_name=recording_name, serving=serve, viewer_url=viewer_url, description=description)
     sink.server = server
     return sink
+
+
+def _check_ports(bind: str, ports: tuple[int, int]) -> None:
+    """ConfigError naming the flag of a port out of range, the same twice, or in use on ``bind``."""
+    for flag, port in zip(("--grpc-port", "--port"), ports, strict=True):
+        if not 1 <= port <= 65535:
+            raise ConfigError(flag, f"{port} is not a port (1-65535)")
+    if ports[0] == ports[1]:
+        raise ConfigError("--port", f"the web viewer and its gRPC server cannot share port {ports[0]}")
+    for flag, port in zip(("--grpc-port", "--port"), ports, strict=True):
+        if _listening(bind, port):
+            raise ConfigError(flag, f"port {port} is in use; stop what listens there, or choose another port")
+
+
+def start_web_viewer(bind: str, ports: tuple[int, int] = (SERVE_GRPC_PORT, SERVE_WEB_PORT), files=()) -> tuple:
+    """Start rerun's web viewer on ``bind`` (``ports``: its gRPC server, the page), stopped when this
+    process dies, holding ``files`` (.rrd) if given; (process, gRPC URL, the page's URL)."""
+    grpc, web = ports
+    server = _start_viewer(
+        "--serve",
+        ["--serve-web", "--bind", bind, "--port", str(grpc), "--web-viewer-port", str(web), *map(str, files)],
+        ports=ports,
+        host=bind,
+        outlive=False,
+        window=False,
+    )
+    grpc_url = f"rerun+http://{_url_host(bind)}:{grpc}/proxy"
+    return server, grpc_url, f"http://{_url_host(bind)}:{web}/?url={quote(grpc_url, safe='')}"
+
+
+def tunnel_line(ports: tuple[int, int]) -> str:
+    """How to see a web viewer served on a machine without a display from another one."""
+    forwards = " ".join(f"-L {p}:{LOCALHOST}:{p}" for p in reversed(ports))
+    return f"from another machine: ssh -N {forwards} USER@THIS_HOST, then open the address above there"
 
 
 def check_recording(path: Path, shown: Path | str | None = None) -> None:
@@ -181,7 +207,7 @@ def _check_display(where: str) -> None:
         raise ConfigError(
             where,
             "no display for the native viewer (DISPLAY and WAYLAND_DISPLAY are unset); "
-            "use --save and `rerun --serve-web FILE` to view it in a browser",
+            "add --serve to serve a web viewer instead (docs/runs.md: on a machine without a display)",
         )
 
 

@@ -6,8 +6,10 @@ import contextlib
 import os
 import sys
 import tempfile
+import threading
 import time
 from collections.abc import Iterator
+from multiprocessing import context as mp_context
 from pathlib import Path
 
 from mlpfac.sweeps.plan import Job
@@ -117,18 +119,81 @@ def pool_context():
     """The multiprocessing context of a local pool: workers forked from a fork server that imported
     :mod:`mlpfac.sweeps.warm` once (started by the first pool, with its environment, and kept for
     the next ones; a fresh interpreter, no copy of this process's threads or BLAS state), or
-    spawned where there is no fork server."""
+    spawned where there is no fork server. Either way a worker does not run the user's script again
+    (see :func:`_launch_without_main`): a sweep started at a script's top level, from stdin, ``python -c``
+    or a notebook needs no ``if __name__ == "__main__":``."""
     import multiprocessing as mp
     from multiprocessing import util
 
     if "forkserver" not in mp.get_all_start_methods():
-        return mp.get_context("spawn")
-    ctx = mp.get_context("forkserver")
+        return _SpawnContext()
+    ctx = _ForkServerContext()
     ctx.set_forkserver_preload(["mlpfac.sweeps.warm"])
     # the folder of the fork server's socket, which the fork server removes when it ends (also
     # after this process was killed, when its workers have gone): see mlpfac.sweeps.warm
     os.environ[POOL_TMP_VARIABLE] = f"{os.getpid()}:{util.get_temp_dir()}"
     return ctx
+
+
+MAIN_KEYS = ("init_main_from_name", "init_main_from_path")  # how a child of multiprocessing runs __main__
+_MAIN_LOCK = threading.Lock()
+
+
+def _launch_without_main(launch, process_obj) -> None:
+    """A process started by ``launch`` (a Popen's) with preparation data that names no ``__main__``.
+
+    A child of multiprocessing's spawn and forkserver methods runs the parent's script (or ``-m``
+    module) again as ``__mp_main__``, so that what it defines can be unpickled. A sweep's workers
+    are handed plain data and mlpfac's own functions only, and a script run again would start its
+    sweep again in every worker (unguarded, multiprocessing refuses and the pool breaks). A user's
+    controller class is imported by its name, as ever (:mod:`mlpfac.plugins`)."""
+    from multiprocessing import spawn
+
+    with _MAIN_LOCK:
+        made = spawn.get_preparation_data
+        spawn.get_preparation_data = lambda name: {k: v for k, v in made(name).items() if k not in MAIN_KEYS}
+        try:
+            launch(process_obj)
+        finally:
+            spawn.get_preparation_data = made
+
+
+def _no_main(popen: type) -> type:
+    class NoMain(popen):
+        def _launch(self, process_obj) -> None:
+            _launch_without_main(super()._launch, process_obj)
+
+    return NoMain
+
+
+class _ForkServerProcess(mp_context.ForkServerProcess):
+    """A fork server's process that does not run the parent's ``__main__`` (:func:`_launch_without_main`)."""
+
+    @staticmethod
+    def _Popen(process_obj):
+        from multiprocessing.popen_forkserver import Popen
+
+        return _no_main(Popen)(process_obj)
+
+
+class _SpawnProcess(mp_context.SpawnProcess):
+    """A spawned process that does not run the parent's ``__main__`` (:func:`_launch_without_main`)."""
+
+    @staticmethod
+    def _Popen(process_obj):
+        if os.name == "nt":
+            from multiprocessing.popen_spawn_win32 import Popen
+        else:
+            from multiprocessing.popen_spawn_posix import Popen
+        return _no_main(Popen)(process_obj)
+
+
+class _ForkServerContext(mp_context.ForkServerContext):
+    Process = _ForkServerProcess
+
+
+class _SpawnContext(mp_context.SpawnContext):
+    Process = _SpawnProcess
 
 
 @contextlib.contextmanager
@@ -159,16 +224,19 @@ IN_WORKER = "MLPFAC_SWEEP_WORKER"  # set in a local pool's workers
 
 
 def not_in_a_worker(what: str) -> None:
-    """A script whose class a sweep's workers import (``path/to/script.py:Class``) is run by each
-    of them: a call of the API at its top level would start runs, or pools of workers, in every
-    worker. MlpfacError there, which the worker reports as that run's error."""
+    """A script whose class a sweep's workers import (``path/to/script.py:Class``, also a class
+    given to the API by the script that calls it) is run by each of them: a call of the API at its
+    top level would start runs, or pools of workers, in every worker. There, while the script is
+    imported, the call raises :class:`~mlpfac.exceptions.ScriptStopped`, which ends the import with
+    what the script defined above the call (:mod:`mlpfac.plugins`); anywhere else in a worker (a
+    controller that calls it) it is an MlpfacError, that run's error."""
     if os.environ.get(IN_WORKER):
-        from mlpfac.exceptions import MlpfacError
+        from mlpfac import plugins
+        from mlpfac.exceptions import MlpfacError, ScriptStopped
 
-        raise MlpfacError(
-            f"mlpfac.{what} was called while a sweep worker imported your script (for its controller class): "
-            'put the script\'s calls under `if __name__ == "__main__":`'
-        )
+        if plugins.IMPORTING:
+            raise ScriptStopped(f"mlpfac.{what}")
+        raise MlpfacError(f"mlpfac.{what} was called in a sweep worker: a controller cannot start runs")
 
 
 def _worker_init(parent: int, environ: dict[str, str] | None = None) -> None:

@@ -1,0 +1,83 @@
+"""`mlpfac report --collect` keeps every run's figures (runs.json), and `mlpfac report --verify N`
+runs N of them again from the recorded command: bit-identical, or by how much they differ."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import pytest
+
+from mlpfac.cli import main
+from mlpfac.verify import RUNS_FILE, digest, verify
+
+COMMAND = "mlpfac sweep paper --controllers kanayama,corradini --seeds 0-2 --duration 1 --out runs/tiny"
+
+
+@pytest.fixture(scope="module")
+def collected(tmp_path_factory) -> Path:
+    """A docs folder whose one dataset is a small sweep, collected as the docs' are."""
+    root = tmp_path_factory.mktemp("repo")
+    out = root / "runs" / "tiny"
+    assert main(["sweep", "paper", "--controllers", "kanayama,corradini", "--seeds", "0-2", "--duration", "1",
+                 "--out", str(out), "--workers", "1"]) == 0  # fmt: skip
+    docs = root / "docs"
+    assert main(["report", str(docs), "--collect", f"tiny={out}", "--command", COMMAND]) == 0
+    return docs
+
+
+def _copy(docs: Path, tmp_path: Path) -> Path:
+    shutil.copytree(docs, tmp_path / "docs")
+    return tmp_path / "docs"
+
+
+def test_collect_keeps_every_runs_figures_and_digest(collected):
+    runs = json.loads((collected / "data" / "tiny" / RUNS_FILE).read_text())["runs"]
+    assert sorted((r["controller"], r["seed"]) for r in runs) == [
+        (c, s) for c in ("corradini", "kanayama") for s in range(3)
+    ]
+    folder = collected.parent / "runs" / "tiny" / "paper" / "kanayama" / "seed-0001"
+    m = json.loads((folder / "metrics.json").read_text())
+    (row,) = [r for r in runs if (r["controller"], r["seed"]) == ("kanayama", 1)]
+    assert (
+        row["digest"] == digest(m)
+        and row["phases"]["before"]["rms_position_error_m"] == m["phases"]["before"]["rms_position_error_m"]
+    )
+    assert digest(m | {"wall_time_s": 123.0}) == digest(m)  # the time a run took is not its result
+    assert digest(m | {"steps": m["steps"] - 1}) != digest(m)
+
+
+def test_verify_says_bit_identical(collected, capsys):
+    assert main(["report", str(collected), "--verify", "4"]) == 0
+    assert capsys.readouterr().out == "tiny: 4 of 4 runs bit-identical\n"
+
+
+def test_verify_says_by_how_much_a_run_differs(collected, tmp_path, capsys):
+    docs = _copy(collected, tmp_path)
+    path = docs / "data" / "tiny" / RUNS_FILE
+    data = json.loads(path.read_text())
+    for r in data["runs"]:  # the kept figures 1 % higher than what the code gives: a known answer
+        r["digest"] = "0" * 32
+        r["rms_position_error_m"] *= 1.01
+    path.write_text(json.dumps(data))
+    assert main(["report", str(docs), "--verify", "2"]) == 1
+    out = capsys.readouterr().out
+    assert out.startswith("tiny: 0 of 2 runs bit-identical; largest difference 0.0099 (relative, paper / ")
+    assert out.rstrip().endswith(", rms_position_error_m)")
+
+
+def test_verify_says_what_it_cannot_verify(collected, tmp_path, capsys):
+    docs = _copy(collected, tmp_path)
+    old = docs / "data" / "old"
+    shutil.copytree(docs / "data" / "tiny", old)
+    (old / RUNS_FILE).unlink()
+    script = docs / "data" / "script"
+    script.mkdir()
+    (script / "table.md").write_text("| a |\n|---|\n| 1 |\n")
+    (script / "meta.json").write_text(json.dumps({"command": "python sims/paper_choices.py --seeds 50"}))
+    assert [v.line() for v in verify(docs, 1)] == [
+        "old: not verified: no per-seed results (runs.json): collect it again from its command",
+        "script: not verified: a script's table: run its command again to check it",
+        "tiny: 1 of 1 runs bit-identical",
+    ]
