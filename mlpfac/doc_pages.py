@@ -151,9 +151,17 @@ def main(argv: list[str] | None = None) -> int:
         for name in old:
             print(f"{docs / name}: differs from what the code gives; run: python -m mlpfac.doc_pages {docs}")
         return 1 if old else 0
-    for name, text in pages().items():
-        (docs / name).write_text(text)
-    print(f"{len(pages())} pages written, {len(old)} changed")
+    from mlpfac.outputs import write_atomic
+
+    texts = pages()
+    for name in texts:  # only our own pages are replaced: a regular file that says it is written here
+        path = docs / name
+        if path.exists() and (not path.is_file() or path.is_symlink() or HEAD not in path.read_text(errors="replace")):
+            print(f"mlpfac: error: {path}: not a page written by mlpfac.doc_pages; left as it is", file=sys.stderr)
+            return 2
+    for name, text in texts.items():
+        write_atomic(docs / name, text)
+    print(f"{len(texts)} pages written, {len(old)} changed")
     return 0
 
 

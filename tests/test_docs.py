@@ -333,6 +333,23 @@ def test_the_pages_written_from_the_code_are_what_the_code_gives(tmp_path: Path,
     assert doc_pages.main([str(docs), "--check"]) == 1 and "scenario-file.md" in capsys.readouterr().out
 
 
+@pytest.mark.parametrize("foreign", ["a file of someone else's", "a folder"])
+def test_the_page_writer_replaces_only_its_own_pages(tmp_path: Path, capsys, foreign: str):
+    from mlpfac import doc_pages
+
+    docs = tmp_path / "docs"
+    docs.mkdir()
+    if foreign == "a folder":
+        (docs / "api.md").mkdir()
+    else:
+        (docs / "api.md").write_text("# my own notes\n")
+    assert doc_pages.main([str(docs)]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "api.md" in err and "Traceback" not in err
+    assert (docs / "api.md").is_dir() if foreign == "a folder" else (docs / "api.md").read_text() == "# my own notes\n"
+    assert not (docs / "scenario-file.md").exists()  # nothing written
+
+
 def test_the_scenario_reference_gives_the_validators_ranges():
     """Known answers, probed from the validators: a new or changed check shows on the page by itself."""
     text = (DOCS / "scenario-file.md").read_text()
