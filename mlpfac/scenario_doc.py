@@ -220,6 +220,16 @@ def _top_probe(key: str) -> tuple[str, str]:
     return f"{default:g}", _range(lambda v: parse(ctx | {key: v}), key, hint)
 
 
+def _initial_probe(key: str) -> tuple[str, str]:
+    """The default of an ``[initial]`` key, as :func:`mlpfac.scenario.parse` fills it in."""
+    from mlpfac.scenario import parse
+
+    scn = parse({})
+    if key == "error":
+        return "[" + ", ".join(f"{x:g}" for x in scn.initial_error) + "]", "finite"
+    return ("true" if scn.start_moving else "false"), ""
+
+
 def scenario_page() -> str:
     from mlpfac.adaptive_config import AdaptiveConfig
     from mlpfac.controllers import KanayamaGains
@@ -253,8 +263,8 @@ def scenario_page() -> str:
         rows = _dataclass_rows(cls, "[reference]")
         doc = " ".join(inspect.cleandoc(cls.__doc__ or "").split()).replace("``", "`")
         out += ["", f'### `kind = "{kind}"`', "", doc, "", *rows]
-    out += ["", "## `[initial]`", "", *_plain_rows(INITIAL, _known({"initial": {"x": 1}}, "[initial]"), "[initial]")]
-    out += ["", "Defaults: `error = [0, 0, 0]`, `moving = true`."]
+    out += ["", "## `[initial]`", ""]
+    out += _plain_rows(INITIAL, _known({"initial": {"x": 1}}, "[initial]"), "[initial]", _initial_probe)
     out += [
         "",
         "## `[plant]`",
