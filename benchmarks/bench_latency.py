@@ -3,7 +3,7 @@
     python benchmarks/bench_latency.py [--repeats 5] [--cold N] [--before MLPFAC] [--only run|quick|workers]
 
 1. ``mlpfac run eight-nominal`` with every output written (metrics.json, config.toml, figure1.png,
-   run.rrd) against the floor process of ``../shared/tools/latency_floor.py`` (start Python, import
+   run.rrd) against the floor process of ``benchmarks/latency_floor.py`` (start Python, import
    numpy and MuJoCo, load the robot, 2500 x (4 mj_step + one reference EKF update)), interleaved
    repeats, median wall time and the CPU time of each process and its children; the same with a
    fresh, empty ``NUMBA_CACHE_DIR`` for every run of the command (all from this checkout's
@@ -19,8 +19,8 @@
    2-workers-vs-1 speedup on ``bench_sweep.py``'s 48 runs that these costs allow when the two
    cores are free (48 warm runs + 2 fixed costs shared by 2, against 48 warm runs in one process).
 
-The floor script is looked up at ``$LATENCY_FLOOR`` or ``../shared/tools/latency_floor.py`` beside
-the repository. On a machine shared with other work, compare the CPU columns as well.
+The floor script is ``benchmarks/latency_floor.py`` beside this file (``$LATENCY_FLOOR`` names another).
+On a machine shared with other work, compare the CPU columns as well.
 """
 
 from __future__ import annotations
@@ -45,7 +45,7 @@ MLPFAC = [sys.executable, "-m", "mlpfac.cli"]
 
 def floor_script() -> Path:
     env = os.environ.get("LATENCY_FLOOR")
-    return Path(env) if env else ROOT.parent / "shared" / "tools" / "latency_floor.py"
+    return Path(env) if env else Path(__file__).resolve().with_name("latency_floor.py")
 
 
 def timed(cmd: list[str], env: dict | None = None, ok: tuple[int, ...] = (0,)) -> tuple[float, float]:

@@ -106,9 +106,9 @@ class Corradini:
 
 @dataclass(frozen=True)
 class KanayamaGains:
-    Kx: float = 10.0
-    Ky: float = 64.0
-    Ktheta: float = 16.0
+    Kx: float = 10.0  # 1/s, on e1
+    Ky: float = 64.0  # 1/m^2, on e2
+    Ktheta: float = 16.0  # 1/m, on sin e3
 
     def __post_init__(self) -> None:
         for name in ("Kx", "Ky", "Ktheta"):

@@ -29,7 +29,11 @@ GAIN_RANGE = (0.25, 4.0)  # learned input gains b_v, b_omega are kept within the
 class Law:
     """Eigenvalues lambda_1..3 of the closed-loop error dynamics, and optional command limits."""
 
-    lambdas: tuple[float, float, float] = (0.9, 0.9, 0.9)  # 0.8 chatters against wheel limits under pose noise
+    lambdas: tuple[float, float, float] = (
+        0.9,
+        0.9,
+        0.9,
+    )  # closed-loop eigenvalues λ1..3 of (36) (0.8 chatters on noise)
     v_max: float | None = 2.0  # |v| limit, m/s (None, or inf in a scenario file: no limit)
     omega_max: float | None = 5.0  # |omega| limit, rad/s
 

@@ -36,17 +36,18 @@ class Networks:
     map is f(e, v_r, omega_r, u_{k-1}) + G u_k; n_f = 8.
     """
 
-    L_f: int = 18
-    L_G: int = 1
-    error_scale: float = 20.0  # the paper's inputs as printed: 1
-    residual: bool = False
+    L_f: int = 18  # hidden units of NN_f (10) (the paper: 18)
+    L_G: int = 1  # hidden units of NN_G (11) (the paper: 1)
+    error_scale: float = 20.0  # c: the error inputs of (8)-(9) are c e (the paper's inputs as printed: 1)
+    residual: bool = False  # NN_f estimates f - e, so f_hat = e + NN_f
     velocity_inputs: bool = False  # NN_f also sees the last command u_{k-1} = (v, omega): the velocity state
 
     def __post_init__(self) -> None:
-        if self.L_f < 1 or self.L_G < 1:
-            raise ConfigError("networks", f"L_f and L_G must be at least 1 (got {self.L_f}, {self.L_G})")
+        for name in ("L_f", "L_G"):
+            if getattr(self, name) < 1:
+                raise ConfigError(name, f"a network needs at least 1 hidden unit, got {getattr(self, name)}")
         if not self.error_scale > 0:
-            raise ConfigError("networks", f"error_scale must be positive (got {self.error_scale})")
+            raise ConfigError("error_scale", f"must be positive, got {self.error_scale}")
 
     @property
     def n_f(self) -> int:

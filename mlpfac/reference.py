@@ -19,10 +19,10 @@ from mlpfac.exceptions import ConfigError
 class Eight:
     """Figure of eight (37): x_r = ax cos(wx t), y_r = ay sin(wy t)."""
 
-    ax: float = 2.0
-    ay: float = 2.0
-    wx: float = 0.25
-    wy: float = 0.5
+    ax: float = 2.0  # m, half the eight's width
+    ay: float = 2.0  # m, half its height
+    wx: float = 0.25  # rad/s
+    wy: float = 0.5  # rad/s (2 wx: an eight)
 
     def derivatives(self, t: np.ndarray) -> tuple[np.ndarray, ...]:
         cx, sx = np.cos(self.wx * t), np.sin(self.wx * t)
@@ -41,10 +41,10 @@ class Eight:
 class Circle:
     """Circle of radius ``radius`` about (cx, cy), travelled counter-clockwise at rate ``rate`` rad/s."""
 
-    radius: float = 1.5
-    rate: float = 0.5
-    cx: float = 0.0
-    cy: float = 0.0
+    radius: float = 1.5  # m
+    rate: float = 0.5  # rad/s
+    cx: float = 0.0  # m, centre
+    cy: float = 0.0  # m
 
     def derivatives(self, t: np.ndarray) -> tuple[np.ndarray, ...]:
         c, s = np.cos(self.rate * t), np.sin(self.rate * t)
@@ -56,10 +56,10 @@ class Circle:
 class Line:
     """Straight line from (x0, y0) along ``heading`` at constant ``speed``."""
 
-    speed: float = 0.5
-    heading: float = 0.0
-    x0: float = 0.0
-    y0: float = 0.0
+    speed: float = 0.5  # m/s
+    heading: float = 0.0  # rad, from the x axis
+    x0: float = 0.0  # m, the start
+    y0: float = 0.0  # m
 
     def derivatives(self, t: np.ndarray) -> tuple[np.ndarray, ...]:
         dx, dy = self.speed * np.cos(self.heading), self.speed * np.sin(self.heading)
@@ -72,8 +72,8 @@ class Lemniscate:
     """Lemniscate of Bernoulli with half-width ``a``, phase s = rate t:
     x = a cos s / (1 + sin^2 s), y = a sin s cos s / (1 + sin^2 s)."""
 
-    a: float = 2.0
-    rate: float = 0.3
+    a: float = 2.0  # m
+    rate: float = 0.3  # rad/s
 
     def derivatives(self, t: np.ndarray) -> tuple[np.ndarray, ...]:
         s, w, a = self.rate * t, self.rate, self.a

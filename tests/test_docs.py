@@ -212,3 +212,171 @@ def test_bad_data_or_markers_are_one_line_and_exit_2(tmp_path: Path, capsys, cas
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert len(err.strip().splitlines()) == 1 and text in err and "Traceback" not in err, err
+
+
+# The pages' commands and snippets, run as written. A command block fenced as ```sh cheap``` runs
+# in a shell where the venv is active (its bin first on PATH, as `. .venv/bin/activate` leaves it)
+# from a copy of the repository's top folder; every ```python``` block runs there too, after the
+# files the pages define (a block whose first line is `# NAME.py`) are written beside it. A snippet
+# runs as a notebook cell does (the code given to a fresh interpreter), each page's in order.
+FENCED = re.compile(r"^```(\w*)([^\n]*)\n(.*?)^```\s*$", re.M | re.S)
+DEFINES = re.compile(r"\A# (\w+\.py)\n")
+
+
+def fenced(page: Path, lang: str) -> list[tuple[str, str]]:
+    """(info, body) of the page's fenced blocks in ``lang`` (``sh cheap``: info "cheap")."""
+    return [(info.strip(), body) for tag, info, body in FENCED.findall(page.read_text()) if tag == lang]
+
+
+def _workspace(tmp_path: Path) -> tuple[Path, dict]:
+    """A folder like the repository's top (sims, models, examples, benchmarks linked; docs copied, so
+    a command that writes there cannot touch the repository), and the environment of an active venv."""
+    import os
+    import sys
+
+    work = tmp_path / "repo"
+    work.mkdir()
+    for name in ("sims", "models", "examples", "benchmarks", "mlpfac"):
+        (work / name).symlink_to(ROOT / name)
+    shutil.copytree(DOCS, work / "docs")
+    shutil.copy(ROOT / "README.md", work)
+    env = dict(os.environ)
+    venv = Path(sys.executable).parent
+    env["PATH"] = f"{venv}{os.pathsep}{env.get('PATH', '')}"
+    env["VIRTUAL_ENV"] = str(venv.parent)
+    env.pop("PYTHONPATH", None)
+    return work, env
+
+
+def _files() -> dict[str, str]:
+    """NAME.py -> its text, for every python block of the pages that starts with ``# NAME.py``."""
+    out: dict[str, str] = {}
+    for page in PAGES:
+        for _, body in fenced(page, "python"):
+            m = DEFINES.match(body)
+            if m:
+                out.setdefault(m[1], body)
+    return out
+
+
+CHEAP = [(page, body) for page in PAGES for info, body in fenced(page, "sh") if info == "cheap"]
+WRITTEN = "<!-- Written by `python -m mlpfac.doc_pages"  # the reference pages: signatures, not snippets
+SNIPPETS = [
+    (page, body)
+    for page in PAGES
+    if WRITTEN not in page.read_text()
+    for _, body in fenced(page, "python")
+    if body.strip() and not DEFINES.match(body)
+]
+
+
+def _ids(cases):
+    return [f"{p.relative_to(ROOT).as_posix()}:{b.strip().splitlines()[0][:50]}" for p, b in cases]
+
+
+def test_there_are_cheap_commands_and_snippets_to_run():
+    assert len(CHEAP) >= 3 and len(SNIPPETS) >= 3 and "my_law.py" in _files()
+
+
+@pytest.mark.parametrize(("page", "block"), CHEAP, ids=_ids(CHEAP))
+def test_every_cheap_command_block_runs_as_written(tmp_path: Path, page: Path, block: str):
+    import subprocess
+
+    work, env = _workspace(tmp_path)
+    for name, text in _files().items():
+        (work / name).write_text(text)
+    r = subprocess.run(
+        ["bash", "-eo", "pipefail", "-c", block], cwd=work, env=env, capture_output=True, text=True, timeout=600
+    )
+    assert r.returncode == 0, f"{page.name}: {block}\nstdout: {r.stdout[-2000:]}\nstderr: {r.stderr[-2000:]}"
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("page", "snippet"), SNIPPETS, ids=_ids(SNIPPETS))
+def test_every_python_snippet_runs_as_written(tmp_path: Path, page: Path, snippet: str):
+    import subprocess
+    import sys
+
+    work, env = _workspace(tmp_path)
+    for name, text in _files().items():
+        (work / name).write_text(text)
+    code = f"import sys; sys.path.insert(0, ''); exec(compile({snippet!r}, 'snippet', 'exec'))"
+    r = subprocess.run([sys.executable, "-c", code], cwd=work, env=env, capture_output=True, text=True, timeout=900)
+    assert r.returncode == 0, f"{page.name}:\n{snippet}\nstdout: {r.stdout[-2000:]}\nstderr: {r.stderr[-3000:]}"
+
+
+def test_the_readmes_budget_is_the_shipped_example():
+    shown = [body for _, body in fenced(ROOT / "README.md", "toml") if "[[budget]]" in body]
+    text = (ROOT / "examples" / "budget.toml").read_text()
+    assert shown and shown[0] == text[text.index("scenarios =") :]
+
+
+def test_no_page_or_script_points_outside_the_repository():
+    """A user's clone has only the repository: no page, benchmark or example names a folder beside it."""
+    files = [*PAGES, *sorted((ROOT / "benchmarks").glob("*.py")), *sorted((ROOT / "examples").iterdir())]
+    bad = [
+        f.relative_to(ROOT).as_posix() for f in files if f.is_file() and re.search(r"\.\./shared|/work/", f.read_text())
+    ]
+    assert bad == []
+
+
+def test_the_pages_written_from_the_code_are_what_the_code_gives(tmp_path: Path, capsys):
+    from mlpfac import doc_pages
+
+    assert doc_pages.stale(DOCS) == [], "run: python -m mlpfac.doc_pages docs"
+    docs = tmp_path / "docs"
+    docs.mkdir()
+    assert doc_pages.main([str(docs), "--check"]) == 1  # missing: stale
+    assert doc_pages.main([str(docs)]) == 0 and doc_pages.stale(docs) == []
+    page = docs / "scenario-file.md"
+    page.write_text(page.read_text().replace("| (0, 1] |", "| > 0 |", 1))
+    assert doc_pages.main([str(docs), "--check"]) == 1 and "scenario-file.md" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("foreign", ["a file of someone else's", "a folder"])
+def test_the_page_writer_replaces_only_its_own_pages(tmp_path: Path, capsys, foreign: str):
+    from mlpfac import doc_pages
+
+    docs = tmp_path / "docs"
+    docs.mkdir()
+    if foreign == "a folder":
+        (docs / "api.md").mkdir()
+    else:
+        (docs / "api.md").write_text("# my own notes\n")
+    assert doc_pages.main([str(docs)]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "api.md" in err and "Traceback" not in err
+    assert (docs / "api.md").is_dir() if foreign == "a folder" else (docs / "api.md").read_text() == "# my own notes\n"
+    assert not (docs / "scenario-file.md").exists()  # nothing written
+
+
+def test_the_scenario_reference_gives_the_validators_ranges():
+    """Known answers, probed from the validators: a new or changed check shows on the page by itself."""
+    text = (DOCS / "scenario-file.md").read_text()
+    for row in (
+        "| `forgetting` | number | 1 | (0, 1] |",
+        "| `input_delay` | integer | 0 | 0-50 |",
+        "| `lambdas` | 3 numbers | [0.9, 0.9, 0.9] | (-1, 1) |",
+        "| `v_max` | number | 2 | > 0; `inf`: no limit |",
+        "| `T` | s | 0.01 | > 0 |",
+        "| `estimator` | string | \"ekf\" | choose 'ekf' or 'ukf' |",
+        "| `sensor_delay` | `steps` (integer >= 0) |",
+    ):
+        assert row in text, row
+
+
+def _fields(page: str, name: str) -> set[str]:
+    block = re.search(rf"<!-- fields: {name} -->(.*?)<!-- /fields -->", (DOCS / page).read_text(), re.S)
+    assert block, name
+    return {f for cell in re.findall(r"^\| ([^|]+) \|", block[1], re.M) for f in re.findall(r"`(\w+)`", cell)}
+
+
+@pytest.mark.slow
+def test_the_outputs_page_names_every_field_the_code_writes():
+    import mlpfac
+
+    rows = mlpfac.sweep(["paper"], ["corradini", "oracle"], seeds="0-1", duration=13.0, workers=1)
+    m = mlpfac.metrics(mlpfac.run("paper", controller="corradini", duration=13.0))
+    assert _fields("outputs.md", "metrics") == set(m)
+    assert _fields("outputs.md", "sweep") == set(rows[0])
+    assert _fields("outputs.md", "paired") == set(rows.paired[0])

@@ -64,3 +64,60 @@ def test_sweep_writes_its_plot_and_plot_draws_it_again(tmp_path, capsys):
     assert (out / "sweep.png").stat().st_size == first  # the same picture from the folders alone
     assert main(["compare", "paper", "--seeds", "0", "--duration", "2", "--workers", "1", "--out", str(out / "c")]) == 0
     assert (out / "c" / "compare.png").is_file()
+
+
+def _metrics(seed: int, rms_mm: float, how: str) -> dict:
+    """A finished run's metrics.json, as much of it as the sweep plots read."""
+    phase = {"start_s": 12.5, "end_s": 25.0, "rms_position_error_m": rms_mm / 1e3}
+    return {
+        "status": "ok", "outcome": how, "seed": seed, "T": 0.01, "excluded_s": [0.0, 2.0],
+        "phases": {"before": phase | {"start_s": 2.0, "end_s": 12.5}, "after": phase},
+        "position_ms_bins": {"bin_steps": 10, "m2": [(rms_mm / 1e3) ** 2] * 250},
+    }  # fmt: skip
+
+
+def test_the_plots_median_is_the_tables_over_the_same_finished_runs():
+    """A lost run is in the table's statistics (over the finished runs): the plot takes it too."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from mlpfac.plots import sweeps
+    from mlpfac.sweeps.paired import median
+
+    rms = [1.0, 2.0, 3.0, 400.0, 500.0]  # mm; the last two lost
+    runs = {("s", "c"): [_metrics(i, x, "lost" if x > 100 else "tracking") for i, x in enumerate(rms)]}
+    fig, ax = plt.subplots()
+    sweeps._distribution(ax, "s", ["c"], runs, {"c": "C0"})
+    label = ax.get_yticklabels()[0].get_text()
+    plt.close(fig)
+    assert f"5/5  median {median(rms):.3g}" in label, label  # 3, not the tracking runs' 2
+
+
+@pytest.mark.parametrize(("lo", "hi"), [(0.7, 30.0), (0.5, 2500.0), (20.0, 60.0), (12.0, 130.0)])
+def test_log_axis_labels_do_not_overlap(lo: float, hi: float):
+    """On a narrow axis matplotlib's own labels of 12-130 overlap (2x10^1, 3x10^1, ... beside 10^2)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from mlpfac.plots.sweeps import log_ticks
+
+    fig, ax = plt.subplots(figsize=(3.0, 3))
+    ax.scatter([lo, hi], [0, 1])
+    ax.set_xscale("log")
+    log_ticks(ax.xaxis, lo, hi)
+    fig.canvas.draw()
+    r, (x0, x1) = fig.canvas.get_renderer(), ax.get_xlim()
+    labels = [
+        t
+        for t in ax.get_xticklabels(which="both")
+        if t.get_text() and t.get_visible() and x0 <= t.get_position()[0] <= x1
+    ]
+    boxes = sorted((t.get_window_extent(r) for t in labels), key=lambda b: b.x0)
+    plt.close(fig)
+    texts = [t.get_text() for t in labels]
+    assert len(boxes) >= 2 and all("times" not in t for t in texts), texts  # plain numbers
+    assert all(a.x1 < b.x0 for a, b in zip(boxes[:-1], boxes[1:], strict=True)), texts

@@ -2,11 +2,13 @@
 ``sweep.md``, ``compare.png`` beside ``compare.md``): one row per scenario, with
 
 - left, the position RMS after the event per controller (whole run after the warm-up when the
-  scenario has no event): one dot per tracking run over a box (quartiles, whiskers 1.5 IQR), on a
-  log scale when the runs spread over more than a decade; the share of tracking runs and the
-  median beside each controller's name, red when a run was lost or diverged;
+  scenario has no event): one dot per finished run (tracking or lost, a lost one a cross) over a
+  box (quartiles, whiskers 1.5 IQR), on a log scale when the runs spread over more than a decade;
+  the share of finished runs and their median beside each controller's name, red when a run was
+  lost or diverged. The runs are those the table's statistics are over, so the medians are the
+  table's (sweep.md);
 - right, the position error over time (the RMS per 0.1 s, from metrics.json's mean square per
-  bin, ``position_ms_bins``): the median over the tracking runs and the band between their
+  bin, ``position_ms_bins``): the median over the same runs and the band between their
   quartiles, the event marked.
 
 Everything is read from the run folders (``<scenario>/<controller>/seed-*/metrics.json``), so the
@@ -135,9 +137,25 @@ def _event_text(ms: list[dict]) -> tuple[float | None, str]:
     return None, ""
 
 
+def finished(m: dict) -> bool:
+    """A run that reached its end (tracking or lost): the runs a sweep's statistics are over."""
+    return outcome(m) in ("tracking", "lost")
+
+
+def log_ticks(axis, lo: float, hi: float) -> None:
+    """Labels on a log axis that do not overlap: 1-2-5 steps within three decades, else powers
+    of ten only; plain numbers (0.5, 20, 1000), no minor labels."""
+    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
+
+    decades = np.log10(hi / lo) if lo > 0 else 9.0
+    axis.set_major_locator(LogLocator(base=10, subs=(1.0, 2.0, 5.0) if decades <= 3 else (1.0,)))
+    axis.set_major_formatter(FuncFormatter(lambda x, _: f"{x:g}"))
+    axis.set_minor_formatter(NullFormatter())
+
+
 def _distribution(ax, scn: str, ctrls: list[str], runs: dict, colors: dict) -> None:
-    """Controllers top to bottom; each tracking run a dot over its box; "k/n" tracking and the
-    median in the labels (red when a run was lost or diverged)."""
+    """Controllers top to bottom; each finished run a dot (a lost one a cross) over its box; "k/n"
+    finished and their median in the labels (red when a run was lost or diverged)."""
     all_ms = [m for c in ctrls for m in runs[(scn, c)]]
     phase = _phase(all_ms)
     rng = np.random.default_rng(0)  # the dots' jitter: the same picture every time
@@ -145,21 +163,23 @@ def _distribution(ax, scn: str, ctrls: list[str], runs: dict, colors: dict) -> N
     labels, filled = [], []
     for p, c in zip(pos, ctrls, strict=True):
         ms = runs[(scn, c)]
-        ok = [m for m in ms if outcome(m) == "tracking"]
-        v = [m["phases"].get(phase, {}).get("rms_position_error_m") for m in ok]
-        v = np.array([x * 1e3 for x in v if x is not None and np.isfinite(x)])
+        ok = [m for m in ms if finished(m)]
+        pairs = [(m["phases"].get(phase, {}).get("rms_position_error_m"), outcome(m) == "lost") for m in ok]
+        pairs = [(x * 1e3, lost) for x, lost in pairs if x is not None and np.isfinite(x)]
+        v = np.array([x for x, _ in pairs])
+        lost_v = np.array([lost for _, lost in pairs], dtype=bool)
         other = [
             f"{sum(outcome(m) == k for m in ms)} {k}" for k in ("lost", "diverged") if any(outcome(m) == k for m in ms)
         ]
-        labels.append(f"{c}  {len(ok)}/{len(ms)}" + (f"  median {np.median(v):.3g}" if len(v) else "  none tracking"))
+        labels.append(f"{c}  {len(ok)}/{len(ms)}" + (f"  median {np.median(v):.3g}" if len(v) else "  none finished"))
         if other:
             labels[-1] += f"\n({', '.join(other)})"
         if len(v):
-            filled.append((p, v, c))
+            filled.append((p, v, c, lost_v))
     if filled:
         ax.boxplot(
-            [v for _, v, _ in filled],
-            positions=[p for p, _, _ in filled],
+            [v for _, v, _, _ in filled],
+            positions=[p for p, _, _, _ in filled],
             orientation="horizontal",
             widths=0.6,
             showfliers=False,
@@ -168,11 +188,15 @@ def _distribution(ax, scn: str, ctrls: list[str], runs: dict, colors: dict) -> N
             whiskerprops={"color": "0.35"},
             capprops={"color": "0.35"},
         )
-        for p, v, c in filled:
-            ax.scatter(v, p + rng.uniform(-0.2, 0.2, len(v)), s=12, color=colors[c], alpha=0.75, zorder=3, lw=0)
-        lo, hi = min(v.min() for _, v, _ in filled), max(v.max() for _, v, _ in filled)
+        for p, v, c, lost in filled:
+            y = p + rng.uniform(-0.2, 0.2, len(v))
+            ax.scatter(v[~lost], y[~lost], s=12, color=colors[c], alpha=0.75, zorder=3, lw=0)
+            if lost.any():
+                ax.scatter(v[lost], y[lost], s=22, color=colors[c], marker="x", zorder=3, lw=1.2)
+        lo, hi = min(v.min() for _, v, _, _ in filled), max(v.max() for _, v, _, _ in filled)
         if lo > 0 and hi / lo > 10:
             ax.set_xscale("log")
+            log_ticks(ax.xaxis, lo, hi)
     ax.set_yticks(pos, labels, fontsize=8)
     for tick, c in zip(ax.get_yticklabels(), ctrls, strict=True):
         ms = runs[(scn, c)]
@@ -180,7 +204,7 @@ def _distribution(ax, scn: str, ctrls: list[str], runs: dict, colors: dict) -> N
     ax.set_ylim(pos[-1] - 0.6, 0.6)
     what = "after the event" if phase == "after" else "after the warm-up"
     ax.set_xlabel(f"position RMS {what} [mm]")
-    ax.set_title(f"{scn}: one dot per tracking run (tracking k/n, median in mm)", fontsize=10)
+    ax.set_title(f"{scn}: one dot per finished run, x lost (finished k/n, median in mm)", fontsize=10)
     ax.grid(axis="x", alpha=0.3, which="both")
 
 
@@ -189,11 +213,11 @@ def _over_time(ax, ctrls: list[str], groups: list[list[dict]], colors: dict) -> 
     warm = max((m.get("excluded_s", [0, 0])[1] for ms in groups for m in ms), default=0.0)
     spans, missing, peak = [], 0, 0.0
     for c, ms in zip(ctrls, groups, strict=True):
-        series = [_rms_bins(m) for m in ms if outcome(m) == "tracking"]
+        series = [_rms_bins(m) for m in ms if finished(m)]
         missing += sum(s is None for s in series)
         series = [s for s in series if s is not None]
         if not series:
-            ax.plot([], [], color=colors[c], label=f"{c} (no tracking run)")
+            ax.plot([], [], color=colors[c], label=f"{c} (no finished run)")
             continue
         dt = series[0][0]
         width = max(len(v) for _, v in series)
@@ -215,6 +239,7 @@ def _over_time(ax, ctrls: list[str], groups: list[list[dict]], colors: dict) -> 
     vals = vals[vals > 0]
     if len(vals) and np.percentile(vals, 99) / max(np.percentile(vals, 1), 1e-9) > 20:
         ax.set_yscale("log")
+        log_ticks(ax.yaxis, float(vals.min()), max(peak, float(vals.max())))
     elif len(vals) and peak > 1.5 * vals.max():  # the start's transient would flatten the rest: clip it
         ax.set_ylim(0, 1.6 * vals.max())
         ax.annotate(
@@ -242,7 +267,7 @@ def _over_time(ax, ctrls: list[str], groups: list[list[dict]], colors: dict) -> 
     ax.set_xlabel("t [s]")
     ax.set_ylabel("position error [mm]\n(RMS per 0.1 s)")
     note = f"; {missing} runs without a series" if missing else ""
-    ax.set_title(f"error over time: median, band = quartiles over tracking runs{note}", fontsize=10)
+    ax.set_title(f"error over time: median, band = quartiles over finished runs{note}", fontsize=10)
     ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
     ax.grid(alpha=0.3, which="both")
     ax.set_xlim(0, None)

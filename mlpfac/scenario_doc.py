@@ -1,0 +1,343 @@
+"""docs/scenario-file.md written from the code that reads a scenario file: every table and key, its
+type, default and range as the validators give them (probed with values around 0 and 1, so a new
+check shows here by itself), its meaning from the comment beside the dataclass field. Keys the
+validators accept but this module does not describe are an error, so the page cannot lag behind
+(``python -m mlpfac.doc_pages docs --check``, run by tests/test_docs.py)."""
+
+from __future__ import annotations
+
+import ast
+import dataclasses
+import inspect
+import io
+import math
+import re
+import textwrap
+import tokenize
+import types
+import typing
+
+from mlpfac.exceptions import ConfigError
+from mlpfac.toml_data import build
+
+HEAD = "<!-- Written by `python -m mlpfac.doc_pages docs` from the code; edit the code, not this page. -->\n"
+
+# The scenario-level keys and the tables without a dataclass of their own: key -> (unit, meaning)
+TOP = {
+    "name": ("", "the scenario's name: its run folders and its rows in tables (default: the file's name)"),
+    "description": ("", "one line, shown by `mlpfac list`"),
+    "duration": ("s", "the run's length (`--duration` overrides it)"),
+    "T": ("s", "the control period: the controller runs once every T"),
+    "seed": ("", "the run's seed: noise, initial weights and the controller's stream (`--seed` overrides it)"),
+    "warmup": ("s", "seconds at the start left out of the phase figures of `metrics.json` (the networks learn)"),
+    "divergence_m": ("m", "a position error beyond this ends the run as diverged"),
+    "reference": ("", "the path to track: [below](#reference)"),
+    "initial": ("", "where the robot starts: [below](#initial)"),
+    "plant": ("", "the robot: [below](#plant)"),
+    "controller": ("", "the controller and its options: [below](#controller)"),
+    "events": ("", "changes of the robot mid-run, never told to the controller: [below](#events)"),
+    "provenance": ("", "written by mlpfac into a run's `config.toml` (what was simulated); not for a file of yours"),
+}
+INITIAL = {
+    "error": ("m, m, rad", "the initial tracking error (e1, e2, e3) of (2) from the reference's pose at t = 0"),
+    "moving": ("", "the robot starts with the reference's (v_r, ω_r); false: at rest"),
+}
+CONTROLLER = {
+    "name": (
+        "",
+        "`adaptive` (default), a shipped controller (`mlpfac list`), `file.py:Class` (from this file's folder) or `module:Class`",
+    ),
+    "adaptive": ("", "the adaptive scheme's options: [below](#controlleradaptive)"),
+    "kanayama": ("", "Kanayama's gains: [below](#controllerkanayama)"),
+    "params": ("", "keyword arguments of your own controller's class (`Class(T=..., **params)`); a plug-in only"),
+}
+# keys whose checks depend on another key: probed with that one set
+CONTEXT = {"detect_mean": {"detect": 1.0}, "input_P_alarm": {"detect": 1.0, "detect_mean": 1.0}}
+
+
+def _known(table: dict, where: str) -> set[str]:
+    """The keys a table accepts, as the validator names them for an unknown one."""
+    from mlpfac.scenario import parse
+
+    try:
+        parse(table)
+    except ConfigError as err:
+        m = re.search(r"\(known: ([^)]*)\)", err.what)
+        if m:
+            return set(m[1].split(", "))
+    raise AssertionError(f"{where}: the validator did not name its keys")
+
+
+def _rejects(make, key: str, value) -> str | None:
+    """The validator's message when ``key = value`` is refused because of that key, else None."""
+    try:
+        make(value)
+    except ConfigError as err:
+        if key in err.where.split():
+            return err.what
+    except (TypeError, ValueError) as err:
+        return str(err)
+    return None
+
+
+def _range(make, key: str, hint) -> str:
+    """The values accepted, probed: bounds at -1, 0 or 1 (open or closed), inf, or the validator's choices."""
+    union = typing.get_origin(hint) in (typing.Union, types.UnionType)
+    base = typing.get_args(hint) if union else (hint,)
+    if str in base and float not in base:
+        what = _rejects(make, key, "?")
+        return what.split(", got")[0] if what and what.startswith("choose") else ""
+    if bool in base:
+        return ""
+    scalar = int if int in base and float not in base else float
+    tup = next((h for h in base if typing.get_origin(h) is tuple), None) if scalar not in base else None
+    n = 0 if tup is None else (3 if typing.get_args(tup)[-1] is Ellipsis else len(typing.get_args(tup)))
+
+    def ok(v) -> bool:
+        return _rejects(make, key, [v] * n if n else v) is None
+
+    if scalar is int:
+        lo = next((v for v in (-1, 0, 1, 2) if ok(v)), None)
+        if lo is None:
+            return ""
+        if ok(10**6):
+            return "" if lo == -1 else f">= {lo}"
+        hi, top = lo, 10**6
+        while top - hi > 1:
+            mid = (hi + top) // 2
+            hi, top = (mid, top) if ok(mid) else (hi, mid)
+        return f"{lo}-{hi}"
+    eps, lower, upper = 1e-9, "", ""
+    if not ok(-1e9):
+        for t in (-1.0, 0.0, 1.0):
+            if not ok(t - eps) and ok(t + eps):
+                lower = ("[" if ok(t) else "(") + f"{t:g}"
+                break
+    if not ok(1e9):
+        for t in (1.0, 0.0, -1.0):
+            if ok(t - eps) and not ok(t + eps):
+                upper = f"{t:g}" + ("]" if ok(t) else ")")
+                break
+    text = f"{lower}, {upper}" if lower and upper else ""
+    if not text:
+        text = ("> " if lower[:1] == "(" else ">= ") + lower[1:] if lower else ""
+        text = text or (("< " if upper[-1:] == ")" else "<= ") + upper[:-1] if upper else "")
+    if ok(math.inf):
+        text += ("; " if text else "") + "`inf`: no limit"
+    return text
+
+
+def _type(hint) -> str:
+    """A field's TOML type in a few words: number, integer, bool, string, 3 numbers, ..."""
+    if typing.get_origin(hint) in (typing.Union, types.UnionType):
+        return " or ".join(_type(h) for h in typing.get_args(hint) if h is not type(None))
+    if typing.get_origin(hint) is tuple:
+        args = typing.get_args(hint)
+        if args[-1] is Ellipsis:
+            return "3x3 numbers" if typing.get_origin(args[0]) is tuple else "3 numbers"
+        return f"{len(args)} numbers"
+    return {bool: "bool", int: "integer", float: "number", str: "string"}.get(hint, str(hint))
+
+
+def _comments(cls) -> dict[str, str]:
+    """field name -> the comment written beside it in the class's source (``# noqa: X --`` dropped)."""
+    src = textwrap.dedent(inspect.getsource(cls))
+    notes: dict[int, str] = {}
+    for tok in tokenize.generate_tokens(io.StringIO(src).readline):
+        if tok.type == tokenize.COMMENT:
+            text = tok.string.lstrip("# ").strip()
+            notes[tok.start[0]] = re.sub(r"^noqa: \S+ --\s*", "", text)
+    out = {}
+    for node in ast.parse(src).body[0].body:
+        if isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name):
+            lines = range(node.lineno, (node.end_lineno or node.lineno) + 1)
+            out[node.target.id] = " ".join(notes[i] for i in lines if i in notes)
+    return out
+
+
+def _default(f: dataclasses.Field) -> str:
+    if f.default is not dataclasses.MISSING:
+        val = f.default
+    elif f.default_factory is not dataclasses.MISSING:
+        val = f.default_factory()
+    else:
+        return "required"
+    if val is None:
+        return "none"
+    if isinstance(val, bool):
+        return "true" if val else "false"
+    if isinstance(val, str) and f.default_factory is not dataclasses.MISSING:  # a path: the shipped file
+        parts = val.replace("\\", "/").split("/")
+        return "`" + "/".join(parts[-2:]) + "`"
+    if isinstance(val, str):
+        return f'"{val}"'
+    if isinstance(val, tuple):
+        return "[" + ", ".join(f"{x:g}" for x in val) + "]"
+    return f"{val:g}" if isinstance(val, float) else str(val)
+
+
+def _cell(text: str) -> str:
+    return text.replace("|", "\\|").replace("\n", " ")
+
+
+def _dataclass_rows(cls, where: str, skip: frozenset = frozenset()) -> list[str]:
+    hints, notes = typing.get_type_hints(cls), _comments(cls)
+    rows = ["| key | type | default | range | meaning |", "| --- | --- | --- | --- | --- |"]
+    for f in dataclasses.fields(cls):
+        if f.name in skip:
+            continue
+
+        def make(v, key=f.name):
+            return build(cls, CONTEXT.get(key, {}) | {key: v}, where)
+
+        cells = (f"`{f.name}`", _type(hints[f.name]), _default(f), _range(make, f.name, hints[f.name]))
+        rows.append("| " + " | ".join(_cell(c) for c in (*cells, notes.get(f.name, ""))) + " |")
+    return rows
+
+
+def _plain_rows(described: dict, known: set[str], where: str, probe=None) -> list[str]:
+    missing, extra = known - set(described), set(described) - known
+    if missing or extra:
+        raise AssertionError(f"{where}: keys not described {sorted(missing)}, described but unknown {sorted(extra)}")
+    rows = ["| key | unit | default | range | meaning |", "| --- | --- | --- | --- | --- |"]
+    for key, (unit, meaning) in described.items():
+        default, rng = probe(key) if probe else ("", "")
+        rows.append(f"| `{key}` | {unit} | {default} | {_cell(rng)} | {_cell(meaning)} |")
+    return rows
+
+
+def _top_probe(key: str) -> tuple[str, str]:
+    """The default and range of a scenario-level number, from :func:`mlpfac.scenario.parse` itself."""
+    from mlpfac.scenario import parse
+
+    if key not in ("duration", "T", "seed", "warmup", "divergence_m"):
+        return {"name": ("the file's name", "letters, digits, `.` `_` `+` `-`")}.get(key, ("", ""))
+    default = getattr(parse({}), key)
+    if key == "duration":  # bounded below by T, above by the memory a run may take
+        return f"{default:g}", ">= T; its steps must fit in memory"
+    ctx = {"T": {"duration": 1e9}}.get(key, {})
+    hint = int if key == "seed" else float
+    return f"{default:g}", _range(lambda v: parse(ctx | {key: v}), key, hint)
+
+
+def _initial_probe(key: str) -> tuple[str, str]:
+    """The default of an ``[initial]`` key, as :func:`mlpfac.scenario.parse` fills it in."""
+    from mlpfac.scenario import parse
+
+    scn = parse({})
+    if key == "error":
+        return "[" + ", ".join(f"{x:g}" for x in scn.initial_error) + "]", "finite"
+    return ("true" if scn.start_moving else "false"), ""
+
+
+def scenario_page() -> str:
+    from mlpfac.adaptive_config import AdaptiveConfig
+    from mlpfac.controllers import KanayamaGains
+    from mlpfac.events import EVENTS
+    from mlpfac.law import Law
+    from mlpfac.networks import Networks
+    from mlpfac.plants.config import MujocoConfig
+    from mlpfac.plants.kinematic import KinematicConfig, KinematicPlant
+    from mlpfac.reference import REFERENCES
+
+    out = [
+        "# The scenario file, key by key",
+        "",
+        HEAD,
+        (
+            "A scenario is a TOML file (`sims/*.toml` are the shipped ones; [Scenarios](scenarios.md)). Every key is "
+            "optional; a key or table not listed here is an error, and so is a value of the wrong type or out of range: "
+            "one line naming the file and key, exit 2, before anything runs. Ranges: `(0, 1]` is 0 < x <= 1; "
+            "`> 0` positive. Units are SI (m, s, rad) unless a key says otherwise."
+        ),
+    ]
+    out += ["", "## The scenario's own keys", "", *_plain_rows(TOP, _known({"x": 1}, "top"), "top", _top_probe)]
+    out += [
+        "",
+        "## `[reference]`",
+        "",
+        '`kind` (default `"eight"`) picks the path; the other keys are its '
+        "parameters (finite numbers). The reference speed v_r must stay above zero along the path.",
+    ]
+    for kind, cls in REFERENCES.items():
+        rows = _dataclass_rows(cls, "[reference]")
+        doc = " ".join(inspect.cleandoc(cls.__doc__ or "").split()).replace("``", "`")
+        out += ["", f'### `kind = "{kind}"`', "", doc, "", *rows]
+    out += ["", "## `[initial]`", ""]
+    out += _plain_rows(INITIAL, _known({"initial": {"x": 1}}, "[initial]"), "[initial]", _initial_probe)
+    out += [
+        "",
+        "## `[plant]`",
+        "",
+        '`kind` (default `"kinematic"`) picks the plant.',
+        "",
+        '### `kind = "kinematic"`: the model (7)',
+        "",
+        *_dataclass_rows(KinematicConfig, "[plant]"),
+    ]
+    out += [
+        "",
+        '### `kind = "mujoco"`: a MuJoCo robot',
+        "",
+        "What each key does to the robot: "
+        "[`models/README.md`](../models/README.md#mujococonfig-the-plant-table-of-a-scenario).",
+        "",
+        *_dataclass_rows(MujocoConfig, "[plant]"),
+    ]
+    known = _known({"controller": {"x": 1}}, "[controller]")
+    law = {f.name for f in dataclasses.fields(Law)}
+    out += [
+        "",
+        "## `[controller]`",
+        "",
+        *_plain_rows(CONTROLLER, known - law, "[controller]"),
+        "",
+        "The law (35)'s keys, for every controller built on it:",
+        "",
+        *_dataclass_rows(Law, "[controller]"),
+    ]
+    out += [
+        "",
+        "### `[controller.adaptive]`",
+        "",
+        "The adaptive scheme and its variants "
+        "([Controllers](controllers.md#beyond-the-paper-the-adaptive-variants)); a named variant "
+        "(`adaptive-best`, ...) sets some of these itself. The networks' sizes:",
+        "",
+        *_dataclass_rows(Networks, "[controller.adaptive]"),
+        "",
+        "The filter, the law and the options:",
+        "",
+        *_dataclass_rows(AdaptiveConfig, "[controller.adaptive]", frozenset({"networks"})),
+    ]
+    out += [
+        "",
+        "### `[controller.kanayama]`",
+        "",
+        "v = v_r cos e3 + Kx e1, ω = ω_r + v_r (Ky e2 + Kθ sin e3).",
+        "",
+        *_dataclass_rows(KanayamaGains, "[controller.kanayama]"),
+    ]
+    kin = KinematicPlant.supported_events
+    out += [
+        "",
+        "## `[[events]]`",
+        "",
+        "One table per event: `time` (s, >= 0, before `duration`) and `kind`, then "
+        "the kind's parameters. A MuJoCo robot takes every kind; the kinematic plant "
+        f"{', '.join(f'`{k}`' for k in sorted(kin))}.",
+        "",
+        "| kind | parameters | what it does |",
+        "| --- | --- | --- |",
+    ]
+    for kind, cls in EVENTS.items():
+        doc = _cell(" ".join(inspect.cleandoc(cls.__doc__ or "").split()).replace("``", "`"))
+        params = []
+        for f in dataclasses.fields(cls):
+            p = f.metadata.get("param")
+            if p is not None:
+                rng = " > 0" if p.positive else (f" >= {p.minimum:g}" if p.minimum is not None else "")
+                typ = {float: "number", int: "integer", str: "name"}[p.kind]
+                params.append(f"`{f.name}` ({typ}{rng}{'' if p.required else ', optional'})")
+        out.append(f"| `{kind}` | {', '.join(params)} | {doc} |")
+    return "\n".join(out) + "\n"
