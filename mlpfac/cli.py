@@ -42,6 +42,10 @@ def _sink_args(p: argparse.ArgumentParser) -> None:
     g.add_argument("--bind", metavar="ADDRESS", default="127.0.0.1", help=BIND_HELP)
 
 
+ROBOT_HELP = (
+    "run the scenario on this robot: diffdrive, cart, a MuJoCo Menagerie base (pal_tiago, hello_robot_stretch_3, "
+    "menagerie:NAME/ENTRY, ...) or an MJCF file; the reference is slowed to what it can drive (docs/robots.md)"
+)
 BIND_HELP = "address the viewers started here listen on (default 127.0.0.1; 0.0.0.0 is every interface)"
 
 
@@ -62,6 +66,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--seed", type=int, help="override the scenario's seed")
     p.add_argument("--duration", type=float, help="override the duration in seconds")
+    p.add_argument("--robot", help=ROBOT_HELP)
     p.add_argument("--out", type=Path, help="output folder (default runs/SCENARIO-CONTROLLER-sSEED)")
     p.add_argument("--baseline", default="corradini", help="controller for panel (h) of the figure, or 'none'")
     p.add_argument("--no-plot", action="store_true", help="skip figure1.png")
@@ -130,6 +135,10 @@ def main(argv: list[str] | None = None) -> int:
             from mlpfac.scenario import load
 
             load(args.scenario, build=False)  # a bad name or file fails here, before the figure's process starts
+            if args.robot is not None:
+                from mlpfac.on_robot import model_of
+
+                model_of(args.robot)
             with painting(args.baseline != "none" and not args.no_plot) as args.painter:  # figure1 drawn beside
                 return cmd_run(args)
         if args.command == "list":
@@ -233,7 +242,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     from mlpfac.run_folder import Recording, check_outputs, run_into_folder
     from mlpfac.scenario import load
 
-    scn = load(args.scenario).with_overrides(args.controller, args.seed, args.duration)
+    scn = load(args.scenario, robot=args.robot).with_overrides(args.controller, args.seed, args.duration)
     found = scn.table.get("provenance", {})
     if found.get("found"):  # the robot's parts the scenario left to the model: what was found
         print(f"robot: {found['robot']}")

@@ -18,10 +18,20 @@ import mujoco
 import numpy as np
 
 from mlpfac.exceptions import ConfigError
-from mlpfac.plants import edits
+from mlpfac.plants import defaults, drive, edits
 from mlpfac.plants.compiled import yaw
 from mlpfac.plants.config import MujocoConfig
-from mlpfac.plants.detect import ROUND, WHEEL_SHAPES, collision_geoms, describe, is_velocity_servo, names, resolve
+from mlpfac.plants.detect import (
+    ROUND,
+    WHEEL_SHAPES,
+    base_frame,
+    collision_geoms,
+    describe,
+    is_motor,
+    is_velocity_servo,
+    names,
+    resolve,
+)
 from mlpfac.plants.model_file import fingerprint, is_menagerie, load_spec
 
 SETTLE_S = 0.5  # seconds the robot settles on its wheels at least, at construction (the rest pose)
@@ -72,6 +82,10 @@ class Robot:
     geometry: list[dict]  # visual shapes relative to the site frame
     max_wheel_speed: float | None  # the model's limit on the wheel speed (rad/s, a servo's ctrlrange), or None
     locked: tuple[str, ...] = ()  # joints fixed at the keyframe (other_actuators = "lock")
+    seconds: tuple[int, int] = (-1, -1)  # each side's second wheel's actuator (skid-steer), -1: none
+    second_per_wheel: tuple[float, float] = (0.0, 0.0)  # its actuator units per forward wheel unit
+    mix: np.ndarray | None = None  # tendon drive: the two motors' controls per forward wheel torque (2, 2)
+    umax: np.ndarray | None = None  # ... and their control limits (2,)
 
     def substeps(self, period: float, where: str) -> int:
         """Physics steps in ``period`` seconds; a ConfigError unless it is a whole number of them."""
@@ -90,76 +104,109 @@ CACHED = 8
 _LOCK = threading.Lock()
 
 
-def read_robot(config: MujocoConfig) -> Robot:
+def read_robot(config: MujocoConfig, periods: tuple[float, ...] = ()) -> Robot:
     """Load, check and describe the robot of ``config``; each problem a ConfigError naming its key.
 
     Read once per process for a configuration and model file (its size and time of change): the
     plants of a sweep share it and copy what they change (the spec; events compile new models).
     The configuration with the parts it found named (``Robot.config``, what a scenario's load
-    writes into config.toml) is the same robot with nothing left to find: it is not read again."""
+    writes into config.toml) is the same robot with nothing left to find: it is not read again.
+    ``periods``: the control periods a run asks (T, and T x an event's factor): an unset timestep
+    is chosen to divide them all."""
     st = config.path.stat()
     stamp = (st.st_mtime_ns, st.st_size)
     try:
         hash(config)
     except TypeError:  # made in Python with lists: not cached
-        return _read_robot(config, stamp)
+        return _read_robot(config, stamp, periods)
+    key = (config, stamp, periods)
     with _LOCK:  # a Dask worker may run several tasks in threads
-        robot = _ROBOTS.pop((config, stamp), None)
+        robot = _ROBOTS.pop(key, None)
     if robot is None:
-        robot = _read_robot(config, stamp)
+        robot = _read_robot(config, stamp, periods)
     with _LOCK:
-        _ROBOTS[config, stamp] = robot
-        if robot.found and (robot.config, stamp) not in _ROBOTS:
-            _ROBOTS[robot.config, stamp] = dataclasses.replace(robot, found=())
+        _ROBOTS[key] = robot
+        if robot.found and (robot.config, stamp, periods) not in _ROBOTS:
+            _ROBOTS[robot.config, stamp, periods] = dataclasses.replace(robot, found=())
         while len(_ROBOTS) > CACHED:
             del _ROBOTS[next(iter(_ROBOTS))]
     return robot
 
 
-def _read_robot(config: MujocoConfig, stamp: tuple[int, int]) -> Robot:
+def _read_robot(config: MujocoConfig, stamp: tuple[int, int], periods: tuple[float, ...] = ()) -> Robot:
     spec, path = load_spec(config.model)
     where = config.model if is_menagerie(config.model) else str(path)
     m = _compile(spec, where)
     sha256 = fingerprint(m)
+    chosen = defaults.keyframe(config, m)
+    config = defaults.with_chosen(config, chosen)
     qpos0, ctrl0 = _keyframe(m, config, where)
     found = resolve(config, m, qpos0)
     config = found.config
-    acts = (_actuator_id(m, config, "left_actuator", where), _actuator_id(m, config, "right_actuator", where))
-    if acts[0] == acts[1]:
-        raise ConfigError(
-            "right_actuator", f"left and right wheels need two actuators, both are {config.left_actuator!r}"
-        )
-    description = describe(m, config, acts)
-    act_names = [m.actuator(a).name for a in acts]
+    drv = drive.resolve_ids(m, config, where)
+    if drv.tendon:
+        acts = drv.acts
+    else:
+        acts = (_actuator_id(m, config, "left_actuator", where), _actuator_id(m, config, "right_actuator", where))
+        if acts[0] == acts[1]:
+            raise ConfigError(
+                "right_actuator", f"left and right wheels need two actuators, both are {config.left_actuator!r}"
+            )
+    keep = [*acts, *(a for a in drv.seconds if a >= 0)]
+    joints = list(drv.joints) if drv.tendon else [int(m.actuator_trnid[a, 0]) for a in acts]
+    if drv.tendon:
+        joints = _left_first(m, config, joints, qpos0)
+    more = defaults.others(config, m, set(keep)) | defaults.timestep(config, float(m.opt.timestep), periods)
+    config = defaults.with_chosen(config, more)
+    chosen |= more
+    description = describe(m, config, acts, joints)
+    keep_names = [m.actuator(a).name for a in keep]
+    joint_names = [m.joint(j).name for j in joints]
     locked: list[str] = []
     if config.other_actuators == "lock":
         m_full = m
-        locked = edits.lock_other_joints(spec, m, qpos0, acts)
+        locked = edits.lock_other_joints(spec, m, qpos0, tuple(keep))
         m = _compile(spec, where)
         qpos0 = edits.by_name(m_full, qpos0, m, "qpos", m.qpos0)
         ctrl0 = edits.by_name(m_full, ctrl0, m, "ctrl", np.zeros(m.nu))
-        acts = tuple(mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_ACTUATOR, n) for n in act_names)
+        keep = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_ACTUATOR, n) for n in keep_names]
+        joints = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, n) for n in joint_names]
+        acts = (keep[0], keep[1])
+    seconds = [keep[2] if drv.seconds[0] >= 0 else -1]
+    seconds.append(keep[-1] if drv.seconds[1] >= 0 else -1)
     if config.timestep is not None:
         spec.option.timestep = float(config.timestep)
     site = _pose_frame(spec, m, config, where)
-    joints = [int(m.actuator_trnid[a, 0]) for a in acts]
-    wheels = [(j, collision_geoms(m, int(m.jnt_bodyid[j]))) for j in joints]
-    for key, (_, geoms) in zip(("left_actuator", "right_actuator"), wheels, strict=True):
+    driven = [*joints, *(int(m.actuator_trnid[a, 0]) for a in seconds if a >= 0)]
+    wheels = [(j, collision_geoms(m, int(m.jnt_bodyid[j]))) for j in driven]
+    for key, (_, geoms) in zip(("left_actuator", "right_actuator"), wheels, strict=False):
         if not any(int(m.geom_type[g]) in WHEEL_SHAPES for g in geoms):
             raise ConfigError(
                 key,
                 f"the body moved by {getattr(config, key)!r} has no sphere, cylinder or mesh collision geom (the wheel)",
             )
     root0 = int(m.body_rootid[m.jnt_bodyid[joints[0]]])
+    floor = _floor_priority(m, root0)
+    rims = [g for _, geoms in wheels for g in geoms if int(m.geom_type[g]) in WHEEL_SHAPES]
+    more = defaults.tyre(config, m, rims, floor)
+    config, chosen = defaults.with_chosen(config, more), chosen | more
     drawn = [g for g in range(m.ngeom) if m.body_rootid[m.geom_bodyid[g]] == root0]
     visual_only = any(m.geom_contype[g] == 0 and m.geom_conaffinity[g] == 0 for g in drawn)
     if config.tyre == "sphere":
         radius = config.wheel_radius or max(_radius(m, g, j) for j, geoms in wheels for g in geoms)
-        edits.sphere_tyres(spec, m, wheels, radius, _floor_priority(m, root0) + 1)
-    wheel_speed = _speed_limits(m, acts)
+        edits.sphere_tyres(spec, m, wheels, radius, floor + 1)
+    wheel_speed = _speed_limits(m, acts) if not drv.tendon else [None, None]
     if config.actuator == "torque":
-        edits.to_torque_motors(spec, m, acts)
-    if site is None or config.tyre == "sphere" or config.actuator == "torque" or config.timestep is not None:
+        edits.to_torque_motors(spec, m, [a for a in (*acts, *seconds) if a >= 0 and not is_motor(m, a)])
+    casters = config.casters == "frictionless"
+    if site is None or casters or config.tyre == "sphere" or config.actuator == "torque" or config.timestep is not None:
+        m = _compile(spec, where)
+    if casters:  # the floor contacts at rest that are not the wheels slide
+        d = mujoco.MjData(m)
+        d.qpos[:], d.ctrl[:] = qpos0, ctrl0
+        mujoco.mj_step(m, d, nstep=int(round(SETTLE_S / float(m.opt.timestep))))
+        bodies = {int(m.jnt_bodyid[j]) for j in driven}
+        defaults.frictionless_casters(spec, m, d, int(m.body_rootid[m.jnt_bodyid[joints[0]]]), bodies, floor)
         m = _compile(spec, where)
     site = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, edits.POSE_SITE if site is None else m.site(site).name)
     root = int(m.body_rootid[m.site_bodyid[site]])
@@ -169,20 +216,29 @@ def _read_robot(config: MujocoConfig, stamp: tuple[int, int]) -> Robot:
         raise ConfigError(
             kind, f"the body tree of {kind} {name!r} must hang from a <freejoint/> (a robot free to drive)"
         )
-    wheel_bodies = tuple(int(m.jnt_bodyid[j]) for j in joints)
+    wheel_bodies = tuple(int(m.jnt_bodyid[j]) for j in driven)
     tyres = tuple(g for b in wheel_bodies for g in collision_geoms(m, b) if int(m.geom_type[g]) in WHEEL_SHAPES)
     dt = float(m.opt.timestep)
     d = mujoco.MjData(m)
     _settle(m, d, dt, qpos0, ctrl0, int(m.jnt_dofadr[jnt]), where)
     anchors = [d.xanchor[j].copy() for j in joints]
     sign = _wheel_signs(config, d, site, joints, anchors)
-    c = [s * g for s, g in zip(sign, m.actuator_gear[list(acts), 0], strict=True)]
+    dofs = (int(m.jnt_dofadr[joints[0]]), int(m.jnt_dofadr[joints[1]]))
+    if drv.tendon:
+        c, inverse, umax = [1.0, 1.0], *drive.mix(m, d.qpos, acts, dofs, sign)
+    else:
+        c = [s * g for s, g in zip(sign, m.actuator_gear[list(acts), 0], strict=True)]
+        inverse, umax = None, None
+    c2 = [
+        0.0 if a < 0 else float(s * m.actuator_gear[a, 0] * _same_way(m, a, j))
+        for a, s, j in zip(seconds, sign, joints, strict=True)
+    ]
     limit = [w / abs(ci) for w, ci in zip(wheel_speed, c, strict=True) if w is not None]
-    return Robot(
+    robot = Robot(
         where=where,
         config=config,
-        found=found.keys,
-        description=description,
+        found=(*found.keys, *chosen),
+        description=description + defaults.said(chosen, config),
         sha256=sha256,
         spec=spec,
         model=m,
@@ -192,8 +248,8 @@ def _read_robot(config: MujocoConfig, stamp: tuple[int, int]) -> Robot:
         root=root,
         qroot=int(m.jnt_qposadr[jnt]),
         droot=int(m.jnt_dofadr[jnt]),
-        dofs=(int(m.jnt_dofadr[joints[0]]), int(m.jnt_dofadr[joints[1]])),
-        wheel_bodies=(wheel_bodies[0], wheel_bodies[1]),
+        dofs=dofs,
+        wheel_bodies=wheel_bodies,
         tyres=tyres,
         qpos_rest=d.qpos.copy(),
         ctrl_rest=d.ctrl.copy(),
@@ -205,7 +261,28 @@ def _read_robot(config: MujocoConfig, stamp: tuple[int, int]) -> Robot:
         geometry=_static_geometry(m, d, site, root, visual_only),
         max_wheel_speed=min(limit) if limit else None,
         locked=tuple(locked),
+        seconds=(seconds[0], seconds[1]),
+        second_per_wheel=(c2[0], c2[1]),
+        mix=inverse,
+        umax=umax,
     )
+    defaults.check_drive(m, d, robot, config.actuator == "torque" or config.casters != "model", where)
+    return robot
+
+
+def _same_way(m: mujoco.MjModel, a: int, first: int) -> float:
+    """+1 when the second wheel's hinge turns the same way as its side's first wheel's, else -1."""
+    return 1.0 if float(m.jnt_axis[int(m.actuator_trnid[a, 0])] @ m.jnt_axis[first]) > 0 else -1.0
+
+
+def _left_first(m: mujoco.MjModel, config: MujocoConfig, joints: list[int], qpos: np.ndarray) -> list[int]:
+    """The tendon drive's two wheel joints, the left one (+y of the pose frame) first."""
+    d = mujoco.MjData(m)
+    d.qpos[:] = qpos
+    mujoco.mj_kinematics(m, d)
+    origin, R = base_frame(m, d, config, int(m.body_rootid[m.jnt_bodyid[joints[0]]]))
+    side = [float((d.xanchor[j] - origin) @ R[:, 1]) for j in joints]
+    return joints if side[0] > side[1] else joints[::-1]
 
 
 def _compile(spec: mujoco.MjSpec, where: str) -> mujoco.MjModel:
@@ -282,8 +359,12 @@ def _actuator_id(m: mujoco.MjModel, config: MujocoConfig, key: str, where: str) 
         or int(m.jnt_type[m.actuator_trnid[a, 0]]) != mujoco.mjtJoint.mjJNT_HINGE
     ):
         raise ConfigError(key, f"actuator {name!r} must drive a hinge joint (the wheel)")
-    if not is_velocity_servo(m, a):
-        raise ConfigError(key, f"actuator {name!r} must be a velocity servo (<velocity kv=... forcerange=...>)")
+    if not is_velocity_servo(m, a) and not (config.actuator == "torque" and is_motor(m, a)):
+        raise ConfigError(
+            key,
+            f"actuator {name!r} must be a velocity servo (<velocity kv=... forcerange=...>), or a motor with "
+            'actuator = "torque"',
+        )
     return a
 
 

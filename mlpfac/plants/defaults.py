@@ -1,0 +1,155 @@
+"""What a robot's ``[plant]`` table leaves unset, chosen as a researcher expects of a real robot
+(docs/robots.md): each rule below fills one key, and what it chose is written into config.toml.
+
+- ``keyframe``: the model's keyframe named ``home``, where it has one (else its default pose);
+- ``other_actuators``: ``"lock"`` when anything but the drive is actuated (an arm, a torso, a
+  head): every such joint fixed where the robot starts, so it stands still and only the base steps;
+- ``tyre``: ``"sphere"`` when a wheel collides through a mesh, or its contact's friction is not
+  its own (its priority not above the floor's), so that it rolls: else the model's own geoms;
+- ``timestep``: the model's when it divides the control period (and every period an event asks),
+  else the largest one below it that does.
+
+:func:`check_drive` refuses, in one line with the numbers, a robot whose wheels cannot move it as
+shipped, naming the keys that make it drive.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import mujoco
+import numpy as np
+
+from mlpfac.exceptions import ConfigError
+from mlpfac.plants.detect import ROUND
+
+HOME = "home"
+MAX_SUBSTEPS = 1000  # a timestep is looked for down to the period / this
+SERVO_SHARE = 0.5  # a wheel servo must reach this share of its top speed against its joint's damping
+FIX = 'set actuator = "torque" (the wheel-speed PI loop, pi_kp and pi_ki) and casters = "frictionless" in [plant]'
+
+
+def keyframe(config, m: mujoco.MjModel) -> dict:
+    """``{"keyframe": "home"}`` when it is unset and the model has a keyframe of that name."""
+    if config.keyframe is None and mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_KEY, HOME) >= 0:
+        return {"keyframe": HOME}
+    return {}
+
+
+def others(config, m: mujoco.MjModel, keep: set[int]) -> dict:
+    """``{"other_actuators": "lock"}`` when it is unset and an actuator that is not the drive moves a joint."""
+    if config.other_actuators is not None:
+        return {}
+    if any(a not in keep and int(m.actuator_trntype[a]) in (0, 3) for a in range(m.nu)):  # joint, tendon
+        return {"other_actuators": "lock"}
+    return {}
+
+
+def tyre(config, m: mujoco.MjModel, geoms: list[int], floor: int) -> dict:
+    """``{"tyre": "sphere"}`` when it is unset and a wheel geom is a mesh or below the floor's priority."""
+    if config.tyre is not None:
+        return {}
+    if any(int(m.geom_type[g]) not in ROUND or int(m.geom_priority[g]) <= floor for g in geoms):
+        return {"tyre": "sphere"}
+    return {}
+
+
+def timestep(config, dt: float, periods: tuple[float, ...]) -> dict:
+    """``{"timestep": s}`` when it is unset and the model's ``dt`` does not divide every period: the
+    largest timestep below ``dt`` that does (nothing when none does: the plant says so)."""
+    if config.timestep is not None or not periods or all(_whole(p, dt) for p in periods):
+        return {}
+    for n in range(1, MAX_SUBSTEPS + 1):
+        step = periods[0] / n
+        if step <= dt * (1 + 1e-9) and all(_whole(p, step) for p in periods):
+            return {"timestep": float(f"{step:.12g}")}
+    return {}
+
+
+def _whole(period: float, dt: float) -> bool:
+    n = period / dt
+    return round(n) >= 1 and abs(n - round(n)) <= 1e-6 * n
+
+
+def said(chosen: dict, config) -> str:
+    """What the rules chose, for the run's first line ("" when nothing)."""
+    parts = []
+    if "keyframe" in chosen:
+        parts.append(f"keyframe {config.keyframe}")
+    if "other_actuators" in chosen:
+        parts.append("the other actuated joints locked where it starts")
+    if "tyre" in chosen:
+        parts.append("sphere tyres")
+    if "timestep" in chosen:
+        parts.append(f"timestep {config.timestep:g} s")
+    return f"; chosen: {', '.join(parts)}" if parts else ""
+
+
+def with_chosen(config, chosen: dict):
+    return dataclasses.replace(config, **chosen) if chosen else config
+
+
+def frictionless_casters(spec: mujoco.MjSpec, m: mujoco.MjModel, d: mujoco.MjData, root: int, wheels, floor: int):
+    """The robot's floor contacts that are not its wheels slide without friction (condim 1, above the
+    floor's priority): the casters a model leaves out. Returns how many geoms changed."""
+    geoms = _drag_geoms(m, d, root, wheels)
+    for g in geoms:
+        spec.geoms[g].condim, spec.geoms[g].priority = 1, floor + 1
+    return len(geoms)
+
+
+def _drag_geoms(m: mujoco.MjModel, d: mujoco.MjData, root: int, wheels) -> list[int]:
+    """The robot's geoms other than its wheels' touching another body (the floor) at rest, with friction."""
+    out = set()
+    for c in d.contact[: d.ncon]:
+        for g, other in (c.geom, c.geom[::-1]):
+            mine, theirs = m.body_rootid[m.geom_bodyid[g]] == root, m.body_rootid[m.geom_bodyid[other]] != root
+            if mine and theirs and int(m.geom_bodyid[g]) not in wheels and c.dim > 1:
+                out.add(int(g))
+    return sorted(out)
+
+
+def check_drive(m: mujoco.MjModel, d: mujoco.MjData, robot, torque: bool, where: str) -> None:
+    """Refuse a robot whose wheel servos cannot move it as shipped: a servo that at full command
+    reaches less than SERVO_SHARE of its speed against its joint's damping, or floor contacts other
+    than the wheels dragging harder (friction x load) than the wheels can push."""
+    if torque:
+        return
+    said = []
+    push = 0.0
+    for a, dof in zip(robot.acts, robot.dofs, strict=True):
+        kv, gear = float(m.actuator_gainprm[a, 0]), abs(float(m.actuator_gear[a, 0]))
+        top = (
+            float(min(-m.actuator_ctrlrange[a, 0], m.actuator_ctrlrange[a, 1]))
+            if m.actuator_ctrllimited[a]
+            else math.inf
+        )
+        force = kv * top * gear
+        if m.actuator_forcelimited[a]:
+            force = min(force, float(min(-m.actuator_forcerange[a, 0], m.actuator_forcerange[a, 1])) * gear)
+        push += force / robot.real_radius
+        b = float(m.dof_damping[dof])
+        if math.isfinite(top) and b > 0:
+            speed = gear * kv * top / (b + gear * gear * kv)  # the wheel speed where the servo meets the damping
+            if speed < SERVO_SHARE * top / gear:
+                text = (
+                    f"wheel servo kv {kv:g} gives at most {force:.3g} N m against joint damping {b:g} N m s/rad "
+                    f"({speed:.2g} of {top / gear:.3g} rad/s at full command)"
+                )
+                said += [text] if text not in said else []
+    drag = []
+    geoms = _drag_geoms(m, d, robot.root, set(robot.wheel_bodies))
+    for g in geoms:
+        f = np.zeros(6)
+        load = sum(
+            (mujoco.mj_contactForce(m, d, i, f), abs(f[0]))[1] for i, c in enumerate(d.contact[: d.ncon]) if g in c.geom
+        )
+        drag.append(float(m.geom_friction[g, 0]) * load)
+    if drag and sum(drag) >= push:
+        said.append(
+            f"{', '.join(sorted({m.body(int(m.geom_bodyid[g])).name for g in geoms}))} drag {sum(drag):.3g} N on the "
+            f"floor (friction x load) against the wheels' {push:.3g} N"
+        )
+    if said:
+        raise ConfigError(where, f"cannot drive as shipped: {'; '.join(said)}: {FIX}")
