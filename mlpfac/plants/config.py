@@ -50,7 +50,7 @@ class MujocoConfig:
     )
     other_actuators: str | None = None  # "hold": keep the keyframe's controls; "lock": fix their joints at the keyframe
     tyre: str | None = None  # "model": the wheels' own collision geoms; "sphere": a sphere tyre on each wheel
-    casters: str = "model"  # "model": other floor contacts as modelled; "frictionless": they slide (condim 1)
+    casters: str | None = None  # "model": other floor contacts as modelled; "frictionless": they slide (condim 1)
     timestep: float | None = None  # physics timestep (s); None: the model's
     wheel_radius: float | None = None  # radius the IK believes (m); None: read from the model
     track: float | None = None  # wheel separation the IK believes (m); None: read from the model
@@ -67,7 +67,7 @@ class MujocoConfig:
             "casters": ("model", "frictionless"),
         }
         for name, allowed in choices.items():
-            if getattr(self, name) not in allowed and not (name != "casters" and getattr(self, name) is None):
+            if getattr(self, name) not in allowed and getattr(self, name) is not None:
                 raise ConfigError(name, f"choose {' or '.join(map(repr, allowed))}, got {getattr(self, name)!r}")
         names = ("model", "left_actuator", "right_actuator", "left_actuator_2", "right_actuator_2", "site", "body")
         for name in (*names, "keyframe"):

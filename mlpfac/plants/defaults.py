@@ -6,6 +6,8 @@
   head): every such joint fixed where the robot starts, so it stands still and only the base steps;
 - ``tyre``: ``"sphere"`` when a wheel collides through a mesh, or its contact's friction is not
   its own (its priority not above the floor's), so that it rolls: else the model's own geoms;
+- ``casters``: ``"frictionless"`` when parts of the robot that are neither wheels nor jointed
+  (a skid standing in for casters) touch the floor with friction at rest: they slide (condim 1);
 - ``timestep``: the model's when it divides the control period (and every period an event asks),
   else the largest one below it that does.
 
@@ -25,9 +27,11 @@ from mlpfac.exceptions import ConfigError
 from mlpfac.plants.detect import ROUND
 
 HOME = "home"
+CHATTER_S = 0.3  # seconds of a steady wheel command the servos are tried with
+SMALLEST_STEP = 1 / 16  # a timestep is halved (for servos that chatter) down to this share of the model's
 MAX_SUBSTEPS = 1000  # a timestep is looked for down to the period / this
 SERVO_SHARE = 0.5  # a wheel servo must reach this share of its top speed against its joint's damping
-FIX = 'set actuator = "torque" (the wheel-speed PI loop, pi_kp and pi_ki) and casters = "frictionless" in [plant]'
+FIX = 'set actuator = "torque" (the wheel-speed PI loop, pi_kp and pi_ki)'
 
 
 def keyframe(config, m: mujoco.MjModel) -> dict:
@@ -67,6 +71,40 @@ def timestep(config, dt: float, periods: tuple[float, ...]) -> dict:
     return {}
 
 
+def chatters(robot) -> bool:
+    """Whether the wheel servos, asked a steady speed (half their limit, else 1 rad/s) from rest,
+    chatter (their force flips sign at most steps of the last half of CHATTER_S) or blow up: a
+    stiff servo whose force limit clamps it overshoots within one timestep."""
+    m = robot.model
+    d = mujoco.MjData(m)
+    d.qpos[:], d.ctrl[:] = robot.qpos_rest, robot.ctrl_rest
+    mujoco.mj_forward(m, d)
+    w = 0.5 * robot.max_wheel_speed if robot.max_wheel_speed is not None else 1.0
+    for a, c in zip((*robot.acts, *robot.seconds), (*robot.act_per_wheel, *robot.second_per_wheel), strict=True):
+        if a >= 0:
+            d.ctrl[a] = c * w
+    n = int(round(CHATTER_S / float(m.opt.timestep)))
+    flips, last = 0, 0.0
+    for k in range(n):
+        mujoco.mj_step(m, d)
+        f = float(np.sign(d.actuator_force[robot.acts[0]]))
+        flips += k >= n // 2 and f != last
+        last = f
+        if not np.all(np.isfinite(d.qvel)) or np.max(np.abs(d.qvel)) > 1e3:
+            return True
+    return flips > n // 8
+
+
+def smaller_timestep(dt: float, periods: tuple[float, ...], floor: float) -> float | None:
+    """The largest timestep below ``dt / 2`` that divides every period, None below ``floor``."""
+    chosen = timestep(_Unset(), dt / 2, periods).get("timestep", dt / 2)
+    return chosen if chosen >= floor * (1 - 1e-9) else None
+
+
+class _Unset:
+    timestep = None
+
+
 def _whole(period: float, dt: float) -> bool:
     n = period / dt
     return round(n) >= 1 and abs(n - round(n)) <= 1e-6 * n
@@ -81,6 +119,8 @@ def said(chosen: dict, config) -> str:
         parts.append("the other actuated joints locked where it starts")
     if "tyre" in chosen:
         parts.append("sphere tyres")
+    if "casters" in chosen:
+        parts.append("frictionless skids")
     if "timestep" in chosen:
         parts.append(f"timestep {config.timestep:g} s")
     return f"; chosen: {', '.join(parts)}" if parts else ""
@@ -90,17 +130,30 @@ def with_chosen(config, chosen: dict):
     return dataclasses.replace(config, **chosen) if chosen else config
 
 
-def frictionless_casters(spec: mujoco.MjSpec, m: mujoco.MjModel, d: mujoco.MjData, root: int, wheels, floor: int):
-    """The robot's floor contacts that are not its wheels slide without friction (condim 1, above the
-    floor's priority): the casters a model leaves out. Returns how many geoms changed."""
-    geoms = _drag_geoms(m, d, root, wheels)
+def skids(m: mujoco.MjModel, qpos: np.ndarray, ctrl: np.ndarray, seconds: float, root: int, wheels) -> list[int]:
+    """The robot's geoms on bodies that do not turn on a joint of their own, not its wheels, that touch another
+    body (the floor) with friction once it has stood ``seconds`` from ``qpos``: skids where the
+    real robot has casters."""
+    d = mujoco.MjData(m)
+    d.qpos[:], d.ctrl[:] = qpos, ctrl
+    mujoco.mj_step(m, d, nstep=int(round(seconds / float(m.opt.timestep))))
+    return [g for g in drag_geoms(m, d, root, wheels) if not _turns(m, int(m.geom_bodyid[g]))]
+
+
+def _turns(m: mujoco.MjModel, body: int) -> bool:
+    """Whether a body has a joint of its own other than a free joint (a caster wheel's, say)."""
+    adr, n = int(m.body_jntadr[body]), int(m.body_jntnum[body])
+    return any(int(m.jnt_type[j]) != mujoco.mjtJoint.mjJNT_FREE for j in range(adr, adr + n))
+
+
+def frictionless(spec: mujoco.MjSpec, geoms: list[int], floor: int) -> None:
+    """The geoms slide without friction on the floor (condim 1, above the floor's priority)."""
     for g in geoms:
         spec.geoms[g].condim, spec.geoms[g].priority = 1, floor + 1
-    return len(geoms)
 
 
-def _drag_geoms(m: mujoco.MjModel, d: mujoco.MjData, root: int, wheels) -> list[int]:
-    """The robot's geoms other than its wheels' touching another body (the floor) at rest, with friction."""
+def drag_geoms(m: mujoco.MjModel, d: mujoco.MjData, root: int, wheels) -> list[int]:
+    """The robot's geoms other than its wheels' touching another body (the floor), with friction."""
     out = set()
     for c in d.contact[: d.ncon]:
         for g, other in (c.geom, c.geom[::-1]):
@@ -110,11 +163,11 @@ def _drag_geoms(m: mujoco.MjModel, d: mujoco.MjData, root: int, wheels) -> list[
     return sorted(out)
 
 
-def check_drive(m: mujoco.MjModel, d: mujoco.MjData, robot, torque: bool, where: str) -> None:
+def check_drive(m: mujoco.MjModel, d: mujoco.MjData, robot, config, where: str) -> None:
     """Refuse a robot whose wheel servos cannot move it as shipped: a servo that at full command
     reaches less than SERVO_SHARE of its speed against its joint's damping, or floor contacts other
     than the wheels dragging harder (friction x load) than the wheels can push."""
-    if torque:
+    if config.actuator == "torque":
         return
     said = []
     push = 0.0
@@ -139,7 +192,7 @@ def check_drive(m: mujoco.MjModel, d: mujoco.MjData, robot, torque: bool, where:
                 )
                 said += [text] if text not in said else []
     drag = []
-    geoms = _drag_geoms(m, d, robot.root, set(robot.wheel_bodies))
+    geoms = drag_geoms(m, d, robot.root, set(robot.wheel_bodies))
     for g in geoms:
         f = np.zeros(6)
         load = sum(
@@ -152,4 +205,16 @@ def check_drive(m: mujoco.MjModel, d: mujoco.MjData, robot, torque: bool, where:
             f"floor (friction x load) against the wheels' {push:.3g} N"
         )
     if said:
-        raise ConfigError(where, f"cannot drive as shipped: {'; '.join(said)}: {FIX}")
+        fix = FIX + (' and casters = "frictionless"' if drag and sum(drag) >= push else "")
+        raise ConfigError(where, f"cannot drive as shipped: {'; '.join(said)}: {fix} in [plant]")
+
+
+def chatter_refusal(robot, dt: float) -> str:
+    """Why the wheel servos cannot run here, in numbers, and the keys that drive the robot instead."""
+    m, a = robot.model, robot.acts[0]
+    dof = robot.dofs[0]
+    return (
+        f"the wheel servos (kv {float(m.actuator_gainprm[a, 0]):g}, gear {float(m.actuator_gear[a, 0]):g}, on a wheel "
+        f"of {float(m.dof_M0[dof]):.3g} kg m^2, their force clamped) chatter at every timestep down to {dt:g} s: "
+        'set actuator = "torque" (the wheel-speed PI loop, pi_kp and pi_ki) in [plant], or a timestep'
+    )

@@ -144,7 +144,7 @@ def sphere_tyres(spec: mujoco.MjSpec, m: mujoco.MjModel, wheels, radius: float, 
             size=[radius, 0.0, 0.0],
             pos=m.jnt_pos[joint].copy(),
             friction=m.geom_friction[g0].copy(),
-            condim=int(m.geom_condim[g0]),
+            condim=min(3, int(m.geom_condim[g0])) if len(wheels) > 2 else int(m.geom_condim[g0]),  # a skid-steer slides
             contype=int(m.geom_contype[g0]),
             conaffinity=int(m.geom_conaffinity[g0]),
             priority=priority,

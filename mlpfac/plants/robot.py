@@ -133,10 +133,16 @@ def read_robot(config: MujocoConfig, periods: tuple[float, ...] = ()) -> Robot:
     return robot
 
 
-def _read_robot(config: MujocoConfig, stamp: tuple[int, int], periods: tuple[float, ...] = ()) -> Robot:
+def _read_robot(
+    config: MujocoConfig, stamp: tuple[int, int], periods: tuple[float, ...] = (), probe: bool = True
+) -> Robot:
+    """The robot of ``config`` (:func:`read_robot`); ``probe``: try its wheel servos, and halve a
+    timestep left unset while they chatter (:func:`mlpfac.plants.defaults.chatters`)."""
+    user = config
     spec, path = load_spec(config.model)
     where = config.model if is_menagerie(config.model) else str(path)
     m = _compile(spec, where)
+    spec_dt = float(m.opt.timestep)
     sha256 = fingerprint(m)
     chosen = defaults.keyframe(config, m)
     config = defaults.with_chosen(config, chosen)
@@ -198,16 +204,19 @@ def _read_robot(config: MujocoConfig, stamp: tuple[int, int], periods: tuple[flo
     wheel_speed = _speed_limits(m, acts) if not drv.tendon else [None, None]
     if config.actuator == "torque":
         edits.to_torque_motors(spec, m, [a for a in (*acts, *seconds) if a >= 0 and not is_motor(m, a)])
-    casters = config.casters == "frictionless"
-    if site is None or casters or config.tyre == "sphere" or config.actuator == "torque" or config.timestep is not None:
+    if site is None or config.tyre == "sphere" or config.actuator == "torque" or config.timestep is not None:
         m = _compile(spec, where)
-    if casters:  # the floor contacts at rest that are not the wheels slide
-        d = mujoco.MjData(m)
-        d.qpos[:], d.ctrl[:] = qpos0, ctrl0
-        mujoco.mj_step(m, d, nstep=int(round(SETTLE_S / float(m.opt.timestep))))
+    if config.casters != "model":  # floor contacts at rest that are not the wheels and drag: they slide
         bodies = {int(m.jnt_bodyid[j]) for j in driven}
-        defaults.frictionless_casters(spec, m, d, int(m.body_rootid[m.jnt_bodyid[joints[0]]]), bodies, floor)
-        m = _compile(spec, where)
+        skids = defaults.skids(m, qpos0, ctrl0, SETTLE_S, root0, bodies)
+        if skids and config.casters is None:
+            config, chosen = (
+                defaults.with_chosen(config, {"casters": "frictionless"}),
+                chosen | {"casters": "frictionless"},
+            )
+        if skids:
+            defaults.frictionless(spec, skids, floor)
+            m = _compile(spec, where)
     site = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, edits.POSE_SITE if site is None else m.site(site).name)
     root = int(m.body_rootid[m.site_bodyid[site]])
     jnt = int(m.body_jntadr[root])
@@ -266,8 +275,22 @@ def _read_robot(config: MujocoConfig, stamp: tuple[int, int], periods: tuple[flo
         mix=inverse,
         umax=umax,
     )
-    defaults.check_drive(m, d, robot, config.actuator == "torque" or config.casters != "model", where)
-    return robot
+    defaults.check_drive(m, d, robot, config, where)
+    if not probe or config.actuator != "velocity" or user.timestep is not None:
+        return robot
+    step = dt
+    while defaults.chatters(robot):
+        step = defaults.smaller_timestep(step, periods or (dt,), spec_dt * defaults.SMALLEST_STEP)
+        if step is None:
+            raise ConfigError(where, defaults.chatter_refusal(robot, robot.dt))
+        robot = _read_robot(dataclasses.replace(user, timestep=step), stamp, periods, probe=False)
+    if step == dt:
+        return robot
+    return dataclasses.replace(
+        robot,
+        found=(*robot.found, "timestep"),
+        description=f"{robot.description}; timestep {step:g} s (the wheel servos chatter at {dt:g} s)",
+    )
 
 
 def _same_way(m: mujoco.MjModel, a: int, first: int) -> float:
