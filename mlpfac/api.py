@@ -24,8 +24,12 @@ from mlpfac.scenario import Scenario, load
 from mlpfac.sweeps.worker import not_in_a_worker
 
 
-def _scenario(scenario: Scenario | str | Path) -> Scenario:
-    return scenario if isinstance(scenario, Scenario) else load(scenario)
+def _scenario(scenario: Scenario | str | Path, robot: str | None = None) -> Scenario:
+    if isinstance(scenario, Scenario):
+        if robot is not None:
+            raise ConfigError("robot", "a robot puts a scenario's file on it: give the scenario by name or path")
+        return scenario
+    return load(scenario, robot=robot)
 
 
 def _spec(controller, where: str) -> str:
@@ -48,6 +52,7 @@ def run(
     record: bool = True,
     sink=None,
     on_step=None,
+    robot: str | None = None,
 ) -> RunRecord:
     """One closed-loop run of ``scenario`` (a :class:`Scenario`, a shipped name or a .toml path).
 
@@ -58,13 +63,13 @@ def run(
     run.rrd (``record``), put in place only when whole. Without it, ``sink`` (:mod:`mlpfac.log`)
     may receive the recording and ``on_step(k)`` is called after every step. A status "diverged"
     or "interrupted" keeps what was recorded; what a user's controller raises is a
-    :class:`~mlpfac.exceptions.PluginError`.
+    :class:`~mlpfac.exceptions.PluginError`. ``robot`` puts the scenario on that robot (as ``--robot``).
     """
     from mlpfac.runner import build
     from mlpfac.runner import run as run_scenario
 
     not_in_a_worker("run")
-    scn = _scenario(scenario)
+    scn = _scenario(scenario, robot)
     instance = None
     if controller is not None and not isinstance(controller, str | Path | type):
         instance, controller = controller, type(controller)
@@ -98,6 +103,7 @@ def sweep(
     batch_size: int = 64,
     scheduler: str | None = None,
     save_rrd: bool = False,
+    robots: list[str] | None = None,
 ) -> list[dict]:
     """Run scenarios x controllers x seeds (as ``mlpfac sweep``) and return the sweep's rows: the
     ``rows`` of sweep.json, one per scenario, controller and phase. With ``out`` the folder is
@@ -107,7 +113,8 @@ def sweep(
 
     The returned list has ``.errors`` ({(scenario, controller, seed): traceback}) and ``.paired``
     (the rows of paired.json). Ctrl-C raises KeyboardInterrupt (with ``out``, the runs written are
-    kept and the next call resumes them)."""
+    kept and the next call resumes them). ``robots``: every scenario on each (as ``--robots``)."""
+    from mlpfac.on_robot import with_robots
     from mlpfac.sweeps import engine
 
     not_in_a_worker("sweep")
@@ -131,7 +138,7 @@ def sweep(
     tmp = None if out is not None else Path(tempfile.mkdtemp(prefix="mlpfac-sweep-"))
     try:
         result = engine.sweep_folder(
-            [str(s) for s in scenarios],
+            with_robots([str(s) for s in scenarios], robots),
             text,
             seeds,
             Path(out) if out is not None else tmp,

@@ -42,10 +42,6 @@ def _sink_args(p: argparse.ArgumentParser) -> None:
     g.add_argument("--bind", metavar="ADDRESS", default="127.0.0.1", help=BIND_HELP)
 
 
-ROBOT_HELP = (
-    "run the scenario on this robot: diffdrive, cart, a MuJoCo Menagerie base (pal_tiago, hello_robot_stretch_3, "
-    "menagerie:NAME/ENTRY, ...) or an MJCF file; the reference is slowed to what it can drive (docs/robots.md)"
-)
 BIND_HELP = "address the viewers started here listen on (default 127.0.0.1; 0.0.0.0 is every interface)"
 
 
@@ -66,6 +62,8 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--seed", type=int, help="override the scenario's seed")
     p.add_argument("--duration", type=float, help="override the duration in seconds")
+    from mlpfac.on_robot import ROBOT_HELP
+
     p.add_argument("--robot", help=ROBOT_HELP)
     p.add_argument("--out", type=Path, help="output folder (default runs/SCENARIO-CONTROLLER-sSEED)")
     p.add_argument("--baseline", default="corradini", help="controller for panel (h) of the figure, or 'none'")
@@ -97,6 +95,9 @@ def build_parser() -> argparse.ArgumentParser:
         "--out", type=Path, default=Path("runs/check"), help="results folder (default runs/check); resumable"
     )
     p.add_argument("--workers", type=int, default=2, help="local worker processes (default 2)")
+    from mlpfac.on_robot import ROBOT_HELP
+
+    p.add_argument("--robot", help=ROBOT_HELP)
 
     p = sub.add_parser(
         "view",
@@ -198,7 +199,7 @@ def cmd_report(args: argparse.Namespace) -> int:
 def cmd_check(args: argparse.Namespace) -> int:
     from mlpfac.checks import check
 
-    result = check(args.budget, args.junit, args.summary, args.baseline, args.out, args.workers)
+    result = check(args.budget, args.junit, args.summary, args.baseline, args.out, args.workers, args.robot)
     for line in result.lines():
         print(line)
     if result.cases:

@@ -20,8 +20,6 @@ import importlib.resources
 import math
 from pathlib import Path
 
-import numpy as np
-
 from mlpfac.exceptions import ConfigError
 
 SHARE = 0.5  # the reference's peak wheel speed, as a share of the robot's wheel-speed limit
@@ -36,6 +34,38 @@ SHIPPED = {"diffdrive": "scene.xml", "cart": "cart-scene.xml"}  # this package's
 SPEEDS = {"eight": ("wx", "wy"), "circle": ("rate",), "line": ("speed",), "lemniscate": ("rate",)}
 DEFAULT_SPEEDS = {"eight": (0.25, 0.5), "circle": (0.5,), "line": (0.5,), "lemniscate": (0.3,)}
 PEAK_SAMPLES = 2001
+
+
+ROBOT_HELP = (
+    "run the scenario on this robot: diffdrive, cart, a MuJoCo Menagerie base (pal_tiago, hello_robot_stretch_3, "
+    "menagerie:NAME/ENTRY, ...) or an MJCF file; the reference is slowed to what it can drive (docs/robots.md)"
+)
+AT = "@"  # SCENARIO@ROBOT: a scenario of a sweep on a robot (--robot, --robots, a budget's robots)
+
+
+def with_robots(scenarios: list[str], robots: list[str] | None) -> list[str]:
+    """Each scenario on each robot, as SCENARIO@ROBOT (the scenarios as they are without robots)."""
+    if not robots:
+        return list(scenarios)
+    for r in robots:
+        model_of(r)  # a bad robot is named before anything runs
+    return [f"{s}{AT}{r}" for s in scenarios for r in robots]
+
+
+def split_robot(src: str) -> tuple[str, str | None]:
+    """(scenario, robot or None) of a sweep's SCENARIO@ROBOT."""
+    head, at, robot = str(src).rpartition(AT)
+    return (head, robot) if at and head else (str(src), None)
+
+
+def robots_flag(text: str | None, flag: str) -> list[str] | None:
+    """The robots of a comma-separated flag (None when not given)."""
+    if text is None:
+        return None
+    robots = [r.strip() for r in text.split(",")]
+    if not all(robots):
+        raise ConfigError(flag, f"expected comma-separated robots, got {text!r}")
+    return robots
 
 
 def model_of(robot: str) -> str:
@@ -66,6 +96,8 @@ def robot_name(robot: str) -> str:
 
 def on_robot(table: dict, robot: str) -> dict:
     """The scenario ``table`` (as read from its file) put on ``robot`` by the module's rule."""
+    import numpy as np
+
     from mlpfac.events import ControlPeriod, parse_event
     from mlpfac.plants.config import MujocoConfig
     from mlpfac.plants.robot import read_robot
