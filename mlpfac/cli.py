@@ -179,6 +179,13 @@ def cmd_list() -> int:
     for name in names:
         scn = load(name, build=False)
         print(f"{name:<{width}}  {scn.plant_kind:<9}  {scn.description}")
+    from mlpfac.on_robot import robots_here
+
+    print("\nrobots (--robot NAME, or an MJCF file):")
+    robots = robots_here()
+    wide = max(len(n) for n, _ in robots)
+    for name, where in robots:
+        print(f"  {name:<{wide}}  {where}")
     print(f"\ncontrollers: {', '.join(CONTROLLERS)}")
     installed = entry_points()
     if installed:

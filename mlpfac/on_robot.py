@@ -1,8 +1,9 @@
 """Any scenario on any robot (``--robot NAME_OR_PATH``): a scenario's reference, events, noise and
 controller put on another robot, by one rule (docs/robots.md):
 
-- the robot is its model alone (``[plant] kind = "mujoco"``, ``model``): every other part is found
-  or chosen in the model (:mod:`mlpfac.plants.defaults`); the pose noise is kept;
+- the robot is its model alone (``[plant] kind = "mujoco"``, ``model``), or a robot file's
+  ``[plant]`` table: every other part is found or chosen in the model
+  (:mod:`mlpfac.plants.defaults`); the scenario's pose noise is kept;
 - the reference is slowed in time (the same path, v and omega x k, k <= 1) until its peak wheel
   speed (|v| + |omega| b / 2) / r is at most ``SHARE`` of the robot's wheel-speed limit: the
   servos' control range, or, for a drive without one, the speed at which the wheels' largest torque
@@ -30,7 +31,7 @@ MENAGERIE_BASES = (
     "hello_robot_stretch_3",
     "rainbow_robotics_rby1",
 )
-SHIPPED = {"diffdrive": "scene.xml", "cart": "cart-scene.xml"}  # this package's robots (models/)
+SHIPPED = {"diffdrive": "scene.xml", "cart": "cart-scene.xml", "rby1a": "rby1a.toml"}  # this package's (models/)
 SPEEDS = {"eight": ("wx", "wy"), "circle": ("rate",), "line": ("speed",), "lemniscate": ("rate",)}
 DEFAULT_SPEEDS = {"eight": (0.25, 0.5), "circle": (0.5,), "line": (0.5,), "lemniscate": (0.3,)}
 PEAK_SAMPLES = 2001
@@ -38,7 +39,8 @@ PEAK_SAMPLES = 2001
 
 ROBOT_HELP = (
     "run the scenario on this robot: diffdrive, cart, a MuJoCo Menagerie base (pal_tiago, hello_robot_stretch_3, "
-    "menagerie:NAME/ENTRY, ...) or an MJCF file; the reference is slowed to what it can drive (docs/robots.md)"
+    "menagerie:NAME/ENTRY, ...), an MJCF file, or a TOML file of one [plant] table; the reference is slowed to "
+    "what it can drive (docs/robots.md)"
 )
 AT = "@"  # SCENARIO@ROBOT: a scenario of a sweep on a robot (--robot, --robots, a budget's robots)
 
@@ -70,16 +72,19 @@ def robots_flag(text: str | None, flag: str) -> list[str] | None:
 
 def model_of(robot: str) -> str:
     """The ``[plant] model`` a ``--robot`` names: a shipped robot, a Menagerie one (``NAME``,
-    ``menagerie:NAME[/ENTRY]``), or an MJCF file (from the current folder)."""
+    ``menagerie:NAME[/ENTRY]``), an MJCF file (from the current folder), or a robot file's."""
     if not isinstance(robot, str) or not robot:
         raise ConfigError("--robot", f"expected a robot's name or an MJCF file, got {robot!r}")
     if robot in SHIPPED:
-        return str(importlib.resources.files("mlpfac.models") / SHIPPED[robot])
+        robot = _shipped(robot)
+        return str(robot_table(robot)["model"]) if robot.endswith(".toml") else robot
     if robot.startswith("menagerie:"):
         return robot
     if robot.split("/")[0] in MENAGERIE_BASES:
         return f"menagerie:{robot}"
     path = Path(robot).expanduser()
+    if path.suffix.lower() == ".toml":
+        return str(robot_table(robot)["model"])
     if path.suffix.lower() != ".xml":
         known = ", ".join([*SHIPPED, *MENAGERIE_BASES])
         raise ConfigError("--robot", f"{robot!r} is neither a robot ({known}) nor an MJCF file (.xml)")
@@ -88,9 +93,55 @@ def model_of(robot: str) -> str:
     return str(path.resolve())
 
 
+def _shipped(robot: str) -> str:
+    return str(importlib.resources.files("mlpfac.models") / SHIPPED[robot])
+
+
+def robot_table(robot: str) -> dict:
+    """The ``[plant]`` table of a robot: a TOML file's (a robot with the keys that make it drive,
+    its model relative to the file), else ``model`` alone."""
+    path = Path(_shipped(robot) if robot in SHIPPED else robot).expanduser()
+    if path.suffix.lower() != ".toml":
+        return {"kind": "mujoco", "model": model_of(robot)}
+    from mlpfac.scenario import read_toml
+
+    table = read_toml(path, "robot file")
+    plant = table.get("plant")
+    if set(table) != {"plant"} or not isinstance(plant, dict) or not isinstance(plant.get("model"), str):
+        raise ConfigError(f"--robot {path}", "a robot file holds one [plant] table with its model")
+    plant = {"kind": "mujoco", **plant}
+    if not plant["model"].startswith("menagerie:"):
+        plant["model"] = str((path.parent / plant["model"]).resolve())
+    return plant
+
+
+def robots_here() -> list[tuple[str, str]]:
+    """(name, where it is, or why it cannot run here) of each robot ``--robot`` knows by name."""
+    out = [(name, f"shipped (models/{file})") for name, file in SHIPPED.items()]
+    out[-1] = (out[-1][0], f"{out[-1][1]}: rainbow_robotics_rby1 with the keys that make it drive")
+    try:
+        import mujoco_menagerie as mm
+    except ImportError:
+        why = "needs the mujoco-menagerie package: pip install 'mlpfac[menagerie]'"
+        return out + [(name, why) for name in MENAGERIE_BASES]
+    cache = mm.Cache()
+    for name in MENAGERIE_BASES:
+        if cache.root is not None:
+            here = (cache.root / name).is_dir()
+            out.append((name, f"MuJoCo Menagerie, {'in' if here else 'not in'} MENAGERIE_ROOT={cache.root}"))
+        elif cache.is_cached(mm.get(name)):
+            out.append((name, f"MuJoCo Menagerie, downloaded ({cache.dir})"))
+        else:
+            out.append(
+                (name, "MuJoCo Menagerie, not downloaded: fetched on first use online; offline set MENAGERIE_ROOT")
+            )
+    return out
+
+
 def robot_name(robot: str) -> str:
     """A short name of the robot for a scenario's name: letters, digits and . _ -."""
-    stem = robot.removeprefix("menagerie:").split("/")[0] if not robot.endswith(".xml") else Path(robot).stem
+    file = robot.endswith((".xml", ".toml"))
+    stem = Path(robot).stem if file else robot.removeprefix("menagerie:").split("/")[0]
     return "".join(c if c.isalnum() or c in "._-" else "-" for c in stem) or "robot"
 
 
@@ -105,8 +156,8 @@ def on_robot(table: dict, robot: str) -> dict:
 
     out = copy.deepcopy(table)
     old = out.get("plant") if isinstance(out.get("plant"), dict) else {}
-    plant = {"kind": "mujoco", "model": model_of(robot)}
-    if "pose_noise_std" in old:
+    plant = robot_table(robot)
+    if "pose_noise_std" in old and "pose_noise_std" not in plant:
         plant["pose_noise_std"] = old["pose_noise_std"]
     T = float(out.get("T", 0.01))
     duration = float(out.get("duration", 25.0))
@@ -115,6 +166,8 @@ def on_robot(table: dict, robot: str) -> dict:
     periods = (T, *(ev.factor * T for ev in events if isinstance(ev, ControlPeriod)))
     try:
         r = read_robot(MujocoConfig(**{k: v for k, v in plant.items() if k != "kind"}), periods)
+    except TypeError as err:
+        raise ConfigError(f"--robot {robot}", f"not a [plant] key: {err}") from None
     except ConfigError as err:
         raise ConfigError(f"--robot {robot}: {err.where}".rstrip(": "), err.what) from None
     w_max = wheel_speed_limit(r)
