@@ -89,7 +89,7 @@ def resolve(config: MujocoConfig, m: mujoco.MjModel, qpos: np.ndarray) -> Found:
         if pair is not None:
             changes["tendon_actuators"] = (m.actuator(pair[0]).name, m.actuator(pair[1]).name)
             named = ["left_actuator", "right_actuator"]  # the wheels are the tendons' two joints
-        elif len(found) == 4:
+        elif len(found) == 4 and len({_root(m, a) for a in found}) == 1:
             changes |= _skid_steer(m, d, config, found)
             named = ["left_actuator", "right_actuator"]
     if config.tendon_actuators is None and len(named) < 2:
@@ -182,7 +182,7 @@ def _wheel_pair(m: mujoco.MjModel, d: mujoco.MjData, config: MujocoConfig, found
         have = f"only {_listed(m, found)}" if found else "none"
         raise ConfigError(
             "left_actuator",
-            f"two wheel servos needed, found {have} (a wheel: a hinge joint driven by one velocity servo, its axis "
+            f"two wheel servos needed, found {have} (a wheel: a hinge joint driven by one velocity servo or motor, its axis "
             f"level, its body's sphere, cylinder or mesh collision geom low; {names(m, mujoco.mjtObj.mjOBJ_ACTUATOR, m.nu)}): "
             f"{PICK}",
         )

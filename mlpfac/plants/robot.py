@@ -363,9 +363,12 @@ def _floor_priority(m: mujoco.MjModel, root: int) -> int:
 
 
 def _speed_limits(m: mujoco.MjModel, acts) -> list[float | None]:
-    """Each velocity servo's control limit (actuator units; a wheel speed once divided by gear and sign)."""
+    """Each velocity servo's control limit (actuator units; a wheel speed once divided by gear and
+    sign); None for a motor (its control is a torque)."""
     return [
-        float(min(-m.actuator_ctrlrange[a, 0], m.actuator_ctrlrange[a, 1])) if m.actuator_ctrllimited[a] else None
+        float(min(-m.actuator_ctrlrange[a, 0], m.actuator_ctrlrange[a, 1]))
+        if m.actuator_ctrllimited[a] and is_velocity_servo(m, a)
+        else None
         for a in acts
     ]
 
