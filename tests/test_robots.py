@@ -146,3 +146,18 @@ def test_robots_are_an_axis_of_a_sweep(tmp_path, monkeypatch, capsys):
     assert main([*argv, "--seeds", "0", "--duration", "3", "--out", "c", "--workers", "1"]) == 0
     rows = json.loads((tmp_path / "c" / "compare.json").read_text())["rows"]
     assert {r["scenario"] for r in rows} == {"eight-nominal+diffdrive", "eight-nominal+skid_arm"}
+
+
+def test_a_budget_runs_each_scenario_on_its_robots(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "skid.xml").write_text(SKID_ARM.read_text())
+    budget = tmp_path / "budget.toml"
+    budget.write_text(
+        'scenarios = ["eight-nominal"]\nrobots = ["diffdrive", "skid.xml"]\ncontrollers = ["kanayama"]\n'
+        'seeds = "0"\nduration = 3.0\n[[budget]]\nscenario = "eight-nominal"\nmax_position_rms_mm = 50.0\n'
+    )
+    assert main(["check", str(budget), "--out", "c", "--workers", "1"]) == 0
+    assert "2 of 2 budget cases hold" in capsys.readouterr().out  # one case a robot, the limit on both
+    assert main(["check", str(budget), "--out", "d", "--workers", "1", "--robot", "nosuch"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "--robot" in err and not (tmp_path / "d").exists()

@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from mlpfac.exceptions import ConfigError
-from mlpfac.on_robot import with_robots
+from mlpfac.on_robot import split_robot, with_robots
 from mlpfac.sweeps.plan import MAX_RUNS, Job, parse_controllers, parse_seeds, plan
 
 PHASE_NAMES = ("before", "after", "whole")  # "whole": the run after the warm-up
@@ -75,7 +75,8 @@ class Limit:
         return f"budget #{self.index}"
 
     def matches(self, g: Group) -> bool:
-        return self.scenario in (None, g.scenario, g.source) and self.controller in (None, g.controller, g.spec)
+        scenario = (None, g.scenario, g.source, split_robot(g.source)[0])  # on every robot, or on one
+        return self.scenario in scenario and self.controller in (None, g.controller, g.spec)
 
 
 @dataclass
@@ -105,7 +106,7 @@ class Budget:
             src, spec = pairs[i // per_pair] if len(jobs) == len(pairs) * per_pair else (j.scenario, j.controller)
             groups.setdefault((j.scenario, j.controller), Group(j.scenario, j.controller, src, spec)).jobs.append(j)
         names = {
-            "scenario": {n for g in groups.values() for n in (g.scenario, g.source)},
+            "scenario": {n for g in groups.values() for n in (g.scenario, g.source, split_robot(g.source)[0])},
             "controller": {n for g in groups.values() for n in (g.controller, g.spec)},
         }
         for b in self.limits:

@@ -239,7 +239,7 @@ def _read_robot(
         c = [s * g for s, g in zip(sign, m.actuator_gear[list(acts), 0], strict=True)]
         inverse, umax = None, None
     c2 = [
-        0.0 if a < 0 else float(s * m.actuator_gear[a, 0] * _same_way(m, a, j))
+        0.0 if a < 0 else float(s * m.actuator_gear[a, 0] * _same_way(m, d, a, j))
         for a, s, j in zip(seconds, sign, joints, strict=True)
     ]
     limit = [w / abs(ci) for w, ci in zip(wheel_speed, c, strict=True) if w is not None]
@@ -293,9 +293,9 @@ def _read_robot(
     )
 
 
-def _same_way(m: mujoco.MjModel, a: int, first: int) -> float:
+def _same_way(m: mujoco.MjModel, d: mujoco.MjData, a: int, first: int) -> float:
     """+1 when the second wheel's hinge turns the same way as its side's first wheel's, else -1."""
-    return 1.0 if float(m.jnt_axis[int(m.actuator_trnid[a, 0])] @ m.jnt_axis[first]) > 0 else -1.0
+    return 1.0 if float(d.xaxis[int(m.actuator_trnid[a, 0])] @ d.xaxis[first]) > 0 else -1.0
 
 
 def _left_first(m: mujoco.MjModel, config: MujocoConfig, joints: list[int], qpos: np.ndarray) -> list[int]:
