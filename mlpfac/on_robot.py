@@ -155,6 +155,7 @@ def on_robot(table: dict, robot: str) -> dict:
     from mlpfac.reference import make_reference, sample
 
     out = copy.deepcopy(table)
+    out.pop("provenance", None)  # what another robot's run simulated
     old = out.get("plant") if isinstance(out.get("plant"), dict) else {}
     plant = robot_table(robot)
     if "pose_noise_std" in old and "pose_noise_std" not in plant:

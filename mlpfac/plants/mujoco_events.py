@@ -14,7 +14,7 @@ import numpy as np
 
 from mlpfac.events import Actuator, ControlPeriod, Event, Friction, Payload, SensorDelay, WheelRadius
 from mlpfac.exceptions import ConfigError
-from mlpfac.plants.robot import ROUND
+from mlpfac.plants.detect import ROUND
 
 
 class MujocoEvents:

@@ -18,17 +18,15 @@ import mujoco
 import numpy as np
 
 from mlpfac.exceptions import ConfigError
-from mlpfac.plants import defaults, drive, edits
+from mlpfac.plants import defaults, drive, edits, shapes
+from mlpfac.plants import wheels as wheel_parts
 from mlpfac.plants.compiled import yaw
 from mlpfac.plants.config import MujocoConfig
 from mlpfac.plants.detect import (
-    ROUND,
     WHEEL_SHAPES,
-    base_frame,
     collision_geoms,
     describe,
     is_motor,
-    is_velocity_servo,
     names,
     resolve,
 )
@@ -37,13 +35,6 @@ from mlpfac.plants.model_file import fingerprint, is_menagerie, load_spec
 SETTLE_S = 0.5  # seconds the robot settles on its wheels at least, at construction (the rest pose)
 SETTLE_MAX_S = 10.0  # ... and at most: then it must be at rest
 REST_SPEED = 1e-4  # at rest: the free body moves no faster than this (m/s, rad/s)
-SHAPES = {
-    int(mujoco.mjtGeom.mjGEOM_BOX): "box",
-    int(mujoco.mjtGeom.mjGEOM_CYLINDER): "cylinder",
-    int(mujoco.mjtGeom.mjGEOM_SPHERE): "sphere",
-    edits.MESH: "mesh",
-}
-SIZE_LEN = {"box": 3, "cylinder": 2, "sphere": 1, "mesh": 0}
 
 
 @dataclass(frozen=True)
@@ -153,7 +144,10 @@ def _read_robot(
     if drv.tendon:
         acts = drv.acts
     else:
-        acts = (_actuator_id(m, config, "left_actuator", where), _actuator_id(m, config, "right_actuator", where))
+        acts = (
+            wheel_parts.actuator_id(m, config, "left_actuator", where),
+            wheel_parts.actuator_id(m, config, "right_actuator", where),
+        )
         if acts[0] == acts[1]:
             raise ConfigError(
                 "right_actuator", f"left and right wheels need two actuators, both are {config.left_actuator!r}"
@@ -161,7 +155,7 @@ def _read_robot(
     keep = [*acts, *(a for a in drv.seconds if a >= 0)]
     joints = list(drv.joints) if drv.tendon else [int(m.actuator_trnid[a, 0]) for a in acts]
     if drv.tendon:
-        joints = _left_first(m, config, joints, qpos0)
+        joints = wheel_parts.left_first(m, config, joints, qpos0)
     more = defaults.others(config, m, set(keep)) | defaults.timestep(config, float(m.opt.timestep), periods)
     config = defaults.with_chosen(config, more)
     chosen |= more
@@ -192,16 +186,16 @@ def _read_robot(
                 f"the body moved by {getattr(config, key)!r} has no sphere, cylinder or mesh collision geom (the wheel)",
             )
     root0 = int(m.body_rootid[m.jnt_bodyid[joints[0]]])
-    floor = _floor_priority(m, root0)
+    floor = wheel_parts.floor_priority(m, root0)
     rims = [g for _, geoms in wheels for g in geoms if int(m.geom_type[g]) in WHEEL_SHAPES]
     more = defaults.tyre(config, m, rims, floor)
     config, chosen = defaults.with_chosen(config, more), chosen | more
     drawn = [g for g in range(m.ngeom) if m.body_rootid[m.geom_bodyid[g]] == root0]
     visual_only = any(m.geom_contype[g] == 0 and m.geom_conaffinity[g] == 0 for g in drawn)
     if config.tyre == "sphere":
-        radius = config.wheel_radius or max(_radius(m, g, j) for j, geoms in wheels for g in geoms)
+        radius = config.wheel_radius or max(wheel_parts.radius(m, g, j) for j, geoms in wheels for g in geoms)
         edits.sphere_tyres(spec, m, wheels, radius, floor + 1)
-    wheel_speed = _speed_limits(m, acts) if not drv.tendon else [None, None]
+    wheel_speed = wheel_parts.speed_limits(m, acts) if not drv.tendon else [None, None]
     if config.actuator == "torque":
         edits.to_torque_motors(spec, m, [a for a in (*acts, *seconds) if a >= 0 and not is_motor(m, a)])
     if site is None or config.tyre == "sphere" or config.actuator == "torque" or config.timestep is not None:
@@ -231,7 +225,7 @@ def _read_robot(
     d = mujoco.MjData(m)
     _settle(m, d, dt, qpos0, ctrl0, int(m.jnt_dofadr[jnt]), where)
     anchors = [d.xanchor[j].copy() for j in joints]
-    sign = _wheel_signs(config, d, site, joints, anchors)
+    sign = wheel_parts.wheel_signs(config, d, site, joints, anchors)
     dofs = (int(m.jnt_dofadr[joints[0]]), int(m.jnt_dofadr[joints[1]]))
     if drv.tendon:
         c, inverse, umax = [1.0, 1.0], *drive.mix(m, d.qpos, acts, dofs, sign)
@@ -239,7 +233,7 @@ def _read_robot(
         c = [s * g for s, g in zip(sign, m.actuator_gear[list(acts), 0], strict=True)]
         inverse, umax = None, None
     c2 = [
-        0.0 if a < 0 else float(s * m.actuator_gear[a, 0] * _same_way(m, d, a, j))
+        0.0 if a < 0 else float(s * m.actuator_gear[a, 0] * wheel_parts.same_way(m, d, a, j))
         for a, s, j in zip(seconds, sign, joints, strict=True)
     ]
     limit = [w / abs(ci) for w, ci in zip(wheel_speed, c, strict=True) if w is not None]
@@ -263,11 +257,11 @@ def _read_robot(
         qpos_rest=d.qpos.copy(),
         ctrl_rest=d.ctrl.copy(),
         site_rest=(d.site_xpos[site].copy(), yaw(d.site_xmat[site])),
-        real_radius=max(_radius(m, g, int(m.body_jntadr[m.geom_bodyid[g]])) for g in tyres),
+        real_radius=max(wheel_parts.radius(m, g, int(m.body_jntadr[m.geom_bodyid[g]])) for g in tyres),
         real_track=float(np.linalg.norm(anchors[1] - anchors[0])),
         sign=sign,
         act_per_wheel=(float(c[0]), float(c[1])),
-        geometry=_static_geometry(m, d, site, root, visual_only),
+        geometry=shapes.static_geometry(m, d, site, root, visual_only),
         max_wheel_speed=min(limit) if limit else None,
         locked=tuple(locked),
         seconds=(seconds[0], seconds[1]),
@@ -291,21 +285,6 @@ def _read_robot(
         found=(*robot.found, "timestep"),
         description=f"{robot.description}; timestep {step:g} s (the wheel servos chatter at {dt:g} s)",
     )
-
-
-def _same_way(m: mujoco.MjModel, d: mujoco.MjData, a: int, first: int) -> float:
-    """+1 when the second wheel's hinge turns the same way as its side's first wheel's, else -1."""
-    return 1.0 if float(d.xaxis[int(m.actuator_trnid[a, 0])] @ d.xaxis[first]) > 0 else -1.0
-
-
-def _left_first(m: mujoco.MjModel, config: MujocoConfig, joints: list[int], qpos: np.ndarray) -> list[int]:
-    """The tendon drive's two wheel joints, the left one (+y of the pose frame) first."""
-    d = mujoco.MjData(m)
-    d.qpos[:] = qpos
-    mujoco.mj_kinematics(m, d)
-    origin, R = base_frame(m, d, config, int(m.body_rootid[m.jnt_bodyid[joints[0]]]))
-    side = [float((d.xanchor[j] - origin) @ R[:, 1]) for j in joints]
-    return joints if side[0] > side[1] else joints[::-1]
 
 
 def _compile(spec: mujoco.MjSpec, where: str) -> mujoco.MjModel:
@@ -352,48 +331,6 @@ def _pose_frame(spec: mujoco.MjSpec, m: mujoco.MjModel, config: MujocoConfig, wh
     return None
 
 
-def _radius(m: mujoco.MjModel, g: int, joint: int) -> float:
-    """A wheel geom's radius: a sphere's or cylinder's size, a mesh's reach from the hinge axis."""
-    return float(m.geom_size[g, 0]) if int(m.geom_type[g]) in ROUND else edits.mesh_radius(m, g, joint)
-
-
-def _floor_priority(m: mujoco.MjModel, root: int) -> int:
-    """The highest contact priority of the geoms that are not the robot's (the floor's)."""
-    return max((int(m.geom_priority[g]) for g in range(m.ngeom) if m.body_rootid[m.geom_bodyid[g]] != root), default=0)
-
-
-def _speed_limits(m: mujoco.MjModel, acts) -> list[float | None]:
-    """Each velocity servo's control limit (actuator units; a wheel speed once divided by gear and
-    sign); None for a motor (its control is a torque)."""
-    return [
-        float(min(-m.actuator_ctrlrange[a, 0], m.actuator_ctrlrange[a, 1]))
-        if m.actuator_ctrllimited[a] and is_velocity_servo(m, a)
-        else None
-        for a in acts
-    ]
-
-
-def _actuator_id(m: mujoco.MjModel, config: MujocoConfig, key: str, where: str) -> int:
-    name = getattr(config, key)
-    a = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_ACTUATOR, name)
-    if a < 0:
-        raise ConfigError(
-            key, f"no actuator named {name!r} in {where} ({names(m, mujoco.mjtObj.mjOBJ_ACTUATOR, m.nu)})"
-        )
-    if (
-        int(m.actuator_trntype[a]) != mujoco.mjtTrn.mjTRN_JOINT
-        or int(m.jnt_type[m.actuator_trnid[a, 0]]) != mujoco.mjtJoint.mjJNT_HINGE
-    ):
-        raise ConfigError(key, f"actuator {name!r} must drive a hinge joint (the wheel)")
-    if not is_velocity_servo(m, a) and not (config.actuator == "torque" and is_motor(m, a)):
-        raise ConfigError(
-            key,
-            f"actuator {name!r} must be a velocity servo (<velocity kv=... forcerange=...>), or a motor with "
-            'actuator = "torque"',
-        )
-    return a
-
-
 def _settle(
     m: mujoco.MjModel, d: mujoco.MjData, dt: float, qpos: np.ndarray, ctrl: np.ndarray, droot: int, where: str
 ) -> None:
@@ -414,55 +351,3 @@ def _settle(
             )
         mujoco.mj_step(m, d, nstep=chunk)
     mujoco.mj_forward(m, d)
-
-
-def _wheel_signs(
-    config: MujocoConfig, d: mujoco.MjData, site: int, joints: list[int], anchors: list[np.ndarray]
-) -> tuple[float, float]:
-    R = d.site_xmat[site].reshape(3, 3)  # columns: site axes in the world
-    signs = []
-    for key, j, p, side in zip(("left_actuator", "right_actuator"), joints, anchors, (1.0, -1.0), strict=True):
-        roll = float(np.cross(d.xaxis[j], [0.0, 0.0, 1.0]) @ R[:, 0])  # forward speed per rad/s, / radius
-        if abs(roll) < 0.5:
-            raise ConfigError(key, "the wheel's hinge axis must be across the site's x axis (forward)")
-        if side * float((p - d.site_xpos[site]) @ R[:, 1]) <= 0:
-            raise ConfigError(
-                key,
-                f"this wheel is not on the {'left' if side > 0 else 'right'} of {' '.join(config.frame)} (y axis to the left)",
-            )
-        signs.append(1.0 if roll > 0 else -1.0)
-    return signs[0], signs[1]
-
-
-def _static_geometry(m: mujoco.MjModel, d: mujoco.MjData, site: int, root: int, visual_only: bool) -> list[dict]:
-    """Visual geoms (contype = conaffinity = 0) of the robot, posed relative to the site frame; all
-    of its geoms when its model has no visual ones (the tyres added here are never drawn). A mesh
-    carries its vertices and triangles."""
-    ps, Rs = d.site_xpos[site], d.site_xmat[site].reshape(3, 3)
-    robot = [
-        g
-        for g in range(m.ngeom)
-        if m.body_rootid[m.geom_bodyid[g]] == root
-        and int(m.geom_type[g]) in SHAPES
-        and not m.geom(g).name.startswith(edits.TYRE)
-    ]
-    if visual_only:
-        robot = [g for g in robot if m.geom_contype[g] == 0 and m.geom_conaffinity[g] == 0]
-    shapes = []
-    for g in robot:
-        kind = SHAPES[int(m.geom_type[g])]
-        quat = np.empty(4)
-        mujoco.mju_mat2Quat(quat, (Rs.T @ d.geom_xmat[g].reshape(3, 3)).ravel())
-        rgba = m.mat_rgba[m.geom_matid[g]] if m.geom_matid[g] >= 0 else m.geom_rgba[g]
-        shape = {
-            "name": m.geom(g).name or f"geom{g}",
-            "type": kind,
-            "size": [round(float(x), 9) for x in m.geom_size[g, : SIZE_LEN[kind]]],
-            "pos": [round(float(x), 9) for x in Rs.T @ (d.geom_xpos[g] - ps)],
-            "quat": [round(float(x), 9) for x in quat],
-            "rgba": [round(float(x), 6) for x in rgba],
-        }
-        if kind == "mesh":
-            shape |= edits.mesh_shape(m, g)
-        shapes.append(shape)
-    return shapes
