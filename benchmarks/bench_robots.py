@@ -20,6 +20,7 @@ import mujoco
 import numpy as np
 from bench_tiago import timed  # this folder's: the median CPU time of repeated calls
 
+from mlpfac.exceptions import ConfigError
 from mlpfac.on_robot import MENAGERIE_BASES, robot_table
 from mlpfac.plants.config import MujocoConfig
 from mlpfac.plants.model_file import model_path
@@ -39,7 +40,11 @@ def main() -> None:
     )
     for name in ("diffdrive", *(b for b in MENAGERIE_BASES if b != "rainbow_robotics_rby1"), "rby1a"):
         plant_table = robot_table(name)
-        plant = MujocoPlant(MujocoConfig(**{k: v for k, v in plant_table.items() if k != "kind"}), T, (T,))
+        try:
+            plant = MujocoPlant(MujocoConfig(**{k: v for k, v in plant_table.items() if k != "kind"}), T, (T,))
+        except ConfigError as err:  # refused from its name alone (docs/robots.md)
+            print(f"{name:22} refused: {err.what[:80]}...")
+            continue
         shipped = mujoco.MjModel.from_xml_path(str(model_path(plant_table["model"])))
         shipped.opt.timestep = plant.model.opt.timestep
         d = mujoco.MjData(shipped)

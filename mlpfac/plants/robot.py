@@ -127,8 +127,9 @@ def read_robot(config: MujocoConfig, periods: tuple[float, ...] = ()) -> Robot:
 def _read_robot(
     config: MujocoConfig, stamp: tuple[int, int], periods: tuple[float, ...] = (), probe: bool = True
 ) -> Robot:
-    """The robot of ``config`` (:func:`read_robot`); ``probe``: try its wheel servos, and halve a
-    timestep left unset while they chatter (:func:`mlpfac.plants.defaults.chatters`)."""
+    """The robot of ``config`` (:func:`read_robot`); ``probe``: try its wheel servos, and where they
+    chatter (:func:`mlpfac.plants.defaults.chatters`) take a timestep left unset down to one that
+    integrates them (:func:`mlpfac.plants.defaults.servo_step`)."""
     user = config
     spec, path = load_spec(config.model)
     where = config.model if is_menagerie(config.model) else str(path)
@@ -272,14 +273,12 @@ def _read_robot(
     defaults.check_drive(m, d, robot, config, where)
     if not probe or config.actuator != "velocity" or user.timestep is not None:
         return robot
-    step = dt
-    while defaults.chatters(robot):
-        step = defaults.smaller_timestep(step, periods or (dt,), spec_dt * defaults.SMALLEST_STEP)
-        if step is None:
-            raise ConfigError(where, defaults.chatter_refusal(robot, robot.dt))
-        robot = _read_robot(dataclasses.replace(user, timestep=step), stamp, periods, probe=False)
-    if step == dt:
+    if not defaults.chatters(robot):
         return robot
+    step = defaults.smaller_timestep(defaults.servo_step(robot), periods or (dt,), spec_dt * defaults.SMALLEST_STEP)
+    if step is None:
+        raise ConfigError(where, defaults.chatter_refusal(robot, spec_dt * defaults.SMALLEST_STEP))
+    robot = _read_robot(dataclasses.replace(user, timestep=step), stamp, periods, probe=False)
     return dataclasses.replace(
         robot,
         found=(*robot.found, "timestep"),
