@@ -25,12 +25,14 @@ from mlpfac.sweeps.worker import not_in_a_worker
 from mlpfac.targets import user_path
 
 
-def _scenario(scenario: Scenario | str | Path, where: str = "scenario") -> Scenario:
+def _scenario(scenario: Scenario | str | Path, where: str = "scenario", robot: str | None = None) -> Scenario:
     if isinstance(scenario, Scenario):
+        if robot is not None:
+            raise ConfigError("robot", "a robot puts a scenario's file on it: give the scenario by name or path")
         return scenario
     if isinstance(scenario, bool) or not isinstance(scenario, str | Path):
         raise ConfigError(where, f"expected a Scenario, a shipped scenario's name or a .toml path, got {scenario!r}")
-    return load(scenario)
+    return load(scenario, robot=robot)
 
 
 def _seeds(seeds) -> str:
@@ -64,6 +66,7 @@ def run(
     record: bool = True,
     sink=None,
     on_step=None,
+    robot: str | None = None,
 ) -> RunRecord:
     """One closed-loop run of ``scenario`` (a :class:`Scenario`, a shipped name or a .toml path).
 
@@ -74,13 +77,13 @@ def run(
     run.rrd (``record``), put in place only when whole. Without it, ``sink`` (:mod:`mlpfac.log`)
     may receive the recording and ``on_step(k)`` is called after every step. A status "diverged"
     or "interrupted" keeps what was recorded; what a user's controller raises is a
-    :class:`~mlpfac.exceptions.PluginError`.
+    :class:`~mlpfac.exceptions.PluginError`. ``robot`` puts the scenario on that robot (as ``--robot``).
     """
     from mlpfac.runner import build
     from mlpfac.runner import run as run_scenario
 
     not_in_a_worker("run")
-    scn = _scenario(scenario)
+    scn = _scenario(scenario, robot=robot)
     instance = None
     if controller is not None and not isinstance(controller, str | Path | type):
         instance, controller = controller, type(controller)
@@ -116,6 +119,7 @@ def sweep(
     batch_size: int = 64,
     scheduler: str | None = None,
     save_rrd: bool = False,
+    robots: list[str] | None = None,
 ) -> list[dict]:
     """Run scenarios x controllers x seeds (as ``mlpfac sweep``) and return the sweep's rows: the
     ``rows`` of sweep.json, one per scenario, controller and phase. With ``out`` the folder is
@@ -125,7 +129,8 @@ def sweep(
 
     The returned list has ``.errors`` ({(scenario, controller, seed): traceback}) and ``.paired``
     (the rows of paired.json). Ctrl-C raises KeyboardInterrupt (with ``out``, the runs written are
-    kept and the next call resumes them)."""
+    kept and the next call resumes them). ``robots``: every scenario on each (as ``--robots``)."""
+    from mlpfac.on_robot import with_robots
     from mlpfac.sweeps import engine
 
     not_in_a_worker("sweep")
@@ -155,7 +160,7 @@ def sweep(
     tmp = None if out is not None else Path(tempfile.mkdtemp(prefix="mlpfac-sweep-"))
     try:
         result = engine.sweep_folder(
-            [str(s) for s in scenarios],
+            with_robots([str(s) for s in scenarios], robots),
             text,
             seeds,
             Path(out) if out is not None else tmp,

@@ -69,6 +69,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--seed", type=int, help="override the scenario's seed")
     p.add_argument("--duration", type=float, help="override the duration in seconds")
+    from mlpfac.on_robot import ROBOT_HELP
+
+    p.add_argument("--robot", help=ROBOT_HELP)
     p.add_argument("--out", type=cli_path, help="output folder (default runs/SCENARIO-CONTROLLER-sSEED)")
     p.add_argument("--baseline", default="corradini", help="controller for panel (h) of the figure, or 'none'")
     p.add_argument("--no-plot", action="store_true", help="skip figure1.png")
@@ -99,6 +102,9 @@ def build_parser() -> argparse.ArgumentParser:
         "--out", type=cli_path, default=Path("runs/check"), help="results folder (default runs/check); resumable"
     )
     p.add_argument("--workers", type=int, default=2, help="local worker processes (default 2)")
+    from mlpfac.on_robot import ROBOT_HELP
+
+    p.add_argument("--robot", help=ROBOT_HELP)
 
     p = sub.add_parser(
         "view",
@@ -144,6 +150,10 @@ def main(argv: list[str] | None = None) -> int:
             from mlpfac.scenario import load
 
             load(args.scenario, build=False)  # a bad name or file fails here, before the figure's process starts
+            if args.robot is not None:
+                from mlpfac.on_robot import model_of
+
+                model_of(args.robot)
             with painting(args.baseline != "none" and not args.no_plot) as args.painter:  # figure1 drawn beside
                 return cmd_run(args)
         if args.command == "list":
@@ -184,6 +194,13 @@ def cmd_list() -> int:
     for name in names:
         scn = load(name, build=False)
         print(f"{name:<{width}}  {scn.plant_kind:<9}  {scn.description}")
+    from mlpfac.on_robot import robots_here
+
+    print("\nrobots (--robot NAME, or an MJCF file):")
+    robots = robots_here()
+    wide = max(len(n) for n, _ in robots)
+    for name, where in robots:
+        print(f"  {name:<{wide}}  {where}")
     print(f"\ncontrollers: {', '.join(CONTROLLERS)}")
     installed = entry_points()
     if installed:
@@ -204,7 +221,7 @@ def cmd_report(args: argparse.Namespace) -> int:
 def cmd_check(args: argparse.Namespace) -> int:
     from mlpfac.checks import check
 
-    result = check(args.budget, args.junit, args.summary, args.baseline, args.out, args.workers)
+    result = check(args.budget, args.junit, args.summary, args.baseline, args.out, args.workers, args.robot)
     for line in result.lines():
         print(line)
     if result.cases:
@@ -254,7 +271,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     from mlpfac.run_folder import Recording, check_outputs, run_into_folder
     from mlpfac.scenario import load
 
-    scn = load(args.scenario).with_overrides(args.controller, args.seed, args.duration)
+    scn = load(args.scenario, robot=args.robot).with_overrides(args.controller, args.seed, args.duration)
     found = scn.table.get("provenance", {})
     if found.get("found"):  # the robot's parts the scenario left to the model: what was found
         print(f"robot: {found['robot']}")

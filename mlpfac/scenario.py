@@ -168,7 +168,7 @@ def read_toml(path: Path, kind: str) -> dict:
         raise ConfigError(str(path), "not a scenario: its arrays or tables are nested too deep to read") from None
 
 
-def load(name_or_path: str | Path, build: bool = True) -> Scenario:
+def load(name_or_path: str | Path, build: bool = True, robot: str | None = None) -> Scenario:
     """A scenario by name (``paper`` -> the shipped paper.toml) or by path to a TOML file.
 
     Relative paths in the file (``[plant] model``) are taken from the file's own folder. The plant
@@ -177,7 +177,8 @@ def load(name_or_path: str | Path, build: bool = True) -> Scenario:
     that already has ``[provenance]`` (a run's config.toml) must simulate the same compiled model.
     The robot's parts the file leaves to the model (its wheels, its pose frame) are written into the
     table's ``[plant]`` as found, so that config.toml names them. ``build=False`` reads and checks
-    the file alone (a listing), without building the plant.
+    the file alone (a listing), without building the plant. ``robot`` (``--robot``) puts the
+    scenario on another robot (:mod:`mlpfac.on_robot`).
     """
     path = Path(name_or_path)
     if path.suffix != ".toml":
@@ -197,6 +198,11 @@ def load(name_or_path: str | Path, build: bool = True) -> Scenario:
         and not plant["model"].startswith("menagerie:")
     ):
         plant["model"] = str((path.parent / Path(plant["model"]).expanduser()).resolve())
+    if robot is not None:
+        from mlpfac.on_robot import on_robot
+
+        parse(table, str(path), check_model=False)  # the file's own errors first, named as its own
+        table = on_robot(table, robot)
     scn = parse(table, str(path))
     if not build:  # the file's data only (a listing): no robot is read, none downloaded
         return scn

@@ -92,12 +92,12 @@ BAD_FILES: dict[str, tuple[str | bytes, str]] = {
     "event not on kinematic": (MINIMAL + '[[events]]\ntime = 0.2\nkind = "friction"\nmu = 0.2\n', "kinematic plant cannot"),
     "friction negative": (ROBOT + '[[events]]\ntime = 0.2\nkind = "friction"\nmu = -1.0\n', "mu"),
     "payload body": (ROBOT + '[[events]]\ntime = 0.2\nkind = "payload"\nmass_scale = 2.0\nbody = "trailer"\n', "trailer"),
-    "control period not whole steps": (ROBOT + '[[events]]\ntime = 0.2\nkind = "control_period"\nfactor = 1.3\n', "whole number"),
+    "control period not whole steps": (ROBOT + 'timestep = 0.002\n[[events]]\ntime = 0.2\nkind = "control_period"\nfactor = 1.3\n', "whole number"),
     "model missing": ('[plant]\nkind = "mujoco"\nmodel = "nope.xml"\n', "not found"),
     "model not mjcf": ('[plant]\nkind = "mujoco"\nmodel = "scenario.toml"\n', "MuJoCo cannot load"),
     "actuator name": ('[plant]\nkind = "mujoco"\nleft_actuator = "nosuch"\n', "[plant] left_actuator"),
     "site name": ('[plant]\nkind = "mujoco"\nsite = "nosuch"\n', "[plant] site"),
-    "T not whole physics steps": ('T = 0.011\n[plant]\nkind = "mujoco"\n', "[plant] T"),
+    "T not whole physics steps": ('T = 0.011\n[plant]\nkind = "mujoco"\ntimestep = 0.002\n', "[plant] T"),
     "pose noise negative": ('[plant]\nkind = "mujoco"\npose_noise_std = -0.001\n', "pose_noise_std"),
     "provenance of another model": ('[plant]\nkind = "mujoco"\n[provenance]\nmodel_sha256 = "0"\n', "model_sha256"),
     "provenance a string": ('provenance = "x"\n', "provenance"),
@@ -114,6 +114,10 @@ BAD_FILES: dict[str, tuple[str | bytes, str]] = {
     "menagerie robot unknown": ('[plant]\nkind = "mujoco"\nmodel = "menagerie:pal_tiagoo/scene"\n', "pal_tiago"),
     "menagerie entry unknown": ('[plant]\nkind = "mujoco"\nmodel = "menagerie:pal_tiago/scene_fast"\n', "scene_velocity"),
     "payload on every body of the kinematic": (MINIMAL + '[[events]]\ntime = 0.2\nkind = "payload"\nmass_kg = 2.0\nbody = "*"\n', "kinematic plant cannot"),
+    "casters choice": (ROBOT + 'casters = "wheels"\n', "[plant] casters"),
+    "tendon actuators one": (ROBOT + 'tendon_actuators = ["forward"]\n', "tendon_actuators"),
+    "tendon and wheel actuators": (ROBOT + 'tendon_actuators = ["a", "b"]\nleft_actuator = "c"\n', "not both"),
+    "second wheel missing": (ROBOT + 'left_actuator_2 = "nosuch"\n', "[plant] left_actuator_2"),
     "payload mass and scale": (ROBOT + '[[events]]\ntime = 0.2\nkind = "payload"\nmass_kg = 2.0\nmass_scale = 2.0\n', "either"),
     "reference kind a list": ('[reference]\nkind = ["eight"]\n', "unknown reference kind ['eight']"),
     "reference wx huge": ("[reference]\nwx = 1e308\n", "[reference] wx: must lie within"),
@@ -177,7 +181,7 @@ BAD_ROBOTS = {
     "two free bodies": (wheeled("a 0 0.2, b 0 -0.2", robots=2), ["2 free bodies", "body base0: a0 (joint a0_hinge), b0", "body base1: a1", "left_actuator and right_actuator"]),
     "wheels on different axles": (wheeled("a 0.1 0.2, b -0.1 -0.2"), ["not on one axle", "a (joint a_hinge), b", "left_actuator and right_actuator"]),
     "wheels on one side": (wheeled("a 0 0.2, b 0 0.4"), ["not on either side", "a (joint a_hinge), b", "left_actuator and right_actuator", "site or body"]),
-    "no wheel servo": (wheeled("a 0 0.2, b 0 -0.2", servo="motor"), ["two wheel servos needed, found none", "it has: 'a', 'b'", "left_actuator and right_actuator"]),
+    "no wheel servo": (wheeled("a 0 0.2, b 0 -0.2", servo='position kp="1"'), ["two wheel servos needed, found none", "it has: 'a', 'b'", "left_actuator and right_actuator"]),
 }  # fmt: skip
 
 
@@ -229,6 +233,10 @@ BAD_FLAGS = {
     "no such scenario": (["no-such-scenario"], "no such scenario"),
     "scenario file missing": (["missing.toml"], "not found"),
     "scenario is a folder": (["sims.toml"], "folder"),
+    "robot unknown": (["paper", "--robot", "nosuch"], "--robot"),
+    "robot file missing": (["paper", "--robot", "missing.xml"], "not found"),
+    "robot file a folder": (["paper", "--robot", "sims.toml"], "folder"),
+    "robot file not a robot": (["paper", "--robot", "robot.toml"], "one [plant] table"),
 }
 
 
@@ -237,6 +245,7 @@ def test_bad_flag(tmp_path, capsys, monkeypatch, case):
     argv, needle = BAD_FLAGS[case]
     monkeypatch.chdir(tmp_path)
     (tmp_path / "sims.toml").mkdir()
+    (tmp_path / "robot.toml").write_text('duration = 3.0\n[plant]\nmodel = "x.xml"\n')
     assert main(["run", *argv, "--no-log", "--out", str(tmp_path / "out")]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and needle in err, err
@@ -257,6 +266,8 @@ BAD_VIEW_PLOT = {
     "check: no budget file": (["check", "missing.toml"], "budget file not found"),
     "check: a folder as the budget": (["check", "D"], "is a folder, not a budget file"),
     "check: --workers 0": (["check", "missing.toml", "--workers", "0"], "--workers"),
+    "sweep: --robots with an empty name": (["sweep", "paper", "--robots", "diffdrive,,cart"], "--robots"),
+    "compare: --robot unknown": (["compare", "paper", "--robot", "nosuch"], "--robot"),
 }
 
 

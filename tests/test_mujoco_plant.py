@@ -576,13 +576,19 @@ def test_bad_config_values(kw, key):
 
 
 def test_period_that_is_not_whole_physics_steps():
+    """A timestep the scenario sets wins, and must divide T; left unset, one that does is chosen."""
     with pytest.raises(ConfigError, match="T: 0.011 s is not a whole number"):
-        MujocoPlant(MujocoConfig(), 0.011)
+        MujocoPlant(MujocoConfig(timestep=0.002), 0.011)
+    plant = MujocoPlant(MujocoConfig(), 0.011, (0.011, 0.0165))
+    assert plant.config.timestep == pytest.approx(0.011 / 6) and plant.found()["timestep"] == plant.config.timestep
+    assert plant.n_substeps == 6 and plant._substeps(0.0165, "factor") == 9
 
 
 def test_model_without_velocity_servo_or_freejoint(tmp_path):
     motor = OWN_ROBOT.replace('<velocity name="lm" joint="wheel_a" kv="3"', '<motor name="lm" joint="wheel_a"')
-    cfg = MujocoConfig(model=write(tmp_path, motor), left_actuator="lm", right_actuator="rm", site="base")
+    cfg = MujocoConfig(
+        model=write(tmp_path, motor), left_actuator="lm", right_actuator="rm", site="base", actuator="velocity"
+    )
     with pytest.raises(ConfigError, match="left_actuator.*velocity servo"):
         MujocoPlant(cfg, 0.01)
     fixed = OWN_ROBOT.replace("<freejoint/>", "")
@@ -622,9 +628,8 @@ def test_bad_events_are_refused(kind, params, match):
 
 def test_friction_event_needs_tyres_that_own_the_contact(tmp_path):
     text = OWN_ROBOT.replace('<geom type="sphere" size="0.08" priority="1"/>', '<geom type="sphere" size="0.08"/>')
-    plant = MujocoPlant(
-        MujocoConfig(model=write(tmp_path, text), left_actuator="lm", right_actuator="rm", site="base"), 0.01
-    )
+    own = MujocoConfig(model=write(tmp_path, text), left_actuator="lm", right_actuator="rm", site="base", tyre="model")
+    plant = MujocoPlant(own, 0.01)
     with pytest.raises(ConfigError, match="priority"):
         plant.check_event(make_event("friction", 1.0, mu=0.2), "here")
 
@@ -682,15 +687,15 @@ def test_a_scenario_robot_is_read_once_by_its_load_and_its_run(monkeypatch):
 
     reads = []
     real = robot._read_robot
-    monkeypatch.setattr(robot, "_read_robot", lambda c, s: reads.append(c) or real(c, s))
+    monkeypatch.setattr(robot, "_read_robot", lambda c, *a: reads.append(c) or real(c, *a))
     monkeypatch.setattr(robot, "_ROBOTS", {})
     scn = load("eight-nominal").with_overrides(duration=0.1)
     assert scn.plant_config.left_actuator is not None and reads[0].left_actuator is None  # found, written in
     run(scn)
     run(scn.with_overrides(controller="corradini"))
     assert len(reads) == 1
-    again = robot.read_robot(scn.plant_config)
+    again = robot.read_robot(scn.plant_config, (scn.T,))
     monkeypatch.setattr(robot, "_ROBOTS", {})
-    fresh = robot.read_robot(scn.plant_config)  # read from the file with every part named
+    fresh = robot.read_robot(scn.plant_config, (scn.T,))  # read from the file with every part named
     assert len(reads) == 2 and again.found == fresh.found == () and again.config == fresh.config
     assert again.description == fresh.description and again.sha256 == fresh.sha256

@@ -276,7 +276,7 @@ def test_a_named_frame_says_which_side_is_left(tmp_path):
     cfg = MujocoConfig(model=str(tmp_path / "cart.xml"), site="back")
     plant = MujocoPlant(cfg, 0.01)
     assert (plant.config.left_actuator, plant.config.right_actuator) == ("spin_o", "spin_n")
-    assert plant.found() == {"left_actuator": "spin_o", "right_actuator": "spin_n"}
+    assert plant.found() == {"left_actuator": "spin_o", "right_actuator": "spin_n", "actuator": "velocity"}
 
 
 def test_an_arms_velocity_servo_high_up_is_not_a_wheel(tmp_path):
@@ -290,4 +290,5 @@ def test_an_arms_velocity_servo_high_up_is_not_a_wheel(tmp_path):
     text = text.replace("</actuator>", '<velocity name="elbow_s" joint="elbow_j" kv="2"/></actuator>')
     (tmp_path / "cart.xml").write_text(text)
     plant = MujocoPlant(MujocoConfig(model=str(tmp_path / "cart.xml")), 0.01)
-    assert plant.model.nu == 3 and (plant.config.left_actuator, plant.config.right_actuator) == ("spin_n", "spin_o")
+    assert (plant.config.left_actuator, plant.config.right_actuator) == ("spin_n", "spin_o")
+    assert plant.model.nu == 2 and plant.robot.locked == ("elbow_j",)  # the arm held where it starts

@@ -55,13 +55,16 @@ def check(
     baseline: str | Path | None = None,
     out: str | Path | None = None,
     workers: int | None = None,
+    robot: str | None = None,
 ) -> CheckResult:
     """Run the sweep of the budget file ``budget`` into ``out`` (default runs/check; runs already
     done there are skipped) with ``workers`` local processes (default 2), then judge it, against
     the runs of the sweep folder (or its sweep.json) ``baseline`` per seed where the budget asks.
     Writes JUnit XML to ``junit`` and a Markdown summary to ``summary`` when given.
 
-    Bad input (the budget, a flag) is a ConfigError naming the file and key before anything runs.
+    ``robot`` (``--robot``) runs every scenario of the budget on that robot instead of the
+    budget's ``robots``. Bad input (the budget, a flag) is a ConfigError naming the file and key
+    before anything runs.
     """
     from mlpfac.sweeps.engine import SWEEP_COLUMNS, check_execution_flags, report, sweep_into, sweep_meta
     from mlpfac.sweeps.folders import OutputError, _oserror
@@ -75,7 +78,7 @@ def check(
     path = user_path(budget, "budget")
     out = DEFAULT_OUT if out is None else user_path(out, "out")
     n_workers = check_execution_flags(DEFAULT_WORKERS if workers is None else workers)
-    b = read_budget(path)
+    b = read_budget(path, robot)
     needs = b.needs_baseline()
     if needs is not None and baseline is None:
         figure = next(f for f in needs.figures if f in ("no_worse_than_baseline", "p"))

@@ -9,6 +9,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from mlpfac.exceptions import ConfigError
+from mlpfac.on_robot import split_robot, with_robots
 from mlpfac.sweeps.plan import MAX_RUNS, Job, parse_controllers, parse_seeds, plan
 
 PHASE_NAMES = ("before", "after", "whole")  # "whole": the run after the warm-up
@@ -39,7 +40,7 @@ FIGURES: dict[str, Figure] = {
     "no_worse_than_baseline": Figure("median per-seed ratio of position RMS to the baseline", "x", baseline=True),
     "p": Figure("one-sided Wilcoxon p that it is worse than the baseline", baseline=True, at_least=True),
 }
-TOP_KEYS = ("scenarios", "controllers", "seeds", "duration", "budget")
+TOP_KEYS = ("scenarios", "robots", "controllers", "seeds", "duration", "budget")
 FILTER_KEYS = ("name", "scenario", "controller", "phase")
 
 
@@ -74,7 +75,8 @@ class Limit:
         return f"budget #{self.index}"
 
     def matches(self, g: Group) -> bool:
-        return self.scenario in (None, g.scenario, g.source) and self.controller in (None, g.controller, g.spec)
+        scenario = (None, g.scenario, g.source, split_robot(g.source)[0])  # on every robot, or on one
+        return self.scenario in scenario and self.controller in (None, g.controller, g.spec)
 
 
 @dataclass
@@ -104,7 +106,7 @@ class Budget:
             src, spec = pairs[i // per_pair] if len(jobs) == len(pairs) * per_pair else (j.scenario, j.controller)
             groups.setdefault((j.scenario, j.controller), Group(j.scenario, j.controller, src, spec)).jobs.append(j)
         names = {
-            "scenario": {n for g in groups.values() for n in (g.scenario, g.source)},
+            "scenario": {n for g in groups.values() for n in (g.scenario, g.source, split_robot(g.source)[0])},
             "controller": {n for g in groups.values() for n in (g.controller, g.spec)},
         }
         for b in self.limits:
@@ -125,7 +127,7 @@ class Budget:
         return jobs, list(groups.values())
 
 
-def read_budget(path: Path) -> Budget:
+def read_budget(path: Path, robot: str | None = None) -> Budget:
     """The budget file at ``path``, checked; scenario paths and ``file.py:Class`` controllers are
     taken from the file's own folder."""
     from mlpfac.scenario import read_toml
@@ -135,6 +137,12 @@ def read_budget(path: Path) -> Budget:
     here = path.absolute().parent
     scenarios = _strings(table, "scenarios", path, required=True)
     scenarios = [str(here / s) if s.endswith(".toml") and not Path(s).is_absolute() else s for s in scenarios]
+    given = _strings(table, "robots", path, required=False)
+    robots = [robot] if robot is not None else [_near_robot(r, here) for r in given] if given else None
+    try:  # every scenario on each robot, as SCENARIO@ROBOT (mlpfac.on_robot)
+        scenarios = with_robots(scenarios, robots)
+    except ConfigError as err:
+        raise ConfigError("--robot" if robot is not None else f"{path} robots", err.what) from None
     specs = _strings(table, "controllers", path, required=False)
     controllers: list[str | None] = [None]
     if specs is not None:
@@ -230,6 +238,11 @@ def _near(spec: str, here: Path) -> str:
     if sep and file.endswith(".py") and not Path(file).is_absolute():
         return f"{here / file}:{rest}"
     return spec
+
+
+def _near_robot(robot: str, here: Path) -> str:
+    """A budget's robot: an MJCF file from the budget's folder, else a name."""
+    return str(here / robot) if robot.endswith(".xml") and not Path(robot).is_absolute() else robot
 
 
 def _is_number(v) -> bool:

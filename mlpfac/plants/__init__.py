@@ -32,9 +32,11 @@ def make_plant(scn: PlantSpec, ref: np.ndarray):
 
             plant = KinematicPlant(scn.plant_config, scn.T, ref)
         else:
+            from mlpfac.events import ControlPeriod
             from mlpfac.plants.mujoco import MujocoPlant
 
-            plant = MujocoPlant(scn.plant_config, scn.T)
+            periods = (scn.T, *(ev.factor * scn.T for ev in scn.events if isinstance(ev, ControlPeriod)))
+            plant = MujocoPlant(scn.plant_config, scn.T, periods)
     except ConfigError as err:
         where = err.where if err.where.startswith(scn.source) else f"{scn.source} [plant] {err.where}".rstrip()
         raise ConfigError(where, err.what) from None

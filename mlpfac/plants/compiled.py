@@ -35,13 +35,17 @@ from mlpfac.exceptions import ConfigError
 from mlpfac.ik import body_velocity_vw, wheel_speeds_lr
 from mlpfac.jit import SALT, WHY, built, kernel
 
-# ints
-I_AL, I_AR, I_DL, I_DR, I_SITE, I_NSUB, I_TORQUE, I_NOISE = range(8)
-N_INTS = 8
+# ints: I_AL2, I_AR2 a second wheel's actuator on each side (skid-steer; -1: none), I_MIX 1 for two
+# motors on tendons over both wheels (a (v, omega) drive; I_AL, I_AR are those motors)
+I_AL, I_AR, I_DL, I_DR, I_SITE, I_NSUB, I_TORQUE, I_NOISE, I_AL2, I_AR2, I_MIX = range(11)
+N_INTS = 11
 # fl
 F_CL, F_CR, F_SL, F_SR, F_IK_R, F_IK_TRACK, F_WMAX, F_DT, F_KP, F_KI, F_TLMAX, F_TRMAX, F_RADIUS, F_ZREST = range(14)
 F_STD = 14  # three pose-noise standard deviations
-N_FL = 17
+F_CL2, F_CR2 = 17, 18  # the second wheels' actuator units per forward wheel unit
+F_MIX = 19  # (2, 2) row-major: the tendon motors' controls per forward wheel torque (left, right)
+F_UMAX = 23  # the tendon motors' control limits (inf: none)
+N_FL = 25
 # st: the unwrapped heading, simulated time, the PI integrals, the true pose (x, y, theta), and 1
 # once MuJoCo warned during a step of this robot (set by the warning handler below)
 S_THETA, S_TIME, S_IL, S_IR = range(4)
@@ -175,9 +179,14 @@ def _physics(mp, dp, ctrl, qvel, ints, fl, st, wl, wr):
     clamped (no wind-up)."""
     n, al, ar, dl, dr = ints[I_NSUB], ints[I_AL], ints[I_AR], ints[I_DL], ints[I_DR]
     cl, cr = fl[F_CL], fl[F_CR]
+    al2, ar2 = ints[I_AL2], ints[I_AR2]
     if ints[I_TORQUE] == 0:
         ctrl[al] = cl * wl
         ctrl[ar] = cr * wr
+        if al2 >= 0:
+            ctrl[al2] = fl[F_CL2] * wl
+        if ar2 >= 0:
+            ctrl[ar2] = fl[F_CR2] * wr
         mj_step2(mp, dp)
         for _ in range(n - 1):
             mj_step(mp, dp)
@@ -191,6 +200,11 @@ def _physics(mp, dp, ctrl, qvel, ints, fl, st, wl, wr):
             er = wr - sr * qvel[dr]
             tl = kp * el + ki * (il + el * dt)
             tr = kp * er + ki * (ir + er * dt)
+            if ints[I_MIX]:
+                il, ir = _mix(ctrl, al, ar, fl, tl, tr, il, ir, el * dt, er * dt)
+                mj_step2(mp, dp)
+                mj_step1(mp, dp)
+                continue
             if -tl_max <= tl <= tl_max:
                 il += el * dt
             else:
@@ -201,10 +215,30 @@ def _physics(mp, dp, ctrl, qvel, ints, fl, st, wl, wr):
                 tr = math.copysign(tr_max, tr)
             ctrl[al] = tl / cl
             ctrl[ar] = tr / cr
+            if al2 >= 0:
+                ctrl[al2] = tl / fl[F_CL2]
+            if ar2 >= 0:
+                ctrl[ar2] = tr / fl[F_CR2]
             mj_step2(mp, dp)
             mj_step1(mp, dp)
         st[S_IL], st[S_IR] = il, ir
     st[S_TIME] += n * fl[F_DT]
+
+
+@kernel()
+def _mix(ctrl, a, b, fl, tl, tr, il, ir, dil, dir_):
+    """The tendon drive's two motors' controls for the wheel torques (tl, tr): the inverse of the
+    motors' torques on the wheels; both scaled down together (the torques' ratio kept) when one
+    passes its control limit, and then the PI integrals held (no wind-up). Returns the integrals."""
+    ca = fl[F_MIX] * tl + fl[F_MIX + 1] * tr
+    cb = fl[F_MIX + 2] * tl + fl[F_MIX + 3] * tr
+    k = max(abs(ca) / fl[F_UMAX], abs(cb) / fl[F_UMAX + 1])
+    if k > 1.0:
+        ca, cb = ca / k, cb / k
+    else:
+        il, ir = il + dil, ir + dir_
+    ctrl[a], ctrl[b] = ca, cb
+    return il, ir
 
 
 @kernel("void(f8[::1], f8[::1], f8[::1])", ext="mujoco")

@@ -46,16 +46,23 @@ class MujocoConfig:
     model: str = field(
         default_factory=shipped_model
     )  # MJCF file (from the scenario's folder) or "menagerie:ROBOT/ENTRY"
-    actuator: str = "velocity"  # "velocity": the model's velocity servos; "torque": torque motors + PI here
+    # None below: chosen from the model (mlpfac.plants.defaults, docs/robots.md), written into config.toml
+    actuator: str | None = None  # "velocity": the model's velocity servos; "torque": torque motors + PI here
     # None below: found in the model (mlpfac.plants.detect); frame_offset None is 0 for a frame that is named
     left_actuator: str | None = None  # velocity servo (<velocity kv forcerange>) on the left wheel's hinge
     right_actuator: str | None = None
+    left_actuator_2: str | None = None  # a second driven wheel on the left (skid-steer), commanded as the first
+    right_actuator_2: str | None = None
+    tendon_actuators: tuple[str, str] | None = None  # two motors on tendons over both wheels (a (v, omega) drive)
     site: str | None = None  # the pose frame: a site on the axle midpoint, x forward (not with body)
     body: str | None = None  # ... or a body's frame instead of a site
     frame_offset: tuple[float, float, float] | None = None  # the pose frame moved by this, in its axes (m)
-    keyframe: str | None = None  # start from this keyframe of the model (None: the model's default pose)
-    other_actuators: str = "hold"  # "hold": keep the keyframe's controls; "lock": fix their joints at the keyframe
-    tyre: str = "model"  # "model": the wheels' own collision geoms; "sphere": a sphere tyre on each wheel
+    keyframe: str | None = (
+        None  # start from this keyframe of the model (None: "home" if it has one, else its default pose)
+    )
+    other_actuators: str | None = None  # "hold": keep the keyframe's controls; "lock": fix their joints at the keyframe
+    tyre: str | None = None  # "model": the wheels' own collision geoms; "sphere": a sphere tyre on each wheel
+    casters: str | None = None  # "model": other floor contacts as modelled; "frictionless": they slide (condim 1)
     timestep: float | None = None  # physics timestep (s); None: the model's
     wheel_radius: float | None = None  # radius the IK believes (m); None: read from the model
     track: float | None = None  # wheel separation the IK believes (m); None: read from the model
@@ -65,14 +72,27 @@ class MujocoConfig:
     pi_ki: float = 10.0  # torque drive: PI integral gain, N m per rad of integrated error
 
     def __post_init__(self) -> None:
-        choices = {"actuator": ("velocity", "torque"), "other_actuators": ("hold", "lock"), "tyre": ("model", "sphere")}
+        choices = {
+            "actuator": ("velocity", "torque"),
+            "other_actuators": ("hold", "lock"),
+            "tyre": ("model", "sphere"),
+            "casters": ("model", "frictionless"),
+        }
         for name, allowed in choices.items():
-            if getattr(self, name) not in allowed:
+            if getattr(self, name) not in allowed and getattr(self, name) is not None:
                 raise ConfigError(name, f"choose {' or '.join(map(repr, allowed))}, got {getattr(self, name)!r}")
-        for name in ("model", "left_actuator", "right_actuator", "site", "body", "keyframe"):
+        names = ("model", "left_actuator", "right_actuator", "left_actuator_2", "right_actuator_2", "site", "body")
+        for name in (*names, "keyframe"):
             value = getattr(self, name)
             if (value is not None or name == "model") and (not isinstance(value, str) or not value):
                 raise ConfigError(name, f"expected a non-empty name, got {value!r}")
+        pair = self.tendon_actuators
+        if pair is not None and (len(pair) != 2 or not all(isinstance(x, str) and x for x in pair)):
+            raise ConfigError("tendon_actuators", f"expected two actuators' names, got {pair!r}")
+        if pair is not None and (self.left_actuator or self.right_actuator):
+            raise ConfigError(
+                "tendon_actuators", "the wheels are driven by wheel actuators or by tendon actuators, not both"
+            )
         if self.site is not None and self.body is not None:
             raise ConfigError(
                 "body", f"the pose frame is a site or a body, not both (site {self.site!r}, body {self.body!r})"

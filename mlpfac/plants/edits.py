@@ -29,16 +29,23 @@ def offset_from_site(m: mujoco.MjModel, site: int, offset) -> tuple[int, np.ndar
 
 
 def lock_other_joints(spec: mujoco.MjSpec, m: mujoco.MjModel, qpos: np.ndarray, keep: tuple[int, ...]) -> list[str]:
-    """Fix every joint moved by an actuator not in ``keep`` at its pose in ``qpos`` and remove those
-    actuators (and the keyframes, whose sizes no longer fit); the locked bodies become rigid parts
-    of their parents (fused when the model compiles with ``fusestatic``). Returns the joints' names."""
+    """Fix every joint moved by an actuator not in ``keep`` (through the joint, or a fixed tendon), or
+    coupled to such a joint by an equality, at its pose in ``qpos``; remove those actuators, the
+    tendons, equalities and sensors on what is fixed (and the keyframes, whose sizes no longer fit).
+    The locked bodies become rigid parts of their parents (fused when the model compiles with
+    ``fusestatic``). Returns the joints' names."""
     d = mujoco.MjData(m)
     d.qpos[:] = qpos
     mujoco.mj_kinematics(m, d)
-    acts = [a for a in range(m.nu) if a not in keep and int(m.actuator_trntype[a]) == mujoco.mjtTrn.mjTRN_JOINT]
-    bodies = sorted({int(m.jnt_bodyid[m.actuator_trnid[a, 0]]) for a in acts})
+    acts = [a for a in range(m.nu) if a not in keep and int(m.actuator_trntype[a]) in (JOINT_TRN, TENDON_TRN)]
+    joints = set()
+    for a in acts:
+        t = int(m.actuator_trnid[a, 0])
+        joints |= {t} if int(m.actuator_trntype[a]) == JOINT_TRN else set(_tendon_joints(m, t))
+    bodies = _coupled({int(m.jnt_bodyid[j]) for j in joints}, m)
+    gone = {j for j in range(m.njnt) if int(m.jnt_bodyid[j]) in bodies}
     locked = []
-    for b in bodies:
+    for b in sorted(bodies):
         p = int(m.body_parentid[b])
         Rp = d.xmat[p].reshape(3, 3)
         qp_inv, q = np.empty(4), np.empty(4)
@@ -49,12 +56,48 @@ def lock_other_joints(spec: mujoco.MjSpec, m: mujoco.MjModel, qpos: np.ndarray, 
         body.pos, body.quat = Rp.T @ (d.xpos[b] - d.xpos[p]), q
         for j in list(body.joints):
             locked.append(j.name or f"joint of body {b}")
-            spec.delete(j)
-    for a in [spec.actuators[a] for a in acts]:
-        spec.delete(a)
+    tendons = {t for t in range(m.ntendon) if gone & set(_tendon_joints(m, t))}
+    eqs = [e for e in range(m.neq) if _eq_objects(m, e) & ({("j", j) for j in gone} | {("t", t) for t in tendons})]
+    objs = {(int(mujoco.mjtObj.mjOBJ_JOINT), j) for j in gone} | {(int(mujoco.mjtObj.mjOBJ_TENDON), t) for t in tendons}
+    objs |= {(int(mujoco.mjtObj.mjOBJ_ACTUATOR), a) for a in acts}
+    sensors = [i for i in range(m.nsensor) if (int(m.sensor_objtype[i]), int(m.sensor_objid[i])) in objs]
+    doomed = [spec.sensors[i] for i in sensors] + [spec.equalities[e] for e in eqs]
+    doomed += [spec.actuators[a] for a in acts] + [spec.tendons[t] for t in sorted(tendons)]
+    doomed += [j for b in sorted(bodies) for j in spec.bodies[b].joints]
+    for item in doomed:
+        spec.delete(item)
     for key in list(spec.keys):
         spec.delete(key)
     return locked
+
+
+JOINT_TRN, TENDON_TRN = int(mujoco.mjtTrn.mjTRN_JOINT), int(mujoco.mjtTrn.mjTRN_TENDON)
+
+
+def _tendon_joints(m: mujoco.MjModel, t: int) -> list[int]:
+    adr, n = int(m.tendon_adr[t]), int(m.tendon_num[t])
+    return [int(m.wrap_objid[adr + i]) for i in range(n) if int(m.wrap_type[adr + i]) == mujoco.mjtWrap.mjWRAP_JOINT]
+
+
+def _eq_objects(m: mujoco.MjModel, e: int) -> set[tuple[str, int]]:
+    kind = {int(mujoco.mjtEq.mjEQ_JOINT): "j", int(mujoco.mjtEq.mjEQ_TENDON): "t"}.get(int(m.eq_type[e]))
+    return {(kind, int(m.eq_obj1id[e])), (kind, int(m.eq_obj2id[e]))} if kind else set()
+
+
+def _coupled(bodies: set[int], m: mujoco.MjModel) -> set[int]:
+    """``bodies`` and the bodies of every joint a joint equality couples to one of their joints."""
+    while True:
+        joints = {j for j in range(m.njnt) if int(m.jnt_bodyid[j]) in bodies}
+        more = {
+            int(m.jnt_bodyid[o])
+            for e in range(m.neq)
+            if int(m.eq_type[e]) == mujoco.mjtEq.mjEQ_JOINT
+            for a, o in ((int(m.eq_obj1id[e]), int(m.eq_obj2id[e])), (int(m.eq_obj2id[e]), int(m.eq_obj1id[e])))
+            if a in joints and o >= 0
+        }
+        if more <= bodies:
+            return bodies
+        bodies = bodies | more
 
 
 def by_name(m_from: mujoco.MjModel, values: np.ndarray, m_to: mujoco.MjModel, obj: str, default: np.ndarray):
@@ -93,7 +136,7 @@ def sphere_tyres(spec: mujoco.MjSpec, m: mujoco.MjModel, wheels, radius: float, 
     """On each wheel (joint, collision geoms): a sphere tyre of ``radius`` about the hinge's anchor,
     with the friction and contact bits of the wheel's own collision geom, which stops colliding."""
     own = [[spec.geoms[g] for g in geoms] for _, geoms in wheels]  # before any geom is added (ids move)
-    for side, (joint, geoms) in zip(("left", "right"), wheels, strict=True):
+    for side, (joint, geoms) in zip(("left", "right", "left_2", "right_2"), wheels, strict=False):
         g0 = geoms[0]
         spec.bodies[int(m.jnt_bodyid[joint])].add_geom(
             name=f"{TYRE}_{side}",
@@ -101,7 +144,7 @@ def sphere_tyres(spec: mujoco.MjSpec, m: mujoco.MjModel, wheels, radius: float, 
             size=[radius, 0.0, 0.0],
             pos=m.jnt_pos[joint].copy(),
             friction=m.geom_friction[g0].copy(),
-            condim=int(m.geom_condim[g0]),
+            condim=min(3, int(m.geom_condim[g0])) if len(wheels) > 2 else int(m.geom_condim[g0]),  # a skid-steer slides
             contype=int(m.geom_contype[g0]),
             conaffinity=int(m.geom_conaffinity[g0]),
             priority=priority,
@@ -112,7 +155,7 @@ def sphere_tyres(spec: mujoco.MjSpec, m: mujoco.MjModel, wheels, radius: float, 
         geom.contype, geom.conaffinity = 0, 0
 
 
-def to_torque_motors(spec: mujoco.MjSpec, m: mujoco.MjModel, acts: tuple[int, int]) -> None:
+def to_torque_motors(spec: mujoco.MjSpec, m: mujoco.MjModel, acts) -> None:
     """Turn the velocity servos into torque motors (force = ctrl) limited to the same force range
     (a servo's control range is a speed, not a torque: it is dropped)."""
     for a in acts:

@@ -33,6 +33,7 @@ import numpy as np
 from mlpfac.events import EVENT_KINDS, DelayLine
 from mlpfac.ik import wheel_speeds
 from mlpfac.plants import compiled as K  # noqa: N812 - the kernel's layout constants, K.F_DT ...
+from mlpfac.plants import drive
 from mlpfac.plants.config import MujocoConfig
 from mlpfac.plants.edits import torque_limit
 from mlpfac.plants.model_file import is_menagerie, menagerie_version
@@ -69,9 +70,9 @@ class MujocoPlant(MujocoEvents):
     real_radius, _z_rest = _Kept("fl", K.F_RADIUS), _Kept("fl", K.F_ZREST)
     _kp, _ki, _n = _Kept("fl", K.F_KP), _Kept("fl", K.F_KI), _Kept("ints", K.I_NSUB, int)
 
-    def __init__(self, config: MujocoConfig, T: float) -> None:
+    def __init__(self, config: MujocoConfig, T: float, periods: tuple[float, ...] = ()) -> None:
         self.T = float(T)
-        self.robot = r = read_robot(config)
+        self.robot = r = read_robot(config, tuple(periods) or (self.T,))
         self.config = r.config  # every part named: what the model said where ``config`` did not
         self.ints, self.fl = np.zeros(K.N_INTS, dtype=np.int64), np.zeros(K.N_FL)
         self._where = r.where
@@ -91,16 +92,25 @@ class MujocoPlant(MujocoEvents):
         self.max_wheel_speed = None if limit is None or math.isinf(limit) else float(limit)
         self._geometry = r.geometry
         self._noise = config.noise_std()
-        self._torque_max = self._force_limits()
         self._changed = False
         self.ints[[K.I_AL, K.I_AR, K.I_DL, K.I_DR, K.I_SITE]] = (*r.acts, *r.dofs, r.site)
-        self.ints[K.I_TORQUE] = config.actuator == "torque"
+        self.ints[K.I_TORQUE] = self.config.actuator == "torque"
+        self.ints[[K.I_AL2, K.I_AR2, K.I_MIX]] = (*r.seconds, r.mix is not None)
+        self.fl[[K.F_CL2, K.F_CR2]] = r.second_per_wheel
+        self._umax()
+        self._torque_max = self._force_limits()
         self.ints[K.I_NOISE] = self._noise is not None
         self.fl[[K.F_CL, K.F_CR, K.F_SL, K.F_SR]] = (*r.act_per_wheel, *r.sign)
         self.fl[[K.F_IK_R, K.F_IK_TRACK, K.F_DT]] = self.ik_radius, self.ik_track, self._dt
         self.fl[K.F_WMAX] = math.inf if self.max_wheel_speed is None else self.max_wheel_speed
         if self._noise is not None:
             self.fl[K.F_STD : K.F_STD + 3] = self._noise
+
+    def _umax(self) -> None:
+        """The tendon drive's inverse and its motors' control limits (of the current model) into fl."""
+        if self.robot.mix is not None:
+            self.fl[K.F_MIX : K.F_MIX + 4] = self.robot.mix.ravel()
+            self.fl[K.F_UMAX : K.F_UMAX + 2] = [drive.ctrl_limit(self.model, a) for a in self._acts]
 
     def _substeps(self, period: float, where: str) -> int:
         return self.robot.substeps(period, where)
@@ -144,6 +154,7 @@ class MujocoPlant(MujocoEvents):
         self.rng = rng
         self._n = self.n_substeps
         self._kp, self._ki = float(self.config.pi_kp), float(self.config.pi_ki)
+        self._umax()
         self._torque_max = self._force_limits()
         self.st = np.zeros(K.N_ST)
         self.st[K.S_THETA] = float(q0[2])
@@ -211,6 +222,9 @@ class MujocoPlant(MujocoEvents):
         w = wheel_speeds(v, omega, self.real_radius, self._real_track)
         for dof, sign, wi in zip(self._dofs, self._sign, w, strict=True):
             d.qvel[dof] = sign * wi
+        for a, c, wi in zip(self.robot.seconds, self.robot.second_per_wheel, w, strict=True):
+            if a >= 0:  # a skid-steer's second wheel turns as its side's first
+                d.qvel[m.jnt_dofadr[m.actuator_trnid[a, 0]]] = wi * c / m.actuator_gear[a, 0]
         mujoco.mj_forward(m, d)
 
     def true_pose(self) -> np.ndarray:
@@ -226,6 +240,8 @@ class MujocoPlant(MujocoEvents):
 
     def _force_limits(self) -> tuple[float, float]:
         """Largest forward wheel torque of each drive (N m at the joint), inf when not limited."""
+        if self.robot.mix is not None:
+            return drive.wheel_torque_limits(self.robot.mix, self.fl[K.F_UMAX : K.F_UMAX + 2])
         torque = self.config.actuator == "torque"
         tl, tr = (torque_limit(self.model, a, c, torque) for a, c in zip(self._acts, self._act_per_wheel, strict=True))
         return tl, tr

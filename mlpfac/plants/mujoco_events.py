@@ -14,7 +14,7 @@ import numpy as np
 
 from mlpfac.events import Actuator, ControlPeriod, Event, Friction, Payload, SensorDelay, WheelRadius
 from mlpfac.exceptions import ConfigError
-from mlpfac.plants.robot import ROUND
+from mlpfac.plants.detect import ROUND
 
 
 class MujocoEvents:
@@ -127,17 +127,19 @@ class MujocoEvents:
         kv = event.kv_scale if event.kv_scale is not None else 1.0
         fs = event.force_scale if event.force_scale is not None else 1.0
         old_limit = self._torque_max[0]
-        for a in self._acts:
+        for a in (*self._acts, *(a for a in self.robot.seconds if a >= 0)):
             act = spec.actuators[a]
             act.forcerange = fs * np.asarray(act.forcerange)
-            joint = spec.joints[int(m.actuator_trnid[a, 0])]
-            joint.actfrcrange = fs * np.asarray(joint.actfrcrange)
+            if int(m.actuator_trntype[a]) == mujoco.mjtTrn.mjTRN_JOINT:
+                joint = spec.joints[int(m.actuator_trnid[a, 0])]
+                joint.actfrcrange = fs * np.asarray(joint.actfrcrange)
             if self.config.actuator == "velocity":
                 act.gainprm[0] *= kv
                 act.biasprm[2] *= kv
             else:
                 act.ctrlrange = fs * np.asarray(act.ctrlrange)
         self._recompile()
+        self._umax()
         self._torque_max = self._force_limits()
         if self.config.actuator == "velocity":
             old_kv = float(m.actuator_gainprm[self._acts[0], 0])

@@ -18,23 +18,24 @@ import mujoco
 import numpy as np
 
 from mlpfac.exceptions import ConfigError
-from mlpfac.plants import edits
+from mlpfac.plants import defaults, drive, edits, shapes
+from mlpfac.plants import wheels as wheel_parts
 from mlpfac.plants.compiled import yaw
 from mlpfac.plants.config import MujocoConfig, check_timestep
-from mlpfac.plants.detect import ROUND, WHEEL_SHAPES, collision_geoms, describe, is_velocity_servo, names, resolve
+from mlpfac.plants.detect import (
+    WHEEL_SHAPES,
+    collision_geoms,
+    describe,
+    is_motor,
+    names,
+    resolve,
+)
 from mlpfac.plants.model_file import fingerprint, is_menagerie, load_spec
 
 MAX_SUBSTEPS = 10_000  # physics steps in one control period, at most
 SETTLE_S = 0.5  # seconds the robot settles on its wheels at least, at construction (the rest pose)
 SETTLE_MAX_S = 10.0  # ... and at most: then it must be at rest
 REST_SPEED = 1e-4  # at rest: the free body moves no faster than this (m/s, rad/s)
-SHAPES = {
-    int(mujoco.mjtGeom.mjGEOM_BOX): "box",
-    int(mujoco.mjtGeom.mjGEOM_CYLINDER): "cylinder",
-    int(mujoco.mjtGeom.mjGEOM_SPHERE): "sphere",
-    edits.MESH: "mesh",
-}
-SIZE_LEN = {"box": 3, "cylinder": 2, "sphere": 1, "mesh": 0}
 
 
 @dataclass(frozen=True)
@@ -73,6 +74,10 @@ class Robot:
     geometry: list[dict]  # visual shapes relative to the site frame
     max_wheel_speed: float | None  # the model's limit on the wheel speed (rad/s, a servo's ctrlrange), or None
     locked: tuple[str, ...] = ()  # joints fixed at the keyframe (other_actuators = "lock")
+    seconds: tuple[int, int] = (-1, -1)  # each side's second wheel's actuator (skid-steer), -1: none
+    second_per_wheel: tuple[float, float] = (0.0, 0.0)  # its actuator units per forward wheel unit
+    mix: np.ndarray | None = None  # tendon drive: the two motors' controls per forward wheel torque (2, 2)
+    umax: np.ndarray | None = None  # ... and their control limits (2,)
 
     def substeps(self, period: float, where: str) -> int:
         """Physics steps in ``period`` seconds; a ConfigError unless it is a whole number of them, at
@@ -98,77 +103,123 @@ CACHED = 8
 _LOCK = threading.Lock()
 
 
-def read_robot(config: MujocoConfig) -> Robot:
+def read_robot(config: MujocoConfig, periods: tuple[float, ...] = ()) -> Robot:
     """Load, check and describe the robot of ``config``; each problem a ConfigError naming its key.
 
     Read once per process for a configuration and model file (its size and time of change): the
     plants of a sweep share it and copy what they change (the spec; events compile new models).
     The configuration with the parts it found named (``Robot.config``, what a scenario's load
-    writes into config.toml) is the same robot with nothing left to find: it is not read again."""
+    writes into config.toml) is the same robot with nothing left to find: it is not read again.
+    ``periods``: the control periods a run asks (T, and T x an event's factor): an unset timestep
+    is chosen to divide them all."""
     st = config.path.stat()
     stamp = (st.st_mtime_ns, st.st_size)
     try:
         hash(config)
     except TypeError:  # made in Python with lists: not cached
-        return _read_robot(config, stamp)
+        return _read_robot(config, stamp, periods)
+    key = (config, stamp, periods)
     with _LOCK:  # a Dask worker may run several tasks in threads
-        robot = _ROBOTS.pop((config, stamp), None)
+        robot = _ROBOTS.pop(key, None)
     if robot is None:
-        robot = _read_robot(config, stamp)
+        robot = _read_robot(config, stamp, periods)
     with _LOCK:
-        _ROBOTS[config, stamp] = robot
-        if robot.found and (robot.config, stamp) not in _ROBOTS:
-            _ROBOTS[robot.config, stamp] = dataclasses.replace(robot, found=())
+        _ROBOTS[key] = robot
+        if robot.found and (robot.config, stamp, periods) not in _ROBOTS:
+            _ROBOTS[robot.config, stamp, periods] = dataclasses.replace(robot, found=())
         while len(_ROBOTS) > CACHED:
             del _ROBOTS[next(iter(_ROBOTS))]
     return robot
 
 
-def _read_robot(config: MujocoConfig, stamp: tuple[int, int]) -> Robot:
+def _read_robot(
+    config: MujocoConfig, stamp: tuple[int, int], periods: tuple[float, ...] = (), probe: bool = True
+) -> Robot:
+    """The robot of ``config`` (:func:`read_robot`); ``probe``: try its wheel servos, and where they
+    chatter (:func:`mlpfac.plants.defaults.chatters`) take a timestep left unset down to one that
+    integrates them (:func:`mlpfac.plants.defaults.servo_step`)."""
+    user = config
     spec, path = load_spec(config.model)
     where = config.model if is_menagerie(config.model) else str(path)
     m = _compile(spec, where)
+    spec_dt = float(m.opt.timestep)
     sha256 = fingerprint(m)
+    chosen = defaults.keyframe(config, m)
+    config = defaults.with_chosen(config, chosen)
     qpos0, ctrl0 = _keyframe(m, config, where)
     found = resolve(config, m, qpos0)
     config = found.config
-    acts = (_actuator_id(m, config, "left_actuator", where), _actuator_id(m, config, "right_actuator", where))
-    if acts[0] == acts[1]:
-        raise ConfigError(
-            "right_actuator", f"left and right wheels need two actuators, both are {config.left_actuator!r}"
+    drv = drive.resolve_ids(m, config, where)
+    if drv.tendon:
+        acts = drv.acts
+    else:
+        acts = (
+            wheel_parts.actuator_id(m, config, "left_actuator", where),
+            wheel_parts.actuator_id(m, config, "right_actuator", where),
         )
-    description = describe(m, config, acts)
-    act_names = [m.actuator(a).name for a in acts]
+        if acts[0] == acts[1]:
+            raise ConfigError(
+                "right_actuator", f"left and right wheels need two actuators, both are {config.left_actuator!r}"
+            )
+    keep = [*acts, *(a for a in drv.seconds if a >= 0)]
+    joints = list(drv.joints) if drv.tendon else [int(m.actuator_trnid[a, 0]) for a in acts]
+    if drv.tendon:
+        joints = wheel_parts.left_first(m, config, joints, qpos0)
+    more = defaults.others(config, m, set(keep)) | defaults.timestep(config, float(m.opt.timestep), periods)
+    config = defaults.with_chosen(config, more)
+    chosen |= more
+    description = describe(m, config, acts, joints)
+    keep_names = [m.actuator(a).name for a in keep]
+    joint_names = [m.joint(j).name for j in joints]
     locked: list[str] = []
     if config.other_actuators == "lock":
         m_full = m
-        locked = edits.lock_other_joints(spec, m, qpos0, acts)
+        locked = edits.lock_other_joints(spec, m, qpos0, tuple(keep))
         m = _compile(spec, where)
         qpos0 = edits.by_name(m_full, qpos0, m, "qpos", m.qpos0)
         ctrl0 = edits.by_name(m_full, ctrl0, m, "ctrl", np.zeros(m.nu))
-        acts = tuple(mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_ACTUATOR, n) for n in act_names)
+        keep = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_ACTUATOR, n) for n in keep_names]
+        joints = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, n) for n in joint_names]
+        acts = (keep[0], keep[1])
+    seconds = [keep[2] if drv.seconds[0] >= 0 else -1]
+    seconds.append(keep[-1] if drv.seconds[1] >= 0 else -1)
     if config.timestep is not None:
         spec.option.timestep = float(config.timestep)
     site = _pose_frame(spec, m, config, where)
-    joints = [int(m.actuator_trnid[a, 0]) for a in acts]
-    wheels = [(j, collision_geoms(m, int(m.jnt_bodyid[j]))) for j in joints]
-    for key, (_, geoms) in zip(("left_actuator", "right_actuator"), wheels, strict=True):
+    driven = [*joints, *(int(m.actuator_trnid[a, 0]) for a in seconds if a >= 0)]
+    wheels = [(j, collision_geoms(m, int(m.jnt_bodyid[j]))) for j in driven]
+    for key, (_, geoms) in zip(("left_actuator", "right_actuator"), wheels, strict=False):
         if not any(int(m.geom_type[g]) in WHEEL_SHAPES for g in geoms):
             raise ConfigError(
                 key,
                 f"the body moved by {getattr(config, key)!r} has no sphere, cylinder or mesh collision geom (the wheel)",
             )
     root0 = int(m.body_rootid[m.jnt_bodyid[joints[0]]])
+    floor = wheel_parts.floor_priority(m, root0)
+    rims = [g for _, geoms in wheels for g in geoms if int(m.geom_type[g]) in WHEEL_SHAPES]
+    more = defaults.tyre(config, m, rims, floor)
+    config, chosen = defaults.with_chosen(config, more), chosen | more
     drawn = [g for g in range(m.ngeom) if m.body_rootid[m.geom_bodyid[g]] == root0]
     visual_only = any(m.geom_contype[g] == 0 and m.geom_conaffinity[g] == 0 for g in drawn)
     if config.tyre == "sphere":
-        radius = config.wheel_radius or max(_radius(m, g, j) for j, geoms in wheels for g in geoms)
-        edits.sphere_tyres(spec, m, wheels, radius, _floor_priority(m, root0) + 1)
-    wheel_speed = _speed_limits(m, acts)
+        radius = config.wheel_radius or max(wheel_parts.radius(m, g, j) for j, geoms in wheels for g in geoms)
+        edits.sphere_tyres(spec, m, wheels, radius, floor + 1)
+    wheel_speed = wheel_parts.speed_limits(m, acts) if not drv.tendon else [None, None]
     if config.actuator == "torque":
-        edits.to_torque_motors(spec, m, acts)
+        edits.to_torque_motors(spec, m, [a for a in (*acts, *seconds) if a >= 0 and not is_motor(m, a)])
     if site is None or config.tyre == "sphere" or config.actuator == "torque" or config.timestep is not None:
         m = _compile(spec, where)
+    if config.casters != "model":  # floor contacts at rest that are not the wheels and drag: they slide
+        bodies = {int(m.jnt_bodyid[j]) for j in driven}
+        skids = defaults.skids(m, qpos0, ctrl0, SETTLE_S, root0, bodies)
+        if skids and config.casters is None:
+            config, chosen = (
+                defaults.with_chosen(config, {"casters": "frictionless"}),
+                chosen | {"casters": "frictionless"},
+            )
+        if skids:
+            defaults.frictionless(spec, skids, floor)
+            m = _compile(spec, where)
     site = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, edits.POSE_SITE if site is None else m.site(site).name)
     root = int(m.body_rootid[m.site_bodyid[site]])
     jnt = int(m.body_jntadr[root])
@@ -177,7 +228,7 @@ def _read_robot(config: MujocoConfig, stamp: tuple[int, int]) -> Robot:
         raise ConfigError(
             kind, f"the body tree of {kind} {name!r} must hang from a <freejoint/> (a robot free to drive)"
         )
-    wheel_bodies = tuple(int(m.jnt_bodyid[j]) for j in joints)
+    wheel_bodies = tuple(int(m.jnt_bodyid[j]) for j in driven)
     tyres = tuple(g for b in wheel_bodies for g in collision_geoms(m, b) if int(m.geom_type[g]) in WHEEL_SHAPES)
     dt = float(m.opt.timestep)
     check_timestep(dt, "timestep", "the model's timestep ")
@@ -187,14 +238,23 @@ def _read_robot(config: MujocoConfig, stamp: tuple[int, int]) -> Robot:
     except mujoco.FatalError as err:  # an arena too small for the model (<size memory>), say
         raise ConfigError(where, f"MuJoCo cannot simulate the model: {' '.join(str(err).split())}") from None
     anchors = [d.xanchor[j].copy() for j in joints]
-    sign = _wheel_signs(config, d, site, joints, anchors)
-    c = [s * g for s, g in zip(sign, m.actuator_gear[list(acts), 0], strict=True)]
+    sign = wheel_parts.wheel_signs(config, d, site, joints, anchors)
+    dofs = (int(m.jnt_dofadr[joints[0]]), int(m.jnt_dofadr[joints[1]]))
+    if drv.tendon:
+        c, inverse, umax = [1.0, 1.0], *drive.mix(m, d.qpos, acts, dofs, sign)
+    else:
+        c = [s * g for s, g in zip(sign, m.actuator_gear[list(acts), 0], strict=True)]
+        inverse, umax = None, None
+    c2 = [
+        0.0 if a < 0 else float(s * m.actuator_gear[a, 0] * wheel_parts.same_way(m, d, a, j))
+        for a, s, j in zip(seconds, sign, joints, strict=True)
+    ]
     limit = [w / abs(ci) for w, ci in zip(wheel_speed, c, strict=True) if w is not None]
-    return Robot(
+    robot = Robot(
         where=where,
         config=config,
-        found=found.keys,
-        description=description,
+        found=(*found.keys, *chosen),
+        description=description + defaults.said(chosen, config),
         sha256=sha256,
         spec=spec,
         model=m,
@@ -204,19 +264,37 @@ def _read_robot(config: MujocoConfig, stamp: tuple[int, int]) -> Robot:
         root=root,
         qroot=int(m.jnt_qposadr[jnt]),
         droot=int(m.jnt_dofadr[jnt]),
-        dofs=(int(m.jnt_dofadr[joints[0]]), int(m.jnt_dofadr[joints[1]])),
-        wheel_bodies=(wheel_bodies[0], wheel_bodies[1]),
+        dofs=dofs,
+        wheel_bodies=wheel_bodies,
         tyres=tyres,
         qpos_rest=d.qpos.copy(),
         ctrl_rest=d.ctrl.copy(),
         site_rest=(d.site_xpos[site].copy(), yaw(d.site_xmat[site])),
-        real_radius=max(_radius(m, g, int(m.body_jntadr[m.geom_bodyid[g]])) for g in tyres),
+        real_radius=max(wheel_parts.radius(m, g, int(m.body_jntadr[m.geom_bodyid[g]])) for g in tyres),
         real_track=float(np.linalg.norm(anchors[1] - anchors[0])),
         sign=sign,
         act_per_wheel=(float(c[0]), float(c[1])),
-        geometry=_static_geometry(m, d, site, root, visual_only),
+        geometry=shapes.static_geometry(m, d, site, root, visual_only),
         max_wheel_speed=min(limit) if limit else None,
         locked=tuple(locked),
+        seconds=(seconds[0], seconds[1]),
+        second_per_wheel=(c2[0], c2[1]),
+        mix=inverse,
+        umax=umax,
+    )
+    defaults.check_drive(m, d, robot, config, where)
+    if not probe or config.actuator != "velocity" or user.timestep is not None:
+        return robot
+    if not defaults.chatters(robot):
+        return robot
+    step = defaults.smaller_timestep(defaults.servo_step(robot), periods or (dt,), spec_dt * defaults.SMALLEST_STEP)
+    if step is None:
+        raise ConfigError(where, defaults.chatter_refusal(robot, spec_dt * defaults.SMALLEST_STEP))
+    robot = _read_robot(dataclasses.replace(user, timestep=step), stamp, periods, probe=False)
+    return dataclasses.replace(
+        robot,
+        found=(*robot.found, "timestep"),
+        description=f"{robot.description}; timestep {step:g} s (the wheel servos chatter at {dt:g} s)",
     )
 
 
@@ -264,41 +342,6 @@ def _pose_frame(spec: mujoco.MjSpec, m: mujoco.MjModel, config: MujocoConfig, wh
     return None
 
 
-def _radius(m: mujoco.MjModel, g: int, joint: int) -> float:
-    """A wheel geom's radius: a sphere's or cylinder's size, a mesh's reach from the hinge axis."""
-    return float(m.geom_size[g, 0]) if int(m.geom_type[g]) in ROUND else edits.mesh_radius(m, g, joint)
-
-
-def _floor_priority(m: mujoco.MjModel, root: int) -> int:
-    """The highest contact priority of the geoms that are not the robot's (the floor's)."""
-    return max((int(m.geom_priority[g]) for g in range(m.ngeom) if m.body_rootid[m.geom_bodyid[g]] != root), default=0)
-
-
-def _speed_limits(m: mujoco.MjModel, acts) -> list[float | None]:
-    """Each velocity servo's control limit (actuator units; a wheel speed once divided by gear and sign)."""
-    return [
-        float(min(-m.actuator_ctrlrange[a, 0], m.actuator_ctrlrange[a, 1])) if m.actuator_ctrllimited[a] else None
-        for a in acts
-    ]
-
-
-def _actuator_id(m: mujoco.MjModel, config: MujocoConfig, key: str, where: str) -> int:
-    name = getattr(config, key)
-    a = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_ACTUATOR, name)
-    if a < 0:
-        raise ConfigError(
-            key, f"no actuator named {name!r} in {where} ({names(m, mujoco.mjtObj.mjOBJ_ACTUATOR, m.nu)})"
-        )
-    if (
-        int(m.actuator_trntype[a]) != mujoco.mjtTrn.mjTRN_JOINT
-        or int(m.jnt_type[m.actuator_trnid[a, 0]]) != mujoco.mjtJoint.mjJNT_HINGE
-    ):
-        raise ConfigError(key, f"actuator {name!r} must drive a hinge joint (the wheel)")
-    if not is_velocity_servo(m, a):
-        raise ConfigError(key, f"actuator {name!r} must be a velocity servo (<velocity kv=... forcerange=...>)")
-    return a
-
-
 def _settle(
     m: mujoco.MjModel, d: mujoco.MjData, dt: float, qpos: np.ndarray, ctrl: np.ndarray, droot: int, where: str
 ) -> None:
@@ -334,54 +377,3 @@ def _no_warning(d: mujoco.MjData, where: str) -> None:
             where, f"MuJoCo warned ({', '.join(warned)}) as the robot settled at rest: the model is not stable as it is"
         )
 
-
-def _wheel_signs(
-    config: MujocoConfig, d: mujoco.MjData, site: int, joints: list[int], anchors: list[np.ndarray]
-) -> tuple[float, float]:
-    R = d.site_xmat[site].reshape(3, 3)  # columns: site axes in the world
-    signs = []
-    for key, j, p, side in zip(("left_actuator", "right_actuator"), joints, anchors, (1.0, -1.0), strict=True):
-        roll = float(np.cross(d.xaxis[j], [0.0, 0.0, 1.0]) @ R[:, 0])  # forward speed per rad/s, / radius
-        if abs(roll) < 0.5:
-            raise ConfigError(key, "the wheel's hinge axis must be across the site's x axis (forward)")
-        if side * float((p - d.site_xpos[site]) @ R[:, 1]) <= 0:
-            raise ConfigError(
-                key,
-                f"this wheel is not on the {'left' if side > 0 else 'right'} of {' '.join(config.frame)} (y axis to the left)",
-            )
-        signs.append(1.0 if roll > 0 else -1.0)
-    return signs[0], signs[1]
-
-
-def _static_geometry(m: mujoco.MjModel, d: mujoco.MjData, site: int, root: int, visual_only: bool) -> list[dict]:
-    """Visual geoms (contype = conaffinity = 0) of the robot, posed relative to the site frame; all
-    of its geoms when its model has no visual ones (the tyres added here are never drawn). A mesh
-    carries its vertices and triangles."""
-    ps, Rs = d.site_xpos[site], d.site_xmat[site].reshape(3, 3)
-    robot = [
-        g
-        for g in range(m.ngeom)
-        if m.body_rootid[m.geom_bodyid[g]] == root
-        and int(m.geom_type[g]) in SHAPES
-        and not m.geom(g).name.startswith(edits.TYRE)
-    ]
-    if visual_only:
-        robot = [g for g in robot if m.geom_contype[g] == 0 and m.geom_conaffinity[g] == 0]
-    shapes = []
-    for g in robot:
-        kind = SHAPES[int(m.geom_type[g])]
-        quat = np.empty(4)
-        mujoco.mju_mat2Quat(quat, (Rs.T @ d.geom_xmat[g].reshape(3, 3)).ravel())
-        rgba = m.mat_rgba[m.geom_matid[g]] if m.geom_matid[g] >= 0 else m.geom_rgba[g]
-        shape = {
-            "name": m.geom(g).name or f"geom{g}",
-            "type": kind,
-            "size": [round(float(x), 9) for x in m.geom_size[g, : SIZE_LEN[kind]]],
-            "pos": [round(float(x), 9) for x in Rs.T @ (d.geom_xpos[g] - ps)],
-            "quat": [round(float(x), 9) for x in quat],
-            "rgba": [round(float(x), 6) for x in rgba],
-        }
-        if kind == "mesh":
-            shape |= edits.mesh_shape(m, g)
-        shapes.append(shape)
-    return shapes

@@ -16,6 +16,11 @@ CONTROLLERS_HELP = "shipped names, path/to/file.py:Class, package.module:Class o
 
 
 def _add_common(p: argparse.ArgumentParser, seeds: str, out: str) -> None:
+    from mlpfac.on_robot import ROBOT_HELP
+
+    r = p.add_mutually_exclusive_group()
+    r.add_argument("--robot", help=ROBOT_HELP)
+    r.add_argument("--robots", help="comma-separated robots: every scenario on each (an axis, as --controllers)")
     p.add_argument("--seeds", default=seeds, help=f"seeds: 0-99, 3, 0,2,5 or 0-4,10 (default {seeds})")
     p.add_argument("--duration", type=float, help="override every scenario's duration in seconds")
     p.add_argument(
@@ -79,9 +84,12 @@ def run_compare_cli(args: argparse.Namespace) -> int:
 def _run_cli(args: argparse.Namespace, stem: str, columns) -> int:
     """Validate everything, then run; 0 done, 1 some run failed or a worker was lost, 2 bad input
     or a failed write (one line naming the path), 130 interrupted (Ctrl-C), 143 terminated (SIGTERM)."""
+    from mlpfac.on_robot import robots_flag, with_robots
+
     cmd = shlex.join(["mlpfac", *sys.argv[1:]]) if sys.argv[1:] else f"mlpfac {stem} ..."
+    robots = [args.robot] if args.robot is not None else robots_flag(args.robots, "--robots")
     done = sweep_folder(
-        args.scenarios, args.controllers, args.seeds, args.out, duration=args.duration, workers=args.workers,
+        with_robots(args.scenarios, robots), args.controllers, args.seeds, args.out, duration=args.duration, workers=args.workers,
         batched=args.batched, batch_size=args.batch_size, scheduler=args.scheduler,
         scheduler_timeout=args.scheduler_timeout, save_rrd=args.save_rrd, stem=stem, columns=columns, command=cmd,
     )  # fmt: skip

@@ -89,6 +89,7 @@ def plan(
     scenarios: Iterable[str], controllers: list[str | None], seeds: list[int], duration: float | None = None
 ) -> list[Job]:
     """Load and resolve every run; raises ConfigError on the first bad scenario, controller or seed."""
+    from mlpfac.on_robot import split_robot
     from mlpfac.scenario import load, to_toml
 
     scenarios = list(dict.fromkeys(scenarios))
@@ -101,7 +102,8 @@ def plan(
     jobs: list[Job] = []
     names: dict[str, str] = {}
     for src in scenarios:
-        base = load(src)
+        name, robot = split_robot(src)  # SCENARIO@ROBOT: on that robot (mlpfac.on_robot)
+        base = load(name, robot=robot)
         if base.name in names:
             raise ConfigError(
                 src,

@@ -1,0 +1,87 @@
+"""The wheels of a robot's model: their radius, which way each rolls forward, their actuators and
+their limits, the floor's contact priority (read once by :func:`mlpfac.plants.robot.read_robot`)."""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+
+from mlpfac.exceptions import ConfigError
+from mlpfac.plants import edits
+from mlpfac.plants.config import MujocoConfig
+from mlpfac.plants.detect import ROUND, base_frame, is_motor, is_velocity_servo, names
+
+
+def radius(m: mujoco.MjModel, g: int, joint: int) -> float:
+    """A wheel geom's radius: a sphere's or cylinder's size, a mesh's reach from the hinge axis."""
+    return float(m.geom_size[g, 0]) if int(m.geom_type[g]) in ROUND else edits.mesh_radius(m, g, joint)
+
+
+def floor_priority(m: mujoco.MjModel, root: int) -> int:
+    """The highest contact priority of the geoms that are not the robot's (the floor's)."""
+    return max((int(m.geom_priority[g]) for g in range(m.ngeom) if m.body_rootid[m.geom_bodyid[g]] != root), default=0)
+
+
+def speed_limits(m: mujoco.MjModel, acts) -> list[float | None]:
+    """Each velocity servo's control limit (actuator units; a wheel speed once divided by gear and
+    sign); None for a motor (its control is a torque)."""
+    return [
+        float(min(-m.actuator_ctrlrange[a, 0], m.actuator_ctrlrange[a, 1]))
+        if m.actuator_ctrllimited[a] and is_velocity_servo(m, a)
+        else None
+        for a in acts
+    ]
+
+
+def actuator_id(m: mujoco.MjModel, config: MujocoConfig, key: str, where: str) -> int:
+    name = getattr(config, key)
+    a = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_ACTUATOR, name)
+    if a < 0:
+        raise ConfigError(
+            key, f"no actuator named {name!r} in {where} ({names(m, mujoco.mjtObj.mjOBJ_ACTUATOR, m.nu)})"
+        )
+    if (
+        int(m.actuator_trntype[a]) != mujoco.mjtTrn.mjTRN_JOINT
+        or int(m.jnt_type[m.actuator_trnid[a, 0]]) != mujoco.mjtJoint.mjJNT_HINGE
+    ):
+        raise ConfigError(key, f"actuator {name!r} must drive a hinge joint (the wheel)")
+    if not is_velocity_servo(m, a) and not (config.actuator == "torque" and is_motor(m, a)):
+        raise ConfigError(
+            key,
+            f"actuator {name!r} must be a velocity servo (<velocity kv=... forcerange=...>), or a motor with "
+            'actuator = "torque"',
+        )
+    return a
+
+
+def wheel_signs(
+    config: MujocoConfig, d: mujoco.MjData, site: int, joints: list[int], anchors: list[np.ndarray]
+) -> tuple[float, float]:
+    R = d.site_xmat[site].reshape(3, 3)  # columns: site axes in the world
+    signs = []
+    for key, j, p, side in zip(("left_actuator", "right_actuator"), joints, anchors, (1.0, -1.0), strict=True):
+        roll = float(np.cross(d.xaxis[j], [0.0, 0.0, 1.0]) @ R[:, 0])  # forward speed per rad/s, / radius
+        if abs(roll) < 0.5:
+            raise ConfigError(key, "the wheel's hinge axis must be across the site's x axis (forward)")
+        if side * float((p - d.site_xpos[site]) @ R[:, 1]) <= 0:
+            raise ConfigError(
+                key,
+                f"this wheel is not on the {'left' if side > 0 else 'right'} of {' '.join(config.frame)} (y axis to the left)",
+            )
+        signs.append(1.0 if roll > 0 else -1.0)
+    return signs[0], signs[1]
+
+
+def same_way(m: mujoco.MjModel, d: mujoco.MjData, a: int, first: int) -> float:
+    """+1 when the second wheel's hinge turns the same way as its side's first wheel's, else -1."""
+    return 1.0 if float(d.xaxis[int(m.actuator_trnid[a, 0])] @ d.xaxis[first]) > 0 else -1.0
+
+
+def left_first(m: mujoco.MjModel, config: MujocoConfig, joints: list[int], qpos: np.ndarray) -> list[int]:
+    """The tendon drive's two wheel joints, the left one (+y of the pose frame) first."""
+    d = mujoco.MjData(m)
+    d.qpos[:] = qpos
+    mujoco.mj_kinematics(m, d)
+    origin, R = base_frame(m, d, config, int(m.body_rootid[m.jnt_bodyid[joints[0]]]))
+    side = [float((d.xanchor[j] - origin) @ R[:, 1]) for j in joints]
+    return joints if side[0] > side[1] else joints[::-1]

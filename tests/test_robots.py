@@ -1,0 +1,174 @@
+"""Every MuJoCo Menagerie wheeled base by its name alone, a test robot of nobody's (an arm, four
+wheels, torque motors), and any scenario on any robot (--robot, --robots, a budget's robots)."""
+
+from __future__ import annotations
+
+import json
+import tomllib
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mlpfac.cli import main
+from mlpfac.exceptions import ConfigError
+from mlpfac.on_robot import SHARE, on_robot, with_robots
+from mlpfac.plants.config import MujocoConfig
+from mlpfac.plants.mujoco import MujocoPlant
+from mlpfac.reference import make_reference, sample
+from mlpfac.scenario import read_toml, shipped_dir
+
+SKID_ARM = Path(__file__).parent / "data" / "skid_arm.xml"
+T = 0.01
+
+# Each base from its model alone: what must have been found or chosen (docs/robots.md).
+BASES = {
+    "pal_tiago": {"keyframe": "home", "other_actuators": "lock", "tyre": "sphere", "actuator": "velocity"},
+    "pal_tiago_dual": {"left_actuator_2": "wheel_rear_left_joint_velocity", "tyre": "sphere", "actuator": "torque"},
+    "hello_robot_stretch": {"tendon_actuators": ["forward", "turn"], "actuator": "torque", "other_actuators": "lock"},
+    "hello_robot_stretch_3": {"keyframe": "home", "timestep": 0.01 / 45, "actuator": "velocity", "other_actuators": "lock"},
+}  # fmt: skip
+
+
+@pytest.mark.menagerie
+@pytest.mark.parametrize("name", sorted(BASES))
+def test_a_menagerie_base_from_its_name_alone(name):
+    torque = {"actuator": "torque"} if name == "pal_tiago_dual" else {}  # its servos refused (below)
+    plant = MujocoPlant(MujocoConfig(model=f"menagerie:{name}", **torque), T, (T,))
+    found = {**plant.found(), **torque}
+    assert {k: pytest.approx(found.get(k)) for k in BASES[name]} == BASES[name]
+    assert plant.robot.locked and plant.model.nu == (4 if name == "pal_tiago_dual" else 2)  # only the drive is left
+    assert plant.n_substeps * plant.model.opt.timestep == pytest.approx(T)
+
+
+@pytest.mark.menagerie
+def test_tiago_dual_servos_are_refused_in_one_line_with_their_numbers():
+    """kv 2000 on wheels of 0.0011 kg m^2, clamped at 400 N m: they overshoot within any timestep
+    above 1.1e-6 s, and chatter (measured: the base leaves the floor within 5 s at 0.000125 s)."""
+    with pytest.raises(ConfigError) as err:
+        MujocoPlant(MujocoConfig(model="menagerie:pal_tiago_dual"), T, (T,))
+    text = str(err.value)
+    assert "\n" not in text and "kv 2000" in text and "1.1e-06 s" in text and 'actuator = "torque"' in text
+
+
+@pytest.mark.menagerie
+def test_rby1a_is_refused_in_one_line_with_its_numbers_and_the_keys_that_make_it_drive():
+    with pytest.raises(ConfigError) as err:
+        MujocoPlant(MujocoConfig(model="menagerie:rainbow_robotics_rby1"), T)
+    text = str(err.value)
+    assert "\n" not in text and "kv 1" in text and "3.14 N m" in text and "damping 5" in text
+    assert 'actuator = "torque"' in text
+    drag = MujocoPlant  # as shipped, its base's collision mesh drags too: named when the skids are kept
+    with pytest.raises(ConfigError, match=r'base drag \d+ N.*casters = "frictionless"'):
+        drag(MujocoConfig(model="menagerie:rainbow_robotics_rby1", casters="model"), T)
+
+
+# before-phase position RMS (m) kanayama must keep on eight-wheel-radius, each base from its name
+# (rby1a: the shipped robot file with the torque drive); measured 0.2-0.5 mm, Stretch 3 1.2 mm.
+TRACKS = {"pal_tiago": 0.002, "hello_robot_stretch": 0.002, "rby1a": 0.002, "hello_robot_stretch_3": 0.003}
+
+
+@pytest.mark.menagerie
+@pytest.mark.parametrize("robot", sorted(TRACKS))
+def test_eight_wheel_radius_tracks_on_each_base(tmp_path, monkeypatch, capsys, robot):
+    monkeypatch.chdir(tmp_path)  # outside the repository
+    argv = ["run", "eight-wheel-radius", "--robot", robot, "--controller", "kanayama", "--duration", "8"]
+    assert main([*argv, "--no-log", "--no-plot", "--out", "run"]) == 0
+    assert capsys.readouterr().out.startswith("robot: ")  # what was found and chosen, first
+    metrics = json.loads((tmp_path / "run" / "metrics.json").read_text())
+    assert metrics["phases"]["before"]["rms_position_error_m"] < TRACKS[robot]
+
+
+@pytest.mark.menagerie
+def test_a_run_on_another_robot_reruns_from_its_config_toml(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    argv = ["--controller", "kanayama", "--duration", "3", "--no-log", "--no-plot"]
+    assert main(["run", "eight-payload", "--robot", "hello_robot_stretch", *argv, "--out", "a"]) == 0
+    config = tomllib.loads((tmp_path / "a" / "config.toml").read_text())
+    assert (
+        config["plant"]["tendon_actuators"] == ["forward", "turn"]
+        and config["name"] == "eight-payload+hello_robot_stretch"
+    )
+    assert main(["run", "a/config.toml", *argv, "--out", "b"]) == 0
+    a, b = (json.loads((tmp_path / d / "metrics.json").read_text()) for d in "ab")
+    assert a["phases"] == b["phases"]
+
+
+def test_a_test_robot_with_an_arm_four_wheels_and_torque_motors_from_its_model_alone():
+    plant = MujocoPlant(MujocoConfig(model=str(SKID_ARM)), T, (T,))
+    found = plant.found()
+    assert (found["left_actuator"], found["right_actuator"]) == ("m_fl", "m_fr")
+    assert (found["left_actuator_2"], found["right_actuator_2"]) == ("m_rl", "m_rr")
+    assert found["actuator"] == "torque" and found["keyframe"] == "home" and found["other_actuators"] == "lock"
+    assert found["timestep"] == 0.0025 and plant.n_substeps == 4  # its 3 ms does not divide 10 ms
+    assert set(plant.robot.locked) == {"shoulder", "elbow"} and plant.model.nu == 4
+    assert "tyre" not in found  # cylinders above the floor's priority roll as they are
+    # the pose is measured in the middle of the four wheels, on the axles' height
+    assert plant.robot.site_rest[0][:2] == pytest.approx([0.0, 0.0], abs=1e-3)
+
+
+def test_keys_a_user_sets_still_win():
+    cfg = MujocoConfig(model=str(SKID_ARM), timestep=0.001, other_actuators="hold", keyframe="home")
+    plant = MujocoPlant(cfg, T, (T,))
+    assert "timestep" not in plant.found() and "other_actuators" not in plant.found() and not plant.robot.locked
+    assert plant.model.opt.timestep == 0.001 and plant.model.nu == 6
+
+
+def test_any_scenario_on_the_test_robot_tracks(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    argv = ["--controller", "kanayama", "--duration", "6", "--no-log", "--no-plot", "--out", "run"]
+    assert main(["run", "eight-nominal", "--robot", str(SKID_ARM), *argv]) == 0
+    metrics = json.loads((tmp_path / "run" / "metrics.json").read_text())
+    assert metrics["phases"]["before"]["rms_position_error_m"] < 0.005  # measured 2.7 mm (25 s run)
+
+
+def test_the_reference_rule_on_a_robot_of_known_limits(tmp_path):
+    """The wheel-speed limit of a drive without servos: its torque limit over its wheels' damping
+    (4 N m / 1 N m s/rad = 4 rad/s); the reference slowed until its peak wheel speed is SHARE of it."""
+    table = read_toml(shipped_dir() / "eight-nominal.toml", "scenario file")
+    table["reference"] = {"kind": "eight", "wx": 5.0, "wy": 10.0}  # 20x the shipped eight's speed
+    out = on_robot(table, str(SKID_ARM))
+    plant = MujocoPlant(MujocoConfig(model=str(SKID_ARM)), T, (T,))
+    r, b = plant.real_radius, plant._real_track
+    assert out["controller"]["v_max"] == pytest.approx(r * 4, rel=1e-5)
+    assert out["controller"]["omega_max"] == pytest.approx(2 * r * 4 / b, rel=1e-5)
+    ref = out["reference"]
+    assert ref["wy"] == pytest.approx(2 * ref["wx"], rel=1e-5) and ref["wx"] < 5.0
+    rows = sample(make_reference("eight", {k: v for k, v in ref.items() if k != "kind"}), np.linspace(0, 100, 20001))
+    peak = np.max((np.abs(rows[:, 3]) + np.abs(rows[:, 4]) * b / 2) / r)
+    assert peak == pytest.approx(SHARE * 4, rel=1e-3)
+    assert out["plant"] == {"kind": "mujoco", "model": str(SKID_ARM), "pose_noise_std": 0.001}
+
+
+def test_events_mean_the_same_physical_change():
+    table = {"name": "x", "events": [{"time": 1.0, "kind": "payload", "mass_kg": 2.0, "body": "chassis_top"}]}
+    table["events"].append({"time": 2.0, "kind": "wheel_radius", "scale": 1.5})
+    out = on_robot(table, str(SKID_ARM))
+    assert out["events"] == [
+        {"time": 1.0, "kind": "payload", "mass_kg": 2.0},  # on this robot's base: its body is not there
+        {"time": 2.0, "kind": "wheel_radius", "scale": 1.5},  # x1.5 of this robot's wheel
+    ]
+
+
+def test_robots_are_an_axis_of_a_sweep(tmp_path, monkeypatch, capsys):
+    assert with_robots(["a", "b"], ["diffdrive", "cart"]) == ["a@diffdrive", "a@cart", "b@diffdrive", "b@cart"]
+    monkeypatch.chdir(tmp_path)
+    argv = ["compare", "eight-nominal", "--robots", f"diffdrive,{SKID_ARM}", "--controllers", "kanayama"]
+    assert main([*argv, "--seeds", "0", "--duration", "3", "--out", "c", "--workers", "1"]) == 0
+    rows = json.loads((tmp_path / "c" / "compare.json").read_text())["rows"]
+    assert {r["scenario"] for r in rows} == {"eight-nominal+diffdrive", "eight-nominal+skid_arm"}
+
+
+def test_a_budget_runs_each_scenario_on_its_robots(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "skid.xml").write_text(SKID_ARM.read_text())
+    budget = tmp_path / "budget.toml"
+    budget.write_text(
+        'scenarios = ["eight-nominal"]\nrobots = ["diffdrive", "skid.xml"]\ncontrollers = ["kanayama"]\n'
+        'seeds = "0"\nduration = 3.0\n[[budget]]\nscenario = "eight-nominal"\nmax_position_rms_mm = 50.0\n'
+    )
+    assert main(["check", str(budget), "--out", "c", "--workers", "1"]) == 0
+    assert "2 of 2 budget cases hold" in capsys.readouterr().out  # one case a robot, the limit on both
+    assert main(["check", str(budget), "--out", "d", "--workers", "1", "--robot", "nosuch"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "--robot" in err and not (tmp_path / "d").exists()
