@@ -92,6 +92,12 @@ def build_parser() -> argparse.ArgumentParser:
         "--out", type=Path, default=Path("runs/check"), help="results folder (default runs/check); resumable"
     )
     p.add_argument("--workers", type=int, default=2, help="local worker processes (default 2)")
+    p.add_argument(
+        "--vary",
+        action="append",
+        metavar="KEY=VALUES",
+        help="an axis or a draw more than the budget's vary (as sweep's)",
+    )
 
     p = sub.add_parser(
         "view",
@@ -189,7 +195,7 @@ def cmd_report(args: argparse.Namespace) -> int:
 def cmd_check(args: argparse.Namespace) -> int:
     from mlpfac.checks import check
 
-    result = check(args.budget, args.junit, args.summary, args.baseline, args.out, args.workers)
+    result = check(args.budget, args.junit, args.summary, args.baseline, args.out, args.workers, args.vary)
     for line in result.lines():
         print(line)
     if result.cases:

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import tomllib
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -212,3 +213,60 @@ def test_a_law_breaks_where_its_speed_limit_falls_below_the_reference(tmp_path):
     assert [r["vary"]["controller.v_max"] for r in rows if r["phase"] == "before"] == values
     assert main(argv) == 0  # resumed: the grid is known, nothing runs again
     assert json.loads((out / "robustness.json").read_text())["breaking_points"] == robust["breaking_points"]
+
+
+V_MAX = [0.3, 0.6, 1.2, 1.6, 2.0]  # below the figure of eight's mean speed (0.77 m/s), above its top (1.12)
+CHECKED = f'scenarios = ["paper"]\ncontrollers = ["corradini"]\nseeds = "0-1"\nduration = 20.0\nvary = ["controller.v_max={",".join(map(str, V_MAX))}"]\n'
+
+
+@pytest.fixture(scope="module")
+def budget_dir(tmp_path_factory) -> Path:
+    return tmp_path_factory.mktemp("breaking")
+
+
+def _check(d: Path, text: str, *flags: str) -> int:
+    (d / "budget.toml").write_text(text)
+    return main(["check", str(d / "budget.toml"), "--out", str(d / "runs"), "--workers", "1", *flags])
+
+
+def test_check_holds_a_controller_to_its_breaking_point(budget_dir, capsys):
+    from mlpfac.reference import sample
+
+    ref = sample(load("paper", build=False).reference, np.arange(2000) * 0.01)
+    assert V_MAX[1] < ref[:, 3].mean() < V_MAX[2] and ref[:, 3].max() < V_MAX[2]
+    holds = CHECKED + '[[budget]]\nname = "slow wheels"\nholds_down_to = 1.2\n'
+    junit = budget_dir / "check.xml"
+    assert _check(budget_dir, holds, "--junit", str(junit), "--summary", str(budget_dir / "check.md")) == 0
+    assert (
+        "pass | paper | corradini | after the change | holds_down_to | <= 1.20 | 1.20"
+        in (budget_dir / "check.md").read_text()
+    )
+    assert (budget_dir / "runs/robustness.json").is_file() and 'failures="0"' in junit.read_text()
+    capsys.readouterr()
+    misses = CHECKED + "[[budget]]\nholds_down_to = 0.6\n"
+    assert _check(budget_dir, misses, "--junit", str(junit)) == 1
+    out = capsys.readouterr().out
+    assert "miss: paper / corradini / after the change: holds_down_to 1.20 (fails at 0.6), limit <= 0.60" in out
+    assert "0 run now" in out  # the grid's runs were resumed
+    assert 'failures="1"' in junit.read_text()
+
+
+BAD_BUDGETS = {
+    "no axis": ('scenarios = ["paper"]\n[[budget]]\nholds_up_to = 2\n', "budget.toml vary: holds_up_to"),
+    "not an axis": (CHECKED + '[[budget]]\naxis = "T"\nholds_down_to = 0.3\n', "budget #1 axis: 'T' is not an axis"),
+    "beyond the axis": (CHECKED + "[[budget]]\nholds_down_to = 0.2\n", "no grid point reaches it"),
+    "with another figure": (CHECKED + "[[budget]]\nholds_down_to = 0.3\nlost = 0\n", "budget #1 lost"),
+    "a phase": (CHECKED + '[[budget]]\nholds_down_to = 0.3\nphase = "after"\n', "budget #1 phase"),
+    "vary not a list": ('scenarios = ["paper"]\nvary = "T=1"\n[[budget]]\nlost = 0\n', "budget.toml vary"),
+    "a bad value": ('scenarios = ["paper"]\nvary = ["T=0.01,-1"]\n[[budget]]\nlost = 0\n', "vary: --vary T=-1"),
+    "threshold": (CHECKED + "threshold_m = 0\n[[budget]]\nholds_down_to = 0.3\n", "threshold_m"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD_BUDGETS))
+def test_a_bad_breaking_budget_is_one_line(tmp_path, capsys, case):
+    text, needle = BAD_BUDGETS[case]
+    assert _check(tmp_path, text) == 2
+    err = [line for line in capsys.readouterr().err.splitlines() if not line.startswith("mlpfac: planning")]
+    assert len(err) == 1 and needle in err[0], err
+    assert not (tmp_path / "runs").exists()

@@ -55,11 +55,13 @@ def check(
     baseline: str | Path | None = None,
     out: str | Path | None = None,
     workers: int | None = None,
+    vary: list[str] | dict | None = None,
 ) -> CheckResult:
     """Run the sweep of the budget file ``budget`` into ``out`` (default runs/check; runs already
     done there are skipped) with ``workers`` local processes (default 2), then judge it, against
     the runs of the sweep folder (or its sweep.json) ``baseline`` per seed where the budget asks.
-    Writes JUnit XML to ``junit`` and a Markdown summary to ``summary`` when given.
+    Writes JUnit XML to ``junit`` and a Markdown summary to ``summary`` when given. ``vary`` adds
+    axes and draws to the budget's ``vary`` (``--vary``, :mod:`mlpfac.sweeps.vary`).
 
     Bad input (the budget, a flag) is a ConfigError naming the file and key before anything runs.
     """
@@ -74,7 +76,9 @@ def check(
     path = Path(budget)
     out = DEFAULT_OUT if out is None else Path(out)
     n_workers = check_execution_flags(DEFAULT_WORKERS if workers is None else workers)
-    b = read_budget(path)
+    from mlpfac.sweeps.vary import parse_vary
+
+    b = read_budget(path, parse_vary(vary))
     needs = b.needs_baseline()
     if needs is not None and baseline is None:
         figure = next(f for f in needs.figures if f in ("no_worse_than_baseline", "p"))
@@ -91,7 +95,9 @@ def check(
     check_writable(out)
     argv = ["mlpfac", "check", str(budget), "--out", str(out), "--workers", str(n_workers)]
     argv += ["--baseline", str(baseline)] if baseline is not None else []
+    argv += [f"--vary={v}" for v in (vary if isinstance(vary, list) else parse_vary(vary).texts())]
     meta = sweep_meta("check", b.scenarios, b.seeds_text, b.duration, jobs) | {"budget": str(path)}
+    meta |= {"vary": b.vary.texts(), "threshold_m": b.threshold} if b.vary else {}
     done = sweep_into(jobs, out, "sweep", SWEEP_COLUMNS, meta, shlex.join(argv), workers=n_workers)
     result = CheckResult(path, out, EXIT_MISS, files=list(done.paths), duration=b.duration)
     if done.code is not None:
@@ -114,8 +120,13 @@ def check(
 
 
 def _judge(b: Budget, groups, metrics: dict[tuple, dict], base_dir: Path | None) -> list[Case]:
+    from mlpfac.checks.breaking import judge_breaking
+
     cases = []
     for limit in b.limits:
+        if limit.breaking:  # one case per scenario and controller, over the grid
+            cases += judge_breaking(limit, groups, metrics, b.threshold)
+            continue
         for g in groups:
             if limit.matches(g) and (limit.phase != "after" or g.has_event):
                 base = baseline_runs(base_dir, g) if base_dir is not None else None
