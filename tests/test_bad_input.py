@@ -114,6 +114,13 @@ BAD_FILES: dict[str, tuple[str | bytes, str]] = {
     "menagerie entry unknown": ('[plant]\nkind = "mujoco"\nmodel = "menagerie:pal_tiago/scene_fast"\n', "scene_velocity"),
     "payload on every body of the kinematic": (MINIMAL + '[[events]]\ntime = 0.2\nkind = "payload"\nmass_kg = 2.0\nbody = "*"\n', "kinematic plant cannot"),
     "payload mass and scale": (ROBOT + '[[events]]\ntime = 0.2\nkind = "payload"\nmass_kg = 2.0\nmass_scale = 2.0\n', "either"),
+    "uniform reversed": (MINIMAL + EVENT.replace("1.5", "{ uniform = [2.0, 1.0] }"), "events.0.factor: uniform needs low < high"),
+    "uniform of text": (MINIMAL + EVENT.replace("1.5", '{ uniform = ["a", 2.0] }'), "events.0.factor: uniform takes two"),
+    "normal sd zero": (MINIMAL + EVENT.replace("1.5", "{ normal = [1.5, 0.0] }"), "standard deviation > 0"),
+    "distribution unknown": (MINIMAL + EVENT.replace("1.5", "{ lognormal = [1.5, 0.1] }"), "factor"),
+    "drawn without a distribution": (MINIMAL + "[drawn]\nduration = 0.5\n", "[drawn] duration: no distribution"),
+    "drawn a string": (MINIMAL + 'drawn = "x"\n', "drawn"),
+    "drawn not the seed's draw": (MINIMAL + EVENT.replace("1.5", "{ uniform = [1.0, 2.0] }") + '[drawn]\n"events.0.factor" = 1.0\n', "is not what seed 0 draws"),
 }  # fmt: skip
 
 
