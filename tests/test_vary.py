@@ -167,6 +167,10 @@ def test_draws_are_in_the_sweep_rows(tmp_path):
     assert [d["seed"] for d in draws] == [0, 1, 2]
     conf = tomllib.loads((out / "drawn/corradini/seed-0001/config.toml").read_text())
     assert draws[1]["events.0.factor"] == conf["drawn"]["events.0.factor"] and draws[1]["pos_rms_m"] > 0
+    batched = tmp_path / "batched"  # each seed its own robot: batched, each runs alone, to the same table
+    assert main(["sweep", str(tmp_path / "drawn.toml"), "--controllers", "corradini", "--seeds", "0-2",
+                 "--workers", "1", "--batched", "--out", str(batched)]) == 0  # fmt: skip
+    assert json.loads((batched / "sweep.json").read_text())["rows"] == rows
 
 
 def test_leaves_are_every_number_by_its_dotted_key():
