@@ -223,7 +223,12 @@ def cmd_plot(args: argparse.Namespace) -> int:
             raise ConfigError(str(folder), "is not a folder")
     for folder in args.folders:
         try:
-            written = sweep_plots(folder)
+            if (folder / "robustness.json").is_file():  # a sweep with --vary: its curves, in place of sweep.png
+                from mlpfac.plots.robustness import robustness_plot
+
+                written = robustness_plot(folder)
+            else:
+                written = sweep_plots(folder)
         except OSError as err:
             raise ConfigError(str(err.filename or folder), f"cannot write ({err.strerror or err})") from None
         if not written:

@@ -217,6 +217,11 @@ def test_a_law_breaks_where_its_speed_limit_falls_below_the_reference(tmp_path):
     assert [r["vary"]["controller.v_max"] for r in rows if r["phase"] == "before"] == values
     assert main(argv) == 0  # resumed: the grid is known, nothing runs again
     assert json.loads((out / "robustness.json").read_text())["breaking_points"] == robust["breaking_points"]
+    (out / "robustness.png").unlink()
+    assert main(["plot", str(out)]) == 0 and (out / "robustness.png").is_file() and not (out / "sweep.png").exists()
+    from mlpfac.report import render
+
+    assert (out / "robustness.md").read_text() == render(out, {"view": "robustness"})
 
 
 V_MAX = [0.3, 0.6, 1.2, 1.6, 2.0]  # below the figure of eight's mean speed (0.77 m/s), above its top (1.12)
