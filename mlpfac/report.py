@@ -131,7 +131,7 @@ def render(folder: Path, opts: dict[str, str]) -> str:
     if view == "robustness":
         from mlpfac.sweeps.robustness import markdown as breaking_markdown
 
-        return breaking_markdown(rows, (data.get("meta") or {}).get("threshold_m"))
+        return breaking_markdown(rows, (data.get("meta") or {}).get("threshold_m"), data.get("curves"))
     columns = {"sweep": SWEEP_COLUMNS, "compare": COMPARE_COLUMNS, "paired": PAIRED_COLUMNS}[view]
     return markdown(rows, columns)
 

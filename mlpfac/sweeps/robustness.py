@@ -152,7 +152,41 @@ def _side(b: dict | None) -> str:
     return f"{_num(b['holds_to'])} (fails at {_num(b['fails_at'])})"
 
 
-def markdown(points: list[dict], threshold: float | None) -> str:
+def curves_markdown(rows: list[dict]) -> str:
+    """Per scenario with one axis: the median position RMS after the change [mm] of each controller
+    at each value, with the seeds tracking where not all did, and the bound."""
+    out = []
+    for fam in dict.fromkeys(r["scenario"] for r in rows):
+        rs = [r for r in rows if r["scenario"] == fam]
+        if len(rs[0]["point"]) != 1:
+            continue
+        (key,) = rs[0]["point"]
+        values = sorted({r["point"][key] for r in rs})
+        cell = {(r["controller"], r["point"][key]): r for r in rs}
+        lines = [f"| {fam}: `{key}` | " + " | ".join(f"{v:g}" for v in values) + " |", "|---" * (len(values) + 1) + "|"]
+        for ctrl in dict.fromkeys(r["controller"] for r in rs):
+            lines.append(f"| {ctrl} | " + " | ".join(_cell(cell.get((ctrl, v))) for v in values) + " |")
+        bound = [
+            next((r["bound_m"] for r in rs if r["point"][key] == v and r["bound_m"] is not None), None) for v in values
+        ]
+        if any(b is not None for b in bound):
+            lines.append("| bound | " + " | ".join(_mm(b) for b in bound) + " |")
+        out.append("\n".join(lines) + "\n")
+    return "\n".join(out)
+
+
+def _mm(x: float | None) -> str:
+    return "-" if x is None else "inf" if not math.isfinite(x) else f"{1e3 * x:.2f}"
+
+
+def _cell(r: dict | None) -> str:
+    if r is None:
+        return "-"
+    text = _mm(r["median_m"])
+    return text if r["tracking"] == r["runs"] else f"{text} ({r['tracking']}/{r['runs']})"
+
+
+def markdown(points: list[dict], threshold: float | None, rows: list[dict] | None = None) -> str:
     lines = [
         "| scenario | controller | axis | other axes | nominal | holds down to | holds up to |",
         "| --- | --- | --- | --- | --- | --- | --- |",
@@ -167,6 +201,12 @@ def markdown(points: list[dict], threshold: float | None) -> str:
         f"median position RMS after the change is within {limit}; the curves are in robustness.json and "
         "robustness.png.\n"
     )
+    table = curves_markdown(rows or [])
+    if table:
+        note += (
+            "\nMedian position RMS after the change [mm] over the seeds (a diverged run counts as infinite), "
+            "(k/n): seeds tracking where not all did; bound: the best law told the change, per seed.\n\n" + table
+        )
     return "\n".join(lines) + "\n" + note
 
 
@@ -184,7 +224,7 @@ def write_robustness(out: Path, jobs: list[Job], metrics: dict[tuple, dict], met
     points = breaking_points(rows, nominals)
     paths = [out / "robustness.json", out / "robustness.md"]
     write_atomic(paths[0], json.dumps({"meta": meta, "curves": rows, "breaking_points": points}, indent=2) + "\n")
-    write_atomic(paths[1], markdown(points, threshold))
+    write_atomic(paths[1], markdown(points, threshold, rows))
     from mlpfac.plots.robustness import robustness_plot
 
     return paths + robustness_plot(out)
