@@ -291,3 +291,23 @@ def test_the_python_api_varies_as_the_command_line(tmp_path):
     assert [d["seed"] for d in rows[0]["draws"]] == [0, 1]
     with pytest.raises(ConfigError, match=r"--vary events.0.factor=-1"):
         mlpfac.sweep("paper", ["corradini"], seeds="0", duration=1.0, workers=1, vary={"events.0.factor": [-1]})
+
+
+def test_a_grid_with_draws_on_dask_gives_the_local_table(tmp_path):
+    distributed = pytest.importorskip("distributed")
+    from mlpfac.sweeps import engine
+
+    (tmp_path / "drawn.toml").write_text(DRAWN)
+    jobs = plan([str(tmp_path / "drawn.toml")], ["corradini"], [0, 1], None, parse_vary(["controller.v_max=1,2"]))
+    local = engine.execute(jobs, tmp_path / "local", workers=2)
+    with distributed.LocalCluster(
+        host="127.0.0.1", n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None
+    ) as cluster:
+        client = engine.connect(cluster.scheduler_address, timeout=30)
+        try:
+            remote = engine.execute(jobs, tmp_path / "dask", client=client)
+        finally:
+            client.close()
+    assert len(remote.metrics) == 4 and engine.aggregate(jobs, remote.metrics) == engine.aggregate(jobs, local.metrics)
+    for j in jobs:
+        assert (j.folder(tmp_path / "dask") / "config.toml").read_text() == j.config
