@@ -98,6 +98,7 @@ BAD_VARY = {  # --vary: the text the one line must hold
     "a draw's end": (["events.0.factor=uniform:-1:2"], "its end -1"),
     "a whole number key": (["controller.adaptive.L_f=10.5"], "--vary controller.adaptive.L_f=10.5"),
     "threshold": (["T=0.01", "--threshold", "-1"], "--threshold"),
+    "a file's draw's end": (["FILE"], "drawn.toml events.0.factor = uniform(-1, 2) (its end -1): must be positive"),
 }
 
 
@@ -105,6 +106,9 @@ BAD_VARY = {  # --vary: the text the one line must hold
 def test_bad_vary_is_one_line_and_nothing_runs(tmp_path, capsys, case):
     flags, needle = BAD_VARY[case]
     argv = ["sweep", "paper", "--seeds", "0", "--duration", "1", "--workers", "1", "--out", str(tmp_path / "o")]
+    if flags == ["FILE"]:  # a distribution of the file whose support leaves the key's range
+        (tmp_path / "drawn.toml").write_text(DRAWN.replace("[1.0, 2.0]", "[-1.0, 2.0]"))
+        argv[1], flags = str(tmp_path / "drawn.toml"), []
     for f in flags:
         argv += [f] if f.startswith("-") or argv[-1] == "--threshold" else ["--vary", f]
     if needle is None:

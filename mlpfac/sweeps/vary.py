@@ -170,10 +170,14 @@ def grid(src: str, vary: Vary) -> list[tuple[Point, Any]]:
     :func:`~mlpfac.scenario.load` builds the file), each value checked as the file's own is."""
     from mlpfac.scenario import load
 
-    if not vary:
-        return [((), load(src))]
     file = load(src, build=False)
     numbers = leaves(file.table)
+    axis_keys = {a.key for a in vary.axes}
+    in_file = {
+        k: distribution(v, f"{src} {k}") for k, v in numbers.items() if isinstance(v, dict) and k not in axis_keys
+    }
+    if not vary and not in_file:
+        return [((), load(src))]
     drawn = {k: d.table() for k, d in vary.draws.items()}
     for key in [a.key for a in vary.axes] + list(drawn):
         if key.split(".")[0] in SKIPPED or (key not in numbers and _present(file.table, key)):
@@ -186,14 +190,17 @@ def grid(src: str, vary: Vary) -> list[tuple[Point, Any]]:
                 if err.what.startswith(("unknown key", "no such key", "not a parameter")):
                     raise _key_error(src, key, file.table) from None
     axes = [(a, tuple(_typed(v, numbers.get(a.key)) for v in a.values)) for a in vary.axes]
-    for key, dist in vary.draws.items():  # a draw can take any value of its support: both ends are checked
+    for key, dist in (in_file | vary.draws).items():  # a draw can take any value of its support: both ends are checked
+        name = f"{FLAG} {key}={dist}" if key in vary.draws else f"{src} {key} = {dist}"
         for end in dist.support():
-            _checked(src, {**drawn, key: _typed(end, numbers.get(key))}, f"{FLAG} {key}={dist} (its end {end:g})")
+            _checked(src, {**drawn, key: _typed(end, numbers.get(key))}, f"{name} (its end {end:g})")
     if len(axes) > 1:  # each value alone first, so that a bad one is named alone (without building the plant)
         for a, values in axes:
             for v in values:
                 _checked(src, {**drawn, a.key: v}, f"{FLAG} {a.key}={v!r}", build=False)
     out = []
+    if not axes:
+        return [((), _checked(src, drawn, "", build=True) if drawn else load(src))]
     for vals in itertools.product(*(values for _, values in axes)):
         point = tuple(zip((a.key for a, _ in axes), vals, strict=True))
         where = f"{FLAG} " + " ".join(f"{k}={v!r}" for k, v in point)
@@ -208,4 +215,6 @@ def _checked(src: str, values: dict, where: str, build: bool = True):
     try:
         return load(src, build=build, values=values)
     except ConfigError as err:
+        if not where:
+            raise
         raise ConfigError(where, f"{err.what} ({err.where})") from None
