@@ -91,13 +91,15 @@ BAD_VARY = {  # --vary: the text the one line must hold
     "no equals": (["events.0.factor"], "expected KEY=VALUES"),
     "twice": (["T=0.01", "T=0.02"], "given twice"),
     "a value twice": (["T=0.01,0.01"], "appears twice"),
-    "an event never reached": (["events.0.time=1,30"], "--vary events.0.time=30"),
+    "an event never reached": (["events.0.time=1,30", "--duration", "25"], "--vary events.0.time=30: "),
     "a float steps": (["events.0.factor=1", "events.0.time=0.5"], None),  # fine: no error
     "uniform reversed": (["events.0.factor=uniform:2:1"], "low < high"),
     "normal sd 0": (["events.0.factor=normal:2:0"], "standard deviation > 0"),
     "a draw's end": (["events.0.factor=uniform:-1:2"], "its end -1"),
     "a whole number key": (["controller.adaptive.L_f=10.5"], "--vary controller.adaptive.L_f=10.5"),
     "threshold": (["T=0.01", "--threshold", "-1"], "--threshold"),
+    "an event --duration leaves out": (["events.0.factor=2", "--duration", "1"], "left out by --duration 1: it would"),
+    "an event time --duration leaves out": (["events.0.time=1,20"], "--vary events.0.time=20: the event would be left"),
     "a file's draw's end": (["FILE"], "drawn.toml events.0.factor = uniform(-1, 2) (its end -1): must be positive"),
 }
 
@@ -105,12 +107,12 @@ BAD_VARY = {  # --vary: the text the one line must hold
 @pytest.mark.parametrize("case", sorted(BAD_VARY))
 def test_bad_vary_is_one_line_and_nothing_runs(tmp_path, capsys, case):
     flags, needle = BAD_VARY[case]
-    argv = ["sweep", "paper", "--seeds", "0", "--duration", "1", "--workers", "1", "--out", str(tmp_path / "o")]
+    argv = ["sweep", "paper", "--seeds", "0", "--duration", "13", "--workers", "1", "--out", str(tmp_path / "o")]
     if flags == ["FILE"]:  # a distribution of the file whose support leaves the key's range
         (tmp_path / "drawn.toml").write_text(DRAWN.replace("[1.0, 2.0]", "[-1.0, 2.0]"))
         argv[1], flags = str(tmp_path / "drawn.toml"), []
     for f in flags:
-        argv += [f] if f.startswith("-") or argv[-1] == "--threshold" else ["--vary", f]
+        argv += [f] if f.startswith("-") or argv[-1] in ("--threshold", "--duration") else ["--vary", f]
     if needle is None:
         assert main(argv) == 0
         return

@@ -115,7 +115,7 @@ def plan(
     jobs: list[Job] = []
     names: dict[str, str] = {}
     for src in scenarios:
-        for point, base in grid(src, vary or Vary()):
+        for point, base in grid(src, vary or Vary(), duration):
             if base.name in names:
                 raise ConfigError(
                     src,

@@ -165,13 +165,16 @@ def _present(table: dict, key: str) -> bool:
     return True
 
 
-def grid(src: str, vary: Vary) -> list[tuple[Point, Any]]:
+def grid(src: str, vary: Vary, duration: float | None = None) -> list[tuple[Point, Any]]:
     """Every grid point of scenario ``src`` and its :class:`~mlpfac.scenario.Scenario` (built as
-    :func:`~mlpfac.scenario.load` builds the file), each value checked as the file's own is."""
+    :func:`~mlpfac.scenario.load` builds the file), each value checked as the file's own is; a key
+    of an event that ``duration`` (``--duration``) leaves out is a ConfigError."""
     from mlpfac.scenario import load
 
     file = load(src, build=False)
     numbers = leaves(file.table)
+    if duration is not None:
+        _check_duration(vary, numbers, duration)
     axis_keys = {a.key for a in vary.axes}
     in_file = {
         k: distribution(v, f"{src} {k}") for k, v in numbers.items() if isinstance(v, dict) and k not in axis_keys
@@ -207,6 +210,24 @@ def grid(src: str, vary: Vary) -> list[tuple[Point, Any]]:
         scn = _checked(src, {**drawn, **dict(point), "name": label(file.name, point)}, where)
         out.append((point, scn))
     return out
+
+
+def _check_duration(vary: Vary, numbers: dict, duration: float) -> None:
+    """A ConfigError for a value of an event that ``--duration`` leaves out (it would vary nothing)."""
+    times = {a.key: a.values for a in vary.axes if a.key.startswith("events.") and a.key.endswith(".time")}
+    for key, values in times.items():
+        late = next((v for v in values if v >= duration), None)
+        if late is not None:
+            raise ConfigError(f"{FLAG} {key}={late!r}", f"the event would be left out by --duration {duration:g}")
+    for key in [a.key for a in vary.axes] + list(vary.draws):
+        parts = key.split(".")
+        if parts[0] != "events" or len(parts) < 3 or f"events.{parts[1]}.time" in times:
+            continue
+        t = numbers.get(f"events.{parts[1]}.time")
+        if isinstance(t, int | float) and t >= duration:
+            raise ConfigError(
+                f"{FLAG} {key}", f"the event at {t:g} s is left out by --duration {duration:g}: it would vary nothing"
+            )
 
 
 def _checked(src: str, values: dict, where: str, build: bool = True):
