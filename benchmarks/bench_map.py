@@ -1,6 +1,6 @@
 """A robustness map at scale (``--vary`` with two axes). Not a test.
 
-    python benchmarks/bench_map.py [--seeds 20] [--pair-runs 100] [--repeat 2]
+    python benchmarks/bench_map.py [--seeds 20] [--pair-runs 100] [--repeat 2] [--workers-only]
 
 1. plan: every grid point of the map checked and built (the plant once per point), the time it takes;
 2. the map: ``eight-wheel-radius`` (the MuJoCo robot), ``kanayama`` and ``oracle-kanayama``,
@@ -60,6 +60,7 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, default=20)
     ap.add_argument("--pair-runs", type=int, default=100)
     ap.add_argument("--repeat", type=int, default=2)
+    ap.add_argument("--workers-only", action="store_true", help="only 3: 2 workers against 1")
     a = ap.parse_args()
     seeds = f"0-{a.seeds - 1}"
     print(
@@ -71,6 +72,8 @@ def main() -> None:
     plan_s = time.perf_counter() - t0
     report("1. plan: grid points checked and built [s]", plan_s, "-", None, f"({len(jobs)} runs, 50 points)")
 
+    if a.workers_only:
+        return workers(jobs, a.pair_runs, a.repeat, Path(tempfile.mkdtemp(prefix="bench-map-")))
     floor_step, steps = physics_floor_s()
     tmp = Path(tempfile.mkdtemp(prefix="bench-map-"))
     with process_tree_cpu() as spent:
@@ -91,13 +94,17 @@ def main() -> None:
     )
     report("   CPU of the tree / (N x per-run floor)", spent[0] / (n * floor_run), "-", None, f"({spent[0]:.0f} CPU s)")
 
-    sub = jobs[: a.pair_runs]
+    workers(jobs, a.pair_runs, a.repeat, tmp)
+
+
+def workers(jobs: list, runs: int, repeat: int, tmp: Path) -> None:
+    sub = jobs[:runs]
     i = iter(range(10**6))
 
     def once(workers: int):
         return lambda: engine.execute(sub, tmp / f"w{workers}-{next(i)}", workers=workers, progress=False)
 
-    t = side_by_side({1: once(1), 2: once(2)}, a.repeat)
+    t = side_by_side({1: once(1), 2: once(2)}, repeat)
     report("3. 2 workers / 1 worker (runs per second)", t[1] / t[2], ">= 1.9", t[1] / t[2] >= 1.9,
            f"({len(sub)} runs: {t[1]:.2f} s vs {t[2]:.2f} s)")  # fmt: skip
 
