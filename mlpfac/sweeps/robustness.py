@@ -15,7 +15,7 @@ The **breaking point** along an axis (the other axes held at each of their value
 side of the nominal value, the last value going away from it at which the point holds, before
 the first at which it does not; "whole axis" when it holds to the axis' end. The nominal value is
 the one at which an event changes nothing (1 for a scale or factor, 0 steps of delay), else the
-file's own value. Written as robustness.json / .md beside the sweep's tables, and drawn in
+file's own value (the axis' smallest where the file leaves the key out). Written as robustness.json / .md beside the sweep's tables, and drawn in
 robustness.png (:mod:`mlpfac.plots.robustness`).
 """
 
