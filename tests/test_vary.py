@@ -291,12 +291,12 @@ def test_the_python_api_varies_as_the_command_line(tmp_path):
     import mlpfac
 
     vary = {"events.0.factor": [1.0, 2.0], "plant.noise_cov": {"uniform": [1e-7, 1e-6]}}
-    rows = mlpfac.sweep("paper", ["corradini"], seeds="0-1", duration=1.0, workers=1, vary=vary, out=tmp_path / "o")
+    rows = mlpfac.sweep("paper", ["corradini"], seeds="0-1", duration=13.0, workers=1, vary=vary, out=tmp_path / "o")
     assert [r["vary"] for r in rows if r["phase"] == "before"] == [{"events.0.factor": 1.0}, {"events.0.factor": 2.0}]
     assert rows.robustness["meta"]["vary"] == ["events.0.factor=1.0,2.0", "plant.noise_cov=uniform:1e-07:1e-06"]
     assert [d["seed"] for d in rows[0]["draws"]] == [0, 1]
     with pytest.raises(ConfigError, match=r"--vary events.0.factor=-1"):
-        mlpfac.sweep("paper", ["corradini"], seeds="0", duration=1.0, workers=1, vary={"events.0.factor": [-1]})
+        mlpfac.sweep("paper", ["corradini"], seeds="0", workers=1, vary={"events.0.factor": [-1]})
 
 
 def test_a_grid_with_draws_on_dask_gives_the_local_table(tmp_path):
