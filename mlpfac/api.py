@@ -12,6 +12,7 @@ installed name, a class, or (for :func:`run`) an object of a class (:mod:`mlpfac
 
 from __future__ import annotations
 
+import json
 import shutil
 import tempfile
 import warnings
@@ -120,12 +121,18 @@ def sweep(
     scheduler: str | None = None,
     save_rrd: bool = False,
     robots: list[str] | None = None,
+    vary: dict | list[str] | None = None,
+    threshold: float | None = None,
 ) -> list[dict]:
     """Run scenarios x controllers x seeds (as ``mlpfac sweep``) and return the sweep's rows: the
     ``rows`` of sweep.json, one per scenario, controller and phase. With ``out`` the folder is
     written as the command writes it (and resumed: runs already done are not run again); without,
     the runs are made in a temporary folder that is removed. ``controllers`` None: each scenario's
     own. A class no file or module names (defined in a notebook) runs in this process only.
+    ``vary`` is ``--vary``: ``{"events.0.scale": [1.0, 1.5, 2.0]}`` (or ``"1.0:2.0:5"``) an axis, two a
+    grid; ``{"plant.pose_noise_std": {"uniform": [0.0, 0.002]}}`` (or ``"uniform:0:0.002"``) drawn
+    per seed; with an axis, ``out`` also gets robustness.json / .md / .png (breaking points within
+    ``threshold`` metres; default the tracking limit), and ``.robustness`` holds robustness.json.
 
     The returned list has ``.errors`` ({(scenario, controller, seed): traceback}) and ``.paired``
     (the rows of paired.json). Ctrl-C raises KeyboardInterrupt (with ``out``, the runs written are
@@ -171,7 +178,11 @@ def sweep(
             scheduler=scheduler,
             save_rrd=save_rrd,
             progress=False,
+            vary=vary,
+            threshold=threshold,
         )
+        robust = Path(out if out is not None else tmp) / "robustness.json"
+        robustness = json.loads(robust.read_text()) if robust in result.paths else None
     finally:
         if tmp is not None:
             shutil.rmtree(tmp, ignore_errors=True)
@@ -180,7 +191,7 @@ def sweep(
     if result.code is not None:  # a local worker process died (said on stderr)
         raise MlpfacError("a sweep worker process died; every run written is whole: run the sweep again to resume")
     rows = Rows(result.rows)
-    rows.errors, rows.paired = dict(result.outcome.errors), result.paired
+    rows.errors, rows.paired, rows.robustness = dict(result.outcome.errors), result.paired, robustness
     return rows
 
 
@@ -191,7 +202,9 @@ def _listed(controllers) -> list:
 
 
 class Rows(list):
-    """The rows of a sweep, with its failed runs (``errors``) and its paired rows (``paired``)."""
+    """The rows of a sweep, with its failed runs (``errors``), its paired rows (``paired``) and,
+    with a ``vary`` axis, its curves and breaking points (``robustness``, as robustness.json)."""
 
     errors: dict
     paired: list
+    robustness: dict | None

@@ -105,6 +105,12 @@ def build_parser() -> argparse.ArgumentParser:
     from mlpfac.on_robot import ROBOT_HELP
 
     p.add_argument("--robot", help=ROBOT_HELP)
+    p.add_argument(
+        "--vary",
+        action="append",
+        metavar="KEY=VALUES",
+        help="an axis or a draw more than the budget's vary (as sweep's)",
+    )
 
     p = sub.add_parser(
         "view",
@@ -114,7 +120,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("runs", nargs="+", type=cli_path, help="run folders (each with a run.rrd) or .rrd files")
     x = p.add_mutually_exclusive_group()
     x.add_argument(
-        "--save", metavar="FILE.rrd", type=cli_path, help="write the comparison of several runs to this file, open nothing"
+        "--save",
+        metavar="FILE.rrd",
+        type=cli_path,
+        help="write the comparison of several runs to this file, open nothing",
     )
     x.add_argument(
         "--serve",
@@ -221,7 +230,7 @@ def cmd_report(args: argparse.Namespace) -> int:
 def cmd_check(args: argparse.Namespace) -> int:
     from mlpfac.checks import check
 
-    result = check(args.budget, args.junit, args.summary, args.baseline, args.out, args.workers, args.robot)
+    result = check(args.budget, args.junit, args.summary, args.baseline, args.out, args.workers, args.robot, args.vary)
     for line in result.lines():
         print(line)
     if result.cases:
@@ -251,7 +260,12 @@ def cmd_plot(args: argparse.Namespace) -> int:
             raise ConfigError(str(folder), "is not a folder")
     for folder in args.folders:
         try:
-            written = sweep_plots(folder)
+            if (folder / "robustness.json").is_file():  # a sweep with --vary: its curves, in place of sweep.png
+                from mlpfac.plots.robustness import robustness_plot
+
+                written = robustness_plot(folder)
+            else:
+                written = sweep_plots(folder)
         except OSError as err:
             raise ConfigError(str(err.filename or folder), f"cannot write ({err.strerror or err})") from None
         except (TypeError, ValueError, KeyError, AttributeError, IndexError) as err:  # a metrics.json edited by hand

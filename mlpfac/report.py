@@ -16,6 +16,8 @@ each drawn by the table code the sweep itself uses (:mod:`mlpfac.sweeps.tables`,
 - ``sweep``: the full per-phase table (``sweep.json``), ``compare``: the shorter one (``compare.json``);
 - ``paired``: per seed against Corradini's law and the oracle (``paired.json``);
 - ``summary``: controllers x scenarios, median position RMS and x oracle (``paired.json``);
+- ``robustness``: each controller's breaking points along a ``--vary`` axis (``robustness.json``,
+  :mod:`mlpfac.sweeps.robustness`);
 - ``text``: ``table.md`` as it is.
 
 Options (shell words after the view): ``scenarios=a,b`` and ``controllers=a,b`` keep those, in
@@ -42,8 +44,8 @@ from mlpfac.outputs import write_atomic
 from mlpfac.targets import cli_path
 
 MARKER = re.compile(r"^<!-- table: (?P<spec>.+?) -->\n(?P<body>.*?)^<!-- /table -->$", re.M | re.S)
-VIEWS = ("sweep", "compare", "paired", "summary", "text")
-DATA_FILES = ("sweep.json", "compare.json", "paired.json")
+VIEWS = ("sweep", "compare", "paired", "summary", "robustness", "text")
+DATA_FILES = ("sweep.json", "compare.json", "paired.json", "robustness.json")
 OPTIONS = ("view", "scenarios", "controllers", "labels")
 
 
@@ -107,8 +109,9 @@ def render(folder: Path, opts: dict[str, str]) -> str:
     view = opts.get("view", "summary")
     if view == "text":
         return _read(folder, "table.md")
-    name = {"sweep": "sweep.json", "compare": "compare.json"}.get(view, "paired.json")
-    rows = _json(folder, name).get("rows")
+    name = {"sweep": "sweep.json", "compare": "compare.json", "robustness": "robustness.json"}.get(view, "paired.json")
+    data = _json(folder, name)
+    rows = data.get("breaking_points" if view == "robustness" else "rows")
     if not isinstance(rows, list) or not all(
         isinstance(r, dict) and "scenario" in r and "controller" in r for r in rows
     ):
@@ -127,6 +130,10 @@ def render(folder: Path, opts: dict[str, str]) -> str:
         rows = [r | {"scenario": labels[kept.index(r["scenario"])]} for r in rows]
     if view == "summary":
         return summary(rows)
+    if view == "robustness":
+        from mlpfac.sweeps.robustness import markdown as breaking_markdown
+
+        return breaking_markdown(rows, (data.get("meta") or {}).get("threshold_m"), data.get("curves"))
     columns = {"sweep": SWEEP_COLUMNS, "compare": COMPARE_COLUMNS, "paired": PAIRED_COLUMNS}[view]
     return markdown(rows, columns)
 

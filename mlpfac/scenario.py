@@ -21,6 +21,9 @@ import numpy as np
 from mlpfac import provenance
 from mlpfac.adaptive_config import AdaptiveConfig
 from mlpfac.controllers import KanayamaGains
+from mlpfac.draws import put as put_value
+from mlpfac.draws import resolve as draw_values
+from mlpfac.draws import restore as restore_draws
 from mlpfac.error_model import pose_from_error
 from mlpfac.events import Event, parse_event
 from mlpfac.exceptions import ConfigError
@@ -48,6 +51,7 @@ TOP_KEYS = {
     "controller",
     "events",
     "provenance",
+    "drawn",
 }
 CONTROLLER_KEYS = {"name", "lambdas", "v_max", "omega_max", "adaptive", "kanayama", "params"}
 NETWORK_KEYS = {f.name for f in dataclasses.fields(Networks)}
@@ -81,6 +85,11 @@ class Scenario:
     plugin: Plugin | None = None  # a user's controller (mlpfac.plugins); None: a shipped one
 
     @property
+    def drawn(self) -> dict[str, float]:
+        """What was drawn for this seed in place of each distribution of the file, by key (:mod:`mlpfac.draws`)."""
+        return dict(self.table.get("drawn", {}))
+
+    @property
     def steps(self) -> int:
         return int(round(self.duration / self.T))
 
@@ -95,6 +104,7 @@ class Scenario:
         value is a ConfigError naming the flag, not the file. A plug-in's ``file.py:Class`` is taken
         from the current folder; another controller than the file's drops its ``[controller.params]``."""
         table = copy.deepcopy(self.table)
+        table.pop("drawn", None)  # drawn again, for the seed it runs
         if controller is not None:
             if not isinstance(controller, str) or not controller:
                 raise ConfigError(flag, f"expected a controller's name, got {controller!r}")
@@ -168,7 +178,9 @@ def read_toml(path: Path, kind: str) -> dict:
         raise ConfigError(str(path), "not a scenario: its arrays or tables are nested too deep to read") from None
 
 
-def load(name_or_path: str | Path, build: bool = True, robot: str | None = None) -> Scenario:
+def load(
+    name_or_path: str | Path, build: bool = True, robot: str | None = None, values: dict | None = None
+) -> Scenario:
     """A scenario by name (``paper`` -> the shipped paper.toml) or by path to a TOML file.
 
     Relative paths in the file (``[plant] model``) are taken from the file's own folder. The plant
@@ -178,7 +190,8 @@ def load(name_or_path: str | Path, build: bool = True, robot: str | None = None)
     The robot's parts the file leaves to the model (its wheels, its pose frame) are written into the
     table's ``[plant]`` as found, so that config.toml names them. ``build=False`` reads and checks
     the file alone (a listing), without building the plant. ``robot`` (``--robot``) puts the
-    scenario on another robot (:mod:`mlpfac.on_robot`).
+    scenario on another robot (:mod:`mlpfac.on_robot`). ``values`` sets numbers of the file by
+    their dotted keys (:mod:`mlpfac.draws`) before it is checked, as if written in it.
     """
     path = Path(name_or_path)
     if path.suffix != ".toml":
@@ -187,6 +200,9 @@ def load(name_or_path: str | Path, build: bool = True, robot: str | None = None)
         path = shipped_dir() / f"{name_or_path}.toml"
     table = read_toml(path, "scenario file")
     table.setdefault("name", path.stem)
+    for key, value in (values or {}).items():
+        if not put_value(table, key, value):
+            raise ConfigError(f"{path} {key}", "no such key in this scenario file")
     ctrl = table.get("controller")
     if isinstance(ctrl, dict) and isinstance(ctrl.get("name"), str):  # file.py:Class, from the file's folder
         ctrl["name"] = absolute_spec(ctrl["name"], path.parent)
@@ -210,7 +226,7 @@ def load(name_or_path: str | Path, build: bool = True, robot: str | None = None)
     if found:  # the robot's parts the file left to the model: written in, so its config.toml re-runs the same
         table["plant"] = table["plant"] | found
         return parse(table, str(path), check_model=False)
-    return dataclasses.replace(scn, table=table)
+    return dataclasses.replace(scn, table=scn.table | {"provenance": table["provenance"]})
 
 
 def _memory_available() -> int:
@@ -240,13 +256,14 @@ def parse(table: dict, source: str = "<scenario>", check_model: bool = True) -> 
     if not isinstance(table, dict):
         raise ConfigError(source, "expected a table of scenario keys")
     check_keys(table, TOP_KEYS, source)
+    seed = table.get("seed", 0)
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise ConfigError(f"{source} seed", f"expected a whole number >= 0, got {seed!r}")
+    table, draws = draw_values(table, seed, source)  # each distribution replaced by its draw for this seed
     T = number(table, "T", 0.01, source)
     duration = number(table, "duration", 25.0, source)
     if duration < T:
         raise ConfigError(f"{source} duration", f"{duration:g} s is shorter than one control period T = {T:g} s")
-    seed = table.get("seed", 0)
-    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
-        raise ConfigError(f"{source} seed", f"expected a whole number >= 0, got {seed!r}")
     name = table.get("name", "scenario")
     if not isinstance(name, str) or not FOLDER_NAME.fullmatch(name):
         raise ConfigError(
@@ -349,7 +366,7 @@ def parse(table: dict, source: str = "<scenario>", check_model: bool = True) -> 
         adaptive=adaptive,
         kanayama=kanayama,
         events=tuple(events),
-        table=table,
+        table=restore_draws(table, draws),
         plugin=plugin,
     )
 

@@ -16,6 +16,8 @@ FOLDER_NAME = re.compile(
     r"[A-Za-z0-9][A-Za-z0-9._+-]*"
 )  # a scenario's or a controller's name: a folder in runs/ and sweeps
 
+BARE_KEY = re.compile(r"[A-Za-z0-9_-]+")  # a TOML key written without quotes
+INLINE_TABLES = ("uniform", "normal")  # one-key tables written inline (the distributions of mlpfac.draws)
 NO_LIMIT = {"v_max", "omega_max"}  # keys where inf means "no limit" (None)
 INF_OK = NO_LIMIT | {
     "max_wheel_speed"
@@ -119,13 +121,23 @@ def to_toml(table: dict) -> str:
             return "inf" if v > 0 else "-inf"
         if isinstance(v, list | tuple):
             return "[" + ", ".join(value(x) for x in v) + "]"
+        if isinstance(v, dict):
+            return "{ " + ", ".join(f"{key(k)} = {value(x)}" for k, x in v.items()) + " }"
         return repr(v)
+
+    def key(k: str) -> str:
+        return k if BARE_KEY.fullmatch(k) else json.dumps(k, ensure_ascii=False)
+
+    def inline(v) -> bool:  # a distribution in place of a number (mlpfac.draws) stays where the number was
+        return isinstance(v, dict) and len(v) == 1 and next(iter(v)) in INLINE_TABLES
 
     def emit(t: dict, prefix: str) -> None:
         for k, v in t.items():
-            if not isinstance(v, dict) and not (isinstance(v, list) and v and isinstance(v[0], dict)):
-                lines.append(f"{k} = {value(v)}")
+            if inline(v) or not (isinstance(v, dict) or (isinstance(v, list) and v and isinstance(v[0], dict))):
+                lines.append(f"{key(k)} = {value(v)}")
         for k, v in t.items():
+            if inline(v):
+                continue
             if isinstance(v, dict):
                 lines.append(f"\n[{prefix}{k}]")
                 emit(v, f"{prefix}{k}.")

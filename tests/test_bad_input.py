@@ -142,6 +142,13 @@ BAD_FILES: dict[str, tuple[str | bytes, str]] = {
     "initial error huge": ("[initial]\nerror = [1e308, 0.0, 0.0]\n", "[initial] error"),
     "pose noise huge": (ROBOT + "pose_noise_std = 1e300\n", "[plant] pose_noise_std"),
     "sensor delay 1e15 steps": (MINIMAL + EV.format("sensor_delay", "steps = 1000000000000000"), "steps: must be <= 10000"),
+    "uniform reversed": (MINIMAL + EVENT.replace("1.5", "{ uniform = [2.0, 1.0] }"), "events.0.factor: uniform needs low < high"),
+    "uniform of text": (MINIMAL + EVENT.replace("1.5", '{ uniform = ["a", 2.0] }'), "events.0.factor: uniform takes two"),
+    "normal sd zero": (MINIMAL + EVENT.replace("1.5", "{ normal = [1.5, 0.0] }"), "standard deviation > 0"),
+    "distribution unknown": (MINIMAL + EVENT.replace("1.5", "{ lognormal = [1.5, 0.1] }"), "factor"),
+    "drawn without a distribution": (MINIMAL + "[drawn]\nduration = 0.5\n", "[drawn] duration: no distribution"),
+    "drawn a string": (MINIMAL + 'drawn = "x"\n', "drawn"),
+    "drawn not the seed's draw": (MINIMAL + EVENT.replace("1.5", "{ uniform = [1.0, 2.0] }") + '[drawn]\n"events.0.factor" = 1.0\n', "is not what seed 0 draws"),
 }  # fmt: skip
 
 

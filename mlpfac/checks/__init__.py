@@ -56,11 +56,13 @@ def check(
     out: str | Path | None = None,
     workers: int | None = None,
     robot: str | None = None,
+    vary: list[str] | dict | None = None,
 ) -> CheckResult:
     """Run the sweep of the budget file ``budget`` into ``out`` (default runs/check; runs already
     done there are skipped) with ``workers`` local processes (default 2), then judge it, against
     the runs of the sweep folder (or its sweep.json) ``baseline`` per seed where the budget asks.
-    Writes JUnit XML to ``junit`` and a Markdown summary to ``summary`` when given.
+    Writes JUnit XML to ``junit`` and a Markdown summary to ``summary`` when given. ``vary`` adds
+    axes and draws to the budget's ``vary`` (``--vary``, :mod:`mlpfac.sweeps.vary`).
 
     ``robot`` (``--robot``) runs every scenario of the budget on that robot instead of the
     budget's ``robots``. Bad input (the budget, a flag) is a ConfigError naming the file and key
@@ -78,7 +80,9 @@ def check(
     path = user_path(budget, "budget")
     out = DEFAULT_OUT if out is None else user_path(out, "out")
     n_workers = check_execution_flags(DEFAULT_WORKERS if workers is None else workers)
-    b = read_budget(path, robot)
+    from mlpfac.sweeps.vary import parse_vary
+
+    b = read_budget(path, robot, parse_vary(vary))
     needs = b.needs_baseline()
     if needs is not None and baseline is None:
         figure = next(f for f in needs.figures if f in ("no_worse_than_baseline", "p"))
@@ -94,7 +98,9 @@ def check(
     check_results_folder(out, table_files("sweep"))
     argv = ["mlpfac", "check", str(budget), "--out", str(out), "--workers", str(n_workers)]
     argv += ["--baseline", str(baseline)] if baseline is not None else []
+    argv += [f"--vary={v}" for v in (vary if isinstance(vary, list) else parse_vary(vary).texts())]
     meta = sweep_meta("check", b.scenarios, b.seeds_text, b.duration, jobs) | {"budget": str(path)}
+    meta |= {"vary": b.vary.texts(), "threshold_m": b.threshold} if b.vary else {}
     done = sweep_into(jobs, out, "sweep", SWEEP_COLUMNS, meta, shlex.join(argv), workers=n_workers)
     result = CheckResult(path, out, EXIT_MISS, files=list(done.paths), duration=b.duration)
     if done.code is not None:
@@ -117,8 +123,13 @@ def check(
 
 
 def _judge(b: Budget, groups, metrics: dict[tuple, dict], base_dir: Path | None) -> list[Case]:
+    from mlpfac.checks.breaking import judge_breaking
+
     cases = []
     for limit in b.limits:
+        if limit.breaking:  # one case per scenario and controller, over the grid
+            cases += judge_breaking(limit, groups, metrics, b.threshold)
+            continue
         for g in groups:
             if limit.matches(g) and (limit.phase != "after" or g.has_event):
                 base = baseline_runs(base_dir, g) if base_dir is not None else None

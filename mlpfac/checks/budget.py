@@ -11,6 +11,7 @@ from pathlib import Path
 from mlpfac.exceptions import ConfigError
 from mlpfac.on_robot import split_robot, with_robots
 from mlpfac.sweeps.plan import MAX_RUNS, Job, parse_controllers, parse_seeds, plan
+from mlpfac.sweeps.vary import Vary
 
 PHASE_NAMES = ("before", "after", "whole")  # "whole": the run after the warm-up
 
@@ -25,6 +26,7 @@ class Figure:
     count: bool = False  # a number of runs: the limit is a whole number
     baseline: bool = False  # needs --baseline
     at_least: bool = False
+    axis: bool = False  # a breaking point along a --vary axis (mlpfac.checks.breaking)
 
 
 FIGURES: dict[str, Figure] = {
@@ -39,9 +41,12 @@ FIGURES: dict[str, Figure] = {
     "diverged": Figure("runs diverged", "runs", count=True),
     "no_worse_than_baseline": Figure("median per-seed ratio of position RMS to the baseline", "x", baseline=True),
     "p": Figure("one-sided Wilcoxon p that it is worse than the baseline", baseline=True, at_least=True),
+    "holds_up_to": Figure("breaking point above the nominal value", at_least=True, axis=True),
+    "holds_down_to": Figure("breaking point below the nominal value", axis=True),
 }
-TOP_KEYS = ("scenarios", "robots", "controllers", "seeds", "duration", "budget")
-FILTER_KEYS = ("name", "scenario", "controller", "phase")
+TOP_KEYS = ("scenarios", "robots", "controllers", "seeds", "duration", "vary", "threshold_m", "budget")
+FILTER_KEYS = ("name", "scenario", "controller", "phase", "axis")
+AFTER_THE_CHANGE = "after the change"  # the phase of a breaking point: the last one (mlpfac.sweeps.robustness)
 
 
 @dataclass
@@ -53,6 +58,7 @@ class Group:
     source: str  # the scenario as the budget wrote it (a name, or a path made absolute)
     spec: str | None  # the controller as the budget wrote it (None: the scenario's own)
     jobs: list[Job] = field(default_factory=list)
+    family: str = ""  # the scenario's own name (a grid point's scenario is SCENARIO+KEY+VALUE)
 
     @property
     def has_event(self) -> bool:
@@ -69,14 +75,25 @@ class Limit:
     controller: str | None
     phase: str
     figures: dict[str, float]
+    axis: str | None = None  # the --vary axis of a breaking point (None: the only one)
+
+    @property
+    def breaking(self) -> bool:
+        return any(FIGURES[f].axis for f in self.figures)
 
     @property
     def where(self) -> str:
         return f"budget #{self.index}"
 
     def matches(self, g: Group) -> bool:
-        scenario = (None, g.scenario, g.source, split_robot(g.source)[0])  # on every robot, or on one
-        return self.scenario in scenario and self.controller in (None, g.controller, g.spec)
+        scenario = self.scenario in (
+            None,
+            g.scenario,
+            g.source,
+            g.family,
+            split_robot(g.source)[0],
+        )  # on every robot, or on one
+        return scenario and self.controller in (None, g.controller, g.spec)
 
 
 @dataclass
@@ -88,6 +105,8 @@ class Budget:
     seeds_text: str
     duration: float | None
     limits: list[Limit]
+    vary: Vary = field(default_factory=Vary)
+    threshold: float | None = None
 
     def needs_baseline(self) -> Limit | None:
         return next((b for b in self.limits if any(FIGURES[f].baseline for f in b.figures)), None)
@@ -96,20 +115,26 @@ class Budget:
         """The runs (ConfigError naming this file's ``scenarios`` key for a scenario that cannot
         load) and their groups; each limit's filters must match a group, and "after" needs an event."""
         try:
-            jobs = plan(self.scenarios, self.controllers, self.seeds, self.duration)
+            jobs = plan(self.scenarios, self.controllers, self.seeds, self.duration, self.vary)
         except ConfigError as err:
-            raise ConfigError(f"{self.path} scenarios", str(err)) from None
+            raise ConfigError(
+                f"{self.path} {'vary' if err.where.startswith('--vary') else 'scenarios'}", str(err)
+            ) from None
         groups: dict[tuple[str, str], Group] = {}
-        per_pair = len(self.seeds)
-        pairs = [(s, c) for s in self.scenarios for c in self.controllers]
-        for i, j in enumerate(jobs):
-            src, spec = pairs[i // per_pair] if len(jobs) == len(pairs) * per_pair else (j.scenario, j.controller)
-            groups.setdefault((j.scenario, j.controller), Group(j.scenario, j.controller, src, spec)).jobs.append(j)
+        sources = dict(zip(dict.fromkeys(j.family for j in jobs), self.scenarios, strict=True))
+        for i, j in enumerate(jobs):  # each scenario and grid point: every controller in order, each with every seed
+            spec = self.controllers[(i // len(self.seeds)) % len(self.controllers)]
+            group = Group(j.scenario, j.controller, sources[j.family], spec, family=j.family)
+            groups.setdefault((j.scenario, j.controller), group).jobs.append(j)
         names = {
             "scenario": {n for g in groups.values() for n in (g.scenario, g.source, split_robot(g.source)[0])},
             "controller": {n for g in groups.values() for n in (g.controller, g.spec)},
         }
         for b in self.limits:
+            if b.breaking:
+                from mlpfac.checks.breaking import check_axis
+
+                check_axis(b, self.vary, f"{self.path} {b.where}")
             for key, known_names in names.items():
                 value = getattr(b, key)
                 if value is not None and value not in known_names:
@@ -127,7 +152,7 @@ class Budget:
         return jobs, list(groups.values())
 
 
-def read_budget(path: Path, robot: str | None = None) -> Budget:
+def read_budget(path: Path, robot: str | None = None, flags: Vary | None = None) -> Budget:
     """The budget file at ``path``, checked; scenario paths and ``file.py:Class`` controllers are
     taken from the file's own folder."""
     from mlpfac.scenario import read_toml
@@ -165,7 +190,17 @@ def read_budget(path: Path, robot: str | None = None) -> Budget:
     if not isinstance(raw, list) or not raw or not all(isinstance(b, dict) for b in raw):
         raise ConfigError(f"{path} budget", "expected one or more [[budget]] tables")
     limits = [_limit(b, i + 1, path, here) for i, b in enumerate(raw)]
-    return Budget(path, list(dict.fromkeys(scenarios)), controllers, seeds, seeds_text, duration, limits)
+    from mlpfac.checks.breaking import read_vary
+
+    vary, threshold = read_vary(table, path, flags)
+    if any(b.breaking for b in limits) and not vary.axes:
+        raise ConfigError(f"{path} vary", 'holds_up_to / holds_down_to need an axis: vary = ["KEY=VALUES"]')
+    n *= vary.size
+    if n > MAX_RUNS:
+        raise ConfigError(f"{path} vary", f"{n} runs is more than the limit of {MAX_RUNS}; split the budget")
+    return Budget(
+        path, list(dict.fromkeys(scenarios)), controllers, seeds, seeds_text, duration, limits, vary, threshold
+    )
 
 
 def _limit(b: dict, index: int, path: Path, here: Path) -> Limit:
@@ -177,6 +212,14 @@ def _limit(b: dict, index: int, path: Path, here: Path) -> Limit:
     phase = b.get("phase", "whole")
     if phase not in PHASE_NAMES:
         raise ConfigError(f"{where} phase", f"expected one of {', '.join(PHASE_NAMES)}, got {phase!r}")
+    scenario, controller = b.get("scenario"), b.get("controller")
+    if scenario is not None and scenario.endswith(".toml") and not Path(scenario).is_absolute():
+        scenario = str(here / scenario)
+    controller = controller and _near(controller, here)
+    if any(k in FIGURES and FIGURES[k].axis for k in b) or "axis" in b:
+        from mlpfac.checks.breaking import breaking_limit
+
+        return breaking_limit(b, Limit(index, b.get("name"), scenario, controller, phase, {}), where)
     figures = {}
     for key, fig in FIGURES.items():
         if key not in b:
@@ -201,10 +244,7 @@ def _limit(b: dict, index: int, path: Path, here: Path) -> Limit:
         figures[key] = float(v) if not fig.count else v
     if not figures:
         raise ConfigError(where, f"limits no figure; give at least one of {', '.join(FIGURES)}")
-    scenario, controller = b.get("scenario"), b.get("controller")
-    if scenario is not None and scenario.endswith(".toml") and not Path(scenario).is_absolute():
-        scenario = str(here / scenario)
-    return Limit(index, b.get("name"), scenario, controller and _near(controller, here), phase, figures)
+    return Limit(index, b.get("name"), scenario, controller, phase, figures)
 
 
 def _known(table: dict, keys: tuple[str, ...], where: str) -> None:

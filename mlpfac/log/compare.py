@@ -264,7 +264,11 @@ def _about(files: list[tuple[Path, dict]], labels: list[str], colors: list[tuple
         after = (m.get("phases") or {}).get("after") or (m.get("phases") or {}).get("before") or {}
         rms = after.get("rms_position_error_m") if isinstance(after, dict) else None  # None: ended within its warm-up
         where = " after the event" if "after" in (m.get("phases") or {}) else ""
-        fig = f", position RMS{where} {rms * 1e3:.1f} mm" if isinstance(rms, int | float) and not isinstance(rms, bool) else ""
+        fig = (
+            f", position RMS{where} {rms * 1e3:.1f} mm"
+            if isinstance(rms, int | float) and not isinstance(rms, bool)
+            else ""
+        )
         lines.append(f"- **{label}** ({name}): {m.get('scenario', f.parent)}, {m.get('status', '?')}{fig}")
     events = {(ev.get("time"), ev.get("text")) for _, m in files for ev in m.get("events") or []}
     for t, text in sorted(events, key=str):

@@ -376,4 +376,3 @@ def _no_warning(d: mujoco.MjData, where: str) -> None:
         raise ConfigError(
             where, f"MuJoCo warned ({', '.join(warned)}) as the robot settled at rest: the model is not stable as it is"
         )
-

@@ -24,6 +24,20 @@ def _add_common(p: argparse.ArgumentParser, seeds: str, out: str) -> None:
     p.add_argument("--seeds", default=seeds, help=f"seeds: 0-99, 3, 0,2,5 or 0-4,10 (default {seeds})")
     p.add_argument("--duration", type=float, help="override every scenario's duration in seconds")
     p.add_argument(
+        "--vary",
+        action="append",
+        metavar="KEY=VALUES",
+        help="a number of the scenario file by its dotted key (events.0.scale, plant.pose_noise_std, ...) as an "
+        "axis: 1.0,1.25,1.5 or LOW:HIGH:COUNT (repeat: a grid); or drawn per seed: uniform:LOW:HIGH, normal:MEAN:SD",
+    )
+    p.add_argument(
+        "--threshold",
+        type=float,
+        metavar="METRES",
+        help="with --vary: the median position RMS a breaking point allows (default: the tracking limit, 0.2 m on "
+        "the figure of eight)",
+    )
+    p.add_argument(
         "--out", type=cli_path, default=Path(out), help=f"results folder (default {out}); re-running skips whole runs"
     )
     g = p.add_argument_group("execution")
@@ -92,6 +106,7 @@ def _run_cli(args: argparse.Namespace, stem: str, columns) -> int:
         with_robots(args.scenarios, robots), args.controllers, args.seeds, args.out, duration=args.duration, workers=args.workers,
         batched=args.batched, batch_size=args.batch_size, scheduler=args.scheduler,
         scheduler_timeout=args.scheduler_timeout, save_rrd=args.save_rrd, stem=stem, columns=columns, command=cmd,
+        vary=args.vary, threshold=args.threshold,
     )  # fmt: skip
     if done.code is not None:
         return done.code

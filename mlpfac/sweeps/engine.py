@@ -180,9 +180,14 @@ def sweep_into(
         done.rows, done.paired = aggregate(jobs, oc.metrics), paired_rows(jobs, oc.metrics)
         try:
             done.paths = write_tables(out, stem, done.rows, columns, meta) + write_paired(out, done.paired, meta)
-            from mlpfac.plots import sweep_plots
+            if any(j.point for j in jobs):  # an axis: where each controller breaks, in place of <stem>.png
+                from mlpfac.sweeps.robustness import write_robustness
 
-            done.paths += sweep_plots(out, (stem,))  # <stem>.png beside the table
+                done.paths += write_robustness(out, jobs, oc.metrics, meta)
+            else:
+                from mlpfac.plots import sweep_plots
+
+                done.paths += sweep_plots(out, (stem,))  # <stem>.png beside the table
         except OSError as err:
             raise OutputError(f"{_oserror(err, str(out))}; every run folder is whole, resume with: {cmd}") from None
     return done
@@ -205,20 +210,30 @@ def sweep_folder(
     columns=SWEEP_COLUMNS,
     command: str | None = None,
     progress: bool | None = None,
+    vary: list[str] | dict | None = None,
+    threshold: float | None = None,
 ) -> Swept:
     """Validate everything (a ConfigError naming the flag before anything runs), plan, then
     :func:`sweep_into` ``out``; what ``mlpfac sweep`` / ``compare`` and :func:`mlpfac.sweep` do.
-    ``command`` is what re-runs it (for messages)."""
+    ``command`` is what re-runs it (for messages); ``vary`` the ``--vary`` axes and draws
+    (:mod:`mlpfac.sweeps.vary`), ``threshold`` the breaking points' limit in metres
+    (:mod:`mlpfac.sweeps.robustness`)."""
+    from mlpfac.sweeps.robustness import check_threshold
+    from mlpfac.sweeps.vary import parse_vary
+
     seed_list = parse_seeds(seeds)
     names = parse_controllers(controllers)
     workers = check_execution_flags(workers, batch_size, scheduler, scheduler_timeout)
+    axes = parse_vary(vary)
+    threshold = check_threshold(threshold)
     scenarios = list(dict.fromkeys(scenarios))
-    n = len(scenarios) * len(names) * len(seed_list)
+    n = len(scenarios) * len(names) * len(seed_list) * axes.size
     if n > MAX_RUNS:
         raise ConfigError(
             "--seeds",
-            f"{len(scenarios)} scenarios x {len(names)} controllers x {len(seed_list)} seeds = {n} runs is more "
-            f"than the limit of {MAX_RUNS} per sweep; split the seeds into several sweeps",
+            f"{len(scenarios)} scenarios x {len(names)} controllers x {len(seed_list)} seeds"
+            + (f" x {axes.size} grid points" if axes.axes else "")
+            + f" = {n} runs is more than the limit of {MAX_RUNS} per sweep; split the seeds into several sweeps",
         )
     if progress is not False:
         print(f"mlpfac: planning {n} runs ...", file=sys.stderr, flush=True)
@@ -226,10 +241,11 @@ def sweep_folder(
         from mlpfac.sweeps.worker import start_pool_server
 
         start_pool_server()  # the workers' fork server warms up while the runs are planned
-    jobs = plan(scenarios, names, seed_list, duration)
+    jobs = plan(scenarios, names, seed_list, duration, axes)
     check_writable(out)
     check_results_folder(out, table_files(stem))
-    meta = sweep_meta(stem, scenarios, seeds, duration, jobs)
+    meta = sweep_meta(stem, scenarios, seeds, duration, jobs) | ({"vary": axes.texts()} if axes else {})
+    meta |= {"threshold_m": threshold} if axes.axes else {}
     client = connect(scheduler, scheduler_timeout) if scheduler else None
     try:
         return sweep_into(jobs, out, stem, columns, meta, command or f"mlpfac {stem} ...", workers=workers,

@@ -42,12 +42,13 @@ class Outcome:
 
 
 def make_tasks(jobs: list[Job], batched: bool, batch_size: int) -> list[list[Job]]:
-    """One job per task, or with ``batched`` up to ``batch_size`` seeds of one scenario and controller."""
+    """One job per task, or with ``batched`` up to ``batch_size`` seeds of one scenario and controller
+    (a run whose scenario draws per seed is a robot of its own: a task of its own)."""
     if not batched:
         return [[j] for j in jobs]
-    groups: dict[tuple[str, str], list[Job]] = {}
+    groups: dict[tuple, list[Job]] = {}
     for j in jobs:
-        groups.setdefault((j.scenario, j.controller), []).append(j)
+        groups.setdefault((j.scenario, j.controller, j.seed if j.drawn else None), []).append(j)
     return [g[i : i + batch_size] for g in groups.values() for i in range(0, len(g), batch_size)]
 
 

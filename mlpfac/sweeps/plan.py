@@ -10,6 +10,7 @@ from pathlib import Path
 
 from mlpfac.exceptions import ConfigError
 from mlpfac.outputs import resolved
+from mlpfac.sweeps.vary import Vary
 
 MAX_RUNS = 100_000  # runs per sweep: a larger plan is refused before anything is loaded
 
@@ -76,6 +77,13 @@ class Job:
     source: str = field(compare=False)  # file it came from (error messages, ConfigError "where")
     table: dict = field(compare=False, hash=False, repr=False)  # resolved TOML table: what a worker runs
     config: str = field(compare=False, repr=False)  # to_toml(table): config.toml
+    point: tuple = field(default=(), compare=False)  # (key, value) per --vary axis (mlpfac.sweeps.vary)
+    family: str = field(default="", compare=False)  # the scenario's own name, before its grid point's
+
+    @property
+    def drawn(self) -> dict:
+        """What was drawn for this run in place of the file's distributions, by key."""
+        return dict(self.table.get("drawn", {}))
 
     @property
     def key(self) -> tuple[str, str, int]:
@@ -86,11 +94,17 @@ class Job:
 
 
 def plan(
-    scenarios: Iterable[str], controllers: list[str | None], seeds: list[int], duration: float | None = None
+    scenarios: Iterable[str],
+    controllers: list[str | None],
+    seeds: list[int],
+    duration: float | None = None,
+    vary: Vary | None = None,
 ) -> list[Job]:
-    """Load and resolve every run; raises ConfigError on the first bad scenario, controller or seed."""
+    """Load and resolve every run (each grid point of ``vary``); raises ConfigError on the first bad
+    scenario, controller, seed or value."""
     from mlpfac.on_robot import split_robot
-    from mlpfac.scenario import load, to_toml
+    from mlpfac.scenario import to_toml
+    from mlpfac.sweeps.vary import grid, label
 
     scenarios = list(dict.fromkeys(scenarios))
     if not scenarios:
@@ -103,21 +117,28 @@ def plan(
     names: dict[str, str] = {}
     for src in scenarios:
         name, robot = split_robot(src)  # SCENARIO@ROBOT: on that robot (mlpfac.on_robot)
-        base = load(name, robot=robot)
-        if base.name in names:
-            raise ConfigError(
-                src,
-                f"scenario name {base.name!r} is also the name of {names[base.name]}; their folders would collide",
-            )
-        names[base.name] = src
-        for ctrl in controllers:
-            # parsed once; only the seed varies, so each seed's table is this one with its seed
-            # (what with_overrides(seed=...) gives: parse checks a seed >= 0, which parse_seeds did)
-            scn = base.with_overrides(controller=ctrl, duration=duration, flag="--controllers")
-            configs = _seed_configs(scn.table, seeds, to_toml)
-            for seed in seeds:
-                table = {**scn.table, "seed": seed}
-                jobs.append(Job(scn.name, scn.controller, seed, scn.source, table, configs(seed, table)))
+        for point, base in grid(name, vary or Vary(), duration, robot):
+            if base.name in names:
+                raise ConfigError(
+                    src,
+                    f"scenario name {base.name!r} is also the name of {names[base.name]}; their folders would collide",
+                )
+            names[base.name] = src
+            family = base.name.replace(label("", point), "", 1) if point else base.name  # the scenario (on its robot)
+            for ctrl in controllers:
+                # parsed once; only the seed varies, so each seed's table is this one with its seed
+                # (what with_overrides(seed=...) gives: parse checks a seed >= 0, which parse_seeds did);
+                # a scenario that draws per seed is parsed per seed
+                scn = base.with_overrides(controller=ctrl, duration=duration, flag="--controllers")
+                configs = _seed_configs(scn.table, seeds, to_toml)
+                for seed in seeds:
+                    table = {**scn.table, "seed": seed}
+                    if "drawn" in scn.table:
+                        table = scn.with_overrides(seed=seed).table
+                        config = to_toml(table)
+                    else:
+                        config = configs(seed, table)
+                    jobs.append(Job(scn.name, scn.controller, seed, scn.source, table, config, point, family))
     return jobs
 
 

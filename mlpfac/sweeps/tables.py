@@ -29,12 +29,15 @@ def _ci95(xs: list[float]) -> tuple[float | None, float | None]:
 def aggregate(jobs: list[Job], metrics: dict[tuple, dict]) -> list[dict]:
     """One row per scenario, controller and phase (in plan order) from the runs' metrics."""
     groups: dict[tuple[str, str], list[dict]] = {}
+    runs: dict[tuple[str, str], list[Job]] = {}
     for j in jobs:
         groups.setdefault((j.scenario, j.controller), [])
+        runs.setdefault((j.scenario, j.controller), []).append(j)
         if j.key in metrics:
             groups[(j.scenario, j.controller)].append(metrics[j.key])
     rows = []
     for (scn, ctrl), ms in groups.items():
+        js = runs[(scn, ctrl)]
         n = len(ms)
         ok = [m for m in ms if m["status"] == "ok"]
         diverged = sorted((m for m in ms if m["status"] != "ok"), key=lambda m: (m["steps"], m["seed"]))
@@ -68,8 +71,19 @@ def aggregate(jobs: list[Job], metrics: dict[tuple, dict]) -> list[dict]:
             row["max_abs_weight"] = max(weights) if weights else None  # over every run, diverged ones too
             row["worst_seed"] = worst["seed"] if worst else None
             row["worst_status"] = worst["status"] if worst else None
+            if js[0].point:  # a grid point of --vary: its values by key
+                row["vary"] = dict(js[0].point)
+            if js[0].drawn:  # drawn per seed: each run's draw beside its figures, to plot one against the other
+                row["draws"] = [_drawn(j, metrics.get(j.key), phase) for j in js]
             rows.append(row)
     return rows
+
+
+def _drawn(job: Job, m: dict | None, phase: str) -> dict:
+    """One run of a scenario that draws per seed: its seed, what was drawn, its outcome and position RMS."""
+    ph = (m or {}).get("phases", {}).get(phase) or {}
+    return {"seed": job.seed, **job.drawn, "outcome": outcome(m) if m else None,
+            "pos_rms_m": ph.get("rms_position_error_m")}  # fmt: skip
 
 
 def _f(x: float | None, scale: float = 1.0, digits: int = 2) -> str:
@@ -141,10 +155,11 @@ def write_tables(out: Path, stem: str, rows: list[dict], columns, meta: dict) ->
     import io
 
     buf = io.StringIO()
-    w = csv.DictWriter(buf, fieldnames=CSV_FIELDS, lineterminator="\n")
+    axes = list(dict.fromkeys(k for r in rows for k in r.get("vary", {})))  # a column per --vary axis
+    w = csv.DictWriter(buf, fieldnames=CSV_FIELDS[:1] + axes + CSV_FIELDS[1:], lineterminator="\n")
     w.writeheader()
     for r in rows:
-        w.writerow({k: ("" if r[k] is None else r[k]) for k in CSV_FIELDS})
+        w.writerow({k: ("" if r[k] is None else r[k]) for k in CSV_FIELDS} | r.get("vary", {}))
     paths = [out / f"{stem}.csv", out / f"{stem}.md", out / f"{stem}.json"]
     note = (
         "\nStatistics over the runs that finished (tracking or lost; not over diverged ones); 95 % CI of "

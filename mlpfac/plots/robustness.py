@@ -1,0 +1,128 @@
+"""robustness.png: where each controller breaks, drawn from robustness.json
+(:mod:`mlpfac.sweeps.robustness`).
+
+One axis: per scenario, the median position RMS after the change against the value, per
+controller, with its 95 % interval as a band, the bound (the best law told the change) dashed
+black, the threshold dotted, the nominal value marked; below it, the share of seeds tracking.
+Two axes or more: per scenario and controller a map over the first two axes (the others at their
+first value) of the median position RMS, each point that holds ringed.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from mlpfac.plots.colors import controller_colors, mpl
+
+
+def robustness_plot(out: Path) -> list[Path]:
+    """Draw ``out``/robustness.png from ``out``/robustness.json; returns the file written."""
+    data = json.loads((out / "robustness.json").read_text())
+    rows, points = data["curves"], data["breaking_points"]
+    if not rows:
+        return []
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    families = list(dict.fromkeys(r["scenario"] for r in rows))
+    axes_of = {f: list(next(r["point"] for r in rows if r["scenario"] == f)) for f in families}
+    ctrls = list(dict.fromkeys(r["controller"] for r in rows))
+    colors = {k: mpl(v) for k, v in controller_colors(ctrls).items()}
+    path = out / "robustness.png"
+    if all(len(a) == 1 for a in axes_of.values()):
+        fig, axs = plt.subplots(2, len(families), figsize=(6.5 * len(families), 6.5), squeeze=False,
+                                gridspec_kw={"height_ratios": [2.2, 1]}, layout="constrained")  # fmt: skip
+        for i, fam in enumerate(families):
+            _curves(
+                axs[0, i], axs[1, i], fam, axes_of[fam][0], [r for r in rows if r["scenario"] == fam], points, colors
+            )
+    else:
+        pairs = [
+            (f, c) for f in families for c in ctrls if any(r["scenario"] == f and r["controller"] == c for r in rows)
+        ]
+        cols = min(len(pairs), 3)
+        nrows = math.ceil(len(pairs) / cols)
+        fig, axs = plt.subplots(nrows, cols, figsize=(5.2 * cols, 4.3 * nrows), squeeze=False, layout="constrained")
+        for ax, (fam, ctrl) in zip(axs.flat, pairs, strict=False):
+            _map(
+                fig, ax, fam, ctrl, axes_of[fam], [r for r in rows if r["scenario"] == fam and r["controller"] == ctrl]
+            )
+        for ax in list(axs.flat)[len(pairs) :]:
+            ax.set_visible(False)
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    return [path]
+
+
+def _finite(x) -> float:
+    return math.nan if x is None or not math.isfinite(x) else x
+
+
+def _curves(ax, share_ax, fam: str, key: str, rows: list[dict], points: list[dict], colors: dict) -> None:
+    for ctrl in dict.fromkeys(r["controller"] for r in rows):
+        rs = sorted((r for r in rows if r["controller"] == ctrl), key=lambda r: r["point"][key])
+        x = [r["point"][key] for r in rs]
+        med = np.array([_finite(r["median_m"]) for r in rs]) * 1e3
+        c = colors[ctrl]
+        ax.plot(x, med, "o-", color=c, label=ctrl, ms=4)
+        lo = np.array([_finite(r["ci_lo_m"]) for r in rs]) * 1e3
+        hi = np.array([_finite(r["ci_hi_m"]) for r in rs]) * 1e3
+        ax.fill_between(x, lo, hi, color=c, alpha=0.15, lw=0)
+        share_ax.plot(x, [100 * (r["tracking_share"] or 0.0) for r in rs], "o-", color=c, ms=3)
+    one = [r for r in rows if r["bound_m"] is not None]
+    if one:
+        bx = sorted({r["point"][key] for r in one})
+        by = [1e3 * _finite(next(r["bound_m"] for r in one if r["point"][key] == v)) for v in bx]
+        ax.plot(bx, by, "k--", lw=1.2, label="bound (best law told the change)")
+    ax.axhline(1e3 * rows[0]["threshold_m"], color="0.4", ls=":", lw=1, label="threshold")
+    nominal = next((p["nominal"] for p in points if p["scenario"] == fam and p["axis"] == key), None)
+    for a in (ax, share_ax):
+        if nominal is not None:
+            a.axvline(nominal, color="0.7", lw=0.8)
+    ax.set_yscale("log")
+    ax.set_title(fam, fontsize=10)
+    ax.set_ylabel("median position RMS after the change [mm]")
+    ax.legend(fontsize=7)
+    share_ax.set_ylabel("seeds tracking [%]")
+    share_ax.set_ylim(-5, 105)
+    share_ax.set_xlabel(key)
+
+
+def _map(fig, ax, fam: str, ctrl: str, keys: list[str], rows: list[dict]) -> None:
+    kx, ky = keys[0], keys[1]
+    rest = {k: rows[0]["point"][k] for k in keys[2:]}
+    rows = [r for r in rows if all(r["point"][k] == v for k, v in rest.items())]
+    xs = sorted({r["point"][kx] for r in rows})
+    ys = sorted({r["point"][ky] for r in rows})
+    z = np.full((len(ys), len(xs)), np.nan)
+    for r in rows:
+        med = _finite(r["median_m"])
+        z[ys.index(r["point"][ky]), xs.index(r["point"][kx])] = 1e3 * med if med > 0 else np.nan
+    from matplotlib.colors import LogNorm
+
+    seen = z[np.isfinite(z)]
+    if seen.size:  # cells where no run finished (or all diverged) stay blank
+        norm = LogNorm(vmin=seen.min() / 1.1, vmax=seen.max() * 1.1)
+        im = ax.pcolormesh(_edges(xs), _edges(ys), z, norm=norm, shading="flat", cmap="viridis")
+        fig.colorbar(im, ax=ax, label="median position RMS [mm]")
+    held = [(r["point"][kx], r["point"][ky]) for r in rows if r["holds"]]
+    if held:
+        ax.plot(*zip(*held, strict=True), "o", mfc="none", mec="white", ms=5)
+    ax.set_title(f"{fam} / {ctrl}" + ("".join(f", {k} = {v:g}" for k, v in rest.items())), fontsize=9)
+    ax.set_xlabel(kx)
+    ax.set_ylabel(ky)
+
+
+def _edges(v: list[float]) -> np.ndarray:
+    """Cell edges around sorted centres ``v`` (one cell of width 1 around a single value)."""
+    a = np.asarray(v, dtype=float)
+    if len(a) == 1:
+        return np.array([a[0] - 0.5, a[0] + 0.5])
+    mid = (a[1:] + a[:-1]) / 2
+    return np.concatenate([[a[0] - (mid[0] - a[0])], mid, [a[-1] + (a[-1] - mid[-1])]])
