@@ -4,7 +4,7 @@
     python benchmarks/bench_logging.py --controller corradini --seed 2 --repeats 7
     python benchmarks/bench_logging.py --synthetic          # log a synthetic 2500-step, 171-weight record
 
-Default: ``mlpfac.runner.run(scenario)`` and ``run(scenario, sink=make_sink(save=...))`` alternate
+Default: ``mlpfac.loop.runner.run(scenario)`` and ``run(scenario, sink=make_sink(save=...))`` alternate
 ``--repeats`` times; the medians and their ratio are printed (target: at most 1.3).
 ``--synthetic``: the sink's whole life (make_sink, begin, a flush every 250 steps, end) on a
 synthetic record of ``--steps`` rows and ``--alpha`` weights, filled without simulating, against the
@@ -27,8 +27,8 @@ import numpy as np
 
 def synthetic_record(steps: int, alpha: int, seed: int = 0):
     """A figure-of-eight run with every telemetry key of the adaptive controller on the kinematic plant."""
-    from mlpfac.record import RunRecord
-    from mlpfac.reference import Eight, sample
+    from mlpfac.loop.record import RunRecord
+    from mlpfac.scenario.reference import Eight, sample
 
     T = 0.01
     rng = np.random.default_rng(seed)
@@ -76,8 +76,8 @@ def main() -> int:
     ap.add_argument("--alpha", type=int, default=171)
     args = ap.parse_args()
 
-    from mlpfac.runner import FLUSH_EVERY, run
-    from mlpfac.scenario import load
+    from mlpfac.loop.runner import FLUSH_EVERY, run
+    from mlpfac.scenario.parse import load
 
     scn = load(args.scenario).with_overrides(args.controller, args.seed, None)
     if args.synthetic:

@@ -13,7 +13,7 @@ beside it), as ``benchmarks/perf_floor.py``. Three figures per control step:
   and three Python calls a step. The replay's final pose is checked against the run's, so it is the
   same trajectory;
 - ``run``: the whole kanayama run (``runner.run``), one seed: the closed loop compiled between
-  events (``mlpfac.segment``), MuJoCo's C functions called from the kernel.
+  events (``mlpfac.loop.compiled``), MuJoCo's C functions called from the kernel.
 
 ``run / floor`` is the target of the loop around physics (<= 1.5); ``replay / floor`` is how much
 the motion's physics takes, with the bindings' calls; ``(run - replay) / floor`` is what our loop
@@ -39,10 +39,10 @@ import numpy as np  # noqa: E402
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from perf_floor import PhysicsFloor  # noqa: E402
 
-from mlpfac.factory import make_plant  # noqa: E402
-from mlpfac.reference import sample  # noqa: E402
-from mlpfac.runner import run, seeded_generators  # noqa: E402
-from mlpfac.scenario import load  # noqa: E402
+from mlpfac.loop.factory import make_plant  # noqa: E402
+from mlpfac.loop.runner import run, seeded_generators  # noqa: E402
+from mlpfac.scenario.parse import load  # noqa: E402
+from mlpfac.scenario.reference import sample  # noqa: E402
 
 
 def main() -> int:

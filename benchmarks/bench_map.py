@@ -29,7 +29,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_sweep import process_tree_cpu, report, side_by_side  # noqa: E402
 from perf_floor import PhysicsFloor  # noqa: E402
 
-from mlpfac.scenario import load  # noqa: E402
+from mlpfac.scenario.parse import load  # noqa: E402
 from mlpfac.sweeps import engine  # noqa: E402
 from mlpfac.sweeps.vary import parse_vary  # noqa: E402
 

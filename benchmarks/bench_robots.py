@@ -21,10 +21,10 @@ import numpy as np
 from bench_tiago import timed  # this folder's: the median CPU time of repeated calls
 
 from mlpfac.exceptions import ConfigError
-from mlpfac.on_robot import MENAGERIE_BASES, robot_table
 from mlpfac.plants.config import MujocoConfig
 from mlpfac.plants.model_file import model_path
 from mlpfac.plants.mujoco import MujocoPlant
+from mlpfac.scenario.on_robot import MENAGERIE_BASES, robot_table
 
 T = 0.01
 

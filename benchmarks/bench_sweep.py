@@ -38,8 +38,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from perf_floor import UpdateFloor  # noqa: E402
 
-from mlpfac.runner import run, run_batch  # noqa: E402
-from mlpfac.scenario import load  # noqa: E402
+from mlpfac.loop.runner import run, run_batch  # noqa: E402
+from mlpfac.scenario.parse import load  # noqa: E402
 from mlpfac.sweeps import engine as sweep  # noqa: E402
 
 RESULTS: list[tuple[str, str, bool | None]] = []

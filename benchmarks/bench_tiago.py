@@ -25,7 +25,7 @@ import numpy as np
 
 from mlpfac.exceptions import MlpfacError
 from mlpfac.plants.mujoco import MujocoConfig, MujocoPlant
-from mlpfac.scenario import load
+from mlpfac.scenario.parse import load
 
 
 def robots() -> dict[str, MujocoConfig]:

@@ -5,7 +5,7 @@ Run it (from the folder that holds this file, or give the path from where you ar
     mlpfac run eight-wheel-radius --controller pure_pursuit.py:PurePursuit
     mlpfac sweep eight-wheel-radius --controllers pure_pursuit.py:PurePursuit,oracle,corradini --seeds 0-9
 
-The contract (mlpfac.plugins): a class built as ``Class(T=..., **params)`` whose ``step(e, r)``
+The contract (mlpfac.control.plugins): a class built as ``Class(T=..., **params)`` whose ``step(e, r)``
 returns (v, omega); ``reset(rng)`` and ``telemetry()`` are optional.
 """
 

@@ -21,16 +21,16 @@ from typing import TYPE_CHECKING
 __version__ = "0.1.0"
 
 _WHERE = {
-    "load": "mlpfac.scenario",
-    "parse": "mlpfac.scenario",
-    "scenario_names": "mlpfac.scenario",
-    "Scenario": "mlpfac.scenario",
+    "load": "mlpfac.scenario.parse",
+    "parse": "mlpfac.scenario.parse",
+    "scenario_names": "mlpfac.scenario.parse",
+    "Scenario": "mlpfac.scenario.parse",
     "run": "mlpfac.api",
     "sweep": "mlpfac.api",
     "PluginError": "mlpfac.exceptions",
-    "metrics": "mlpfac.run_metrics",
-    "RunRecord": "mlpfac.record",
-    "CONTROLLERS": "mlpfac.controllers",
+    "metrics": "mlpfac.runs.metrics",
+    "RunRecord": "mlpfac.loop.record",
+    "CONTROLLERS": "mlpfac.control.baselines",
     "check": "mlpfac.checks",
     "ConfigError": "mlpfac.exceptions",
     "MlpfacError": "mlpfac.exceptions",
@@ -55,11 +55,11 @@ __all__ = [
 if TYPE_CHECKING:
     from mlpfac.api import run, sweep
     from mlpfac.checks import check
-    from mlpfac.controllers import CONTROLLERS
+    from mlpfac.control.baselines import CONTROLLERS
     from mlpfac.exceptions import ConfigError, MlpfacError, PluginError
-    from mlpfac.record import RunRecord
-    from mlpfac.run_metrics import metrics
-    from mlpfac.scenario import Scenario, load, parse, scenario_names
+    from mlpfac.loop.record import RunRecord
+    from mlpfac.runs.metrics import metrics
+    from mlpfac.scenario.parse import Scenario, load, parse, scenario_names
 
 
 def __getattr__(name: str):

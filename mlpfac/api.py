@@ -7,7 +7,7 @@
     rows = mlpfac.sweep(["eight-wheel-radius"], [MyLaw, "oracle", "corradini"], seeds="0-9")
 
 A controller is a shipped name, ``"path/to/file.py:Class"``, ``"package.module:Class"``, an
-installed name, a class, or (for :func:`run`) an object of a class (:mod:`mlpfac.plugins`).
+installed name, a class, or (for :func:`run`) an object of a class (:mod:`mlpfac.control.plugins`).
 """
 
 from __future__ import annotations
@@ -18,10 +18,10 @@ import tempfile
 import warnings
 from pathlib import Path
 
+from mlpfac.control.plugins import local_spec
 from mlpfac.exceptions import ConfigError, MlpfacError
-from mlpfac.plugins import local_spec
-from mlpfac.record import RunRecord
-from mlpfac.scenario import Scenario, load
+from mlpfac.loop.record import RunRecord
+from mlpfac.scenario.parse import Scenario, load
 from mlpfac.sweeps.worker import not_in_a_worker
 from mlpfac.targets import user_path
 
@@ -80,8 +80,8 @@ def run(
     or "interrupted" keeps what was recorded; what a user's controller raises is a
     :class:`~mlpfac.exceptions.PluginError`. ``robot`` puts the scenario on that robot (as ``--robot``).
     """
-    from mlpfac.runner import build
-    from mlpfac.runner import run as run_scenario
+    from mlpfac.loop.runner import build
+    from mlpfac.loop.runner import run as run_scenario
 
     not_in_a_worker("run")
     scn = _scenario(scenario, robot=robot)
@@ -96,7 +96,7 @@ def run(
         return run_scenario(scn, sink=sink, on_step=on_step, built=build(scn, instance))
     if sink is not None or on_step is not None:
         raise ConfigError("out", "a run into a folder records into it: give out, or sink / on_step, not both")
-    from mlpfac.run_folder import Recording, check_outputs, run_into_folder
+    from mlpfac.runs.folder import Recording, check_outputs, run_into_folder
 
     baseline = None
     if figure is not None:
@@ -137,7 +137,7 @@ def sweep(
     The returned list has ``.errors`` ({(scenario, controller, seed): traceback}) and ``.paired``
     (the rows of paired.json). Ctrl-C raises KeyboardInterrupt (with ``out``, the runs written are
     kept and the next call resumes them). ``robots``: every scenario on each (as ``--robots``)."""
-    from mlpfac.on_robot import with_robots
+    from mlpfac.scenario.on_robot import with_robots
     from mlpfac.sweeps import engine
 
     not_in_a_worker("sweep")

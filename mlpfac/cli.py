@@ -69,7 +69,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--seed", type=int, help="override the scenario's seed")
     p.add_argument("--duration", type=float, help="override the duration in seconds")
-    from mlpfac.on_robot import ROBOT_HELP
+    from mlpfac.scenario.on_robot import ROBOT_HELP
 
     p.add_argument("--robot", help=ROBOT_HELP)
     p.add_argument("--out", type=cli_path, help="output folder (default runs/SCENARIO-CONTROLLER-sSEED)")
@@ -102,7 +102,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--out", type=cli_path, default=Path("runs/check"), help="results folder (default runs/check); resumable"
     )
     p.add_argument("--workers", type=int, default=2, help="local worker processes (default 2)")
-    from mlpfac.on_robot import ROBOT_HELP
+    from mlpfac.scenario.on_robot import ROBOT_HELP
 
     p.add_argument("--robot", help=ROBOT_HELP)
     p.add_argument(
@@ -140,7 +140,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("folders", nargs="+", type=cli_path, help="results folders of `mlpfac sweep` or `mlpfac compare`")
 
-    from mlpfac import report
+    from mlpfac import results as report
 
     report.add_arguments(sub.add_parser("report", help="write the results tables of the docs from their data"))
     return parser
@@ -149,18 +149,18 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     from mlpfac.exceptions import MlpfacError, PluginError
-    from mlpfac.signals import handle_sigterm
+    from mlpfac.interrupts import handle_sigterm
 
     handle_sigterm()
 
     try:
         if args.command == "run":
             from mlpfac.plots.painter import painting
-            from mlpfac.scenario import load
+            from mlpfac.scenario.parse import load
 
             load(args.scenario, build=False)  # a bad name or file fails here, before the figure's process starts
             if args.robot is not None:
-                from mlpfac.on_robot import model_of
+                from mlpfac.scenario.on_robot import model_of
 
                 model_of(args.robot)
             with painting(args.baseline != "none" and not args.no_plot) as args.painter:  # figure1 drawn beside
@@ -194,16 +194,16 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def cmd_list() -> int:
-    from mlpfac.controllers import CONTROLLERS
-    from mlpfac.plugins import entry_points
-    from mlpfac.scenario import load, scenario_names
+    from mlpfac.control.baselines import CONTROLLERS
+    from mlpfac.control.plugins import entry_points
+    from mlpfac.scenario.parse import load, scenario_names
 
     names = scenario_names()
     width = max(map(len, names), default=0)
     for name in names:
         scn = load(name, build=False)
         print(f"{name:<{width}}  {scn.plant_kind:<9}  {scn.description}")
-    from mlpfac.on_robot import robots_here
+    from mlpfac.scenario.on_robot import robots_here
 
     print("\nrobots (--robot NAME, or an MJCF file):")
     robots = robots_here()
@@ -213,7 +213,7 @@ def cmd_list() -> int:
     print(f"\ncontrollers: {', '.join(CONTROLLERS)}")
     installed = entry_points()
     if installed:
-        print("installed controllers (entry-point group mlpfac.controllers):")
+        print("installed controllers (entry-point group mlpfac.control.baselines):")
         width = max(map(len, installed))
         for name, (target, dist) in sorted(installed.items()):
             print(f"  {name:<{width}}  {target}  (from {dist})")
@@ -222,7 +222,7 @@ def cmd_list() -> int:
 
 
 def cmd_report(args: argparse.Namespace) -> int:
-    from mlpfac import report
+    from mlpfac import results as report
 
     return report.run_cli(args)
 
@@ -280,10 +280,10 @@ def cmd_plot(args: argparse.Namespace) -> int:
 
 def cmd_run(args: argparse.Namespace) -> int:
     """Check everything, build the plant and the controller, then run into a folder beside --out
-    that replaces it only when whole (:mod:`mlpfac.run_folder`), under --out's lock."""
+    that replaces it only when whole (:mod:`mlpfac.runs.folder`), under --out's lock."""
     from mlpfac.exceptions import ConfigError
-    from mlpfac.run_folder import Recording, check_outputs, run_into_folder
-    from mlpfac.scenario import load
+    from mlpfac.runs.folder import Recording, check_outputs, run_into_folder
+    from mlpfac.scenario.parse import load
 
     scn = load(args.scenario, robot=args.robot).with_overrides(args.controller, args.seed, args.duration)
     found = scn.table.get("provenance", {})
@@ -303,7 +303,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         out,
         Recording(args.save, args.spawn, args.connect, args.serve, args.bind, args.no_log, (args.grpc_port, args.port)),
     )
-    from mlpfac.runner import build  # the run's imports (MuJoCo, the kernels): after the checks of the input
+    from mlpfac.loop.runner import build  # the run's imports (MuJoCo, the kernels): after the checks of the input
 
     done = run_into_folder(scn, out, build(scn), recording, baseline, args.painter)
     rec = done.rec
@@ -372,7 +372,7 @@ def entry() -> None:
     except OSError as err:
         code = exits.failed_write(err, "stdout")
     code = 0 if code is None else code
-    plugins = sys.modules.get("mlpfac.plugins")
+    plugins = sys.modules.get("mlpfac.control.plugins")
     others = [t for t in threading.enumerate() if t is not threading.current_thread()]
     if all(t.daemon for t in others) and not getattr(plugins, "USER_CODE", False):
         atexit._run_exitfuncs()

@@ -43,14 +43,14 @@ HERE = Path(__file__).resolve().parent
 EXTENSIONS = {"core": "mlpfac._kernels", "mujoco": "mlpfac.plants._kernels"}
 MODULES = {  # the modules whose kernels each extension holds
     "core": (
-        "mlpfac.kernels",
-        "mlpfac.loop_kernels",
-        "mlpfac.input_model",
-        "mlpfac.delay_bank",
-        "mlpfac.events",
-        "mlpfac.ik",
+        "mlpfac.control.adaptive.kernels",
+        "mlpfac.loop.kernels",
+        "mlpfac.control.adaptive.input_model",
+        "mlpfac.control.adaptive.delay_bank",
+        "mlpfac.plants.events",
+        "mlpfac.plants.ik",
     ),
-    "mujoco": ("mlpfac.plants.compiled", "mlpfac.segment"),
+    "mujoco": ("mlpfac.plants.compiled", "mlpfac.loop.compiled"),
 }
 FILES = tuple(m.removeprefix("mlpfac.").replace(".", "/") + ".py" for ms in MODULES.values() for m in ms) + ("jit.py",)
 JIT = {"cache": True, "error_model": "numpy", "nogil": True}  # numpy's inf or NaN for a division by zero

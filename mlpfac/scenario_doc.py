@@ -18,7 +18,7 @@ import types
 import typing
 
 from mlpfac.exceptions import ConfigError
-from mlpfac.toml_data import build
+from mlpfac.tables import build
 
 HEAD = "<!-- Written by `python -m mlpfac.doc_pages docs` from the code; edit the code, not this page. -->\n"
 
@@ -57,7 +57,7 @@ CONTEXT = {"detect_mean": {"detect": 1.0}, "input_P_alarm": {"detect": 1.0, "det
 
 def _known(table: dict, where: str) -> set[str]:
     """The keys a table accepts, as the validator names them for an unknown one."""
-    from mlpfac.scenario import parse
+    from mlpfac.scenario.parse import parse
 
     try:
         parse(table)
@@ -208,7 +208,7 @@ def _plain_rows(described: dict, known: set[str], where: str, probe=None) -> lis
 
 def _top_probe(key: str) -> tuple[str, str]:
     """The default and range of a scenario-level number, from :func:`mlpfac.scenario.parse` itself."""
-    from mlpfac.scenario import parse
+    from mlpfac.scenario.parse import parse
 
     if key not in ("duration", "T", "seed", "warmup", "divergence_m"):
         return {"name": ("the file's name", "letters, digits, `.` `_` `+` `-`")}.get(key, ("", ""))
@@ -222,7 +222,7 @@ def _top_probe(key: str) -> tuple[str, str]:
 
 def _initial_probe(key: str) -> tuple[str, str]:
     """The default of an ``[initial]`` key, as :func:`mlpfac.scenario.parse` fills it in."""
-    from mlpfac.scenario import parse
+    from mlpfac.scenario.parse import parse
 
     scn = parse({})
     if key == "error":
@@ -231,14 +231,14 @@ def _initial_probe(key: str) -> tuple[str, str]:
 
 
 def scenario_page() -> str:
-    from mlpfac.adaptive_config import AdaptiveConfig
-    from mlpfac.controllers import KanayamaGains
-    from mlpfac.events import EVENTS
-    from mlpfac.law import Law
-    from mlpfac.networks import Networks
+    from mlpfac.control.adaptive.config import AdaptiveConfig
+    from mlpfac.control.adaptive.networks import Networks
+    from mlpfac.control.baselines import KanayamaGains
+    from mlpfac.control.law import Law
     from mlpfac.plants.config import MujocoConfig
+    from mlpfac.plants.events import EVENTS
     from mlpfac.plants.kinematic import KinematicConfig, KinematicPlant
-    from mlpfac.reference import REFERENCES
+    from mlpfac.scenario.reference import REFERENCES
 
     out = [
         "# The scenario file, key by key",

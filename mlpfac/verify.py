@@ -98,7 +98,7 @@ def _plan(command: str, root: Path):
     if words[:1] != ["mlpfac"] or words[1:2] not in (["sweep"], ["compare"]):
         raise ConfigError(command, "a script's table: run its command again to check it")
     from mlpfac.cli import build_parser
-    from mlpfac.scenario import scenario_names
+    from mlpfac.scenario.parse import scenario_names
     from mlpfac.sweeps.plan import parse_controllers, parse_seeds, plan
 
     try:
@@ -131,7 +131,7 @@ def differ(kept: dict, new: dict) -> tuple[float, str]:
 
 def verify_dataset(folder: Path, n: int, root: Path) -> Verdict:
     """Run ``n`` of the dataset's runs again (a sample fixed by the dataset's name) and compare."""
-    from mlpfac.report import _json
+    from mlpfac.results import _json
     from mlpfac.sweeps.worker import run_task
 
     command = _json(folder, "meta.json").get("command", "")

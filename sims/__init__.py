@@ -1,1 +1,1 @@
-"""The shipped scenarios: one TOML file each, read by mlpfac.scenario through importlib.resources."""
+"""The shipped scenarios: one TOML file each, read by mlpfac.scenario.parse through importlib.resources."""

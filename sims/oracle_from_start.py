@@ -15,9 +15,9 @@ import copy
 from concurrent.futures import ProcessPoolExecutor
 from statistics import median
 
-from mlpfac.run_metrics import metrics
-from mlpfac.runner import run
-from mlpfac.scenario import load, parse
+from mlpfac.loop.runner import run
+from mlpfac.runs.metrics import metrics
+from mlpfac.scenario.parse import load, parse
 from mlpfac.sweeps.paired import compare, window_rms
 
 SCENARIOS = ("eight-payload", "eight-weak-actuator", "eight-friction")

@@ -15,9 +15,9 @@ from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 
-from mlpfac.run_metrics import metrics
-from mlpfac.runner import run
-from mlpfac.scenario import load, parse
+from mlpfac.loop.runner import run
+from mlpfac.runs.metrics import metrics
+from mlpfac.scenario.parse import load, parse
 
 # (label, controller-table changes, adaptive-table changes)
 CHOICES = [

@@ -13,10 +13,10 @@ from dataclasses import dataclass, field
 import numpy as np
 import pytest
 
-from mlpfac.error_model import h_true, tracking_error
-from mlpfac.networks import Networks
-from mlpfac.record import RunRecord
-from mlpfac.reference import Eight, sample
+from mlpfac.control.adaptive.networks import Networks
+from mlpfac.loop.record import RunRecord
+from mlpfac.model import h_true, tracking_error
+from mlpfac.scenario.reference import Eight, sample
 
 MENAGERIE_ROBOT = "pal_tiago"  # the Menagerie robot of the tiago-* scenarios
 PROBE_S = 3.0  # how long the one probe of the download server may take
@@ -66,7 +66,7 @@ def _answers(url: str) -> bool:
 @functools.cache
 def _menagerie_scenarios() -> frozenset[str]:
     """The shipped scenarios whose robot comes from MuJoCo Menagerie."""
-    from mlpfac.scenario import load, scenario_names
+    from mlpfac.scenario.parse import load, scenario_names
 
     models = {n: getattr(load(n, build=False).plant_config, "model", None) for n in scenario_names()}
     return frozenset(n for n, m in models.items() if isinstance(m, str) and m.startswith("menagerie:"))

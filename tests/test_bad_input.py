@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from mlpfac.cli import main
-from mlpfac.scenario import scenario_names
+from mlpfac.scenario.parse import scenario_names
 
 MINIMAL = 'duration = 0.5\n[plant]\nkind = "kinematic"\n'
 EVENT = '[[events]]\ntime = 0.2\nkind = "control_period"\nfactor = 1.5\n'
@@ -337,7 +337,7 @@ def test_a_custom_robot_reruns_from_its_config_toml(tmp_path, monkeypatch):
     import json
     import shutil
 
-    from mlpfac.scenario import shipped_dir
+    from mlpfac.scenario.parse import shipped_dir
 
     robot = tmp_path / "robots"
     shutil.copytree(shipped_dir().parent / "models", robot)
@@ -363,14 +363,14 @@ def test_config_toml_round_trips(name):
     """What config.toml says is the table that was run: every shipped scenario, read back, is equal."""
     import tomllib
 
-    from mlpfac.scenario import load, to_toml
+    from mlpfac.scenario.parse import load, to_toml
 
     table = load(name).table
     assert tomllib.loads(to_toml(table)) == table, name
 
 
 def test_shipped_scenarios_resolve_inside_the_package():
-    from mlpfac.scenario import load, shipped_dir
+    from mlpfac.scenario.parse import load, shipped_dir
 
     scn = load("eight-nominal")
     assert Path(scn.plant_config.model).is_file() and Path(scn.plant_config.model).parent.name == "models"

@@ -1,13 +1,13 @@
-"""The batched closed loop (mlpfac.runner.run_batch) against one-at-a-time runs: bit-identical per seed."""
+"""The batched closed loop (mlpfac.loop.runner.run_batch) against one-at-a-time runs: bit-identical per seed."""
 
 import copy
 
 import numpy as np
 import pytest
 
-from mlpfac.run_metrics import metrics
-from mlpfac.runner import run, run_batch
-from mlpfac.scenario import load, parse
+from mlpfac.loop.runner import run, run_batch
+from mlpfac.runs.metrics import metrics
+from mlpfac.scenario.parse import load, parse
 
 ARRAYS = ("pose", "pose_meas", "e", "e_true", "u", "ref")
 

@@ -4,9 +4,9 @@ and the covariance of (h1, h2, h5, b_v, b_omega) it is fed from P_k."""
 import numpy as np
 import pytest
 
-from mlpfac.adaptive import Adaptive, AdaptiveConfig
-from mlpfac.law import Law
-from mlpfac.networks import Networks
+from mlpfac.control.adaptive.controller import Adaptive, AdaptiveConfig
+from mlpfac.control.adaptive.networks import Networks
+from mlpfac.control.law import Law
 
 T = 0.01
 

@@ -3,12 +3,12 @@
 import numpy as np
 import pytest
 
-from mlpfac.error_model import G_true, f_true, h_true, pose_from_error, tracking_error, wrap
-from mlpfac.estimators import EKF
+from mlpfac.control.adaptive.estimators import EKF
+from mlpfac.control.adaptive.networks import Networks
+from mlpfac.control.law import Law
 from mlpfac.exceptions import ConfigError
-from mlpfac.law import Law
-from mlpfac.networks import Networks
-from mlpfac.reference import Circle, Eight, Lemniscate, Line, sample
+from mlpfac.model import G_true, f_true, h_true, pose_from_error, tracking_error, wrap
+from mlpfac.scenario.reference import Circle, Eight, Lemniscate, Line, sample
 
 NETS = [Networks(), Networks(L_f=5, L_G=3, error_scale=20.0), Networks(residual=True), Networks(velocity_inputs=True)]
 
@@ -210,7 +210,7 @@ def test_ekf_covariance_stays_symmetric_positive_definite_over_a_long_run():
 
 @pytest.mark.parametrize("nets", NETS)
 def test_compiled_networks_equal_the_numpy_ones(nets):
-    from mlpfac.kernels import networks_h_jacobian
+    from mlpfac.control.adaptive.kernels import networks_h_jacobian
 
     rng = np.random.default_rng(7)
     B = 4

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from mlpfac import report
+from mlpfac import results as report
 from mlpfac.cli import main
 from mlpfac.exceptions import ConfigError
 

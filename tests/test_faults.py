@@ -56,9 +56,9 @@ def test_a_mujoco_warning_ends_the_run_as_diverged_and_writes_nothing_outside(he
 def test_a_warning_marks_the_robot_stepping_and_ends_a_compiled_segment():
     """The handler marks the robot whose step warned; its divergence test (compiled, in every step
     of a segment too) then says so."""
+    from mlpfac.loop.runner import build
     from mlpfac.plants import compiled
-    from mlpfac.runner import build
-    from mlpfac.scenario import load
+    from mlpfac.scenario.parse import load
 
     scn = load("eight-nominal").with_overrides("kanayama", duration=0.5)
     built = build(scn)
@@ -74,7 +74,7 @@ def test_a_warning_marks_the_robot_stepping_and_ends_a_compiled_segment():
 
 def test_a_model_mujoco_cannot_simulate_is_one_line(here, capsys):
     """A model whose arena is too small (<size memory="4K"/>): MuJoCo's fatal error is one line, exit 2."""
-    from mlpfac.scenario import shipped_dir
+    from mlpfac.scenario.parse import shipped_dir
 
     models = shipped_dir().parent / "models"
     for f in models.glob("*.xml"):

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mlpfac.ik import body_velocity, wheel_speeds
+from mlpfac.plants.ik import body_velocity, wheel_speeds
 
 R, L = 0.05, 0.28
 

@@ -1,4 +1,4 @@
-"""The input model (mlpfac.input_model): input gains, change detection, delay and predictor, on
+"""The input model (mlpfac.control.adaptive.input_model): input gains, change detection, delay and predictor, on
 synthetic unicycles with a known gain and delay (batched on the MuJoCo robot: tests/test_batch.py)."""
 
 import math
@@ -6,8 +6,8 @@ import math
 import numpy as np
 import pytest
 
-from mlpfac.input_model import InputModel
-from mlpfac.loop_kernels import tracking_errors
+from mlpfac.control.adaptive.input_model import InputModel
+from mlpfac.loop.kernels import tracking_errors
 
 T = 0.01
 R0 = np.zeros(5)  # a reference fixed at the origin: e is the pose seen from it

@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 
 from mlpfac import jit
+from mlpfac.control.variants import CONTROLLERS
 from mlpfac.exceptions import ConfigError
-from mlpfac.variants import CONTROLLERS
 
 # Short runs that call every exported kernel between them: every shipped controller (the adaptive
 # step and its EKF, the estimators' ekf_update, the input model and the delay bank, the baselines'
@@ -35,10 +35,10 @@ SCRIPT = textwrap.dedent(
     import hashlib, json, sys
     import numpy as np
     import mlpfac
-    from mlpfac.kernels import networks_h_jacobian
+    from mlpfac.control.adaptive.kernels import networks_h_jacobian
 
-    from mlpfac.runner import run_batch
-    from mlpfac.scenario import load
+    from mlpfac.loop.runner import run_batch
+    from mlpfac.scenario.parse import load
 
     def digest(r):
         return hashlib.sha256(b"".join(a.tobytes() for a in (r.pose, r.e, r.u))).hexdigest()
@@ -131,7 +131,7 @@ def test_the_stamp_covers_every_kernel_file_and_the_processor():
 
 
 def test_a_delay_line_of_integers_or_strided_rows_pushes_what_it_was_given():
-    from mlpfac.events import DelayLine
+    from mlpfac.plants.events import DelayLine
 
     line = DelayLine(np.int32(3))
     assert line.hist.dtype == np.int64

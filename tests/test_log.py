@@ -227,8 +227,8 @@ def test_end_twice_and_flush_past_n(make_record, tmp_path, rrd_contents):
 
 
 def test_a_real_run_through_the_runner(tmp_path, rrd_contents):
-    from mlpfac.runner import run
-    from mlpfac.scenario import load
+    from mlpfac.loop.runner import run
+    from mlpfac.scenario.parse import load
 
     scn = load("paper").with_overrides(duration=3.0)
     rec = run(scn, sink=log.make_sink(save=tmp_path / "run.rrd", recording_id="real"))
@@ -318,7 +318,7 @@ def test_view_needs_a_run_in_each_folder(tmp_path):
 
 
 def test_runs_without_logging_do_not_import_rerun():
-    code = "import sys, mlpfac.runner, mlpfac.cli, mlpfac.scenario, mlpfac.outputs; print('rerun' in sys.modules)"
+    code = "import sys, mlpfac.loop.runner, mlpfac.cli, mlpfac.scenario.parse, mlpfac.runs.files; print('rerun' in sys.modules)"
     out = subprocess.run(
         [sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=Path(__file__).parents[1]
     )
@@ -358,8 +358,8 @@ def test_schema_covers_every_key_of_a_real_run(scenario, controller):
 
     from mlpfac.log.layout import VIEWS
     from mlpfac.log.schema import rows_for
-    from mlpfac.runner import run
-    from mlpfac.scenario import load
+    from mlpfac.loop.runner import run
+    from mlpfac.scenario.parse import load
 
     rec = run(load(scenario).with_overrides(controller=controller, duration=0.05))
     arrays = [f.name for f in fields(rec) if isinstance(getattr(rec, f.name), np.ndarray)]
@@ -428,7 +428,7 @@ def about_texts(path) -> list[list[str]]:
 
 
 def test_weights_show_as_their_change_per_layer(logged):
-    from mlpfac.networks import Networks
+    from mlpfac.control.adaptive.networks import Networks
 
     labels = Networks().labels()
     idx = [i for i, name in enumerate(labels) if name.startswith("NN_G/hidden/")]
@@ -446,7 +446,7 @@ def test_runs_compared_in_one_recording_take_their_controllers_colours(tmp_path,
 
     from mlpfac.cli import main
     from mlpfac.plots import controller_colors
-    from mlpfac.run_metrics import metrics
+    from mlpfac.runs.metrics import metrics
 
     for ctrl, seed in (("adaptive", 3), ("kanayama", 4)):
         rec = make_record(N=600, seed=seed)

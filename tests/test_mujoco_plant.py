@@ -10,8 +10,8 @@ import mujoco
 import numpy as np
 import pytest
 
-from mlpfac.events import make_event, parse_event
 from mlpfac.exceptions import ConfigError
+from mlpfac.plants.events import make_event, parse_event
 from mlpfac.plants.mujoco import MujocoConfig, MujocoPlant
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -681,9 +681,9 @@ def test_scenario_builds_a_plant_and_its_events_pass(path):
 def test_a_scenario_robot_is_read_once_by_its_load_and_its_run(monkeypatch):
     """``load`` writes the parts it found into the scenario ([plant] left_actuator, ...): the run's
     configuration then names them, and is the same robot, not read (and compiled) a second time."""
+    from mlpfac.loop.runner import run
     from mlpfac.plants import robot
-    from mlpfac.runner import run
-    from mlpfac.scenario import load
+    from mlpfac.scenario.parse import load
 
     reads = []
     real = robot._read_robot

@@ -8,15 +8,15 @@ import numpy as np
 import pytest
 from scipy.stats import wilcoxon as scipy_wilcoxon
 
-from mlpfac.error_model import G_true, f_true
-from mlpfac.events import make_event
-from mlpfac.factory import make_controller
-from mlpfac.law import Law
-from mlpfac.oracle import Oracle, told
-from mlpfac.record import RunRecord
-from mlpfac.run_metrics import LOST_FRACTION, metrics, outcome
-from mlpfac.runner import run
-from mlpfac.scenario import load
+from mlpfac.control.law import Law
+from mlpfac.control.oracle import Oracle, told
+from mlpfac.loop.factory import make_controller
+from mlpfac.loop.record import RunRecord
+from mlpfac.loop.runner import run
+from mlpfac.model import G_true, f_true
+from mlpfac.plants.events import make_event
+from mlpfac.runs.metrics import LOST_FRACTION, metrics, outcome
+from mlpfac.scenario.parse import load
 from mlpfac.sweeps.paired import compare, paired_rows, twins, wilcoxon, window_rms
 from mlpfac.sweeps.plan import plan
 
@@ -258,7 +258,7 @@ def test_paired_rows_on_a_sweep_plan():
 @pytest.mark.parametrize("limit", [None, 30.0, 5.0])
 def test_dividing_by_the_radius_scale_is_the_ik_given_the_true_radius(limit):
     """The nominal IK on u / s gives the wheel speeds of the IK told the true radius s r, limit included."""
-    from mlpfac.ik import wheel_speeds
+    from mlpfac.plants.ik import wheel_speeds
 
     u, s, r, track = np.array([0.9, 1.7]), 1.5, 0.05, 0.3
     np.testing.assert_allclose(

@@ -186,7 +186,7 @@ def test_tiago_is_drawn_with_its_meshes_standing_on_the_floor():
     from mlpfac.log.scene import robot_shapes
 
     scn = mlpfac.load("tiago-nominal")
-    from mlpfac.factory import make_plant
+    from mlpfac.loop.factory import make_plant
 
     shapes = make_plant(scn, np.zeros((2, 5))).geometry()
     arches = dict(robot_shapes(shapes))

@@ -8,9 +8,9 @@ import json
 import pytest
 
 from mlpfac.cli import main
+from mlpfac.loop.runner import run
 from mlpfac.plots import controller_colors, figure1, outcome
-from mlpfac.runner import run
-from mlpfac.scenario import load
+from mlpfac.scenario.parse import load
 
 
 @pytest.fixture(scope="module")
@@ -18,7 +18,7 @@ def short_runs():
     """The paper's scenario for 3 s with its event at 1.5 s, per controller."""
     import copy
 
-    from mlpfac.scenario import parse
+    from mlpfac.scenario.parse import parse
 
     table = copy.deepcopy(load("paper").table)
     table["duration"] = 3.0

@@ -1,5 +1,5 @@
 """A user's own controller, without editing mlpfac: every form of naming it, what its runs get,
-its bad input, its bugs, the entry-point group and the Python API (mlpfac.plugins, mlpfac.api)."""
+its bad input, its bugs, the entry-point group and the Python API (mlpfac.control.plugins, mlpfac.api)."""
 
 from __future__ import annotations
 
@@ -222,7 +222,7 @@ def test_a_plugin_that_raises_mid_sweep_is_one_failed_run(law, tmp_path, batched
     assert p.returncode == 1
     assert "ZeroDivisionError: the law's own bug" in p.stderr
     err = (tmp_path / "sw" / "k" / "Failing" / "seed-0000" / "error.txt").read_text()
-    assert "failing.py" in err and "the law's own bug" in err and "mlpfac/runner.py" not in err
+    assert "failing.py" in err and "the law's own bug" in err and "mlpfac/loop/runner.py" not in err
     assert (tmp_path / "sw" / "k" / "Law" / "seed-0001" / "metrics.json").exists()
 
 
@@ -251,7 +251,7 @@ def test_a_plugin_that_raises_fails_its_run_and_keeps_the_earlier_one(law, tmp_p
     )
     bad = cli(["run", "f.toml", "--out", "o", "--no-plot"], tmp_path)
     assert bad.returncode == 1
-    assert "law.py" in bad.stderr and "ZeroDivisionError" in bad.stderr and "mlpfac/runner.py" not in bad.stderr
+    assert "law.py" in bad.stderr and "ZeroDivisionError" in bad.stderr and "mlpfac/loop/runner.py" not in bad.stderr
     assert (tmp_path / "o" / "metrics.json").read_text() == before  # the earlier run is whole
     fresh = cli(["run", "f.toml", "--out", "new", "--no-plot"], tmp_path)
     assert fresh.returncode == 1
@@ -332,14 +332,14 @@ def test_bad_plugin_input_is_one_line_and_nothing_written(tmp_path, monkeypatch,
 
 
 def test_an_installed_package_registers_controllers(tmp_path):
-    """The entry-point group mlpfac.controllers: a tiny installed package found by name."""
+    """The entry-point group mlpfac.control.baselines: a tiny installed package found by name."""
     site = tmp_path / "site"  # what `pip install --target site` leaves: the package and its dist-info
     (site / "tinylaws").mkdir(parents=True)
     (site / "tinylaws" / "__init__.py").write_text(LAW)
     info = site / "tinylaws-0.1.dist-info"
     info.mkdir()
     (info / "METADATA").write_text("Metadata-Version: 2.1\nName: tinylaws\nVersion: 0.1\n")
-    (info / "entry_points.txt").write_text("[mlpfac.controllers]\ntiny-kanayama = tinylaws:Law\n")
+    (info / "entry_points.txt").write_text("[mlpfac.control.baselines]\ntiny-kanayama = tinylaws:Law\n")
     (info / "RECORD").write_text("")
     env = {**os.environ, "PYTHONPATH": str(site)}
     listed = cli(["list"], tmp_path, env)
@@ -408,7 +408,7 @@ def test_a_config_of_a_class_no_file_names_is_refused_in_one_line(tmp_path, caps
     config = tomllib.loads((tmp_path / "o" / "config.toml").read_text())
     assert config["controller"]["name"].startswith("<local>:") and "Local#" in config["controller"]["name"]
     config["controller"]["name"] = config["controller"]["name"].replace("#", "#0")  # another process's
-    from mlpfac.scenario import to_toml
+    from mlpfac.scenario.parse import to_toml
 
     (tmp_path / "again.toml").write_text(to_toml(config))
     assert main(["run", str(tmp_path / "again.toml"), "--out", str(tmp_path / "x")]) == 2
@@ -419,7 +419,7 @@ def test_a_config_of_a_class_no_file_names_is_refused_in_one_line(tmp_path, caps
 def test_a_seed_that_stopped_is_not_asked_for_telemetry_again(tmp_path):
     """In a batch without the batch form, a diverged seed's controller (which may be in a bad state)
     is neither stepped nor asked for telemetry again; the other seeds go on."""
-    from mlpfac.runner import run_batch, seeded_generators
+    from mlpfac.loop.runner import run_batch, seeded_generators
 
     (tmp_path / "fragile.py").write_text(
         LAW + "\n\nclass Fragile(Law):\n"

@@ -8,11 +8,11 @@ import math
 import numpy as np
 import pytest
 
-from mlpfac.adaptive import VARIANTS, Adaptive, AdaptiveConfig
-from mlpfac.delay_bank import DelayBank
+from mlpfac.control.adaptive.controller import VARIANTS, Adaptive, AdaptiveConfig
+from mlpfac.control.adaptive.delay_bank import DelayBank
+from mlpfac.control.law import Law
 from mlpfac.exceptions import ConfigError
-from mlpfac.law import Law
-from mlpfac.loop_kernels import kanayama_step, tracking_errors
+from mlpfac.loop.kernels import kanayama_step, tracking_errors
 from mlpfac.sweeps.bound import bound_rows, load, main, p_worse
 
 T = 0.01

@@ -12,11 +12,11 @@ import pytest
 
 from mlpfac.cli import main
 from mlpfac.exceptions import ConfigError
-from mlpfac.on_robot import SHARE, on_robot, with_robots
 from mlpfac.plants.config import MujocoConfig
 from mlpfac.plants.mujoco import MujocoPlant
-from mlpfac.reference import make_reference, sample
-from mlpfac.scenario import read_toml, shipped_dir
+from mlpfac.scenario.on_robot import SHARE, on_robot, with_robots
+from mlpfac.scenario.parse import read_toml, shipped_dir
+from mlpfac.scenario.reference import make_reference, sample
 
 SKID_ARM = Path(__file__).parent / "data" / "skid_arm.xml"
 T = 0.01

@@ -6,9 +6,9 @@ import math
 import numpy as np
 import pytest
 
-from mlpfac.run_metrics import metrics
-from mlpfac.runner import run
-from mlpfac.scenario import load, parse
+from mlpfac.loop.runner import run
+from mlpfac.runs.metrics import metrics
+from mlpfac.scenario.parse import load, parse
 
 
 def test_same_seed_gives_bit_identical_runs():

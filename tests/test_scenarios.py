@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mlpfac.run_metrics import metrics
-from mlpfac.runner import run
-from mlpfac.scenario import load, parse, scenario_names
+from mlpfac.loop.runner import run
+from mlpfac.runs.metrics import metrics
+from mlpfac.scenario.parse import load, parse, scenario_names
 
 ROOT = Path(__file__).resolve().parents[1]
 

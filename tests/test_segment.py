@@ -1,4 +1,4 @@
-"""The compiled closed loop (mlpfac.segment) and the compiled plant step (mlpfac.plants.compiled):
+"""The compiled closed loop (mlpfac.loop.compiled) and the compiled plant step (mlpfac.plants.compiled):
 the same records, to the bit, as the step-by-step loop; divergence stops at the same step for the
 same reason; MuJoCo's fatal errors end the process with one line."""
 
@@ -13,12 +13,12 @@ import textwrap
 import numpy as np
 import pytest
 
-from mlpfac.events import DelayLine
-from mlpfac.factory import make_plant
+from mlpfac.loop.factory import make_plant
+from mlpfac.loop.runner import run, run_batch
 from mlpfac.plants import compiled
-from mlpfac.reference import sample
-from mlpfac.runner import run, run_batch
-from mlpfac.scenario import load
+from mlpfac.plants.events import DelayLine
+from mlpfac.scenario.parse import load
+from mlpfac.scenario.reference import sample
 
 
 def _arrays(rec) -> dict[str, np.ndarray]:

@@ -12,7 +12,7 @@ import time
 import pytest
 
 from mlpfac.exceptions import ConfigError
-from mlpfac.scenario import load, to_toml
+from mlpfac.scenario.parse import load, to_toml
 from mlpfac.sweeps import cli as sweep_cli
 from mlpfac.sweeps import engine as sweep
 
@@ -178,7 +178,7 @@ def test_ctrl_c_while_a_folder_is_written_waits_for_the_folder(tmp_path):
     """The race the test above can hit: SIGINT between a run's config.toml and its metrics.json."""
     import signal
 
-    from mlpfac.signals import sigint_deferred
+    from mlpfac.interrupts import sigint_deferred
 
     written = []
     with pytest.raises(KeyboardInterrupt), sigint_deferred():
@@ -308,16 +308,16 @@ def test_worst_seed_is_the_first_to_diverge(tmp_path):
 def test_run_that_raises_is_reported_and_rerun(tmp_path, monkeypatch):
     jobs = plan(seeds="0", controllers="corradini")
     broken = {"on": True}
-    import mlpfac.runner
+    import mlpfac.loop.runner
 
-    real = mlpfac.runner.run
+    real = mlpfac.loop.runner.run
 
     def run(scn, sink=None, on_step=None):
         if broken["on"]:
             raise RuntimeError("boom")
         return real(scn, sink, on_step)
 
-    monkeypatch.setattr(mlpfac.runner, "run", run)
+    monkeypatch.setattr(mlpfac.loop.runner, "run", run)
     oc = sweep.execute(jobs, tmp_path)
     assert list(oc.errors) == [jobs[0].key] and not oc.metrics
     assert "boom" in (jobs[0].folder(tmp_path) / "error.txt").read_text()

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from mlpfac.estimators import EKF, UKF
-from mlpfac.networks import Networks
+from mlpfac.control.adaptive.estimators import EKF, UKF
+from mlpfac.control.adaptive.networks import Networks
 
 R3 = np.diag([1e-2, 2e-2, 5e-3])
 

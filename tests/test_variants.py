@@ -6,17 +6,17 @@ import dataclasses
 import numpy as np
 import pytest
 
-from mlpfac.adaptive import VARIANTS, Adaptive, AdaptiveConfig
-from mlpfac.controllers import CONTROLLERS, Corradini
-from mlpfac.estimators import EKF, UKF, covariance
+from mlpfac.control.adaptive.controller import VARIANTS, Adaptive, AdaptiveConfig
+from mlpfac.control.adaptive.estimators import EKF, UKF, covariance
+from mlpfac.control.adaptive.networks import Networks
+from mlpfac.control.baselines import CONTROLLERS, Corradini
+from mlpfac.control.law import Law
 from mlpfac.exceptions import ConfigError
-from mlpfac.factory import make_controller
-from mlpfac.law import Law
-from mlpfac.networks import Networks
-from mlpfac.reference import Eight, sample
-from mlpfac.run_metrics import metrics
-from mlpfac.runner import run
-from mlpfac.scenario import load, parse
+from mlpfac.loop.factory import make_controller
+from mlpfac.loop.runner import run
+from mlpfac.runs.metrics import metrics
+from mlpfac.scenario.parse import load, parse
+from mlpfac.scenario.reference import Eight, sample
 
 T = 0.01
 

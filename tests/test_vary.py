@@ -12,10 +12,10 @@ import numpy as np
 import pytest
 
 from mlpfac.cli import main
-from mlpfac.draws import Distribution, leaves
 from mlpfac.exceptions import ConfigError
-from mlpfac.runner import run
-from mlpfac.scenario import load, parse, shipped_dir
+from mlpfac.loop.runner import run
+from mlpfac.scenario.draws import Distribution, leaves
+from mlpfac.scenario.parse import load, parse, shipped_dir
 from mlpfac.sweeps.plan import plan
 from mlpfac.sweeps.robustness import breaking_points, median_interval
 from mlpfac.sweeps.vary import parse_vary
@@ -205,7 +205,7 @@ def test_a_law_breaks_where_its_speed_limit_falls_below_the_reference(tmp_path):
     """A known case: on the kinematic plant without noise Corradini's law tracks the figure of eight
     while v_max is above the reference's top speed, and loses it once v_max is below the speed it
     must keep on average (it falls behind by the difference every second)."""
-    from mlpfac.reference import sample
+    from mlpfac.scenario.reference import sample
 
     scn = load("paper", build=False)
     ref = sample(scn.reference, np.arange(2500) * scn.T)
@@ -225,7 +225,7 @@ def test_a_law_breaks_where_its_speed_limit_falls_below_the_reference(tmp_path):
     assert json.loads((out / "robustness.json").read_text())["breaking_points"] == robust["breaking_points"]
     (out / "robustness.png").unlink()
     assert main(["plot", str(out)]) == 0 and (out / "robustness.png").is_file() and not (out / "sweep.png").exists()
-    from mlpfac.report import render
+    from mlpfac.results import render
 
     assert (out / "robustness.md").read_text() == render(out, {"view": "robustness"})
 
@@ -245,7 +245,7 @@ def _check(d: Path, text: str, *flags: str) -> int:
 
 
 def test_check_holds_a_controller_to_its_breaking_point(budget_dir, capsys):
-    from mlpfac.reference import sample
+    from mlpfac.scenario.reference import sample
 
     ref = sample(load("paper", build=False).reference, np.arange(2000) * 0.01)
     assert V_MAX[1] < ref[:, 3].mean() < V_MAX[2] and ref[:, 3].max() < V_MAX[2]

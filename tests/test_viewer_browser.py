@@ -125,7 +125,7 @@ def _shows(img: np.ndarray, left: dict, right: dict) -> dict[str, int]:
 def runs(tmp_path_factory) -> dict[str, Path]:
     """Two real short runs (adaptive, corradini) and their comparison recording."""
     from mlpfac.cli import main
-    from mlpfac.scenario import load, to_toml
+    from mlpfac.scenario.parse import load, to_toml
 
     d = tmp_path_factory.mktemp("runs")
     table = copy.deepcopy(load("eight-wheel-radius").table)
@@ -274,7 +274,7 @@ def test_web_viewer_renders_tiago_from_its_meshes(tmp_path: Path) -> None:
     from mlpfac.cli import main
     from mlpfac.log import PATH_COLOR, REF_COLOR
     from mlpfac.log.schema import EVENT_COLOR
-    from mlpfac.scenario import load, to_toml
+    from mlpfac.scenario.parse import load, to_toml
 
     table = copy.deepcopy(load("tiago-wheel-radius").table)
     table["duration"], table["events"][0]["time"] = 8.0, 4.0

@@ -17,9 +17,9 @@ from pathlib import Path
 
 from mlpfac.checks.budget import Budget, read_budget
 from mlpfac.checks.judge import Case, baseline_folder, baseline_runs, judge
-from mlpfac.checks.report import junit as junit_xml
-from mlpfac.checks.report import miss_lines
-from mlpfac.checks.report import summary as summary_md
+from mlpfac.checks.reports import junit as junit_xml
+from mlpfac.checks.reports import miss_lines
+from mlpfac.checks.reports import summary as summary_md
 from mlpfac.exceptions import ConfigError
 
 DEFAULT_OUT = Path("runs/check")

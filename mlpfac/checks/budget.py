@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from mlpfac.exceptions import ConfigError
-from mlpfac.on_robot import split_robot, with_robots
+from mlpfac.scenario.on_robot import split_robot, with_robots
 from mlpfac.sweeps.plan import MAX_RUNS, Job, parse_controllers, parse_seeds, plan
 from mlpfac.sweeps.vary import Vary
 
@@ -155,7 +155,7 @@ class Budget:
 def read_budget(path: Path, robot: str | None = None, flags: Vary | None = None) -> Budget:
     """The budget file at ``path``, checked; scenario paths and ``file.py:Class`` controllers are
     taken from the file's own folder."""
-    from mlpfac.scenario import read_toml
+    from mlpfac.scenario.parse import read_toml
 
     table = read_toml(path, "budget file")
     _known(table, TOP_KEYS, str(path))
@@ -164,7 +164,7 @@ def read_budget(path: Path, robot: str | None = None, flags: Vary | None = None)
     scenarios = [str(here / s) if s.endswith(".toml") and not Path(s).is_absolute() else s for s in scenarios]
     given = _strings(table, "robots", path, required=False)
     robots = [robot] if robot is not None else [_near_robot(r, here) for r in given] if given else None
-    try:  # every scenario on each robot, as SCENARIO@ROBOT (mlpfac.on_robot)
+    try:  # every scenario on each robot, as SCENARIO@ROBOT (mlpfac.scenario.on_robot)
         scenarios = with_robots(scenarios, robots)
     except ConfigError as err:
         raise ConfigError("--robot" if robot is not None else f"{path} robots", err.what) from None

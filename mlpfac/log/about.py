@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from mlpfac.record import RunRecord
+from mlpfac.loop.record import RunRecord
 
 CONTROLLERS = {
     "adaptive": "the paper's scheme: MLPs learn f and G, an EKF tunes their weights",

@@ -23,7 +23,7 @@ import rerun.blueprint.encodings as rbe
 
 from mlpfac.log.scene import bounds
 from mlpfac.log.series import Series, plan_series
-from mlpfac.record import RunRecord
+from mlpfac.loop.record import RunRecord
 
 # (place, title, origin, marked: the events are marked on its first series).
 VIEWS = (

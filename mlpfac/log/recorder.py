@@ -21,7 +21,7 @@ from mlpfac.log.layout import ABOUT, blueprint, marked_origins
 from mlpfac.log.scene import PATH_STRIDE, POSE_STRIDE, send_poses, send_static_scene, strided
 from mlpfac.log.schema import EVENT_COLOR
 from mlpfac.log.series import Series, ns, plan_series, send_series, style_series, time_index
-from mlpfac.record import RunRecord
+from mlpfac.loop.record import RunRecord
 
 APPLICATION_ID = "mlpfac"
 BATCH_ROWS = 1000  # flush() sends once this many rows are pending ...

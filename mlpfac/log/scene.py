@@ -16,7 +16,7 @@ import rerun as rr
 from mlpfac.log import meshes
 from mlpfac.log.schema import PATH_COLOR, REF_COLOR, ROBOT_COLOR, entity_part
 from mlpfac.log.series import time_index
-from mlpfac.record import RunRecord
+from mlpfac.loop.record import RunRecord
 
 POSE_STRIDE = 5  # robot transform, reference arrow, top-view markers: every 5th step
 PATH_STRIDE = 25  # the driven path is re-sent every 25th step ...

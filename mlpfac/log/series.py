@@ -25,7 +25,7 @@ from mlpfac.log.schema import (
     generic,
     rows_for,
 )
-from mlpfac.record import RunRecord
+from mlpfac.loop.record import RunRecord
 
 SCALARS = rr.Scalars.descriptor_scalars()
 

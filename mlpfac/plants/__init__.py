@@ -14,7 +14,7 @@ from mlpfac.exceptions import ConfigError
 
 
 class PlantSpec(Protocol):
-    """What :func:`make_plant` reads of a :class:`~mlpfac.scenario.Scenario`."""
+    """What :func:`make_plant` reads of a :class:`~mlpfac.scenario.parse.Scenario`."""
 
     plant_kind: str
     plant_config: object
@@ -32,7 +32,7 @@ def make_plant(scn: PlantSpec, ref: np.ndarray):
 
             plant = KinematicPlant(scn.plant_config, scn.T, ref)
         else:
-            from mlpfac.events import ControlPeriod
+            from mlpfac.plants.events import ControlPeriod
             from mlpfac.plants.mujoco import MujocoPlant
 
             periods = (scn.T, *(ev.factor * scn.T for ev in scn.events if isinstance(ev, ControlPeriod)))

@@ -1,6 +1,6 @@
 """The plant interface shared by the kinematic model (7) and the MuJoCo robot.
 
-One control step of the closed loop (see :mod:`mlpfac.runner`)::
+One control step of the closed loop (see :mod:`mlpfac.loop.runner`)::
 
     q_meas = plant.measure()             # pose (x, y, theta) the controller sees
     u = controller.step(e(q_meas, r_k), r_k)
@@ -15,7 +15,7 @@ from typing import Protocol
 
 import numpy as np
 
-from mlpfac.events import Event
+from mlpfac.plants.events import Event
 
 
 class Plant(Protocol):

@@ -2,7 +2,7 @@
 the divergence test out, with MuJoCo's own C functions called from the kernel (no Python per step).
 
 :class:`~mlpfac.plants.mujoco.MujocoPlant` steps through :func:`plant_step` one control step at a
-time, and the compiled closed loop (:mod:`mlpfac.segment`) runs it for many steps in one call: one
+time, and the compiled closed loop (:mod:`mlpfac.loop.compiled`) runs it for many steps in one call: one
 implementation of the step either way. The C functions are the ones the ``mujoco`` package's
 bindings call (``mj_step``, ``mj_step1``, ``mj_step2``, ``mj_objectVelocity``, ``mj_getState``),
 from the library the package ships, so a compiled step gives the bindings' bits; the kernels name
@@ -30,10 +30,10 @@ from typing import NamedTuple
 import mujoco
 import numpy as np
 
-from mlpfac.events import delay_push
 from mlpfac.exceptions import ConfigError
-from mlpfac.ik import body_velocity_vw, wheel_speeds_lr
 from mlpfac.jit import SALT, WHY, built, kernel
+from mlpfac.plants.events import delay_push
+from mlpfac.plants.ik import body_velocity_vw, wheel_speeds_lr
 
 # ints: I_AL2, I_AR2 a second wheel's actuator on each side (skid-steer; -1: none), I_MIX 1 for two
 # motors on tendons over both wheels (a (v, omega) drive; I_AL, I_AR are those motors)

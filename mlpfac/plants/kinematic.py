@@ -11,11 +11,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from mlpfac.error_model import pose_from_error, tracking_error
-from mlpfac.estimators import covariance
-from mlpfac.events import ControlPeriod, DelayLine, Event, SensorDelay
+from mlpfac.control.adaptive.estimators import covariance
 from mlpfac.exceptions import ConfigError
 from mlpfac.jit import as_rows
+from mlpfac.model import pose_from_error, tracking_error
+from mlpfac.plants.events import ControlPeriod, DelayLine, Event, SensorDelay
 
 
 @dataclass(frozen=True)
@@ -48,8 +48,8 @@ class KinematicPlant:
 
     def reset(self, q0: np.ndarray, rng, u0: np.ndarray | None = None) -> None:
         """``u0`` is ignored: the error model (7) has no velocity state."""
-        from mlpfac.kernels import seeds  # the kernels: imported by a run, not by reading a scenario
-        from mlpfac.loop_kernels import kinematic_step
+        from mlpfac.control.adaptive.kernels import seeds  # the kernels: imported by a run, not by reading a scenario
+        from mlpfac.loop.kernels import kinematic_step
 
         rngs, self.single = seeds(rng)
         B, N = len(rngs), len(self.ref) - 1

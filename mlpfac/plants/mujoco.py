@@ -4,7 +4,7 @@ What the robot is (actuators, wheels, site, radius, track, rest pose) is read on
 by :func:`mlpfac.plants.robot.read_robot`; this module resets it, applies events and reads what it
 did; its control step is compiled (:func:`mlpfac.plants.compiled.plant_step`, one call a step).
 The controller's u = (v, omega) is turned into wheel speeds by the inverse kinematics
-(:func:`mlpfac.ik.wheel_speeds`) with the wheel radius and track the IK *believes* (the
+(:func:`mlpfac.plants.ik.wheel_speeds`) with the wheel radius and track the IK *believes* (the
 nominal ones), and held for one control period of ``n_substeps`` physics steps,
 ``control_dt = n_substeps * model.opt.timestep``. Two wheel drives:
 
@@ -30,12 +30,12 @@ import math
 import mujoco
 import numpy as np
 
-from mlpfac.events import EVENT_KINDS, DelayLine
-from mlpfac.ik import wheel_speeds
 from mlpfac.plants import compiled as K  # noqa: N812 - the kernel's layout constants, K.F_DT ...
 from mlpfac.plants import drive
 from mlpfac.plants.config import MujocoConfig
 from mlpfac.plants.edits import torque_limit
+from mlpfac.plants.events import EVENT_KINDS, DelayLine
+from mlpfac.plants.ik import wheel_speeds
 from mlpfac.plants.model_file import is_menagerie, menagerie_version
 from mlpfac.plants.mujoco_events import MujocoEvents
 from mlpfac.plants.robot import read_robot

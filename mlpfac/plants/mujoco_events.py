@@ -12,9 +12,9 @@ import math
 import mujoco
 import numpy as np
 
-from mlpfac.events import Actuator, ControlPeriod, Event, Friction, Payload, SensorDelay, WheelRadius
 from mlpfac.exceptions import ConfigError
 from mlpfac.plants.detect import ROUND
+from mlpfac.plants.events import Actuator, ControlPeriod, Event, Friction, Payload, SensorDelay, WheelRadius
 
 
 class MujocoEvents:

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mlpfac.record import RunRecord
+from mlpfac.loop.record import RunRecord
 
 EVENT_COLOR = "firebrick"
 RUN_COLOR = "tab:blue"

@@ -16,7 +16,7 @@ CONTROLLERS_HELP = "shipped names, path/to/file.py:Class, package.module:Class o
 
 
 def _add_common(p: argparse.ArgumentParser, seeds: str, out: str) -> None:
-    from mlpfac.on_robot import ROBOT_HELP
+    from mlpfac.scenario.on_robot import ROBOT_HELP
 
     r = p.add_mutually_exclusive_group()
     r.add_argument("--robot", help=ROBOT_HELP)
@@ -89,7 +89,7 @@ def run_sweep_cli(args: argparse.Namespace) -> int:
 
 def run_compare_cli(args: argparse.Namespace) -> int:
     if not args.scenarios:
-        from mlpfac.scenario import scenario_names
+        from mlpfac.scenario.parse import scenario_names
 
         args.scenarios = scenario_names()
     return _run_cli(args, "compare", COMPARE_COLUMNS)
@@ -98,7 +98,7 @@ def run_compare_cli(args: argparse.Namespace) -> int:
 def _run_cli(args: argparse.Namespace, stem: str, columns) -> int:
     """Validate everything, then run; 0 done, 1 some run failed or a worker was lost, 2 bad input
     or a failed write (one line naming the path), 130 interrupted (Ctrl-C), 143 terminated (SIGTERM)."""
-    from mlpfac.on_robot import robots_flag, with_robots
+    from mlpfac.scenario.on_robot import robots_flag, with_robots
 
     cmd = shlex.join(["mlpfac", *sys.argv[1:]]) if sys.argv[1:] else f"mlpfac {stem} ..."
     robots = [args.robot] if args.robot is not None else robots_flag(args.robots, "--robots")

@@ -11,8 +11,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from mlpfac.exceptions import ConfigError, MlpfacError
-from mlpfac.outputs import check_run_folder, folder_lock, remove_staged
-from mlpfac.signals import Terminated, raise_swallowed, sigint_deferred
+from mlpfac.interrupts import Terminated, raise_swallowed, sigint_deferred
+from mlpfac.runs.files import check_run_folder, folder_lock, remove_staged
 from mlpfac.sweeps.folders import _oserror, check_done, write_result
 from mlpfac.sweeps.plan import Job
 from mlpfac.sweeps.worker import _worker_init, one_blas_thread, pool_context, run_task
@@ -68,7 +68,7 @@ def execute(
 
     ``client`` is a ``dask.distributed.Client`` or None (local). ``progress``: None shows a bar
     only when stderr is a terminal. KeyboardInterrupt (Ctrl-C, or SIGTERM as
-    :class:`~mlpfac.signals.Terminated`) stops the workers and returns with ``interrupted=True``;
+    :class:`~mlpfac.interrupts.Terminated`) stops the workers and returns with ``interrupted=True``;
     every folder written so far is whole. ``out`` is locked for the sweep (``folder_lock``) unless
     the caller holds the lock (``locked``); recordings are made in ``out/.tmp``, which is removed at
     the end and, left by a killed sweep, at the start. A failed write raises :class:`OutputError`.

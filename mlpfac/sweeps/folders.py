@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from mlpfac.exceptions import MlpfacError
-from mlpfac.outputs import write_folder_whole
+from mlpfac.runs.files import write_folder_whole
 
 if TYPE_CHECKING:
     from mlpfac.sweeps.plan import Job

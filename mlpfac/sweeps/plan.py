@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from mlpfac.exceptions import ConfigError
-from mlpfac.outputs import resolved
+from mlpfac.runs.files import resolved
 from mlpfac.sweeps.vary import Vary
 
 MAX_RUNS = 100_000  # runs per sweep: a larger plan is refused before anything is loaded
@@ -49,12 +49,12 @@ def parse_seeds(text: str, limit: int | None = MAX_RUNS) -> list[int]:
 
 def parse_controllers(text: str | None, where: str = "--controllers") -> list[str | None]:
     """``"adaptive,corradini,my_law.py:MyLaw"`` -> names, checked (a plug-in's file taken from the
-    current folder and made absolute, :mod:`mlpfac.plugins`); ``None`` -> each scenario's own controller."""
+    current folder and made absolute, :mod:`mlpfac.control.plugins`); ``None`` -> each scenario's own controller."""
     if text is None:
         return [None]
     from pathlib import Path
 
-    from mlpfac.plugins import absolute_spec, is_plugin_spec, resolve
+    from mlpfac.control.plugins import absolute_spec, is_plugin_spec, resolve
 
     names = [absolute_spec(c.strip(), Path.cwd()) for c in text.split(",") if c.strip()]
     if not names:
@@ -102,8 +102,8 @@ def plan(
 ) -> list[Job]:
     """Load and resolve every run (each grid point of ``vary``); raises ConfigError on the first bad
     scenario, controller, seed or value."""
-    from mlpfac.on_robot import split_robot
-    from mlpfac.scenario import to_toml
+    from mlpfac.scenario.on_robot import split_robot
+    from mlpfac.scenario.parse import to_toml
     from mlpfac.sweeps.vary import grid, label
 
     scenarios = list(dict.fromkeys(scenarios))
@@ -116,7 +116,7 @@ def plan(
     jobs: list[Job] = []
     names: dict[str, str] = {}
     for src in scenarios:
-        name, robot = split_robot(src)  # SCENARIO@ROBOT: on that robot (mlpfac.on_robot)
+        name, robot = split_robot(src)  # SCENARIO@ROBOT: on that robot (mlpfac.scenario.on_robot)
         for point, base in grid(name, vary or Vary(), duration, robot):
             if base.name in names:
                 raise ConfigError(

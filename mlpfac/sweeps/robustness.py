@@ -26,7 +26,7 @@ import math
 from pathlib import Path
 
 from mlpfac.exceptions import ConfigError
-from mlpfac.outputs import write_atomic
+from mlpfac.runs.files import write_atomic
 from mlpfac.sweeps.paired import _rms, median, outcome
 from mlpfac.sweeps.plan import Job
 
@@ -63,8 +63,8 @@ def median_interval(xs: list[float]) -> tuple[float | None, float | None]:
 def nominal(job: Job, key: str):
     """The value of ``key`` at which nothing changes: 1 for an event's scale or factor, 0 steps of
     delay, else the file's own value (None where the file leaves it out)."""
-    from mlpfac.draws import get
-    from mlpfac.scenario import load
+    from mlpfac.scenario.draws import get
+    from mlpfac.scenario.parse import load
 
     last = key.rsplit(".", 1)[-1]
     if key.startswith("events.") and last in UNCHANGED:

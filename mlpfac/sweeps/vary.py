@@ -1,6 +1,6 @@
 """``--vary KEY=VALUES``: a number of the scenario file as an axis of the sweep, or drawn per seed.
 
-KEY is the dotted path of a number in the scenario file as a user writes it (:mod:`mlpfac.draws`):
+KEY is the dotted path of a number in the scenario file as a user writes it (:mod:`mlpfac.scenario.draws`):
 ``events.0.scale``, ``plant.pose_noise_std``, ``reference.wx``, ``controller.v_max``. VALUES is
 
 - a list, ``1.0,1.25,1.5``, or an inclusive range with a count, ``1.0:2.0:11`` (whole numbers when
@@ -22,8 +22,8 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
-from mlpfac.draws import KINDS, SKIPPED, Distribution, distribution, get, is_distribution, leaves
 from mlpfac.exceptions import ConfigError
+from mlpfac.scenario.draws import KINDS, SKIPPED, Distribution, distribution, get, is_distribution, leaves
 
 Point = tuple[tuple[str, Any], ...]  # (key, value) per axis, in the order of the axes
 FLAG = "--vary"
@@ -166,10 +166,10 @@ def _present(table: dict, key: str) -> bool:
 
 
 def grid(src: str, vary: Vary, duration: float | None = None, robot: str | None = None) -> list[tuple[Point, Any]]:
-    """Every grid point of scenario ``src`` and its :class:`~mlpfac.scenario.Scenario` (built as
-    :func:`~mlpfac.scenario.load` builds the file), each value checked as the file's own is; a key
+    """Every grid point of scenario ``src`` and its :class:`~mlpfac.scenario.parse.Scenario` (built as
+    :func:`~mlpfac.scenario.parse.load` builds the file), each value checked as the file's own is; a key
     of an event that ``duration`` (``--duration``) leaves out is a ConfigError."""
-    from mlpfac.scenario import load
+    from mlpfac.scenario.parse import load
 
     file = load(src, build=False)
     numbers = leaves(file.table)
@@ -231,7 +231,7 @@ def _check_duration(vary: Vary, numbers: dict, duration: float) -> None:
 
 
 def _checked(src: str, values: dict, where: str, build: bool = True, robot: str | None = None):
-    from mlpfac.scenario import load
+    from mlpfac.scenario.parse import load
 
     try:
         return load(src, build=build, robot=robot, values=values)

@@ -20,11 +20,11 @@ if _folder and _owner == str(os.getppid()):
 try:
     import numpy as np
 
-    from mlpfac.loop_kernels import tracking_errors
+    from mlpfac.loop.kernels import tracking_errors
+    from mlpfac.loop.runner import run  # noqa: F401
     from mlpfac.plants import compiled  # noqa: F401
-    from mlpfac.run_metrics import metrics  # noqa: F401
-    from mlpfac.runner import run  # noqa: F401
-    from mlpfac.scenario import load, parse  # noqa: F401
+    from mlpfac.runs.metrics import metrics  # noqa: F401
+    from mlpfac.scenario.parse import load, parse  # noqa: F401
     from mlpfac.sweeps.worker import run_task  # noqa: F401
 
     tracking_errors(np.zeros((0, 3)), np.zeros(5), np.zeros((0, 3)))

@@ -25,11 +25,11 @@ def run_task(jobs: list[Job], batched: bool = False, save_rrd: bool = False, tmp
     Recordings are made in ``tmp_dir`` (OUT/.tmp for a local sweep; the system's temporary folder
     on a Dask worker). An interrupted run raises KeyboardInterrupt: it must never be written as done.
     """
-    from mlpfac.run_metrics import metrics
-    from mlpfac.scenario import parse
+    from mlpfac.runs.metrics import metrics
+    from mlpfac.scenario.parse import parse
 
     if batched and len(jobs) > 1 and not save_rrd:
-        from mlpfac.runner import run_batch
+        from mlpfac.loop.runner import run_batch
 
         try:
             scns = [parse(j.table, j.source) for j in jobs]
@@ -47,9 +47,9 @@ def run_task(jobs: list[Job], batched: bool = False, save_rrd: bool = False, tmp
 
 
 def _run_one(job: Job, save_rrd: bool, tmp_dir: str | None = None) -> dict:
-    from mlpfac.run_metrics import metrics
-    from mlpfac.runner import run
-    from mlpfac.scenario import parse
+    from mlpfac.loop.runner import run
+    from mlpfac.runs.metrics import metrics
+    from mlpfac.scenario.parse import parse
 
     rrd_path = sink = None
     try:
@@ -146,7 +146,7 @@ def _launch_without_main(launch, process_obj) -> None:
     module) again as ``__mp_main__``, so that what it defines can be unpickled. A sweep's workers
     are handed plain data and mlpfac's own functions only, and a script run again would start its
     sweep again in every worker (unguarded, multiprocessing refuses and the pool breaks). A user's
-    controller class is imported by its name, as ever (:mod:`mlpfac.plugins`)."""
+    controller class is imported by its name, as ever (:mod:`mlpfac.control.plugins`)."""
     from multiprocessing import spawn
 
     with _MAIN_LOCK:
@@ -228,10 +228,10 @@ def not_in_a_worker(what: str) -> None:
     given to the API by the script that calls it) is run by each of them: a call of the API at its
     top level would start runs, or pools of workers, in every worker. There, while the script is
     imported, the call raises :class:`~mlpfac.exceptions.ScriptStopped`, which ends the import with
-    what the script defined above the call (:mod:`mlpfac.plugins`); anywhere else in a worker (a
+    what the script defined above the call (:mod:`mlpfac.control.plugins`); anywhere else in a worker (a
     controller that calls it) it is an MlpfacError, that run's error."""
     if os.environ.get(IN_WORKER):
-        from mlpfac import plugins
+        from mlpfac.control import plugins
         from mlpfac.exceptions import MlpfacError, ScriptStopped
 
         if plugins.IMPORTING:

@@ -103,7 +103,7 @@ def robot_table(robot: str) -> dict:
     path = Path(_shipped(robot) if robot in SHIPPED else robot).expanduser()
     if path.suffix.lower() != ".toml":
         return {"kind": "mujoco", "model": model_of(robot)}
-    from mlpfac.scenario import read_toml
+    from mlpfac.scenario.parse import read_toml
 
     table = read_toml(path, "robot file")
     plant = table.get("plant")
@@ -149,10 +149,10 @@ def on_robot(table: dict, robot: str) -> dict:
     """The scenario ``table`` (as read from its file) put on ``robot`` by the module's rule."""
     import numpy as np
 
-    from mlpfac.events import ControlPeriod, parse_event
     from mlpfac.plants.config import MujocoConfig
+    from mlpfac.plants.events import ControlPeriod, parse_event
     from mlpfac.plants.robot import read_robot
-    from mlpfac.reference import make_reference, sample
+    from mlpfac.scenario.reference import make_reference, sample
 
     out = copy.deepcopy(table)
     out.pop("provenance", None)  # what another robot's run simulated

@@ -43,11 +43,11 @@ from collections import deque
 
 import numpy as np
 
-from mlpfac.events import ControlPeriod, DelayLine, Event, SensorDelay, WheelRadius
+from mlpfac.control.adaptive.kernels import seeds
+from mlpfac.control.law import Law
 from mlpfac.jit import as_rows
-from mlpfac.kernels import seeds
-from mlpfac.law import Law
-from mlpfac.loop_kernels import corradini_step, kanayama_step, tracking_errors
+from mlpfac.loop.kernels import corradini_step, kanayama_step, tracking_errors
+from mlpfac.plants.events import ControlPeriod, DelayLine, Event, SensorDelay, WheelRadius
 
 GAIN_KINDS = ("wheel_radius", "control_period")
 

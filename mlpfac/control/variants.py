@@ -1,6 +1,6 @@
 """The shipped controllers' names (:data:`CONTROLLERS`), and the named variants of the adaptive
-controller (:class:`~mlpfac.adaptive.AdaptiveConfig` fields, and :class:`~mlpfac.networks.Networks`
-fields under "networks"); :mod:`mlpfac.adaptive` exports them. No imports of the package: the
+controller (:class:`~mlpfac.control.adaptive.controller.AdaptiveConfig` fields, and :class:`~mlpfac.control.adaptive.networks.Networks`
+fields under "networks"); :mod:`mlpfac.control.adaptive.controller` exports them. No imports of the package: the
 controllers and the plug-in loader both read these names."""
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ VARIANTS: dict[str, dict] = {
         "P_max": 1e-4,
     },
 }
-# adaptive-best with the input gains learned from the measured motion (mlpfac.input_model), re-adapted
+# adaptive-best with the input gains learned from the measured motion (mlpfac.control.adaptive.input_model), re-adapted
 # when a CUSUM on their innovation detects a change ("adaptive-input"), or by forgetting alone; and
 # with a measurement delay of up to 6 steps found and predicted over ("adaptive-input-delay").
 VARIANTS["adaptive-input"] = VARIANTS["adaptive-best"] | {"input_gains": True, "detect": 20.0}
@@ -55,5 +55,5 @@ VARIANTS["adaptive-real"] = VARIANTS["adaptive-input-delay"] | {
 # cost where the plant keeps changing (a friction change raises an alarm every half second).
 VARIANTS["adaptive-real-fast"] = VARIANTS["adaptive-real"] | {"input_P_alarm": 2e-2}
 
-# Every shipped controller (the oracles: mlpfac/oracle.py); any other name is a plug-in's.
+# Every shipped controller (the oracles: mlpfac/control/oracle.py); any other name is a plug-in's.
 CONTROLLERS = (*VARIANTS, "corradini", "kanayama", "oracle", "oracle-kanayama")

@@ -2,9 +2,9 @@
 
 The control period T is the scenario's; both blocks get it here, when they are built, and nowhere else.
 
-A :class:`~mlpfac.scenario.Scenario` is plain, validated data; the runner asks this module for the
+A :class:`~mlpfac.scenario.parse.Scenario` is plain, validated data; the runner asks this module for the
 blocks it steps. The plant is built by :func:`mlpfac.plants.make_plant` (re-exported here), which
-:func:`mlpfac.scenario.load` also calls once, to check before any run that the robot can be built
+:func:`mlpfac.scenario.parse.load` also calls once, to check before any run that the robot can be built
 and can apply every event.
 """
 
@@ -12,17 +12,17 @@ from __future__ import annotations
 
 import dataclasses
 
-from mlpfac.adaptive import VARIANTS, Adaptive
-from mlpfac.controllers import Corradini, Kanayama, PluginController
-from mlpfac.oracle import Oracle, told
-from mlpfac.plants import make_plant  # noqa: F401 (the plant half of the factory, as mlpfac.factory.make_plant)
-from mlpfac.scenario import Scenario
+from mlpfac.control.adaptive.controller import VARIANTS, Adaptive
+from mlpfac.control.baselines import Corradini, Kanayama, PluginController
+from mlpfac.control.oracle import Oracle, told
+from mlpfac.plants import make_plant  # noqa: F401 (the plant half of the factory, as mlpfac.loop.factory.make_plant)
+from mlpfac.scenario.parse import Scenario
 
 
 def make_controller(scn: Scenario, instance: object | None = None):
     """The scenario's controller: a named variant of the adaptive scheme, Corradini's or Kanayama's law,
-    the oracle (the law told the scenario's events, :mod:`mlpfac.oracle`), or a user's own
-    (:mod:`mlpfac.plugins`; ``instance``: an object of it, made by the caller, runs one seed)."""
+    the oracle (the law told the scenario's events, :mod:`mlpfac.control.oracle`), or a user's own
+    (:mod:`mlpfac.control.plugins`; ``instance``: an object of it, made by the caller, runs one seed)."""
     if scn.plugin is not None:
         return PluginController(scn.plugin, scn.T, instance)
     if scn.controller in VARIANTS:

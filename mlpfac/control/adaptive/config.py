@@ -1,15 +1,15 @@
 """The adaptive controller's options (:class:`AdaptiveConfig`): plain data, each value checked when
 it is made (a bad one is a ConfigError naming its key); the controller that runs them is
-:class:`mlpfac.adaptive.Adaptive`, their named combinations :data:`mlpfac.variants.VARIANTS`."""
+:class:`mlpfac.control.adaptive.controller.Adaptive`, their named combinations :data:`mlpfac.control.variants.VARIANTS`."""
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
 
-from mlpfac.estimators import covariance
+from mlpfac.control.adaptive.estimators import covariance
+from mlpfac.control.adaptive.networks import Networks
 from mlpfac.exceptions import ConfigError
-from mlpfac.networks import Networks
 
 
 @dataclass(frozen=True)
@@ -21,8 +21,8 @@ class AdaptiveConfig:
     each off by default:
 
     - ``estimator = "ukf"``: tune the weights with the square-root unscented filter
-      (:class:`~mlpfac.estimators.UKF`, spread ``ukf_alpha``, ``ukf_beta``, ``ukf_kappa``) instead of (29)-(32).
-    - ``cautious = c > 0``: the cautious law (:meth:`~mlpfac.law.Law.cautious_control`) with the
+      (:class:`~mlpfac.control.adaptive.estimators.UKF`, spread ``ukf_alpha``, ``ukf_beta``, ``ukf_kappa``) instead of (29)-(32).
+    - ``cautious = c > 0``: the cautious law (:meth:`~mlpfac.control.law.Law.cautious_control`) with the
       covariance of (h1, h2, h5, b_v, b_omega) from P_k, scaled by c; 0 is certainty equivalence.
     - ``Q``, ``forgetting``, ``P_max``: adaptation that does not switch off, with P bounded.
     - ``prior = true``: the networks learn only the correction to the nominal kinematic functions (5)-(6),
@@ -31,7 +31,7 @@ class AdaptiveConfig:
     - ``learned_gains = true``: the law divides by the learned input gains b_v = -G_11, b_omega = -G_32
       (kept within ``GAIN_RANGE`` times T) instead of T, so a wrong actuator/wheel gain can be learned.
     - ``input_gains = true``: learn the plant's input gains g_v, g_omega from the motion measured
-      between poses (:mod:`mlpfac.input_model`) and send u / g, so the law's u reaches the robot as
+      between poses (:mod:`mlpfac.control.adaptive.input_model`) and send u / g, so the law's u reaches the robot as
       the kinematic model (7) assumes; ``input_P0``, ``input_forgetting``; ``detect = h > 0`` reopens
       their covariance when a CUSUM on the normalised innovation exceeds h (a change detected);
       ``detect_mean > 0`` also when a channel's leaky sum of innovations shows a bias, and
@@ -39,9 +39,9 @@ class AdaptiveConfig:
       ``input_delay = D > 0``: find a measurement delay of up to D control steps from the commands'
       correlation with the measured motion, and give the law the error of the pose predicted over it.
     - ``law_form = "kanayama"``: the certainty-equivalence law takes Kanayama's structure, with the
-      estimates h2, h5 of (34) as its feedforward (:func:`~mlpfac.kernels._law_kanayama`), with gains
+      estimates h2, h5 of (34) as its feedforward (:func:`~mlpfac.control.adaptive.kernels._law_kanayama`), with gains
       ``law_gains`` (Kx, Ky, Ktheta) (the scenario's Kanayama gains if unset); ``delay_finder
-      = "bank"``: the delay by a bank of predictors over the candidate delays (:mod:`mlpfac.delay_bank`).
+      = "bank"``: the delay by a bank of predictors over the candidate delays (:mod:`mlpfac.control.adaptive.delay_bank`).
     - ``output_weight_std``: the initial spread of the output-layer weights (``weight_std`` if unset);
       0 with ``prior`` starts from the nominal functions exactly.
     """

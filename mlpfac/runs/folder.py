@@ -1,5 +1,5 @@
 """One run into a folder: config.toml, metrics.json, figure1.png and run.rrd, written beside the
-folder and put in place only when whole (:class:`mlpfac.outputs.Stage`), under its lock. What
+folder and put in place only when whole (:class:`mlpfac.runs.files.Stage`), under its lock. What
 ``mlpfac run`` does, and :func:`mlpfac.run` with ``out``.
 """
 
@@ -11,9 +11,9 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from mlpfac.exceptions import ConfigError, PluginError
-from mlpfac.outputs import Stage, check_run_folder, check_save_file, folder_lock, holds_finished_run
-from mlpfac.replay import DEFER_MAX_S, DeferredSink
-from mlpfac.signals import raise_swallowed
+from mlpfac.interrupts import raise_swallowed
+from mlpfac.runs.files import Stage, check_run_folder, check_save_file, folder_lock, holds_finished_run
+from mlpfac.runs.replay import DEFER_MAX_S, DeferredSink
 
 
 @dataclass
@@ -114,8 +114,8 @@ def run_into_folder(scn, out: Path, built, recording: Recording, baseline=None, 
 def _keep_error(folder: Stage, out: Path, scn, err: PluginError, held: bool) -> None:
     """A run whose controller raised: its folder holds error.txt and config.toml (and what was
     recorded), unless ``out`` holds a finished run, which is kept."""
-    from mlpfac.outputs import write_atomic
-    from mlpfac.scenario import to_toml
+    from mlpfac.runs.files import write_atomic
+    from mlpfac.scenario.parse import to_toml
 
     if held:
         print(f"mlpfac: {out} kept the earlier run; this one failed", file=sys.stderr)
@@ -158,9 +158,9 @@ def _open_sink(recording: Recording, scn, save: tuple[Path, Path] | None):
 def _run_into(folder: Stage, out: Path, scn, built, sink, baseline, painter) -> tuple:
     """The run, then its folder (config.toml, metrics.json, figure1.png) in the stage. A write that
     fails is a ConfigError naming the file where it would have gone."""
-    from mlpfac.outputs import write_run
-    from mlpfac.runner import run
-    from mlpfac.signals import Terminated
+    from mlpfac.interrupts import Terminated
+    from mlpfac.loop.runner import run
+    from mlpfac.runs.files import write_run
 
     rec = run(scn, sink=sink, built=built)
     writing = folder.path / "metrics.json"

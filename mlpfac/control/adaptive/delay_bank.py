@@ -2,7 +2,7 @@
 likelihood ratio: the input model's ``delay_finder = "bank"``.
 
 Candidate d says the measured pose is d control steps old, so the velocity realised between the
-poses measured at k - 1 and k (:mod:`mlpfac.input_model`: the chord over T at the mid heading, and
+poses measured at k - 1 and k (:mod:`mlpfac.control.adaptive.input_model`: the chord over T at the mid heading, and
 the heading increment over T) is the input gain times the command sent d steps before the one the
 undelayed robot answers with (the last one sent, u_k-1), per channel c in {v, omega}:
 
@@ -42,7 +42,7 @@ tiago-* and cart-* scenarios), each costing about 10 mm. Lags of two steps and m
 bias, but on them the loop's own excitation at 1 mm of pose noise does not tell neighbouring delays
 apart within seconds (candidates on u_k-2-d chose a delay of 4 before any event).
 
-Batch-first and compiled as :mod:`mlpfac.kernels`: a seed's arithmetic does not depend on the batch.
+Batch-first and compiled as :mod:`mlpfac.control.adaptive.kernels`: a seed's arithmetic does not depend on the batch.
 """
 
 from __future__ import annotations

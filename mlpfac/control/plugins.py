@@ -1,10 +1,10 @@
 """Your own controller in the testbed: how a name becomes a class (the contract it keeps is the
-:class:`~mlpfac.controllers.Controller` protocol's docstring, and docs/controllers.md).
+:class:`~mlpfac.control.baselines.Controller` protocol's docstring, and docs/controllers.md).
 
 **Names** (``--controller``, ``--controllers``, ``[controller] name``, :func:`mlpfac.run`,
 :func:`mlpfac.sweep`): a shipped controller; ``path/to/file.py:Class`` (relative to the current
 folder on the command line, to the scenario file's folder in a scenario file); ``package.module:Class``
-(importable); or a name an installed package registers in the entry-point group ``mlpfac.controllers``
+(importable); or a name an installed package registers in the entry-point group ``mlpfac.control.baselines``
 (``name = "module:Class"``).
 """
 
@@ -19,11 +19,11 @@ import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from mlpfac.control.variants import CONTROLLERS
 from mlpfac.exceptions import ConfigError, ScriptStopped
-from mlpfac.toml_data import FOLDER_NAME
-from mlpfac.variants import CONTROLLERS
+from mlpfac.tables import FOLDER_NAME
 
-GROUP = "mlpfac.controllers"  # the entry-point group an installed package registers controllers in
+GROUP = "mlpfac.control.baselines"  # the entry-point group an installed package registers controllers in
 _LOCAL: dict[str, type] = {}  # classes handed to the Python API that no file or module names
 USER_CODE = False  # a controller of the user's was resolved in this process (see mlpfac.cli.entry)
 IMPORTING = 0  # a user's file is being imported (see mlpfac.sweeps.worker.not_in_a_worker)
@@ -115,7 +115,9 @@ def resolve(spec: str, params: dict | None, T: float, where: str, params_where: 
     if not inspect.isclass(cls):
         raise ConfigError(where, f"{target} is not a class (a controller is a class with step(e, r))")
     if not callable(getattr(cls, "step", None)):
-        raise ConfigError(where, f"{target} has no step(e, r) method (the contract: mlpfac.controllers.Controller)")
+        raise ConfigError(
+            where, f"{target} has no step(e, r) method (the contract: mlpfac.control.baselines.Controller)"
+        )
     name = _name(cls, spec if origin.startswith("entry point") else None, where)
     if params is not None:
         _check_params(cls, T, params, where, params_where)

@@ -1,15 +1,15 @@
-"""Compiled kernels of the rest of the closed loop, batch-first as :mod:`mlpfac.kernels`: the
+"""Compiled kernels of the rest of the closed loop, batch-first as :mod:`mlpfac.control.adaptive.kernels`: the
 tracking error (2), the kinematic plant (7), the baseline laws (Corradini's (35) with the nominal
 h of (34), Kanayama's) and :func:`law_step`, which runs either by number in the compiled closed
-loop (:mod:`mlpfac.segment`), and the runner's divergence test.
+loop (:mod:`mlpfac.loop.compiled`), and the runner's divergence test.
 """
 
 from __future__ import annotations
 
 import math
 
+from mlpfac.control.adaptive.kernels import _law
 from mlpfac.jit import kernel
-from mlpfac.kernels import _law
 
 
 @kernel("void(f8[:, ::1], f8[::1], f8[:, ::1])")
@@ -77,7 +77,7 @@ def bad_seeds(q, u, e_true, z, limit, bad):
     return n
 
 
-KANAYAMA, CORRADINI = 1, 2  # the laws the compiled closed loop runs (mlpfac.segment), by number
+KANAYAMA, CORRADINI = 1, 2  # the laws the compiled closed loop runs (mlpfac.loop.compiled), by number
 
 
 @kernel()

@@ -1,4 +1,4 @@
-"""Controllers with one interface: the adaptive MLP-EKF law (:mod:`mlpfac.adaptive`), Corradini's
+"""Controllers with one interface: the adaptive MLP-EKF law (:mod:`mlpfac.control.adaptive.controller`), Corradini's
 law with the nominal functions, and Kanayama's law. Any controller runs on any plant.
 
 ``step(e_k, r_k)`` takes the tracking error (2) and the reference sample
@@ -12,17 +12,17 @@ from typing import Protocol
 
 import numpy as np
 
+from mlpfac.control.law import Law
+from mlpfac.control.plugins import Plugin, one_line
+from mlpfac.control.variants import CONTROLLERS  # noqa: F401 (the shipped names, as mlpfac.control.baselines.CONTROLLERS)
 from mlpfac.exceptions import ConfigError, PluginError
 from mlpfac.jit import as_rows
-from mlpfac.law import Law
-from mlpfac.plugins import Plugin, one_line
-from mlpfac.variants import CONTROLLERS  # noqa: F401 (the shipped names, as mlpfac.controllers.CONTROLLERS)
 
 MAX_TELEMETRY = 256  # values per telemetry key of a user's controller
 
 
 class Controller(Protocol):
-    """The contract every controller keeps, the shipped ones and a user's own (:mod:`mlpfac.plugins`
+    """The contract every controller keeps, the shipped ones and a user's own (:mod:`mlpfac.control.plugins`
     turns a name into a class; :class:`PluginController` steps a user's class).
 
     - a class, built as ``Class(T=<control period in s>, **params)``; ``params`` are the scenario's
@@ -75,8 +75,8 @@ class Corradini:
         )
 
     def reset(self, rng) -> None:
-        from mlpfac.kernels import seeds  # the kernels: imported by a run, not by reading a scenario
-        from mlpfac.loop_kernels import corradini_step
+        from mlpfac.control.adaptive.kernels import seeds  # the kernels: imported by a run, not by reading a scenario
+        from mlpfac.loop.kernels import corradini_step
 
         rngs, self.single = seeds(rng)
         T = self.T
@@ -98,8 +98,8 @@ class Corradini:
         return self._tele
 
     def law_kernel(self) -> tuple[int, np.ndarray]:
-        """The law for the compiled closed loop: (its number, its constants) (:func:`mlpfac.loop_kernels.law_step`)."""
-        from mlpfac.loop_kernels import CORRADINI
+        """The law for the compiled closed loop: (its number, its constants) (:func:`mlpfac.loop.kernels.law_step`)."""
+        from mlpfac.loop.kernels import CORRADINI
 
         return CORRADINI, np.array([self.T, *self.law.lambdas, *self._limits], dtype=float)
 
@@ -135,8 +135,8 @@ class Kanayama:
         )
 
     def reset(self, rng) -> None:
-        from mlpfac.kernels import seeds
-        from mlpfac.loop_kernels import kanayama_step
+        from mlpfac.control.adaptive.kernels import seeds
+        from mlpfac.loop.kernels import kanayama_step
 
         rngs, self.single = seeds(rng)
         self._kernel = kanayama_step
@@ -153,8 +153,8 @@ class Kanayama:
         return self._tele
 
     def law_kernel(self) -> tuple[int, np.ndarray]:
-        """The law for the compiled closed loop: (its number, its constants) (:func:`mlpfac.loop_kernels.law_step`)."""
-        from mlpfac.loop_kernels import KANAYAMA
+        """The law for the compiled closed loop: (its number, its constants) (:func:`mlpfac.loop.kernels.law_step`)."""
+        from mlpfac.loop.kernels import KANAYAMA
 
         return KANAYAMA, np.array(self._consts, dtype=float)
 

@@ -4,7 +4,7 @@ watches a file while it grows, and the run then neither imports rerun nor logs o
 A long run streams its recording as it goes: rerun encodes it in its own threads beside the
 simulation, and a file being written shows the run is stepping.
 
-:class:`DeferredSink` takes the sink calls of :func:`mlpfac.runner.run` (begin, flush every
+:class:`DeferredSink` takes the sink calls of :func:`mlpfac.loop.runner.run` (begin, flush every
 ``FLUSH_EVERY`` steps, end) and makes them on the real sink at :meth:`DeferredSink.replay`, with
 the same arguments: rows are written once, so the rows up to each flush are the same then as
 they were when it was called, and the recording holds the same data.

@@ -40,7 +40,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 from mlpfac.exceptions import ConfigError
-from mlpfac.outputs import write_atomic
+from mlpfac.runs.files import write_atomic
 from mlpfac.targets import cli_path
 
 MARKER = re.compile(r"^<!-- table: (?P<spec>.+?) -->\n(?P<body>.*?)^<!-- /table -->$", re.M | re.S)
@@ -249,7 +249,7 @@ def collect(folder: Path, results: Path, command: str | None = None, version: st
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.description = "Write every marked table of DOCS/*.md from the data folder it names (mlpfac/report.py)."
+    p.description = "Write every marked table of DOCS/*.md from the data folder it names (mlpfac/results.py)."
     p.add_argument("docs", nargs="?", type=cli_path, default=Path("docs"), help="the folder of pages (default docs)")
     p.add_argument("--check", action="store_true", help="write nothing; exit 1 if a table differs from its data")
     p.add_argument(

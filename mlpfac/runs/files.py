@@ -18,7 +18,7 @@ from collections.abc import Iterable, Iterator
 from contextlib import contextmanager, suppress
 from pathlib import Path
 
-from mlpfac.signals import sigint_deferred
+from mlpfac.interrupts import sigint_deferred
 
 
 def write_atomic(path: Path, data: str | bytes) -> None:
@@ -140,8 +140,8 @@ def _clear_staged(path: Path, target: Path) -> None:
 
 def write_run(out: Path, scn, rec) -> dict:
     """The folder of one run from the command line (run.rrd is written by its sink). Returns the metrics."""
-    from mlpfac.run_metrics import metrics
-    from mlpfac.scenario import to_toml
+    from mlpfac.runs.metrics import metrics
+    from mlpfac.scenario.parse import to_toml
 
     m = metrics(rec)
     write_run_folder(out, to_toml(scn.table), m)

@@ -48,7 +48,7 @@ correlations of the heading-rate increments with the command increments j steps 
 and the law is then given the error (2) of the measured pose moved over the last d commands sent,
 a unicycle step at g u each (:func:`_predict`, a Smith predictor); with d = 0 it is given e itself.
 
-Batch-first and compiled as :mod:`mlpfac.kernels`: a seed's arithmetic does not depend on the batch.
+Batch-first and compiled as :mod:`mlpfac.control.adaptive.kernels`: a seed's arithmetic does not depend on the batch.
 """
 
 from __future__ import annotations
@@ -57,7 +57,7 @@ import math
 
 import numpy as np
 
-from mlpfac.delay_bank import HELD, DelayBank, motion, pose_of
+from mlpfac.control.adaptive.delay_bank import HELD, DelayBank, motion, pose_of
 from mlpfac.jit import kernel
 
 # columns of the per-seed state S, per channel c (v: +0, omega: +1)
@@ -255,7 +255,7 @@ class InputModel:
         P_alarm: float = 0.0,
         detect_mean: float = 0.0,
     ) -> None:
-        """``bank``: the delay is found by :class:`~mlpfac.delay_bank.DelayBank` instead of the correlations;
+        """``bank``: the delay is found by :class:`~mlpfac.control.adaptive.delay_bank.DelayBank` instead of the correlations;
         ``P_alarm``, ``detect_mean`` (0: off): see the module docstring."""
         self.gains = gains
         self.hist = np.zeros((B, 2, max(2, delay + 2)))

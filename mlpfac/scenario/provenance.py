@@ -15,11 +15,11 @@ from mlpfac.exceptions import ConfigError
 from mlpfac.plants import PlantSpec
 
 if TYPE_CHECKING:
-    from mlpfac.plugins import Plugin
+    from mlpfac.control.plugins import Plugin
 
 
 class Recorded(PlantSpec, Protocol):
-    """What :func:`recorded` reads of a :class:`~mlpfac.scenario.Scenario`."""
+    """What :func:`recorded` reads of a :class:`~mlpfac.scenario.parse.Scenario`."""
 
     reference: object
     plugin: Plugin | None
@@ -29,7 +29,7 @@ def recorded(scn: Recorded) -> tuple[dict, dict]:
     """Build the plant once (every check made): what it simulates, and the [plant] keys it found."""
     from mlpfac import __version__
     from mlpfac.plants import make_plant
-    from mlpfac.reference import sample
+    from mlpfac.scenario.reference import sample
 
     plant = make_plant(scn, sample(scn.reference, np.arange(2) * scn.T))
     out = {"mlpfac": __version__, "numpy": np.__version__}

@@ -17,7 +17,7 @@ FOLDER_NAME = re.compile(
 )  # a scenario's or a controller's name: a folder in runs/ and sweeps
 
 BARE_KEY = re.compile(r"[A-Za-z0-9_-]+")  # a TOML key written without quotes
-INLINE_TABLES = ("uniform", "normal")  # one-key tables written inline (the distributions of mlpfac.draws)
+INLINE_TABLES = ("uniform", "normal")  # one-key tables written inline (the distributions of mlpfac.scenario.draws)
 NO_LIMIT = {"v_max", "omega_max"}  # keys where inf means "no limit" (None)
 INF_OK = NO_LIMIT | {
     "max_wheel_speed"
@@ -128,7 +128,7 @@ def to_toml(table: dict) -> str:
     def key(k: str) -> str:
         return k if BARE_KEY.fullmatch(k) else json.dumps(k, ensure_ascii=False)
 
-    def inline(v) -> bool:  # a distribution in place of a number (mlpfac.draws) stays where the number was
+    def inline(v) -> bool:  # a distribution in place of a number (mlpfac.scenario.draws) stays where the number was
         return isinstance(v, dict) and len(v) == 1 and next(iter(v)) in INLINE_TABLES
 
     def emit(t: dict, prefix: str) -> None:

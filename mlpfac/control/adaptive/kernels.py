@@ -1,7 +1,7 @@
 """Compiled kernels of the adaptive controller's hot path, batch-first: the networks (10)-(15) and
 their closed-form Jacobian (19)-(24), the EKF update (29)-(32), the law (35) with the corrected
 (36), and the adaptive step made of them. The rest of the loop (error, kinematic plant, baseline
-laws, divergence test) is in :mod:`mlpfac.loop_kernels`.
+laws, divergence test) is in :mod:`mlpfac.loop.kernels`.
 
 Every kernel takes a leading batch dimension B and loops over it inside, one seed after another,
 so a seed's arithmetic does not depend on B or on the other seeds: a seed in a batch of 64 gets
@@ -10,7 +10,7 @@ compiled by numba on first use (:mod:`mlpfac.jit`). With ``error_model="numpy"``
 zero gives inf or NaN as numpy does: a diverging run is detected by the runner, not by an
 exception here.
 
-Weight layout (16)-(18), as :mod:`mlpfac.networks`: z = [W_f (3, L_f), S_f (L_f, n_f), W_G (3, 2, L_G),
+Weight layout (16)-(18), as :mod:`mlpfac.control.adaptive.networks`: z = [W_f (3, L_f), S_f (L_f, n_f), W_G (3, 2, L_G),
 S_G (L_G, 3)], row-major blocks.
 """
 
@@ -31,7 +31,7 @@ def seeds(rng) -> tuple[list[np.random.Generator], bool]:
     return list(rng), False
 
 
-V_R_MIN = 1e-3  # as mlpfac.law.V_R_MIN
+V_R_MIN = 1e-3  # as mlpfac.control.law.V_R_MIN
 
 
 @kernel()
@@ -312,7 +312,7 @@ def adaptive_step(e, v_r, omega_r, first, z, P, S, H, u, innov, h_hat, trace, in
 
 @kernel("void(f8[:, ::1], f8[:, ::1], f8[:, ::1], f8[:, ::1], f8[:, ::1], i8, i8, b1, f8[:, ::1], f8[:, :, ::1])")
 def networks_h_jacobian(z, xf, xG, e, u, Lf, LG, residual, h, H):
-    """h (B, 3) and nabla_h (B, 3, alpha) of (26), (19)-(24): for tests against :mod:`mlpfac.networks`."""
+    """h (B, 3) and nabla_h (B, 3, alpha) of (26), (19)-(24): for tests against :mod:`mlpfac.control.adaptive.networks`."""
     phif = np.empty(Lf)
     phiG = np.empty(LG)
     f = np.empty(3)

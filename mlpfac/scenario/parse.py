@@ -18,21 +18,21 @@ from typing import Any
 
 import numpy as np
 
-from mlpfac import provenance
-from mlpfac.adaptive_config import AdaptiveConfig
-from mlpfac.controllers import KanayamaGains
-from mlpfac.draws import put as put_value
-from mlpfac.draws import resolve as draw_values
-from mlpfac.draws import restore as restore_draws
-from mlpfac.error_model import pose_from_error
-from mlpfac.events import Event, parse_event
+from mlpfac.control.adaptive.config import AdaptiveConfig
+from mlpfac.control.adaptive.networks import Networks
+from mlpfac.control.baselines import KanayamaGains
+from mlpfac.control.law import Law
+from mlpfac.control.plugins import Plugin, absolute_spec, is_plugin_spec, resolve
+from mlpfac.control.variants import VARIANTS
 from mlpfac.exceptions import ConfigError
-from mlpfac.law import Law
-from mlpfac.networks import Networks
-from mlpfac.plugins import Plugin, absolute_spec, is_plugin_spec, resolve
-from mlpfac.reference import make_reference
-from mlpfac.toml_data import FOLDER_NAME, build, check_keys, number, subtable, to_toml, typed  # noqa: F401 (mlpfac.scenario.to_toml)
-from mlpfac.variants import VARIANTS
+from mlpfac.model import pose_from_error
+from mlpfac.plants.events import Event, parse_event
+from mlpfac.scenario import provenance
+from mlpfac.scenario.draws import put as put_value
+from mlpfac.scenario.draws import resolve as draw_values
+from mlpfac.scenario.draws import restore as restore_draws
+from mlpfac.scenario.reference import make_reference
+from mlpfac.tables import FOLDER_NAME, build, check_keys, number, subtable, to_toml, typed  # noqa: F401 (mlpfac.scenario.parse.to_toml)
 
 INITIAL_ERROR_MAX = 1e3  # m (e1, e2) and rad (e3): a start beyond this is not a tracking problem
 MEMORY_SHARE = 0.8  # a run may plan to use at most this share of the memory available now
@@ -82,11 +82,11 @@ class Scenario:
     events: tuple[Event, ...]
     table: dict
     dropped_events: tuple[float, ...] = ()  # times of the file's events a shorter --duration left out
-    plugin: Plugin | None = None  # a user's controller (mlpfac.plugins); None: a shipped one
+    plugin: Plugin | None = None  # a user's controller (mlpfac.control.plugins); None: a shipped one
 
     @property
     def drawn(self) -> dict[str, float]:
-        """What was drawn for this seed in place of each distribution of the file, by key (:mod:`mlpfac.draws`)."""
+        """What was drawn for this seed in place of each distribution of the file, by key (:mod:`mlpfac.scenario.draws`)."""
         return dict(self.table.get("drawn", {}))
 
     @property
@@ -190,8 +190,8 @@ def load(
     The robot's parts the file leaves to the model (its wheels, its pose frame) are written into the
     table's ``[plant]`` as found, so that config.toml names them. ``build=False`` reads and checks
     the file alone (a listing), without building the plant. ``robot`` (``--robot``) puts the
-    scenario on another robot (:mod:`mlpfac.on_robot`). ``values`` sets numbers of the file by
-    their dotted keys (:mod:`mlpfac.draws`) before it is checked, as if written in it.
+    scenario on another robot (:mod:`mlpfac.scenario.on_robot`). ``values`` sets numbers of the file by
+    their dotted keys (:mod:`mlpfac.scenario.draws`) before it is checked, as if written in it.
     """
     path = Path(name_or_path)
     if path.suffix != ".toml":
@@ -215,7 +215,7 @@ def load(
     ):
         plant["model"] = str((path.parent / Path(plant["model"]).expanduser()).resolve())
     if robot is not None:
-        from mlpfac.on_robot import on_robot
+        from mlpfac.scenario.on_robot import on_robot
 
         parse(table, str(path), check_model=False)  # the file's own errors first, named as its own
         table = on_robot(table, robot)

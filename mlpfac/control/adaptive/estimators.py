@@ -54,7 +54,7 @@ class _WeightFilter:
 
 class EKF(_WeightFilter):
     """Extended Kalman filter over the network weights, eqs. (29)-(32), compiled
-    (:func:`mlpfac.kernels.ekf_update`).
+    (:func:`mlpfac.control.adaptive.kernels.ekf_update`).
 
     ``forgetting`` in (0, 1] divides P by itself after each update (exponential forgetting; 1 is
     the paper). ``Q`` is added after each update. ``P_max`` (optional) caps the diagonal of P so
@@ -83,7 +83,7 @@ class EKF(_WeightFilter):
         exactly symmetric; it costs half the Joseph form, and P stays positive definite over long
         runs (tests/test_core.py).
         """
-        from mlpfac.kernels import ekf_update
+        from mlpfac.control.adaptive.kernels import ekf_update
 
         a = self.z.shape[-1]
         h, H = jac(self.z)

@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 
-from mlpfac.record import RunRecord
+from mlpfac.loop.record import RunRecord
 
 LOST_FRACTION = 0.05  # a finished run is "lost" when a phase's position RMS exceeds this share of the path's size
 BIN_S = 0.1  # seconds per bin of the position error's mean square in metrics.json (any window of whole bins)

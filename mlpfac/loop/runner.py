@@ -8,13 +8,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from mlpfac.factory import make_controller, make_plant
-from mlpfac.loop_kernels import bad_seeds, tracking_errors
-from mlpfac.record import RunRecord
-from mlpfac.reference import sample
-from mlpfac.scenario import Scenario
-from mlpfac.segment import BAD, segment
-from mlpfac.signals import Terminated, raise_swallowed
+from mlpfac.interrupts import Terminated, raise_swallowed
+from mlpfac.loop.compiled import BAD, segment
+from mlpfac.loop.factory import make_controller, make_plant
+from mlpfac.loop.kernels import bad_seeds, tracking_errors
+from mlpfac.loop.record import RunRecord
+from mlpfac.scenario.parse import Scenario
+from mlpfac.scenario.reference import sample
 
 FLUSH_EVERY = 250  # steps between sends to a log sink
 SEGMENT_PHYSICS = 5_000  # physics steps of one compiled segment, at most: a signal waits for no more
@@ -38,7 +38,7 @@ class Built:
 def build(scn: Scenario, instance: object | None = None) -> Built:
     """Sample the reference, build the plant and the controller: what can fail (a bad model, a
     missing actuator) fails here, before a run writes or sends anything. ``instance``: an object of
-    the scenario's plug-in controller to run (:func:`mlpfac.factory.make_controller`)."""
+    the scenario's plug-in controller to run (:func:`mlpfac.loop.factory.make_controller`)."""
     ref = sample(scn.reference, np.arange(scn.steps + 1) * scn.T)  # (N + 1, 5)
     return Built(ref, make_plant(scn, ref), make_controller(scn, instance))
 
@@ -116,7 +116,7 @@ def run(
     ``built``: from :func:`build`, used once (the plant and the controller keep state).
     ``on_step(k)`` is called after every step k; the loop then goes step by step in Python. Without
     it, a MuJoCo plant with Kanayama's or Corradini's law runs compiled from one event or flush to
-    the next (:mod:`mlpfac.segment`), to the same bits.
+    the next (:mod:`mlpfac.loop.compiled`), to the same bits.
     A run is the closed loop of :func:`run_batch` with one seed (B = 1).
     """
     built = built or build(scn)
@@ -190,7 +190,7 @@ def _loop(scns, ref, plant, ctrl, sink, on_step, full: bool) -> list[RunRecord]:
     tracking_errors(e[:0], ref[0], e[:0])  # load (or compile) the loop's kernels before it starts
     bad_seeds(e[:0], np.zeros((0, 2)), e[:0], no_z[:0], 1.0, bad[:0])
     compiled = listed and on_step is None and _compiled(plant, ctrl)
-    if compiled:  # the closed loop compiled between events (mlpfac.segment)
+    if compiled:  # the closed loop compiled between events (mlpfac.loop.compiled)
         ctele = _allocate(ctrl_store, ctrl.telemetry(), recs, "ctrl", B, N, full)
         ptele = _allocate(
             plant_store, {k: v[None] for k, v in plant.plants[0].telemetry().items()}, recs, "plant", B, N, True
@@ -349,7 +349,7 @@ def _clear_after(rec: RunRecord, stop: tuple[int, int] | None, plant_store: dict
 
 
 def _diverged(q: np.ndarray, u: np.ndarray, e_true: np.ndarray, z: np.ndarray | None, limit_m: float) -> str | None:
-    """Why one seed's step diverged (the reasons of :func:`mlpfac.loop_kernels.bad_seeds`), or None."""
+    """Why one seed's step diverged (the reasons of :func:`mlpfac.loop.kernels.bad_seeds`), or None."""
     err = float(np.hypot(e_true[0], e_true[1]))
     if not (np.isfinite(q).all() and np.isfinite(u).all()):
         return "non-finite pose or command"

@@ -9,12 +9,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from mlpfac.adaptive_config import AdaptiveConfig  # noqa: F401 -- exported here too
-from mlpfac.error_model import G_true, f_true, wrap
-from mlpfac.estimators import EKF, UKF, covariance
+from mlpfac.control.adaptive.config import AdaptiveConfig  # noqa: F401 -- exported here too
+from mlpfac.control.adaptive.estimators import EKF, UKF, covariance
+from mlpfac.control.law import GAIN_RANGE, Law
+from mlpfac.control.variants import VARIANTS  # noqa: F401 -- exported here too (factory, scenario, controllers)
 from mlpfac.jit import as_rows
-from mlpfac.law import GAIN_RANGE, Law
-from mlpfac.variants import VARIANTS  # noqa: F401 -- exported here too (factory, scenario, controllers)
+from mlpfac.model import G_true, f_true, wrap
 
 
 class NominalPrior:
@@ -43,7 +43,7 @@ class Adaptive:
     UKF), the nominal prior (or none), the law (certainty equivalence, or cautious with weight c),
     the input gains (T, or learned). The paper's parts, the EKF with the certainty-equivalence law
     and fixed gains, with or without the prior, run as one compiled kernel per step for all seeds
-    (:func:`mlpfac.kernels.adaptive_step`); the other compositions run numpy parts seed by seed.
+    (:func:`mlpfac.control.adaptive.kernels.adaptive_step`); the other compositions run numpy parts seed by seed.
 
     ``reset(T, rng)`` with one Generator: one run, ``step`` takes e (3,) and returns u (2,);
     with a sequence of B Generators: B seeds, e (B, 3) -> u (B, 2), telemetry (B, ...).
@@ -89,8 +89,10 @@ class Adaptive:
         return EKF(**common)
 
     def reset(self, rng) -> None:
-        from mlpfac.input_model import InputModel  # the kernels: imported by a run, not by reading a scenario
-        from mlpfac.kernels import adaptive_step, seeds
+        from mlpfac.control.adaptive.input_model import (
+            InputModel,  # the kernels: imported by a run, not by reading a scenario
+        )
+        from mlpfac.control.adaptive.kernels import adaptive_step, seeds
 
         rngs, self.single = seeds(rng)
         T = self.T

@@ -1,0 +1,1 @@
+"""The adaptive scheme of the paper and its variants: the networks NN_f, NN_G (8)-(27), the estimators (EKF (29)-(32), UKF), the input model and the delay bank, the compiled hot path, and the controller composed of them."""
