@@ -37,6 +37,11 @@ TOP = {
     "controller": ("", "the controller and its options: [below](#controller)"),
     "events": ("", "changes of the robot mid-run, never told to the controller: [below](#events)"),
     "provenance": ("", "written by mlpfac into a run's `config.toml` (what was simulated); not for a file of yours"),
+    "drawn": (
+        "",
+        "written by mlpfac into a run's `config.toml`: the value each distribution of the file drew for this seed "
+        "(checked again when it re-runs); not for a file of yours",
+    ),
 }
 INITIAL = {
     "error": ("m, m, rad", "the initial tracking error (e1, e2, e3) of (2) from the reference's pose at t = 0"),
