@@ -7,8 +7,10 @@ import dataclasses
 import json
 import math
 import re
+import tomllib
 import types
 import typing
+from pathlib import Path
 
 from mlpfac.exceptions import ConfigError
 
@@ -148,3 +150,22 @@ def to_toml(table: dict) -> str:
 
     emit(table, "")
     return "\n".join(lines) + "\n"
+
+
+def read_toml(path: Path, kind: str) -> dict:
+    """The TOML file at ``path`` (a ``kind``, e.g. "scenario file"); a ConfigError naming it when it
+    cannot be read or is not UTF-8 TOML."""
+    try:
+        return tomllib.loads(path.read_bytes().decode("utf-8"))
+    except FileNotFoundError:
+        raise ConfigError(str(path), f"{kind} not found") from None
+    except IsADirectoryError:
+        raise ConfigError(str(path), f"is a folder, not a {kind}") from None
+    except OSError as err:
+        raise ConfigError(str(path), f"cannot read: {err.strerror or err}") from None
+    except UnicodeDecodeError:
+        raise ConfigError(str(path), "not a text file (TOML is UTF-8 text)") from None
+    except tomllib.TOMLDecodeError as err:
+        raise ConfigError(str(path), f"not valid TOML: {err}") from None
+    except RecursionError:  # arrays or tables nested thousands deep
+        raise ConfigError(str(path), f"not a {kind}: its arrays or tables are nested too deep to read") from None

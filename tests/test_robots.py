@@ -15,8 +15,9 @@ from mlpfac.exceptions import ConfigError
 from mlpfac.plants.config import MujocoConfig
 from mlpfac.plants.mujoco import MujocoPlant
 from mlpfac.scenario.on_robot import SHARE, on_robot, with_robots
-from mlpfac.scenario.parse import read_toml, shipped_dir
+from mlpfac.scenario.parse import shipped_dir
 from mlpfac.scenario.reference import make_reference, sample
+from mlpfac.tables import read_toml
 
 SKID_ARM = Path(__file__).parent / "data" / "skid_arm.xml"
 T = 0.01

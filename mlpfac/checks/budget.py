@@ -155,7 +155,7 @@ class Budget:
 def read_budget(path: Path, robot: str | None = None, flags: Vary | None = None) -> Budget:
     """The budget file at ``path``, checked; scenario paths and ``file.py:Class`` controllers are
     taken from the file's own folder."""
-    from mlpfac.scenario.parse import read_toml
+    from mlpfac.tables import read_toml
 
     table = read_toml(path, "budget file")
     _known(table, TOP_KEYS, str(path))

@@ -103,7 +103,7 @@ def robot_table(robot: str) -> dict:
     path = Path(_shipped(robot) if robot in SHIPPED else robot).expanduser()
     if path.suffix.lower() != ".toml":
         return {"kind": "mujoco", "model": model_of(robot)}
-    from mlpfac.scenario.parse import read_toml
+    from mlpfac.tables import read_toml
 
     table = read_toml(path, "robot file")
     plant = table.get("plant")

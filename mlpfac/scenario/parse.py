@@ -11,7 +11,6 @@ import dataclasses
 import importlib.resources
 import math
 import os
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -32,7 +31,16 @@ from mlpfac.scenario.draws import put as put_value
 from mlpfac.scenario.draws import resolve as draw_values
 from mlpfac.scenario.draws import restore as restore_draws
 from mlpfac.scenario.reference import make_reference
-from mlpfac.tables import FOLDER_NAME, build, check_keys, number, subtable, to_toml, typed  # noqa: F401 (mlpfac.scenario.parse.to_toml)
+from mlpfac.tables import (  # noqa: F401 (mlpfac.scenario.parse.to_toml)
+    FOLDER_NAME,
+    build,
+    check_keys,
+    number,
+    read_toml,
+    subtable,
+    to_toml,
+    typed,
+)
 
 INITIAL_ERROR_MAX = 1e3  # m (e1, e2) and rad (e3): a start beyond this is not a tracking problem
 MEMORY_SHARE = 0.8  # a run may plan to use at most this share of the memory available now
@@ -157,25 +165,6 @@ def shipped_dir() -> Path:
 def scenario_names() -> list[str]:
     """Names of the shipped scenarios."""
     return sorted(p.stem for p in shipped_dir().glob("*.toml"))
-
-
-def read_toml(path: Path, kind: str) -> dict:
-    """The TOML file at ``path`` (a ``kind``, e.g. "scenario file"); a ConfigError naming it when it
-    cannot be read or is not UTF-8 TOML."""
-    try:
-        return tomllib.loads(path.read_bytes().decode("utf-8"))
-    except FileNotFoundError:
-        raise ConfigError(str(path), f"{kind} not found") from None
-    except IsADirectoryError:
-        raise ConfigError(str(path), f"is a folder, not a {kind}") from None
-    except OSError as err:
-        raise ConfigError(str(path), f"cannot read: {err.strerror or err}") from None
-    except UnicodeDecodeError:
-        raise ConfigError(str(path), "not a text file (TOML is UTF-8 text)") from None
-    except tomllib.TOMLDecodeError as err:
-        raise ConfigError(str(path), f"not valid TOML: {err}") from None
-    except RecursionError:  # arrays or tables nested thousands deep
-        raise ConfigError(str(path), "not a scenario: its arrays or tables are nested too deep to read") from None
 
 
 def load(
