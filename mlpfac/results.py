@@ -42,6 +42,7 @@ from pathlib import Path
 from mlpfac.exceptions import ConfigError
 from mlpfac.runs.files import write_atomic
 from mlpfac.targets import cli_path
+from mlpfac.verify import read_data, read_json
 
 MARKER = re.compile(r"^<!-- table: (?P<spec>.+?) -->\n(?P<body>.*?)^<!-- /table -->$", re.M | re.S)
 VIEWS = ("sweep", "compare", "paired", "summary", "robustness", "text")
@@ -62,28 +63,6 @@ def parse_spec(spec: str, where: str) -> tuple[str, dict[str, str]]:
     if opts.get("view", "summary") not in VIEWS:
         raise ConfigError(where, f"table marker {spec!r}: view must be one of {VIEWS}")
     return words[0], opts
-
-
-def _read(folder: Path, name: str) -> str:
-    path = folder / name
-    if not path.is_file():
-        raise ConfigError(str(path), "missing: the data folder holds no such file")
-    try:
-        return path.read_text()
-    except (OSError, UnicodeDecodeError) as err:
-        raise ConfigError(str(path), f"cannot read: {err}") from None
-
-
-def _json(folder: Path, name: str) -> dict:
-    """A data file's JSON; ConfigError naming it when it is not what a sweep writes."""
-    text = _read(folder, name)
-    try:
-        data = json.loads(text)
-    except (ValueError, RecursionError) as err:
-        raise ConfigError(str(folder / name), f"not valid JSON: {err}") from None
-    if not isinstance(data, dict):
-        raise ConfigError(str(folder / name), "expected a JSON object")
-    return data
 
 
 def select(rows: list[dict], scenarios: str | None, controllers: str | None) -> list[dict]:
@@ -108,9 +87,9 @@ def render(folder: Path, opts: dict[str, str]) -> str:
 
     view = opts.get("view", "summary")
     if view == "text":
-        return _read(folder, "table.md")
+        return read_data(folder, "table.md")
     name = {"sweep": "sweep.json", "compare": "compare.json", "robustness": "robustness.json"}.get(view, "paired.json")
-    data = _json(folder, name)
+    data = read_json(folder, name)
     rows = data.get("breaking_points" if view == "robustness" else "rows")
     if not isinstance(rows, list) or not all(
         isinstance(r, dict) and "scenario" in r and "controller" in r for r in rows
@@ -210,7 +189,7 @@ def collect(folder: Path, results: Path, command: str | None = None, version: st
     write its meta.json: the command (kept from the earlier meta.json unless given), the code
     version and the date the results were written."""
     old = folder / "meta.json"
-    meta = _json(folder, "meta.json") if old.is_file() else {}
+    meta = read_json(folder, "meta.json") if old.is_file() else {}
     command = command or meta.get("command")
     if not command:
         raise ConfigError("--command", f"{folder} has no meta.json yet: give the command that made {results}")

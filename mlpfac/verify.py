@@ -26,6 +26,29 @@ UNTIMED = ("wall_time_s", "rrd")  # what differs between two runs of the same bi
 FIGURES = ("rms_position_error_m", "max_position_error_m", "rms_heading_error_rad")
 
 
+def read_data(folder: Path, name: str) -> str:
+    """A data file's text; ConfigError naming it when it is missing or cannot be read."""
+    path = folder / name
+    if not path.is_file():
+        raise ConfigError(str(path), "missing: the data folder holds no such file")
+    try:
+        return path.read_text()
+    except (OSError, UnicodeDecodeError) as err:
+        raise ConfigError(str(path), f"cannot read: {err}") from None
+
+
+def read_json(folder: Path, name: str) -> dict:
+    """A data file's JSON; ConfigError naming it when it is not what a sweep writes."""
+    text = read_data(folder, name)
+    try:
+        data = json.loads(text)
+    except (ValueError, RecursionError) as err:
+        raise ConfigError(str(folder / name), f"not valid JSON: {err}") from None
+    if not isinstance(data, dict):
+        raise ConfigError(str(folder / name), "expected a JSON object")
+    return data
+
+
 def digest(metrics: dict) -> str:
     """A hash of a run's metrics.json but its wall-clock time: equal for the same bits."""
     kept = {k: v for k, v in metrics.items() if k not in UNTIMED}
@@ -88,6 +111,19 @@ class Verdict:
         return not self.skipped and self.identical != self.checked
 
 
+def _parser():
+    """The command lines of ``mlpfac sweep`` and ``mlpfac compare``, as the command reads them."""
+    import argparse
+
+    from mlpfac.sweeps.cli import add_compare_arguments, add_sweep_arguments
+
+    parser = argparse.ArgumentParser(prog="mlpfac")
+    sub = parser.add_subparsers(dest="command", required=True)
+    add_sweep_arguments(sub.add_parser("sweep"))
+    add_compare_arguments(sub.add_parser("compare"))
+    return parser
+
+
 def _plan(command: str, root: Path):
     """The jobs of a recorded ``[cd DIR &&] mlpfac sweep|compare ...`` command, and the folder it
     runs in; ConfigError for any other command."""
@@ -97,12 +133,11 @@ def _plan(command: str, root: Path):
         where, words = root / words[1], words[3:]
     if words[:1] != ["mlpfac"] or words[1:2] not in (["sweep"], ["compare"]):
         raise ConfigError(command, "a script's table: run its command again to check it")
-    from mlpfac.cli import build_parser
     from mlpfac.scenario.parse import scenario_names
     from mlpfac.sweeps.plan import parse_controllers, parse_seeds, plan
 
     try:
-        args = build_parser().parse_args(words[1:])
+        args = _parser().parse_args(words[1:])
     except SystemExit:
         raise ConfigError(command, "not a command mlpfac reads") from None
     with contextlib.chdir(where):
@@ -131,16 +166,15 @@ def differ(kept: dict, new: dict) -> tuple[float, str]:
 
 def verify_dataset(folder: Path, n: int, root: Path) -> Verdict:
     """Run ``n`` of the dataset's runs again (a sample fixed by the dataset's name) and compare."""
-    from mlpfac.results import _json
     from mlpfac.sweeps.worker import run_task
 
-    command = _json(folder, "meta.json").get("command", "")
+    command = read_json(folder, "meta.json").get("command", "")
     v = Verdict(folder.name, command)
     if not (folder / RUNS_FILE).is_file():
         v.skipped = "a script's table: run its command again to check it" if (folder / "table.md").is_file() else ""
         v.skipped = v.skipped or f"no per-seed results ({RUNS_FILE}): collect it again from its command"
         return v
-    kept = {(r["scenario"], r["controller"], r["seed"]): r for r in _json(folder, RUNS_FILE)["runs"]}
+    kept = {(r["scenario"], r["controller"], r["seed"]): r for r in read_json(folder, RUNS_FILE)["runs"]}
     try:
         jobs, where = _plan(command, root)
     except ConfigError as err:

@@ -15,8 +15,8 @@ from __future__ import annotations
 import dataclasses
 import math
 
-from mlpfac.checks.budget import AFTER_THE_CHANGE, FIGURES, Group, Limit
 from mlpfac.checks.judge import Case, Verdict
+from mlpfac.checks.limits import AFTER_THE_CHANGE, FIGURES, Group, Limit
 from mlpfac.exceptions import ConfigError
 from mlpfac.sweeps.robustness import breaking_points, check_threshold, curves, nominal
 from mlpfac.sweeps.vary import Vary, parse_vary

@@ -16,7 +16,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from mlpfac.checks.budget import FIGURES, Group, Limit
+from mlpfac.checks.limits import FIGURES, Group, Limit
 from mlpfac.exceptions import ConfigError
 from mlpfac.sweeps.folders import metrics_problem
 from mlpfac.sweeps.paired import compare, median, outcome
