@@ -211,7 +211,10 @@ def _read_robot(
         m = _compile(spec, where)
     if config.casters != "model":  # floor contacts at rest that are not the wheels and drag: they slide
         bodies = {int(m.jnt_bodyid[j]) for j in driven}
-        skids = defaults.skids(m, qpos0, ctrl0, SETTLE_S, root0, bodies)
+        try:
+            skids = defaults.skids(m, qpos0, ctrl0, SETTLE_S, root0, bodies)
+        except mujoco.FatalError as err:  # an arena too small for the model (<size memory>), say
+            raise _cannot_simulate(where, err) from None
         if skids and config.casters is None:
             config, chosen = (
                 defaults.with_chosen(config, {"casters": "frictionless"}),
@@ -236,7 +239,7 @@ def _read_robot(
         d = mujoco.MjData(m)
         _settle(m, d, dt, qpos0, ctrl0, int(m.jnt_dofadr[jnt]), where)
     except mujoco.FatalError as err:  # an arena too small for the model (<size memory>), say
-        raise ConfigError(where, f"MuJoCo cannot simulate the model: {' '.join(str(err).split())}") from None
+        raise _cannot_simulate(where, err) from None
     anchors = [d.xanchor[j].copy() for j in joints]
     sign = wheel_parts.wheel_signs(config, d, site, joints, anchors)
     dofs = (int(m.jnt_dofadr[joints[0]]), int(m.jnt_dofadr[joints[1]]))
@@ -367,6 +370,11 @@ def _settle(
         mujoco.mj_step(m, d, nstep=chunk)
         _no_warning(d, where)
     mujoco.mj_forward(m, d)
+
+
+def _cannot_simulate(where: str, err: Exception) -> ConfigError:
+    """MuJoCo's fatal error (an arena too small for the model, ``<size memory>``), on one line."""
+    return ConfigError(where, f"MuJoCo cannot simulate the model: {' '.join(str(err).split())}")
 
 
 def _no_warning(d: mujoco.MjData, where: str) -> None:
