@@ -178,12 +178,12 @@ def main(argv: list[str] | None = None) -> int:
         from mlpfac.sweeps import cli as sweep
 
         return sweep.run_compare_cli(args) if args.command == "compare" else sweep.run_sweep_cli(args)
-    except MlpfacError as err:
-        print(f"mlpfac: error: {err}", file=sys.stderr)
-        return EXIT_BAD_INPUT
     except PluginError as err:  # the user's controller raised: its traceback, not ours
         print(err.report(), end="", file=sys.stderr)
         return EXIT_FAILED
+    except MlpfacError as err:
+        print(f"mlpfac: error: {err}", file=sys.stderr)
+        return EXIT_BAD_INPUT
     except (KeyboardInterrupt, ImportError) as err:  # ImportError: a signal as MuJoCo's module initialised
         code = exits.interrupted(err)
         if code is None:

@@ -26,8 +26,17 @@ class ScriptStopped(BaseException):  # noqa: N818 - not an error: the import of 
     ``if __name__ == "__main__":`` and its sweep does not start again in every worker."""
 
 
-class PluginError(Exception):
-    """A user's controller raised in its own code: that run fails (exit 1). ``traceback`` is the
+class OutputError(MlpfacError):
+    """Writing results failed (a full disk, a lost permission): one line naming the path."""
+
+
+class WorkerLostError(MlpfacError):
+    """A local worker process died (killed from outside, out of memory): the pool cannot go on."""
+
+
+class PluginError(MlpfacError):
+    """A user's controller raised in its own code: that run fails (exit 1, not 2: the fault is the
+    controller's, not the input's). ``traceback`` is the
     controller's part of the traceback (frames in mlpfac's own files left out)."""
 
     def __init__(self, controller: str, what: str, err: BaseException | None = None, traceback: str = "") -> None:

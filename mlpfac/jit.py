@@ -68,6 +68,14 @@ def as_rows(x, width: int) -> np.ndarray:
     return np.ascontiguousarray(x, dtype=float).reshape(-1, width)
 
 
+def seeds(rng) -> tuple[list[np.random.Generator], bool]:
+    """The batch convention of ``reset(..., rng)``: one Generator is one run (arrays without a batch
+    dimension, "single"), a sequence of B Generators is a batch (arrays (B, ...))."""
+    if isinstance(rng, np.random.Generator):
+        return [rng], True
+    return list(rng), False
+
+
 def _cpu() -> bytes:
     """What the code built for this processor needs of it: its instruction set extensions."""
     try:

@@ -68,8 +68,9 @@ def check(
     budget's ``robots``. Bad input (the budget, a flag) is a ConfigError naming the file and key
     before anything runs.
     """
+    from mlpfac.exceptions import OutputError
     from mlpfac.sweeps.engine import SWEEP_COLUMNS, check_execution_flags, report, sweep_into, sweep_meta
-    from mlpfac.sweeps.folders import OutputError, _oserror
+    from mlpfac.sweeps.folders import _oserror
     from mlpfac.sweeps.plan import check_writable
     from mlpfac.sweeps.tables import table_files
     from mlpfac.sweeps.worker import not_in_a_worker

@@ -68,14 +68,13 @@ class Corradini:
     def __init__(self, law: Law, T: float) -> None:
         self.T = float(T)
         self.law = law
-        lam = law
         self._limits = (
-            np.inf if lam.v_max is None else float(lam.v_max),
-            np.inf if lam.omega_max is None else float(lam.omega_max),
+            np.inf if law.v_max is None else float(law.v_max),
+            np.inf if law.omega_max is None else float(law.omega_max),
         )
 
     def reset(self, rng) -> None:
-        from mlpfac.control.adaptive.kernels import seeds  # the kernels: imported by a run, not by reading a scenario
+        from mlpfac.jit import seeds
         from mlpfac.loop.kernels import corradini_step
 
         rngs, self.single = seeds(rng)
@@ -135,7 +134,7 @@ class Kanayama:
         )
 
     def reset(self, rng) -> None:
-        from mlpfac.control.adaptive.kernels import seeds
+        from mlpfac.jit import seeds
         from mlpfac.loop.kernels import kanayama_step
 
         rngs, self.single = seeds(rng)

@@ -43,9 +43,8 @@ from collections import deque
 
 import numpy as np
 
-from mlpfac.control.adaptive.kernels import seeds
 from mlpfac.control.law import Law
-from mlpfac.jit import as_rows
+from mlpfac.jit import as_rows, seeds
 from mlpfac.loop.kernels import corradini_step, kanayama_step, tracking_errors
 from mlpfac.plants.events import ControlPeriod, DelayLine, Event, SensorDelay, WheelRadius
 

@@ -55,13 +55,3 @@ class RunRecord:
             e_true=nan((N, 3), np.nan),
             u=nan((N, 2), np.nan),
         )
-
-    def put(self, store: dict[str, np.ndarray], k: int, values: dict) -> None:
-        """Write telemetry ``values`` into row k of ``store``, allocating each key on first use."""
-        N = len(self.t)
-        for key, val in values.items():
-            arr = store.get(key)
-            if arr is None:
-                shape = np.shape(val)
-                arr = store[key] = np.full((N, *shape), np.nan)
-            arr[k] = val

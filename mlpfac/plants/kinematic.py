@@ -48,7 +48,7 @@ class KinematicPlant:
 
     def reset(self, q0: np.ndarray, rng, u0: np.ndarray | None = None) -> None:
         """``u0`` is ignored: the error model (7) has no velocity state."""
-        from mlpfac.control.adaptive.kernels import seeds  # the kernels: imported by a run, not by reading a scenario
+        from mlpfac.jit import seeds
         from mlpfac.loop.kernels import kinematic_step
 
         rngs, self.single = seeds(rng)

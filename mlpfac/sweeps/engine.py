@@ -57,19 +57,17 @@ import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from mlpfac.exceptions import ConfigError
+from mlpfac.exceptions import ConfigError, OutputError, WorkerLostError  # noqa: F401 (also as mlpfac.sweeps.engine.*)
 from mlpfac.runs.files import folder_lock
 from mlpfac.sweeps.execute import (  # noqa: F401  (the engine's API, used as mlpfac.sweeps.engine.*)
     TMP_DIR,
     Outcome,
-    WorkerLostError,
     connect,
     execute,
     make_tasks,
 )
 from mlpfac.sweeps.folders import (  # noqa: F401
     PHASES,
-    OutputError,
     _oserror,
     check_done,
     load_done,

@@ -10,7 +10,7 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from mlpfac.exceptions import ConfigError, MlpfacError
+from mlpfac.exceptions import ConfigError, WorkerLostError
 from mlpfac.interrupts import Terminated, raise_swallowed, sigint_deferred
 from mlpfac.runs.files import check_run_folder, folder_lock, remove_staged
 from mlpfac.sweeps.folders import _oserror, check_done, write_result
@@ -20,10 +20,6 @@ from mlpfac.sweeps.worker import _worker_init, one_blas_thread, pool_context, ru
 TMP_DIR = ".tmp"  # OUT/.tmp: recordings being made; removed when the sweep ends and when the next one starts
 EXIT_GRACE_S = 15.0  # how long a finished worker may take to exit before it is killed
 POLL_S = 0.2  # the longest a Ctrl-C or SIGTERM waits while a local pool is waited on
-
-
-class WorkerLostError(MlpfacError):
-    """A local worker process died (killed from outside, out of memory): the pool cannot go on."""
 
 
 @dataclass

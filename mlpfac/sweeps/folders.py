@@ -7,17 +7,13 @@ import json
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from mlpfac.exceptions import MlpfacError
+from mlpfac.exceptions import OutputError
 from mlpfac.runs.files import write_folder_whole
 
 if TYPE_CHECKING:
     from mlpfac.sweeps.plan import Job
 
 PHASES = ("before", "after")
-
-
-class OutputError(MlpfacError):
-    """Writing the sweep's results failed (a full disk, a lost permission): one line naming the path."""
 
 
 def write_result(out: Path, job: Job, result: dict) -> None:

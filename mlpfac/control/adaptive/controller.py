@@ -92,7 +92,8 @@ class Adaptive:
         from mlpfac.control.adaptive.input_model import (
             InputModel,  # the kernels: imported by a run, not by reading a scenario
         )
-        from mlpfac.control.adaptive.kernels import adaptive_step, seeds
+        from mlpfac.control.adaptive.kernels import adaptive_step
+        from mlpfac.jit import seeds
 
         rngs, self.single = seeds(rng)
         T = self.T

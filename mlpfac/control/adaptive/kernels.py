@@ -20,18 +20,8 @@ import math
 
 import numpy as np
 
+from mlpfac.control.law import V_R_MIN
 from mlpfac.jit import kernel
-
-
-def seeds(rng) -> tuple[list[np.random.Generator], bool]:
-    """The batch convention of ``reset(..., rng)``: one Generator is one run (arrays without a batch
-    dimension, "single"), a sequence of B Generators is a batch (arrays (B, ...))."""
-    if isinstance(rng, np.random.Generator):
-        return [rng], True
-    return list(rng), False
-
-
-V_R_MIN = 1e-3  # as mlpfac.control.law.V_R_MIN
 
 
 @kernel()
