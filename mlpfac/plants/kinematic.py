@@ -11,11 +11,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from mlpfac.control.adaptive.estimators import covariance
 from mlpfac.exceptions import ConfigError
 from mlpfac.jit import as_rows
 from mlpfac.model import pose_from_error, tracking_error
 from mlpfac.plants.events import ControlPeriod, DelayLine, Event, SensorDelay
+from mlpfac.tables import covariance
 
 
 @dataclass(frozen=True)

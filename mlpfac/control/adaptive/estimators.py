@@ -17,24 +17,9 @@ from collections.abc import Callable
 import numpy as np
 
 from mlpfac.exceptions import ConfigError
+from mlpfac.tables import covariance  # noqa: F401 (importable from here too)
 
 Jacobian = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]  # z -> (h (..., 3), H (..., 3, alpha))
-
-
-def covariance(value: float | list | np.ndarray, n: int, name: str) -> np.ndarray:
-    """A covariance from a scalar (times I), a diagonal, or a full matrix; checked symmetric PSD."""
-    a = np.asarray(value, dtype=float)
-    if a.ndim == 0:
-        a = np.full(n, float(a))
-    if a.ndim == 1:
-        if a.shape != (n,):
-            raise ConfigError(name, f"expected a scalar or {n} diagonal values, got {a.shape[0]}")
-        if np.any(a < 0) or not np.all(np.isfinite(a)):
-            raise ConfigError(name, "a covariance must be finite and non-negative")
-        return np.diag(a)
-    if a.shape != (n, n) or not np.allclose(a, a.T) or np.linalg.eigvalsh(a).min() < -1e-12:
-        raise ConfigError(name, f"expected a symmetric positive semi-definite {n}x{n} matrix")
-    return a
 
 
 class _WeightFilter:
