@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from mlpfac.control.adaptive.controller import VARIANTS, Adaptive, AdaptiveConfig
-from mlpfac.control.adaptive.estimators import EKF, UKF, covariance
+from mlpfac.control.adaptive.estimators import EKF, UKF
 from mlpfac.control.adaptive.networks import Networks
 from mlpfac.control.baselines import CONTROLLERS, Corradini
 from mlpfac.control.law import Law
@@ -17,6 +17,7 @@ from mlpfac.loop.runner import run
 from mlpfac.runs.metrics import metrics
 from mlpfac.scenario.parse import load, parse
 from mlpfac.scenario.reference import Eight, sample
+from mlpfac.tables import covariance
 
 T = 0.01
 

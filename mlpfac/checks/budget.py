@@ -8,7 +8,7 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from mlpfac.checks.limits import AFTER_THE_CHANGE, FIGURES, PHASE_NAMES, Figure, Group, Limit  # noqa: F401 (importable from here too)
+from mlpfac.checks.limits import FIGURES, PHASE_NAMES, Group, Limit
 from mlpfac.exceptions import ConfigError
 from mlpfac.scenario.on_robot import split_robot, with_robots
 from mlpfac.sweeps.plan import MAX_RUNS, Job, parse_controllers, parse_seeds, plan

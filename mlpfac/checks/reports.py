@@ -8,8 +8,8 @@ import time
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
-from mlpfac.checks.budget import FIGURES
 from mlpfac.checks.judge import Case, Verdict
+from mlpfac.checks.limits import FIGURES
 
 
 def rerun(case: Case, seed: int, duration: float | None) -> str:

@@ -7,9 +7,9 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from mlpfac.control.adaptive.estimators import covariance
 from mlpfac.control.adaptive.networks import Networks
 from mlpfac.exceptions import ConfigError
+from mlpfac.tables import covariance
 
 
 @dataclass(frozen=True)

@@ -10,11 +10,12 @@ from __future__ import annotations
 import numpy as np
 
 from mlpfac.control.adaptive.config import AdaptiveConfig  # noqa: F401 -- exported here too
-from mlpfac.control.adaptive.estimators import EKF, UKF, covariance
+from mlpfac.control.adaptive.estimators import EKF, UKF
 from mlpfac.control.law import GAIN_RANGE, Law
 from mlpfac.control.variants import VARIANTS  # noqa: F401 -- exported here too (factory, scenario, controllers)
 from mlpfac.jit import as_rows
 from mlpfac.model import G_true, f_true, wrap
+from mlpfac.tables import covariance
 
 
 class NominalPrior:

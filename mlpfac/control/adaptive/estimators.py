@@ -17,7 +17,6 @@ from collections.abc import Callable
 import numpy as np
 
 from mlpfac.exceptions import ConfigError
-from mlpfac.tables import covariance  # noqa: F401 (importable from here too)
 
 Jacobian = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]  # z -> (h (..., 3), H (..., 3, alpha))
 
