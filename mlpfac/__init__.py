@@ -18,7 +18,7 @@ from __future__ import annotations
 import importlib
 from typing import TYPE_CHECKING
 
-__version__ = "0.1.0"
+from mlpfac.version import __version__
 
 _WHERE = {
     "load": "mlpfac.scenario.parse",

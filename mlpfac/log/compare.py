@@ -124,7 +124,7 @@ def save_comparison(runs: Sequence[Path | str], path: Path | str) -> Path:
     """Write the runs' comparison recording to ``path`` (checked and read back like a run's): made
     beside it and renamed into place when whole, so a failure (a broken run.rrd, a full disk, a
     signal) leaves an earlier file at ``path`` as it was."""
-    from mlpfac.runs.files import Stage, check_save_file
+    from mlpfac.files import Stage, check_save_file
 
     files = run_files(runs)
     path = Path(path)

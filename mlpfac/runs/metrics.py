@@ -3,7 +3,9 @@
 
 from __future__ import annotations
 
+import json
 import math
+from pathlib import Path
 
 import numpy as np
 
@@ -128,3 +130,13 @@ def outcome(rec: RunRecord, phases: dict) -> dict:
         rms = [p["rms_position_error_m"] for p in phases.values() if p["rms_position_error_m"] is not None]
         how = "lost" if any(x > limit for x in rms) else "tracking"
     return {"outcome": how, "path_size_m": size, "lost_threshold_m": limit}
+
+
+def holds_finished_run(out: Path) -> bool:
+    """A folder whose metrics.json says the run ended (ok or diverged), or a file that exists."""
+    if not out.is_dir():
+        return out.exists()
+    try:
+        return json.loads((out / "metrics.json").read_text()).get("status") != "interrupted"
+    except (OSError, ValueError, AttributeError):
+        return False

@@ -27,9 +27,9 @@ class Recorded(PlantSpec, Protocol):
 
 def recorded(scn: Recorded) -> tuple[dict, dict]:
     """Build the plant once (every check made): what it simulates, and the [plant] keys it found."""
-    from mlpfac import __version__
     from mlpfac.plants import make_plant
     from mlpfac.scenario.reference import sample
+    from mlpfac.version import __version__
 
     plant = make_plant(scn, sample(scn.reference, np.arange(2) * scn.T))
     out = {"mlpfac": __version__, "numpy": np.__version__}

@@ -11,8 +11,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from mlpfac.exceptions import ConfigError, WorkerLostError
+from mlpfac.files import check_run_folder, folder_lock, remove_staged
 from mlpfac.interrupts import Terminated, raise_swallowed, sigint_deferred
-from mlpfac.runs.files import check_run_folder, folder_lock, remove_staged
 from mlpfac.sweeps.folders import _oserror, check_done, write_result
 from mlpfac.sweeps.plan import Job
 from mlpfac.sweeps.worker import _worker_init, one_blas_thread, pool_context, run_task

@@ -26,7 +26,7 @@ import math
 from pathlib import Path
 
 from mlpfac.exceptions import ConfigError
-from mlpfac.runs.files import write_atomic
+from mlpfac.files import write_atomic
 from mlpfac.sweeps.paired import _rms, median, outcome
 from mlpfac.sweeps.plan import Job
 

@@ -7,7 +7,7 @@ import math
 from collections.abc import Callable
 from pathlib import Path
 
-from mlpfac.runs.files import write_atomic
+from mlpfac.files import write_atomic
 from mlpfac.sweeps.folders import PHASES
 from mlpfac.sweeps.paired import PAIRED_COLUMNS, median, outcome, summary
 from mlpfac.sweeps.plan import Job
