@@ -56,17 +56,20 @@ def digest(metrics: dict) -> str:
 
 
 def run_row(m: dict) -> dict:
-    """What ``runs.json`` keeps of one run."""
+    """What ``runs.json`` keeps of one run (``m``, its metrics.json)."""
+    from mlpfac.loop.metrics import RunMetrics
+
+    run = RunMetrics.from_json(m)
     return {
-        "scenario": m["scenario"],
-        "controller": m["controller"],
-        "seed": m["seed"],
+        "scenario": run.scenario,
+        "controller": run.controller,
+        "seed": run.seed,
         "digest": digest(m),
-        "status": m["status"],
-        "outcome": m.get("outcome"),
-        "steps": m["steps"],
+        "status": run.status,
+        "outcome": run.outcome,
+        "steps": run.steps,
         **{k: m[k] for k in FIGURES},
-        "phases": {p: {k: v[k] for k in FIGURES} for p, v in m["phases"].items()},
+        "phases": {p: {k: getattr(v, k) for k in FIGURES} for p, v in run.phases.items()},
     }
 
 

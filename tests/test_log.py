@@ -447,8 +447,8 @@ def test_runs_compared_in_one_recording_take_their_controllers_colours(tmp_path,
     from conftest import read_rrd
 
     from mlpfac.cli import main
+    from mlpfac.loop.metrics import metrics
     from mlpfac.plots import controller_colors
-    from mlpfac.runs.metrics import metrics
 
     for ctrl, seed in (("adaptive", 3), ("kanayama", 4)):
         rec = make_record(N=600, seed=seed)

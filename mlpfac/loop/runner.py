@@ -11,8 +11,9 @@ import numpy as np
 from mlpfac.interrupts import Terminated, raise_swallowed
 from mlpfac.loop.compiled import BAD, segment
 from mlpfac.loop.factory import make_controller, make_plant
-from mlpfac.loop.kernels import bad_seeds, tracking_errors
+from mlpfac.loop.kernels import bad_seeds
 from mlpfac.loop.record import RunRecord
+from mlpfac.model import tracking_errors
 from mlpfac.scenario.parse import Scenario
 from mlpfac.scenario.reference import sample
 

@@ -14,7 +14,7 @@ from pathlib import Path
 from mlpfac.exceptions import ConfigError, PluginError
 from mlpfac.files import Stage, check_run_folder, check_save_file, folder_lock, write_atomic
 from mlpfac.interrupts import raise_swallowed, sigint_deferred
-from mlpfac.runs.metrics import holds_finished_run, metrics
+from mlpfac.loop.metrics import metrics
 from mlpfac.runs.replay import DEFER_MAX_S, DeferredSink
 
 
@@ -198,3 +198,13 @@ def write_run(out: Path, scn, rec) -> dict:
         write_atomic(out / "config.toml", to_toml(scn.table))
         write_atomic(out / "metrics.json", json.dumps(m, indent=2) + "\n")
     return m
+
+
+def holds_finished_run(out: Path) -> bool:
+    """A folder whose metrics.json says the run ended (ok or diverged), or a file that exists."""
+    if not out.is_dir():
+        return out.exists()
+    try:
+        return json.loads((out / "metrics.json").read_text()).get("status") != "interrupted"
+    except (OSError, ValueError, AttributeError):
+        return False

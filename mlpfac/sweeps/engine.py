@@ -36,7 +36,7 @@ below is importable from here:
    own run without the event, in paired.csv / .md / .json and summary.md.
 
 How runs enter the statistics: each run is tracking, lost or diverged (``outcome`` in
-metrics.json, :func:`mlpfac.runs.metrics.outcome`); the position / heading RMS statistics (mean, median,
+metrics.json, :func:`mlpfac.loop.metrics.outcome`); the position / heading RMS statistics (mean, median,
 95 % confidence interval of the mean, Student t) are over the runs that finished (tracking or lost;
 status "ok"), next to the three counts. The worst seed is the diverged run that
 diverged first (fewest steps, then lowest seed) if any diverged, else the bounded run with the

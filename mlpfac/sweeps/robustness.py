@@ -27,7 +27,8 @@ from pathlib import Path
 
 from mlpfac.exceptions import ConfigError
 from mlpfac.files import write_atomic
-from mlpfac.sweeps.paired import _rms, median, outcome
+from mlpfac.loop.metrics import RunMetrics
+from mlpfac.sweeps.paired import compared_rms, median
 from mlpfac.sweeps.plan import Job
 
 TOLD = ("oracle", "oracle-kanayama")  # the laws told the change: the bound
@@ -76,7 +77,7 @@ def nominal(job: Job, key: str):
     return value if isinstance(value, int | float) and not isinstance(value, bool) else None
 
 
-def curves(jobs: list[Job], metrics: dict[tuple, dict], threshold: float | None) -> list[dict]:
+def curves(jobs: list[Job], metrics: dict[tuple, RunMetrics], threshold: float | None) -> list[dict]:
     """One row per scenario, controller and grid point (plan order) of the jobs with a point."""
     cells: dict[tuple, list[Job]] = {}
     for j in jobs:
@@ -88,14 +89,14 @@ def curves(jobs: list[Job], metrics: dict[tuple, dict], threshold: float | None)
             best = told.setdefault((fam, point), {})
             for j in js:
                 if j.key in metrics:
-                    best[j.seed] = min(best.get(j.seed, math.inf), _rms(metrics[j.key]))
+                    best[j.seed] = min(best.get(j.seed, math.inf), compared_rms(metrics[j.key]))
     rows = []
     for (fam, ctrl, point), js in cells.items():
         ms = [metrics[j.key] for j in js if j.key in metrics]
-        xs = [_rms(m) for m in ms]
+        xs = [compared_rms(m) for m in ms]
         lo, hi = median_interval(xs)
-        limit = threshold if threshold is not None else median([m.get("lost_threshold_m", 0.2) for m in ms])
-        tracking = sum(outcome(m) == "tracking" for m in ms)
+        limit = threshold if threshold is not None else median([m.lost_threshold_m or 0.2 for m in ms])
+        tracking = sum(m.outcome == "tracking" for m in ms)
         med = median(xs)
         bound = told.get((fam, point), {})
         rows.append({
@@ -210,7 +211,7 @@ def markdown(points: list[dict], threshold: float | None, rows: list[dict] | Non
     return "\n".join(lines) + "\n" + note
 
 
-def write_robustness(out: Path, jobs: list[Job], metrics: dict[tuple, dict], meta: dict) -> list[Path]:
+def write_robustness(out: Path, jobs: list[Job], metrics: dict[tuple, RunMetrics], meta: dict) -> list[Path]:
     """robustness.json / .md / .png beside the sweep's tables (nothing when no job has a grid point)."""
     if not any(j.point for j in jobs):
         return []

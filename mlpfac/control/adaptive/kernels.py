@@ -1,7 +1,7 @@
 """Compiled kernels of the adaptive controller's hot path, batch-first: the networks (10)-(15) and
 their closed-form Jacobian (19)-(24), the EKF update (29)-(32), the law (35) with the corrected
-(36), and the adaptive step made of them. The rest of the loop (error, kinematic plant, baseline
-laws, divergence test) is in :mod:`mlpfac.loop.kernels`.
+(36) (:func:`mlpfac.control.law._law`), and the adaptive step made of them. The baseline laws are
+in :mod:`mlpfac.control.law`, the error (2) and the kinematic plant (7) in :mod:`mlpfac.model`.
 
 Every kernel takes a leading batch dimension B and loops over it inside, one seed after another,
 so a seed's arithmetic does not depend on B or on the other seeds: a seed in a batch of 64 gets
@@ -20,7 +20,7 @@ import math
 
 import numpy as np
 
-from mlpfac.control.law import V_R_MIN
+from mlpfac.control.law import _law
 from mlpfac.jit import kernel
 
 
@@ -194,17 +194,6 @@ def ekf_update(z, P, y, h, H, R, forgetting, Q, has_Q, P_max, innov):
         for k in range(3):
             innov[b, k] = y[b, k] - h[b, k]  # (32)
         _ekf(z[b], P[b], innov[b], H[b], R, forgetting, Q, has_Q, P_max, PHt, W)
-
-
-@kernel()
-def _law(e0, e1, e2, h1, h2, h5, v_r, T, l1, l2, l3, v_max, omega_max, u):
-    """(35) with the corrected gains (36); omega first, limited, then v with the omega sent."""
-    k2 = (1.0 - l2) * (1.0 - l3) / (T * max(v_r, V_R_MIN))
-    omega = (h5 + k2 * e1 + (2.0 - l2 - l3) * e2) / T
-    omega = min(max(omega, -omega_max), omega_max)
-    v = ((1.0 - l1) * e0 + h1 * omega + h2) / T
-    u[0] = min(max(v, -v_max), v_max)
-    u[1] = omega
 
 
 @kernel()
