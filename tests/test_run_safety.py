@@ -344,7 +344,7 @@ def test_a_ctrl_c_that_lands_in_a_del_still_stops_the_run(tmp_path):
     script = textwrap.dedent(
         f"""
         import sys
-        import mlpfac.loop.runner as runner
+        import mlpfac.loop.closed_loop as runner
 
         class Dropped:
             def __del__(self):
