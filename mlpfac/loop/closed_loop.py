@@ -101,7 +101,7 @@ class ClosedLoop:
         self.base, self.ref, self.ctrl, self.full = base, ref, ctrl, full
         B, N = len(scns), base.steps
         self.B, self.N, self.T = B, N, base.T
-        if isinstance(plant, list) or not getattr(plant, "batched", False):
+        if isinstance(plant, list) or not plant.batched:
             plant = PlantList(plant if isinstance(plant, list) else [plant])
         self.plant: Plant | PlantList = plant
         self.listed = isinstance(plant, PlantList)

@@ -77,7 +77,7 @@ def run_batch(scns: list[Scenario], plant_list: bool = False) -> list[RunRecord]
     base = scns[0]
     ref = sample(base.reference, np.arange(base.steps + 1) * base.T)  # (N + 1, 5)
     plant = make_plant(base, ref)
-    if plant_list or not getattr(plant, "batched", False):
+    if plant_list or not plant.batched:
         plant = [plant] + [make_plant(s, ref) for s in scns[1:]]
     recs = _loop(scns, ref, plant, make_controller(base), None, None, full=False)
     if any(r.status == "interrupted" for r in recs):

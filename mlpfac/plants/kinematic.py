@@ -110,6 +110,12 @@ class KinematicPlant:
         out = [None if x else "non-finite tracking error" for x in ok]
         return out[0] if self.single else out
 
+    def provenance(self) -> dict:
+        return {}  # the model is all in the scenario
+
+    def found(self) -> dict:
+        return {}
+
     def geometry(self) -> list[dict]:
         return [
             {

@@ -33,11 +33,10 @@ def recorded(scn: Recorded) -> tuple[dict, dict]:
 
     plant = make_plant(scn, sample(scn.reference, np.arange(2) * scn.T))
     out = {"mlpfac": __version__, "numpy": np.__version__}
-    if hasattr(plant, "provenance"):
-        out |= plant.provenance()
+    out |= plant.provenance()
     if scn.plugin is not None:
         out["controller"] = scn.plugin.provenance()
-    return out, plant.found() if hasattr(plant, "found") else {}
+    return out, plant.found()
 
 
 def check_model(recorded, config, where: str) -> None:
