@@ -48,8 +48,6 @@ from mlpfac.jit import as_rows, seeds
 from mlpfac.model import tracking_errors
 from mlpfac.plants.events import ControlPeriod, DelayLine, Event, SensorDelay, WheelRadius
 
-GAIN_KINDS = ("wheel_radius", "control_period")
-
 
 def told(event: Event) -> tuple[float, str, float]:
     """An event as the oracle is told it: time, kind, and the one number the law needs (1 if none)."""

@@ -70,7 +70,6 @@ from mlpfac.sweeps.folders import (  # noqa: F401
     PHASES,
     _oserror,
     check_done,
-    load_done,
     metrics_problem,
     write_result,
 )

@@ -130,11 +130,6 @@ def _sha256(path: Path) -> str:
     return h.hexdigest()
 
 
-def load_done(out: Path, job: Job, save_rrd: bool = False) -> dict | None:
-    """The metrics of ``job`` if its folder is whole and was run with the same configuration (see :func:`check_done`)."""
-    return check_done(out, job, save_rrd)[0]
-
-
 def _oserror(err: OSError, what: str) -> OutputError:
     path = err.filename or what
     return OutputError(f"cannot write {path} ({err.strerror or err})")
