@@ -89,9 +89,19 @@ def _curves(ax, share_ax, fam: str, key: str, rows: list[dict], points: list[dic
     ax.set_title(fam, fontsize=10)
     ax.set_ylabel("median position RMS after the change [mm]")
     ax.legend(fontsize=7)
+    for a in (ax, share_ax):
+        _xscale(a, [r["point"][key] for r in rows])
     share_ax.set_ylabel("seeds tracking [%]")
     share_ax.set_ylim(-5, 105)
     share_ax.set_xlabel(key)
+
+
+def _xscale(ax, values: list[float]) -> None:
+    """A log scale for values over more than a decade (a friction from 1 to 0.05), else linear."""
+    if min(values) > 0 and max(values) >= 10 * min(values):
+        ax.set_xscale("log")
+        ax.set_xticks(sorted(set(values)), [f"{v:g}" for v in sorted(set(values))], minor=False)
+        ax.minorticks_off()
 
 
 def _map(fig, ax, fam: str, ctrl: str, keys: list[str], rows: list[dict]) -> None:
@@ -176,6 +186,7 @@ def panels_plot(folders: list[Path]) -> bytes | None:
         ax.plot(bx, by, "k--", lw=1.1)
         ax.axhline(1e3 * rows[0]["threshold_m"], color="0.3", ls=":", lw=1.2)
         ax.set_yscale("log")
+        _xscale(ax, [r["point"][key] for r in rows])
         ax.set_title(f"{fam}\n{key}", fontsize=8.5)
         ax.tick_params(labelsize=7.5)
     for ax in axs[:, 0]:
