@@ -110,3 +110,21 @@ def test_a_vary_dataset_re_plans_its_grid_and_draws(tmp_path, capsys):
     meta.write_text(json.dumps({"command": GRID.replace(" --vary events.0.factor=1,2", "")}))
     (line,) = [v.line() for v in verify(docs, 4)]
     assert line == "grid: not verified: none of its 4 runs is in its command's plan: collect it again from its command"
+
+
+DOCS = Path(__file__).resolve().parents[1] / "docs"
+ROBUST = sorted(p.name for p in (DOCS / "data").glob("robust-*"))
+
+
+@pytest.mark.parametrize(
+    "name", [pytest.param(n, marks=[pytest.mark.menagerie] if "tiago" in n else []) for n in ROBUST]
+)
+def test_every_documented_robustness_dataset_re_plans_to_its_runs(name):
+    """Each robustness dataset keeps every run's figures, and its recorded command (its --vary)
+    plans exactly those runs again, so report --verify can check any of them."""
+    from mlpfac.verify import _plan
+
+    folder = DOCS / "data" / name
+    runs = json.loads((folder / RUNS_FILE).read_text())["runs"]
+    jobs, _ = _plan(json.loads((folder / "meta.json").read_text())["command"], DOCS.parent)
+    assert sorted(j.key for j in jobs) == sorted((r["scenario"], r["controller"], r["seed"]) for r in runs)
