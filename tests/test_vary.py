@@ -201,7 +201,7 @@ def test_breaking_points_go_away_from_the_nominal_value():
     assert b["above"]["whole_axis"] and b["above"]["holds_to"] == 1.25
 
 
-def test_a_law_breaks_where_its_speed_limit_falls_below_the_reference(tmp_path):
+def test_a_law_breaks_where_its_speed_limit_falls_below_the_reference(tmp_path, capsys):
     """A known case: on the kinematic plant without noise Corradini's law tracks the figure of eight
     while v_max is above the reference's top speed, and loses it once v_max is below the speed it
     must keep on average (it falls behind by the difference every second)."""
@@ -230,6 +230,14 @@ def test_a_law_breaks_where_its_speed_limit_falls_below_the_reference(tmp_path):
     assert (out / "robustness.md").read_text() == render(out, {"view": "robustness"})
     panels = tmp_path / "axes.png"  # the curves of several sweeps in one figure: this one's twice
     assert main(["plot", str(out), str(out), "--panels", str(panels)]) == 0 and panels.stat().st_size > 10_000
+    edited = tmp_path / "edited"  # a robustness.json edited by hand: one line naming it, nothing written
+    edited.mkdir()
+    (edited / "robustness.json").write_text('{"curves": [{"scenario": "x", "point": {"k": 1}}]}')
+    capsys.readouterr()
+    assert main(["plot", str(out), str(edited), "--panels", str(tmp_path / "no.png")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == f"mlpfac: error: {edited / 'robustness.json'}: not what a sweep writes (KeyError: 'controller')"
+    assert not (tmp_path / "no.png").exists()
 
 
 V_MAX = [0.3, 0.6, 1.2, 1.6, 2.0]  # below the figure of eight's mean speed (0.77 m/s), above its top (1.12)

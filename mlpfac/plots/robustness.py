@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from mlpfac.exceptions import ConfigError
 from mlpfac.plots.colors import controller_colors, mpl
 
 
@@ -138,6 +139,7 @@ def _edges(v: list[float]) -> np.ndarray:
     return np.concatenate([[a[0] - (mid[0] - a[0])], mid, [a[-1] + (a[-1] - mid[-1])]])
 
 
+ROW_KEYS = ("scenario", "controller", "point", "median_m", "tracking", "runs", "bound_m", "threshold_m")
 TOP_MM = 3e3  # where a median of diverged runs is drawn (x) on the panels
 
 
@@ -148,11 +150,19 @@ def panels_plot(folders: list[Path]) -> bytes | None:
     the threshold (the tracking limit) dotted; one legend. None when no scenario has one axis."""
     found = []
     for folder in folders:
-        data = json.loads((folder / "robustness.json").read_text())
-        for fam in dict.fromkeys(r["scenario"] for r in data["curves"]):
-            rows = [r for r in data["curves"] if r["scenario"] == fam]
-            if len(rows[0]["point"]) == 1:
-                found.append((fam, next(iter(rows[0]["point"])), rows))
+        try:
+            data = json.loads((folder / "robustness.json").read_text())
+            for r in data["curves"]:  # what the panels read of each row, there
+                if gone := [k for k in ROW_KEYS if k not in r]:
+                    raise KeyError(gone[0])
+            for fam in dict.fromkeys(r["scenario"] for r in data["curves"]):
+                rows = [r for r in data["curves"] if r["scenario"] == fam]
+                if len(rows[0]["point"]) == 1:
+                    found.append((fam, next(iter(rows[0]["point"])), rows))
+        except (ValueError, KeyError, TypeError, AttributeError, IndexError) as err:  # edited by hand
+            raise ConfigError(
+                str(folder / "robustness.json"), f"not what a sweep writes ({type(err).__name__}: {err})"
+            ) from None
     if not found:
         return None
     import io
