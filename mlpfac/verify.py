@@ -138,6 +138,7 @@ def _plan(command: str, root: Path):
         raise ConfigError(command, "a script's table: run its command again to check it")
     from mlpfac.scenario.parse import scenario_names
     from mlpfac.sweeps.plan import parse_controllers, parse_seeds, plan
+    from mlpfac.sweeps.vary import parse_vary
 
     try:
         args = _parser().parse_args(words[1:])
@@ -149,6 +150,7 @@ def _plan(command: str, root: Path):
             parse_controllers(args.controllers),
             parse_seeds(args.seeds),
             args.duration,
+            parse_vary(args.vary),  # the grid points and draws: each point's runs are its own scenario
         )
     return jobs, where
 
@@ -184,6 +186,9 @@ def verify_dataset(folder: Path, n: int, root: Path) -> Verdict:
         v.skipped = f"its command cannot be planned again ({err})"
         return v
     jobs = [j for j in jobs if j.key in kept]
+    if not jobs:
+        v.skipped = f"none of its {len(kept)} runs is in its command's plan: collect it again from its command"
+        return v
     for job in random.Random(folder.name).sample(jobs, min(n, len(jobs))):
         with contextlib.chdir(where):
             (res,) = run_task([job])

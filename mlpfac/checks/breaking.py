@@ -104,9 +104,12 @@ def judge_breaking(
     cases = []
     for (fam, _), g in families.items():
         axis = limit.axis
+        ran = next((j for j in g.jobs if j.key in metrics), g.jobs[0])  # a run that finished tells a friction's own
         found = [
             p
-            for p in breaking_points(curves(g.jobs, metrics, threshold), {(fam, axis): nominal(g.jobs[0], axis)})
+            for p in breaking_points(
+                curves(g.jobs, metrics, threshold), {(fam, axis): nominal(ran, axis, metrics.get(ran.key))}
+            )
             if p["axis"] == axis
         ]
         case = Case(limit, g, errors=sorted({j.seed for j in g.jobs if j.key not in metrics}))

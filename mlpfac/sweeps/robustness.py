@@ -14,8 +14,8 @@ the position RMS after the change, i.e. the last phase; a diverged run counts as
 The **breaking point** along an axis (the other axes held at each of their values) is, on each
 side of the nominal value, the last value going away from it at which the point holds, before
 the first at which it does not; "whole axis" when it holds to the axis' end. The nominal value is
-the one at which an event changes nothing (1 for a scale or factor, 0 steps of delay), else the
-file's own value (the axis' smallest where the file leaves the key out). Written as robustness.json / .md beside the sweep's tables, and drawn in
+the one at which an event changes nothing (1 for a scale or factor, 0 steps of delay, the robot's
+own friction for a friction event's ``mu``), else the file's own value (the axis' smallest where the file leaves the key out). Written as robustness.json / .md beside the sweep's tables, and drawn in
 robustness.png (:mod:`mlpfac.plots.robustness`).
 """
 
@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from pathlib import Path
 
 from mlpfac.exceptions import ConfigError
@@ -34,6 +35,7 @@ from mlpfac.sweeps.plan import Job
 TOLD = ("oracle", "oracle-kanayama")  # the laws told the change: the bound
 UNCHANGED = {"scale": 1.0, "factor": 1.0, "mass_scale": 1.0, "kv_scale": 1.0, "force_scale": 1.0, "steps": 0}
 SIDES = ("below", "above")
+FROM = re.compile(r"friction (\S+) -> ")  # the robot's own friction, in a friction event's record
 
 
 def check_threshold(threshold: float | None) -> float | None:
@@ -61,15 +63,23 @@ def median_interval(xs: list[float]) -> tuple[float | None, float | None]:
     return s[k - 1], s[n - k]
 
 
-def nominal(job: Job, key: str):
+def nominal(job: Job, key: str, metrics: dict | None = None):
     """The value of ``key`` at which nothing changes: 1 for an event's scale or factor, 0 steps of
-    delay, else the file's own value (None where the file leaves it out)."""
+    delay, a friction event's ``mu`` the robot's own (what the event changed, as the job's run
+    recorded it in ``metrics``), else the file's own value (None where the file leaves it out)."""
     from mlpfac.scenario.draws import get
     from mlpfac.scenario.parse import load
 
     last = key.rsplit(".", 1)[-1]
     if key.startswith("events.") and last in UNCHANGED:
         return UNCHANGED[last]
+    if key.startswith("events.") and last == "mu" and metrics is not None:
+        value = dict(job.point).get(key)
+        for ev in metrics.get("events", []):  # "tyre/floor sliding friction 1 -> 0.2"
+            if ev.get("kind") == "friction" and ev.get("params", {}).get("mu") == value:
+                found = FROM.search(ev.get("text", ""))
+                if found:
+                    return float(found[1])
     try:
         value = get(load(job.source, build=False).table, key)
     except (KeyError, ConfigError):
@@ -217,11 +227,12 @@ def write_robustness(out: Path, jobs: list[Job], metrics: dict[tuple, RunMetrics
         return []
     threshold = meta.get("threshold_m")
     rows = curves(jobs, metrics, threshold)
-    first = {}
+    first: dict[tuple[str, str], Job] = {}  # a job of each scenario and axis, one that finished if any did
     for j in jobs:
         for key, _ in j.point:
-            first.setdefault((j.family, key), j)
-    nominals = {fk: nominal(j, fk[1]) for fk, j in first.items()}
+            if (j.family, key) not in first or (j.key in metrics and first[j.family, key].key not in metrics):
+                first[j.family, key] = j
+    nominals = {fk: nominal(j, fk[1], metrics.get(j.key)) for fk, j in first.items()}
     points = breaking_points(rows, nominals)
     paths = [out / "robustness.json", out / "robustness.md"]
     write_atomic(paths[0], json.dumps({"meta": meta, "curves": rows, "breaking_points": points}, indent=2) + "\n")
