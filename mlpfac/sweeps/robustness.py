@@ -63,7 +63,7 @@ def median_interval(xs: list[float]) -> tuple[float | None, float | None]:
     return s[k - 1], s[n - k]
 
 
-def nominal(job: Job, key: str, metrics: dict | None = None):
+def nominal(job: Job, key: str, metrics: RunMetrics | None = None):
     """The value of ``key`` at which nothing changes: 1 for an event's scale or factor, 0 steps of
     delay, a friction event's ``mu`` the robot's own (what the event changed, as the job's run
     recorded it in ``metrics``), else the file's own value (None where the file leaves it out)."""
@@ -75,7 +75,7 @@ def nominal(job: Job, key: str, metrics: dict | None = None):
         return UNCHANGED[last]
     if key.startswith("events.") and last == "mu" and metrics is not None:
         value = dict(job.point).get(key)
-        for ev in metrics.get("events", []):  # "tyre/floor sliding friction 1 -> 0.2"
+        for ev in metrics.events:  # "tyre/floor sliding friction 1 -> 0.2"
             if ev.get("kind") == "friction" and ev.get("params", {}).get("mu") == value:
                 found = FROM.search(ev.get("text", ""))
                 if found:
