@@ -76,7 +76,8 @@ def main() -> int:
     ap.add_argument("--alpha", type=int, default=171)
     args = ap.parse_args()
 
-    from mlpfac.loop.runner import FLUSH_EVERY, run
+    from mlpfac.loop.closed_loop import FLUSH_EVERY
+    from mlpfac.loop.runner import run
     from mlpfac.scenario.parse import load
 
     scn = load(args.scenario).with_overrides(args.controller, args.seed, None)

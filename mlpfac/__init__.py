@@ -18,7 +18,7 @@ from __future__ import annotations
 import importlib
 from typing import TYPE_CHECKING
 
-__version__ = "0.1.0"
+from mlpfac.version import __version__
 
 _WHERE = {
     "load": "mlpfac.scenario.parse",
@@ -28,7 +28,7 @@ _WHERE = {
     "run": "mlpfac.api",
     "sweep": "mlpfac.api",
     "PluginError": "mlpfac.exceptions",
-    "metrics": "mlpfac.runs.metrics",
+    "metrics": "mlpfac.loop.metrics",
     "RunRecord": "mlpfac.loop.record",
     "CONTROLLERS": "mlpfac.control.baselines",
     "check": "mlpfac.checks",
@@ -57,8 +57,8 @@ if TYPE_CHECKING:
     from mlpfac.checks import check
     from mlpfac.control.baselines import CONTROLLERS
     from mlpfac.exceptions import ConfigError, MlpfacError, PluginError
+    from mlpfac.loop.metrics import metrics
     from mlpfac.loop.record import RunRecord
-    from mlpfac.runs.metrics import metrics
     from mlpfac.scenario.parse import Scenario, load, parse, scenario_names
 
 

@@ -139,6 +139,13 @@ def build_parser() -> argparse.ArgumentParser:
         description="Draw sweep.png / compare.png beside the tables of finished sweep folders.",
     )
     p.add_argument("folders", nargs="+", type=cli_path, help="results folders of `mlpfac sweep` or `mlpfac compare`")
+    p.add_argument(
+        "--panels",
+        type=cli_path,
+        metavar="PNG",
+        help="instead: one figure of small panels, one per one-axis sweep of the folders (or data folders) holding "
+        "robustness.json: each controller's median against the value, the bound, the tracking limit",
+    )
 
     from mlpfac import results as report
 
@@ -258,6 +265,8 @@ def cmd_plot(args: argparse.Namespace) -> int:
     for folder in args.folders:
         if not folder.is_dir():
             raise ConfigError(str(folder), "is not a folder")
+    if args.panels is not None:
+        return _plot_panels(args.folders, args.panels)
     for folder in args.folders:
         try:
             if (folder / "robustness.json").is_file():  # a sweep with --vary: its curves, in place of sweep.png
@@ -275,6 +284,28 @@ def cmd_plot(args: argparse.Namespace) -> int:
         if not written:
             raise ConfigError(str(folder), "holds no finished runs (<scenario>/<controller>/seed-*/metrics.json)")
         print(" ".join(map(str, written)))
+    return 0
+
+
+def _plot_panels(folders: list[Path], png: Path) -> int:
+    """``mlpfac plot --panels PNG FOLDER...``: every folder's robustness.json in one figure."""
+    from mlpfac.exceptions import ConfigError
+    from mlpfac.plots.robustness import panels_plot
+    from mlpfac.targets import check_report_file, write_report_file
+
+    if png.suffix.lower() != ".png":
+        raise ConfigError(f"--panels {png}", "must name a .png file")
+    check_report_file(png, "--panels")
+    for folder in folders:
+        if not (folder / "robustness.json").is_file():
+            raise ConfigError(str(folder), "holds no robustness.json: not a sweep with --vary")
+    data = panels_plot(folders)  # a robustness.json edited by hand: a ConfigError naming it
+    if data is None:
+        raise ConfigError(str(folders[0]), "no scenario of these sweeps has exactly one axis")
+    try:
+        print(write_report_file(png, data))
+    except OSError as err:
+        raise ConfigError(f"--panels {png}", f"cannot write ({err.strerror or err})") from None
     return 0
 
 

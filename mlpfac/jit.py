@@ -43,6 +43,8 @@ HERE = Path(__file__).resolve().parent
 EXTENSIONS = {"core": "mlpfac._kernels", "mujoco": "mlpfac.plants._kernels"}
 MODULES = {  # the modules whose kernels each extension holds
     "core": (
+        "mlpfac.model",
+        "mlpfac.control.law",
         "mlpfac.control.adaptive.kernels",
         "mlpfac.loop.kernels",
         "mlpfac.control.adaptive.input_model",

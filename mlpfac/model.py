@@ -1,8 +1,13 @@
-"""The tracking error (2) and the discrete error model e_k = f_{k-1} + G_{k-1} u_{k-1}, (4)-(6)."""
+"""The tracking error (2) and the discrete error model e_k = f_{k-1} + G_{k-1} u_{k-1}, (4)-(6);
+compiled and batch-first (:mod:`mlpfac.jit`): the error (2) of B poses and the kinematic plant (7)."""
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
+
+from mlpfac.jit import kernel
 
 
 def wrap(angle: np.ndarray | float) -> np.ndarray | float:
@@ -37,3 +42,33 @@ def G_true(e: np.ndarray, T: float) -> np.ndarray:
 def h_true(e: np.ndarray, v_r: float, omega_r: float, T: float) -> np.ndarray:
     """Eq. (34) with the true functions: (h1, h2, h5) = (G_12, f_1 - e1, f_3 - e3). (3,)"""
     return np.array([T * e[1], T * v_r * np.cos(e[2]), T * omega_r])
+
+
+@kernel("void(f8[:, ::1], f8[::1], f8[:, ::1])")
+def tracking_errors(q, r, out):
+    """Eq. (2) for poses q (B, 3) and one reference sample r (>= 3,): out (B, 3), e3 wrapped to (-pi, pi]."""
+    for b in range(q.shape[0]):
+        c, s = math.cos(q[b, 2]), math.sin(q[b, 2])
+        dx, dy = r[0] - q[b, 0], r[1] - q[b, 1]
+        out[b, 0] = c * dx + s * dy
+        out[b, 1] = -s * dx + c * dy
+        out[b, 2] = math.pi - ((math.pi - (r[2] - q[b, 2])) % (2.0 * math.pi))
+
+
+@kernel("void(f8[:, ::1], f8[::1], f8[::1], f8, f8[:, ::1], f8[:, ::1], f8[:, ::1], f8[:, ::1], f8[:, ::1])")
+def kinematic_step(e, r, r_next, Tp, u, noise, e_out, pose_out, h_true):
+    """Model (7) for B seeds: e_out = f(e) + G(e) u + noise with the true f, G (5)-(6) at period Tp;
+    pose_out the pose whose error (2) to r_next is e_out; h_true (B, 3) the true (34) at e."""
+    for b in range(e.shape[0]):
+        e0, e1, e2 = e[b, 0], e[b, 1], e[b, 2]
+        u0, u1 = u[b, 0], u[b, 1]
+        h_true[b, 0], h_true[b, 1], h_true[b, 2] = Tp * e1, Tp * r[3] * math.cos(e2), Tp * r[4]
+        n0 = (e0 + Tp * r[3] * math.cos(e2)) + (-Tp * u0 + Tp * e1 * u1) + noise[b, 0]
+        n1 = (e1 + Tp * r[3] * math.sin(e2)) + (-Tp * e0) * u1 + noise[b, 1]
+        n2 = (e2 + Tp * r[4]) + (-Tp) * u1 + noise[b, 2]
+        e_out[b, 0], e_out[b, 1], e_out[b, 2] = n0, n1, n2
+        th = r_next[2] - n2
+        c, s = math.cos(th), math.sin(th)
+        pose_out[b, 0] = r_next[0] - (c * n0 - s * n1)
+        pose_out[b, 1] = r_next[1] - (s * n0 + c * n1)
+        pose_out[b, 2] = th

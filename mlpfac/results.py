@@ -40,7 +40,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 from mlpfac.exceptions import ConfigError
-from mlpfac.runs.files import write_atomic
+from mlpfac.files import write_atomic
 from mlpfac.targets import cli_path
 from mlpfac.verify import read_data, read_json
 

@@ -56,17 +56,20 @@ def digest(metrics: dict) -> str:
 
 
 def run_row(m: dict) -> dict:
-    """What ``runs.json`` keeps of one run."""
+    """What ``runs.json`` keeps of one run (``m``, its metrics.json)."""
+    from mlpfac.loop.metrics import RunMetrics
+
+    run = RunMetrics.from_json(m)
     return {
-        "scenario": m["scenario"],
-        "controller": m["controller"],
-        "seed": m["seed"],
+        "scenario": run.scenario,
+        "controller": run.controller,
+        "seed": run.seed,
         "digest": digest(m),
-        "status": m["status"],
-        "outcome": m.get("outcome"),
-        "steps": m["steps"],
+        "status": run.status,
+        "outcome": run.outcome,
+        "steps": run.steps,
         **{k: m[k] for k in FIGURES},
-        "phases": {p: {k: v[k] for k in FIGURES} for p, v in m["phases"].items()},
+        "phases": {p: {k: getattr(v, k) for k in FIGURES} for p, v in run.phases.items()},
     }
 
 
@@ -135,6 +138,7 @@ def _plan(command: str, root: Path):
         raise ConfigError(command, "a script's table: run its command again to check it")
     from mlpfac.scenario.parse import scenario_names
     from mlpfac.sweeps.plan import parse_controllers, parse_seeds, plan
+    from mlpfac.sweeps.vary import parse_vary
 
     try:
         args = _parser().parse_args(words[1:])
@@ -146,6 +150,7 @@ def _plan(command: str, root: Path):
             parse_controllers(args.controllers),
             parse_seeds(args.seeds),
             args.duration,
+            parse_vary(args.vary),  # the grid points and draws: each point's runs are its own scenario
         )
     return jobs, where
 
@@ -181,6 +186,9 @@ def verify_dataset(folder: Path, n: int, root: Path) -> Verdict:
         v.skipped = f"its command cannot be planned again ({err})"
         return v
     jobs = [j for j in jobs if j.key in kept]
+    if not jobs:
+        v.skipped = f"none of its {len(kept)} runs is in its command's plan: collect it again from its command"
+        return v
     for job in random.Random(folder.name).sample(jobs, min(n, len(jobs))):
         with contextlib.chdir(where):
             (res,) = run_task([job])

@@ -15,10 +15,10 @@ import copy
 from concurrent.futures import ProcessPoolExecutor
 from statistics import median
 
+from mlpfac.loop.metrics import RunMetrics, metrics
 from mlpfac.loop.runner import run
-from mlpfac.runs.metrics import metrics
 from mlpfac.scenario.parse import load, parse
-from mlpfac.sweeps.paired import compare, window_rms
+from mlpfac.sweeps.paired import compare
 
 SCENARIOS = ("eight-payload", "eight-weak-actuator", "eight-friction")
 
@@ -30,8 +30,8 @@ def one(args: tuple[str, int, bool]) -> float | None:
     start = table["events"][0]["time"]
     if from_start:
         table["events"][0]["time"] = 0.0
-    m = metrics(run(parse(table, f"sims/{name}.toml")))
-    return window_rms(m, start, table["duration"])
+    m = RunMetrics.from_json(metrics(run(parse(table, f"sims/{name}.toml"))))
+    return m.window_rms(start, table["duration"])
 
 
 def main() -> None:

@@ -15,8 +15,8 @@ from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 
+from mlpfac.loop.metrics import metrics
 from mlpfac.loop.runner import run
-from mlpfac.runs.metrics import metrics
 from mlpfac.scenario.parse import load, parse
 
 # (label, controller-table changes, adaptive-table changes)

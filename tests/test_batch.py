@@ -5,8 +5,8 @@ import copy
 import numpy as np
 import pytest
 
+from mlpfac.loop.metrics import metrics
 from mlpfac.loop.runner import run, run_batch
-from mlpfac.runs.metrics import metrics
 from mlpfac.scenario.parse import load, parse
 
 ARRAYS = ("pose", "pose_meas", "e", "e_true", "u", "ref")

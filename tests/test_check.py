@@ -14,8 +14,8 @@ from pathlib import Path
 import pytest
 
 import mlpfac
-from mlpfac.checks.judge import phase_figures
 from mlpfac.cli import main
+from mlpfac.loop.metrics import RunMetrics
 
 # A short kinematic figure of eight with its event at 3 s: "before", "after" and "whole" all exist.
 SCENARIO = """name = "kin-event"
@@ -120,11 +120,13 @@ def test_whole_is_the_run_after_the_warm_up_its_phases_joined():
             "after": {"start_s": 3.0, "end_s": 5.0, "rms_position_error_m": 3.0, "max_position_error_m": 4.0, "rms_heading_error_rad": 2.0},
         }
     }  # fmt: skip
-    pos, mx, head = phase_figures(m, "whole")
+    m |= {"status": "ok", "scenario": "paper", "controller": "corradini", "seed": 0, "T": 0.01, "steps": 500}
+    pos, mx, head = RunMetrics.from_json(m).figures("whole")
     assert math.isclose(pos, math.sqrt(5.0)) and mx == 4.0 and math.isclose(head, math.sqrt(2.0))
-    assert phase_figures(m, "after") == (3.0, 4.0, 2.0)
+    assert RunMetrics.from_json(m).figures("after") == (3.0, 4.0, 2.0)
     del m["phases"]["after"]
-    assert phase_figures(m, "whole") == phase_figures(m, "before") == (1.0, 2.0, 0.0)
+    run = RunMetrics.from_json(m)
+    assert run.figures("whole") == run.figures("before") == (1.0, 2.0, 0.0)
 
 
 def test_the_minimal_form_of_the_issue_works_as_written(tmp_path, capsys):

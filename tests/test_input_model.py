@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from mlpfac.control.adaptive.input_model import InputModel
-from mlpfac.loop.kernels import tracking_errors
+from mlpfac.model import tracking_errors
 
 T = 0.01
 R0 = np.zeros(5)  # a reference fixed at the origin: e is the pose seen from it

@@ -318,7 +318,9 @@ def test_view_needs_a_run_in_each_folder(tmp_path):
 
 
 def test_runs_without_logging_do_not_import_rerun():
-    code = "import sys, mlpfac.loop.runner, mlpfac.cli, mlpfac.scenario.parse, mlpfac.runs.files; print('rerun' in sys.modules)"
+    code = (
+        "import sys, mlpfac.loop.runner, mlpfac.cli, mlpfac.scenario.parse, mlpfac.files; print('rerun' in sys.modules)"
+    )
     out = subprocess.run(
         [sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=Path(__file__).parents[1]
     )
@@ -445,8 +447,8 @@ def test_runs_compared_in_one_recording_take_their_controllers_colours(tmp_path,
     from conftest import read_rrd
 
     from mlpfac.cli import main
+    from mlpfac.loop.metrics import metrics
     from mlpfac.plots import controller_colors
-    from mlpfac.runs.metrics import metrics
 
     for ctrl, seed in (("adaptive", 3), ("kanayama", 4)):
         rec = make_record(N=600, seed=seed)

@@ -11,13 +11,13 @@ from scipy.stats import wilcoxon as scipy_wilcoxon
 from mlpfac.control.law import Law
 from mlpfac.control.oracle import Oracle, told
 from mlpfac.loop.factory import make_controller
+from mlpfac.loop.metrics import LOST_FRACTION, RunMetrics, metrics, outcome
 from mlpfac.loop.record import RunRecord
 from mlpfac.loop.runner import run
 from mlpfac.model import G_true, f_true
 from mlpfac.plants.events import make_event
-from mlpfac.runs.metrics import LOST_FRACTION, metrics, outcome
 from mlpfac.scenario.parse import load
-from mlpfac.sweeps.paired import compare, paired_rows, twins, wilcoxon, window_rms
+from mlpfac.sweeps.paired import compare, paired_rows, twins, wilcoxon
 from mlpfac.sweeps.plan import plan
 
 LAW = Law((0.9, 0.85, 0.8), v_max=2.0, omega_max=5.0)
@@ -169,7 +169,7 @@ def test_oracle_on_wheel_radius_tracks_like_corradini_on_the_nominal_robot():
         ("eight-nominal", "corradini"),
     ):
         m = metrics(run(load(name).with_overrides(controller=ctrl, duration=hi)))
-        got[name, ctrl] = window_rms(m, lo, hi)
+        got[name, ctrl] = RunMetrics.from_json(m).window_rms(lo, hi)
     nominal = got["eight-nominal", "corradini"]
     assert got["eight-wheel-radius", "oracle"] < 1.6 * nominal
     assert got["eight-wheel-radius", "corradini"] > 10 * nominal
@@ -210,8 +210,9 @@ def test_window_rms_from_the_bins_is_the_phase_rms():
     m = metrics(run(load("paper").with_overrides(controller="corradini", duration=3.0, seed=2)))
     # the split at 12.5 s is beyond 3 s: one phase, [2, 3)
     ph = m["phases"]["before"]
-    assert window_rms(m, ph["start_s"], ph["end_s"]) == pytest.approx(ph["rms_position_error_m"], rel=1e-12)
-    assert window_rms(m | {"status": "diverged"}, 2.0, 3.0) is None
+    read = RunMetrics.from_json(m)
+    assert read.window_rms(ph["start_s"], ph["end_s"]) == pytest.approx(ph["rms_position_error_m"], rel=1e-12)
+    assert RunMetrics.from_json(m | {"status": "diverged"}).window_rms(2.0, 3.0) is None
 
 
 FIXED_X = [1.83, 0.50, 1.62, 2.48, 1.68, 1.88, 1.55, 3.06, 1.30, 0.9, 2.2, 1.1]
@@ -243,9 +244,10 @@ def test_paired_rows_on_a_sweep_plan():
         if not nominal:
             phases["after"] = {"start_s": 12.5, "end_s": 25.0, "rms_position_error_m": after}
         return {"status": "ok", "outcome": "tracking", "T": 0.01, "steps": 2500, "phases": phases,
+                "scenario": scn, "controller": ctrl, "seed": seed,
                 "position_ms_bins": {"bin_steps": 10, "m2": [base**2] * 250}}  # fmt: skip
 
-    ms = {j.key: fake(*j.key) for j in jobs}
+    ms = {j.key: RunMetrics.from_json(fake(*j.key)) for j in jobs}
     rows = {(r["scenario"], r["controller"]): r for r in paired_rows(jobs, ms)}
     a = rows["eight-wheel-radius", "adaptive"]
     assert a["x_oracle_median"] == pytest.approx(0.0205 / 0.0013)

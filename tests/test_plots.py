@@ -8,8 +8,9 @@ import json
 import pytest
 
 from mlpfac.cli import main
+from mlpfac.loop.metrics import RunMetrics
 from mlpfac.loop.runner import run
-from mlpfac.plots import controller_colors, figure1, outcome
+from mlpfac.plots import controller_colors, figure1
 from mlpfac.scenario.parse import load
 
 
@@ -34,6 +35,12 @@ def test_figure1_leaves_out_the_panels_that_do_not_apply(tmp_path, short_runs):
     assert figure1(corradini, corradini, tmp_path / "c.png") == list("abcef")  # (h) would be itself
     assert figure1(adaptive, None, tmp_path / "n.png") == list("abcdefg")
     assert all((tmp_path / f).stat().st_size > 20_000 for f in ("a.png", "k.png", "c.png", "n.png"))
+
+
+def outcome(m: dict) -> str:
+    """The outcome RunMetrics reads from a metrics.json with the keys ``m`` adds to a minimal one."""
+    least = {"scenario": "paper", "controller": "corradini", "seed": 0, "T": 0.01, "steps": 10, "phases": {}}
+    return RunMetrics.from_json(least | m).outcome
 
 
 def test_outcome_reads_the_newer_field_and_falls_back_to_status():
@@ -66,14 +73,15 @@ def test_sweep_writes_its_plot_and_plot_draws_it_again(tmp_path, capsys):
     assert (out / "c" / "compare.png").is_file()
 
 
-def _metrics(seed: int, rms_mm: float, how: str) -> dict:
-    """A finished run's metrics.json, as much of it as the sweep plots read."""
+def _metrics(seed: int, rms_mm: float, how: str) -> RunMetrics:
+    """A finished run's metrics.json, as much of it as the sweep plots read, read."""
     phase = {"start_s": 12.5, "end_s": 25.0, "rms_position_error_m": rms_mm / 1e3}
-    return {
+    return RunMetrics.from_json({
         "status": "ok", "outcome": how, "seed": seed, "T": 0.01, "excluded_s": [0.0, 2.0],
+        "scenario": "s", "controller": "c", "steps": 2500,
         "phases": {"before": phase | {"start_s": 2.0, "end_s": 12.5}, "after": phase},
         "position_ms_bins": {"bin_steps": 10, "m2": [(rms_mm / 1e3) ** 2] * 250},
-    }  # fmt: skip
+    })  # fmt: skip
 
 
 def test_the_plots_median_is_the_tables_over_the_same_finished_runs():

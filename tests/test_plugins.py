@@ -419,7 +419,8 @@ def test_a_config_of_a_class_no_file_names_is_refused_in_one_line(tmp_path, caps
 def test_a_seed_that_stopped_is_not_asked_for_telemetry_again(tmp_path):
     """In a batch without the batch form, a diverged seed's controller (which may be in a bad state)
     is neither stepped nor asked for telemetry again; the other seeds go on."""
-    from mlpfac.loop.runner import run_batch, seeded_generators
+    from mlpfac.loop.closed_loop import seeded_generators
+    from mlpfac.loop.runner import run_batch
 
     (tmp_path / "fragile.py").write_text(
         LAW + "\n\nclass Fragile(Law):\n"

@@ -10,9 +10,10 @@ import pytest
 
 from mlpfac.control.adaptive.controller import VARIANTS, Adaptive, AdaptiveConfig
 from mlpfac.control.adaptive.delay_bank import DelayBank
-from mlpfac.control.law import Law
+from mlpfac.control.law import Law, kanayama_step
 from mlpfac.exceptions import ConfigError
-from mlpfac.loop.kernels import kanayama_step, tracking_errors
+from mlpfac.loop.metrics import RunMetrics
+from mlpfac.model import tracking_errors
 from mlpfac.sweeps.bound import bound_rows, load, main, p_worse
 
 T = 0.01
@@ -133,6 +134,8 @@ def _metrics(scn: str, ctrl: str, seed: int, rms: float | None) -> dict:
         "seed": seed,
         "status": "ok" if ok else "diverged",
         "outcome": "tracking" if ok else "diverged",
+        "T": 0.01,
+        "steps": 1000,
         "phases": {"before": {"start_s": 2.0, "end_s": 10.0, "rms_position_error_m": rms if ok else None}},
     }
 
@@ -182,12 +185,13 @@ def test_the_windows_after_the_event_have_their_known_answer():
     1 mm and the rest 2 mm, whatever the seed; a run without an event has no row."""
     from mlpfac.sweeps.bound import window_rows
 
-    def run(seed: int, event: bool) -> dict:
+    def run(scn: str, seed: int, event: bool) -> RunMetrics:
         m2 = [9e-6] * 10 + [1e-6] * 20 + [4e-6] * 20  # 5 s of 10-step bins at T = 10 ms
-        return {"status": "ok", "T": 0.01, "steps": 500, "events": [{"time": 1.0}] if event else [],
-                "position_ms_bins": {"bin_steps": 10, "m2": m2}}  # fmt: skip
+        return RunMetrics.from_json({"status": "ok", "T": 0.01, "steps": 500, "events": [{"time": 1.0}] if event else [],
+                "position_ms_bins": {"bin_steps": 10, "m2": m2}, "scenario": scn, "controller": "v", "seed": seed,
+                "phases": {}})  # fmt: skip
 
-    metrics = {("s", "v", k): run(k, True) for k in range(3)} | {("n", "v", 0): run(0, False)}
+    metrics = {("s", "v", k): run("s", k, True) for k in range(3)} | {("n", "v", 0): run("n", 0, False)}
     (row,) = window_rows(metrics, ["v"], 2.0)
     assert row["scenario"] == "s"
     first, then = row["windows"]["v"]

@@ -303,7 +303,7 @@ def test_connect_streams_to_a_running_viewer_and_keeps_no_file(tmp_path):
 
 @pytest.mark.parametrize("exchange", [True, False], ids=["renameat2", "rename-aside"])
 def test_a_stage_replaces_a_full_folder_whole(tmp_path, monkeypatch, exchange):
-    from mlpfac.runs import files as outputs
+    from mlpfac import files as outputs
 
     if not exchange:
         monkeypatch.setattr(outputs, "_exchange", lambda a, b: False)
@@ -344,7 +344,7 @@ def test_a_ctrl_c_that_lands_in_a_del_still_stops_the_run(tmp_path):
     script = textwrap.dedent(
         f"""
         import sys
-        import mlpfac.loop.runner as runner
+        import mlpfac.loop.closed_loop as runner
 
         class Dropped:
             def __del__(self):

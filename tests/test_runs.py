@@ -6,8 +6,8 @@ import math
 import numpy as np
 import pytest
 
+from mlpfac.loop.metrics import metrics
 from mlpfac.loop.runner import run
-from mlpfac.runs.metrics import metrics
 from mlpfac.scenario.parse import load, parse
 
 

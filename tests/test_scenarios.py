@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from mlpfac.loop.metrics import metrics
 from mlpfac.loop.runner import run
-from mlpfac.runs.metrics import metrics
 from mlpfac.scenario.parse import load, parse, scenario_names
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -12,6 +12,7 @@ import time
 import pytest
 
 from mlpfac.exceptions import ConfigError
+from mlpfac.loop.metrics import RunMetrics
 from mlpfac.scenario.parse import load, to_toml
 from mlpfac.sweeps import cli as sweep_cli
 from mlpfac.sweeps import engine as sweep
@@ -27,8 +28,9 @@ def table(jobs, oc):
     return sweep.aggregate(jobs, oc.metrics)
 
 
-def strip(metrics: dict) -> dict:
-    return {k: v for k, v in metrics.items() if k != "wall_time_s"}
+def strip(metrics: RunMetrics) -> dict:
+    """A run's metrics.json as read, but its wall-clock time."""
+    return {k: v for k, v in metrics.data.items() if k != "wall_time_s"}
 
 
 def cli_args(out, *extra, command="sweep"):

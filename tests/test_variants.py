@@ -13,8 +13,8 @@ from mlpfac.control.baselines import CONTROLLERS, Corradini
 from mlpfac.control.law import Law
 from mlpfac.exceptions import ConfigError
 from mlpfac.loop.factory import make_controller
+from mlpfac.loop.metrics import metrics
 from mlpfac.loop.runner import run
-from mlpfac.runs.metrics import metrics
 from mlpfac.scenario.parse import load, parse
 from mlpfac.scenario.reference import Eight, sample
 from mlpfac.tables import covariance

@@ -201,7 +201,7 @@ def test_breaking_points_go_away_from_the_nominal_value():
     assert b["above"]["whole_axis"] and b["above"]["holds_to"] == 1.25
 
 
-def test_a_law_breaks_where_its_speed_limit_falls_below_the_reference(tmp_path):
+def test_a_law_breaks_where_its_speed_limit_falls_below_the_reference(tmp_path, capsys):
     """A known case: on the kinematic plant without noise Corradini's law tracks the figure of eight
     while v_max is above the reference's top speed, and loses it once v_max is below the speed it
     must keep on average (it falls behind by the difference every second)."""
@@ -228,6 +228,16 @@ def test_a_law_breaks_where_its_speed_limit_falls_below_the_reference(tmp_path):
     from mlpfac.results import render
 
     assert (out / "robustness.md").read_text() == render(out, {"view": "robustness"})
+    panels = tmp_path / "axes.png"  # the curves of several sweeps in one figure: this one's twice
+    assert main(["plot", str(out), str(out), "--panels", str(panels)]) == 0 and panels.stat().st_size > 10_000
+    edited = tmp_path / "edited"  # a robustness.json edited by hand: one line naming it, nothing written
+    edited.mkdir()
+    (edited / "robustness.json").write_text('{"curves": [{"scenario": "x", "point": {"k": 1}}]}')
+    capsys.readouterr()
+    assert main(["plot", str(out), str(edited), "--panels", str(tmp_path / "no.png")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == f"mlpfac: error: {edited / 'robustness.json'}: not what a sweep writes (KeyError: 'controller')"
+    assert not (tmp_path / "no.png").exists()
 
 
 V_MAX = [0.3, 0.6, 1.2, 1.6, 2.0]  # below the figure of eight's mean speed (0.77 m/s), above its top (1.12)
@@ -317,3 +327,15 @@ def test_a_grid_with_draws_on_dask_gives_the_local_table(tmp_path):
     assert len(remote.metrics) == 4 and engine.aggregate(jobs, remote.metrics) == engine.aggregate(jobs, local.metrics)
     for j in jobs:
         assert (j.folder(tmp_path / "dask") / "config.toml").read_text() == j.config
+
+
+def test_a_friction_axis_is_measured_from_the_robots_own_friction(tmp_path):
+    """``eight-friction`` sets mu = 0.2; along ``events.0.mu`` the nominal value is the robot's own
+    tyre friction (1, which the event changes), not the file's 0.2, so the axis goes down from 1."""
+    out = tmp_path / "out"
+    argv = ["sweep", "eight-friction", "--controllers", "kanayama", "--seeds", "0", "--duration", "13",
+            "--workers", "1", "--vary", "events.0.mu=0.5,1", "--out", str(out)]  # fmt: skip
+    assert main(argv) == 0
+    (b,) = json.loads((out / "robustness.json").read_text())["breaking_points"]
+    assert b["nominal"] == 1.0 and b["below"] == {"holds_to": 0.5, "fails_at": None, "whole_axis": True}
+    assert "above" not in b

@@ -81,3 +81,50 @@ def test_verify_says_what_it_cannot_verify(collected, tmp_path, capsys):
         "script: not verified: a script's table: run its command again to check it",
         "tiny: 1 of 1 runs bit-identical",
     ]
+
+
+GRID = (
+    "mlpfac sweep paper --controllers kanayama --vary events.0.factor=1,2 --vary plant.noise_cov=uniform:1e-07:1e-06 "
+    "--seeds 0-1 --duration 13 --out runs/grid"
+)
+
+
+def test_a_vary_dataset_re_plans_its_grid_and_draws(tmp_path, capsys):
+    """The recorded --vary of a dataset is planned again: the same grid points (the runs' keys) and
+    the same draws (the same bits), so every run of a robustness dataset can be verified."""
+    from mlpfac.verify import _plan
+
+    root = tmp_path / "repo"
+    out = root / "runs" / "grid"
+    argv = GRID.split()[1:]
+    assert main([*argv[: argv.index("--out")], "--out", str(out), "--workers", "1"]) == 0
+    docs = root / "docs"
+    assert main(["report", str(docs), "--collect", f"grid={out}", "--command", GRID]) == 0
+    capsys.readouterr()
+    runs = json.loads((docs / "data" / "grid" / RUNS_FILE).read_text())["runs"]
+    jobs, _ = _plan(GRID, root)
+    assert sorted(j.key for j in jobs) == sorted((r["scenario"], r["controller"], r["seed"]) for r in runs)
+    assert {r["scenario"] for r in runs} == {"paper+events.0.factor+1.0", "paper+events.0.factor+2.0"}
+    assert [v.line() for v in verify(docs, 4)] == ["grid: 4 of 4 runs bit-identical"]
+    meta = docs / "data" / "grid" / "meta.json"  # recorded without its axes: none of its runs is planned
+    meta.write_text(json.dumps({"command": GRID.replace(" --vary events.0.factor=1,2", "")}))
+    (line,) = [v.line() for v in verify(docs, 4)]
+    assert line == "grid: not verified: none of its 4 runs is in its command's plan: collect it again from its command"
+
+
+DOCS = Path(__file__).resolve().parents[1] / "docs"
+ROBUST = sorted(p.name for p in (DOCS / "data").glob("robust-*"))
+
+
+@pytest.mark.parametrize(
+    "name", [pytest.param(n, marks=[pytest.mark.menagerie] if "tiago" in n else []) for n in ROBUST]
+)
+def test_every_documented_robustness_dataset_re_plans_to_its_runs(name):
+    """Each robustness dataset keeps every run's figures, and its recorded command (its --vary)
+    plans exactly those runs again, so report --verify can check any of them."""
+    from mlpfac.verify import _plan
+
+    folder = DOCS / "data" / name
+    runs = json.loads((folder / RUNS_FILE).read_text())["runs"]
+    jobs, _ = _plan(json.loads((folder / "meta.json").read_text())["command"], DOCS.parent)
+    assert sorted(j.key for j in jobs) == sorted((r["scenario"], r["controller"], r["seed"]) for r in runs)

@@ -21,6 +21,7 @@ from mlpfac.checks.reports import junit as junit_xml
 from mlpfac.checks.reports import miss_lines
 from mlpfac.checks.reports import summary as summary_md
 from mlpfac.exceptions import ConfigError
+from mlpfac.loop.metrics import RunMetrics
 
 DEFAULT_OUT = Path("runs/check")
 DEFAULT_WORKERS = 2
@@ -123,7 +124,7 @@ def check(
     return result
 
 
-def _judge(b: Budget, groups, metrics: dict[tuple, dict], base_dir: Path | None) -> list[Case]:
+def _judge(b: Budget, groups, metrics: dict[tuple, RunMetrics], base_dir: Path | None) -> list[Case]:
     from mlpfac.checks.breaking import judge_breaking
 
     cases = []

@@ -18,6 +18,7 @@ import math
 from mlpfac.checks.judge import Case, Verdict
 from mlpfac.checks.limits import AFTER_THE_CHANGE, FIGURES, Group, Limit
 from mlpfac.exceptions import ConfigError
+from mlpfac.loop.metrics import RunMetrics
 from mlpfac.sweeps.robustness import breaking_points, check_threshold, curves, nominal
 from mlpfac.sweeps.vary import Vary, parse_vary
 
@@ -90,7 +91,7 @@ def check_axis(limit: Limit, vary: Vary, where: str) -> None:
 
 
 def judge_breaking(
-    limit: Limit, groups: list[Group], metrics: dict[tuple, dict], threshold: float | None
+    limit: Limit, groups: list[Group], metrics: dict[tuple, RunMetrics], threshold: float | None
 ) -> list[Case]:
     """One case per scenario and controller of the grid groups ``limit`` matches."""
     families: dict[tuple[str, str], Group] = {}
@@ -103,13 +104,16 @@ def judge_breaking(
     cases = []
     for (fam, _), g in families.items():
         axis = limit.axis
+        ran = next((j for j in g.jobs if j.key in metrics), g.jobs[0])  # a run that finished tells a friction's own
         found = [
             p
-            for p in breaking_points(curves(g.jobs, metrics, threshold), {(fam, axis): nominal(g.jobs[0], axis)})
+            for p in breaking_points(
+                curves(g.jobs, metrics, threshold), {(fam, axis): nominal(ran, axis, metrics.get(ran.key))}
+            )
             if p["axis"] == axis
         ]
         case = Case(limit, g, errors=sorted({j.seed for j in g.jobs if j.key not in metrics}))
-        case.time_s = math.fsum(metrics[j.key].get("wall_time_s", 0.0) for j in g.jobs if j.key in metrics)
+        case.time_s = math.fsum(metrics[j.key].wall_time_s for j in g.jobs if j.key in metrics)
         for fig, lim in limit.figures.items():
             case.verdicts.append(_verdict(fig, lim, found))
         cases.append(case)

@@ -18,10 +18,11 @@ from pathlib import Path
 
 from mlpfac.checks.limits import FIGURES, Group, Limit
 from mlpfac.exceptions import ConfigError
+from mlpfac.loop.metrics import RunMetrics
 from mlpfac.sweeps.folders import metrics_problem
-from mlpfac.sweeps.paired import compare, median, outcome
+from mlpfac.sweeps.paired import compare, median
 
-Runs = dict[int, dict]  # seed -> metrics.json
+Runs = dict[int, RunMetrics]  # seed -> metrics.json
 Value = tuple[float | None, int | None, str]  # (value, worst seed, note)
 
 
@@ -56,30 +57,10 @@ class Case:
         return [v for v in self.verdicts if not v.passed]
 
 
-def phase_figures(m: dict, phase: str) -> tuple[float, float, float] | None:
-    """(position RMS, largest position error, heading RMS) of run ``m`` in ``phase``; "whole" is
-    the run after the warm-up, the phases joined (RMS weighted by their lengths); None when the
-    phase has no step."""
-    ph = m["phases"]
-    names = ("before", "after") if phase == "whole" else (phase,)
-    parts = [ph[k] for k in names if k in ph and ph[k]["rms_position_error_m"] is not None]
-    if not parts:
-        return None
-    if len(parts) == 1:
-        p = parts[0]
-        return p["rms_position_error_m"], p["max_position_error_m"], p["rms_heading_error_rad"]
-    w = [max(p["end_s"] - p["start_s"], 0.0) for p in parts]
-
-    def rms(key: str) -> float:
-        return math.sqrt(math.fsum(wi * p[key] ** 2 for wi, p in zip(w, parts, strict=True)) / math.fsum(w))
-
-    return rms("rms_position_error_m"), max(p["max_position_error_m"] for p in parts), rms("rms_heading_error_rad")
-
-
 def _values(runs: Runs, phase: str, i: int) -> dict[int, float]:
     out = {}
     for seed, m in runs.items():
-        f = phase_figures(m, phase) if m["status"] == "ok" else None
+        f = m.figures(phase) if m.status == "ok" else None
         if f is not None and f[i] is not None:
             out[seed] = f[i]
     return out
@@ -105,27 +86,19 @@ def _mean(xs: list[float]) -> float:
 
 def _lost(runs: Runs, phase: str, base: Runs | None) -> Value:
     rms = _values(runs, phase, 0)
-    lost = {s: rms.get(s, 0.0) for s, m in runs.items() if outcome(m) == "lost"}
+    lost = {s: rms.get(s, 0.0) for s, m in runs.items() if m.outcome == "lost"}
     return len(lost), _largest(lost), ""
 
 
 def _diverged(runs: Runs, phase: str, base: Runs | None) -> Value:
-    bad = sorted((m["steps"], s) for s, m in runs.items() if m["status"] != "ok")
+    bad = sorted((m.steps, s) for s, m in runs.items() if m.status != "ok")
     return len(bad), (bad[0][1] if bad else None), ""  # the first to diverge
-
-
-def _rms(m: dict, phase: str) -> float | None:
-    """The compared figure: the phase's position RMS; inf for a run that diverged."""
-    if m["status"] != "ok":
-        return math.inf
-    f = phase_figures(m, phase)
-    return None if f is None else f[0]
 
 
 def _ratios(runs: Runs, phase: str, base: Runs) -> dict[int, float]:
     out = {}
     for seed in sorted(set(runs) & set(base)):
-        x, y = _rms(runs[seed], phase), _rms(base[seed], phase)
+        x, y = runs[seed].rms(phase), base[seed].rms(phase)
         if x is None or y is None:
             continue
         out[seed] = 1.0 if x == y else math.inf if y == 0 else 0.0 if math.isinf(y) else x / y
@@ -141,11 +114,11 @@ def _no_worse(runs: Runs, phase: str, base: Runs | None) -> Value:
 
 def _p(runs: Runs, phase: str, base: Runs | None) -> Value:
     base = base or {}
-    seeds = [s for s in sorted(set(runs) & set(base)) if None not in (_rms(runs[s], phase), _rms(base[s], phase))]
+    seeds = [s for s in sorted(set(runs) & set(base)) if None not in (runs[s].rms(phase), base[s].rms(phase))]
     if not seeds:
         return None, None, "no seed pairs with the baseline"
-    x = [_rms(runs[s], phase) for s in seeds]
-    y = [_rms(base[s], phase) for s in seeds]
+    x = [runs[s].rms(phase) for s in seeds]
+    y = [base[s].rms(phase) for s in seeds]
     _, n, p = compare(x, y, alternative="greater")
     return (1.0 if p is None else p), _largest(_ratios(runs, phase, base)), f"{n} seeds paired"
 
@@ -166,12 +139,12 @@ FIGURE_VALUES: dict[str, Callable[[Runs, str, Runs | None], Value]] = {
 assert set(FIGURE_VALUES) == {k for k, f in FIGURES.items() if not f.axis}  # breaking points: mlpfac.checks.breaking
 
 
-def judge(limit: Limit, group: Group, metrics: dict[tuple, dict], base: Runs | None) -> Case:
+def judge(limit: Limit, group: Group, metrics: dict[tuple, RunMetrics], base: Runs | None) -> Case:
     """The verdicts of ``limit`` on ``group``'s runs (``metrics`` by job key); ``base``: the
     baseline's runs of the group by seed, or None without a baseline."""
     runs = {j.seed: metrics[j.key] for j in group.jobs if j.key in metrics}
     case = Case(limit, group, errors=[j.seed for j in group.jobs if j.key not in metrics])
-    case.time_s = math.fsum(m.get("wall_time_s", 0.0) for m in runs.values())
+    case.time_s = math.fsum(m.wall_time_s for m in runs.values())
     paired = None
     if base is not None:
         case.missing = [s for s in runs if s not in base]
@@ -216,5 +189,5 @@ def baseline_runs(folder: Path, group: Group) -> Runs:
         except (OSError, ValueError):
             continue
         if metrics_problem(m, j) is None:
-            out[j.seed] = m
+            out[j.seed] = RunMetrics.from_json(m)
     return out

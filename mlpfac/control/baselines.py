@@ -74,8 +74,8 @@ class Corradini:
         )
 
     def reset(self, rng) -> None:
+        from mlpfac.control.law import corradini_step
         from mlpfac.jit import seeds
-        from mlpfac.loop.kernels import corradini_step
 
         rngs, self.single = seeds(rng)
         T = self.T
@@ -97,8 +97,8 @@ class Corradini:
         return self._tele
 
     def law_kernel(self) -> tuple[int, np.ndarray]:
-        """The law for the compiled closed loop: (its number, its constants) (:func:`mlpfac.loop.kernels.law_step`)."""
-        from mlpfac.loop.kernels import CORRADINI
+        """The law for the compiled closed loop: (its number, its constants) (:func:`mlpfac.control.law.law_step`)."""
+        from mlpfac.control.law import CORRADINI
 
         return CORRADINI, np.array([self.T, *self.law.lambdas, *self._limits], dtype=float)
 
@@ -134,8 +134,8 @@ class Kanayama:
         )
 
     def reset(self, rng) -> None:
+        from mlpfac.control.law import kanayama_step
         from mlpfac.jit import seeds
-        from mlpfac.loop.kernels import kanayama_step
 
         rngs, self.single = seeds(rng)
         self._kernel = kanayama_step
@@ -152,8 +152,8 @@ class Kanayama:
         return self._tele
 
     def law_kernel(self) -> tuple[int, np.ndarray]:
-        """The law for the compiled closed loop: (its number, its constants) (:func:`mlpfac.loop.kernels.law_step`)."""
-        from mlpfac.loop.kernels import KANAYAMA
+        """The law for the compiled closed loop: (its number, its constants) (:func:`mlpfac.control.law.law_step`)."""
+        from mlpfac.control.law import KANAYAMA
 
         return KANAYAMA, np.array(self._consts, dtype=float)
 

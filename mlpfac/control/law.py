@@ -11,15 +11,23 @@ so eigenvalues lambda_2, lambda_3 need
 
 :meth:`Law.cautious_control` generalises (35) to uncertain estimates (a cautious law, Fabri and
 Kadirkamanathan 2001) and to learned input gains; certainty equivalence is its zero-variance case.
+
+The law (35) is written once, compiled (:func:`_law`, :mod:`mlpfac.jit`): one run's
+:meth:`Law.control` calls it, as do the batch-first kernels of Corradini's law (:func:`corradini_step`,
+(35) with the nominal h of (34)), the adaptive step and the compiled closed loop (:func:`law_step`,
+with Kanayama's law :func:`kanayama_step`); the batch form of :meth:`Law.control` is its numpy twin,
+which the tests compare it with.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from mlpfac.exceptions import ConfigError
+from mlpfac.jit import kernel
 
 V_R_MIN = 1e-3  # m/s: k2 divides by T v_r; the references keep v_r far above this
 GAIN_RANGE = (0.25, 4.0)  # learned input gains b_v, b_omega are kept within these multiples of T
@@ -61,10 +69,11 @@ class Law:
         omega is computed first since v uses it; the v law uses the omega actually sent (after the
         limit), so that e1 still decays as lambda_1 when only omega saturates.
         """
-        if np.ndim(e) == 1:  # one run: the same arithmetic on Python floats, without array overhead
-            return self._control_one(
-                float(e[0]), float(e[1]), float(e[2]), float(h[0]), float(h[1]), float(h[2]), float(v_r), T
-            )
+        if np.ndim(e) == 1:  # one run: the compiled law, the one the batch kernels run
+            u = np.empty(2)
+            v_max, omega_max = (math.inf if x is None else x for x in (self.v_max, self.omega_max))
+            _law(*map(float, e[:3]), *map(float, h[:3]), float(v_r), T, *self.lambdas, v_max, omega_max, u)
+            return u
         k1, k2, k3 = self.gains(T, v_r)
         omega = (h[..., 2] + k2 * e[..., 1] + k3 * e[..., 2]) / T
         if self.omega_max is not None:
@@ -73,20 +82,6 @@ class Law:
         if self.v_max is not None:
             v = np.clip(v, -self.v_max, self.v_max)
         return np.stack([v, omega], axis=-1)
-
-    def _control_one(
-        self, e1: float, e2: float, e3: float, h1: float, h2: float, h5: float, v_r: float, T: float
-    ) -> np.ndarray:
-        """:meth:`control` for one run, operation for operation (so a batch of runs gives the same bits)."""
-        l1, l2, l3 = self.lambdas
-        k2 = (1.0 - l2) * (1.0 - l3) / (T * max(v_r, V_R_MIN))
-        omega = (h5 + k2 * e2 + (2.0 - l2 - l3) * e3) / T
-        if self.omega_max is not None:
-            omega = min(max(omega, -self.omega_max), self.omega_max)
-        v = ((1.0 - l1) * e1 + h1 * omega + h2) / T
-        if self.v_max is not None:
-            v = min(max(v, -self.v_max), self.v_max)
-        return np.array([v, omega])
 
     def cautious_control(
         self,
@@ -147,3 +142,48 @@ class Law:
         if self.v_max is not None:
             v = np.clip(v, -self.v_max, self.v_max)
         return np.stack([v, omega], axis=-1)
+
+
+@kernel()
+def _law(e0, e1, e2, h1, h2, h5, v_r, T, l1, l2, l3, v_max, omega_max, u):
+    """(35) with the corrected gains (36); omega first, limited, then v with the omega sent."""
+    k2 = (1.0 - l2) * (1.0 - l3) / (T * max(v_r, V_R_MIN))
+    omega = (h5 + k2 * e1 + (2.0 - l2 - l3) * e2) / T
+    omega = min(max(omega, -omega_max), omega_max)
+    v = ((1.0 - l1) * e0 + h1 * omega + h2) / T
+    u[0] = min(max(v, -v_max), v_max)
+    u[1] = omega
+
+
+@kernel("void(f8[:, ::1], f8, f8, f8, f8, f8, f8, f8, f8, f8[:, ::1], f8[:, ::1])")
+def corradini_step(e, v_r, omega_r, T, l1, l2, l3, v_max, omega_max, h_hat, u):
+    """(35) given the nominal h1 = T e2, h2 = T v_r cos e3, h5 = T omega_r, for B seeds."""
+    for b in range(e.shape[0]):
+        e0, e1, e2 = e[b, 0], e[b, 1], e[b, 2]
+        h1, h2, h5 = T * e1, T * v_r * math.cos(e2), T * omega_r
+        h_hat[b, 0], h_hat[b, 1], h_hat[b, 2] = h1, h2, h5
+        _law(e0, e1, e2, h1, h2, h5, v_r, T, l1, l2, l3, v_max, omega_max, u[b])
+
+
+@kernel("void(f8[:, ::1], f8, f8, f8, f8, f8, f8, f8, f8[:, ::1])")
+def kanayama_step(e, v_r, omega_r, Kx, Ky, Ktheta, v_max, omega_max, u):
+    """Kanayama's law for B seeds: v = v_r cos e3 + Kx e1, omega = omega_r + v_r (Ky e2 + Ktheta sin e3)."""
+    for b in range(e.shape[0]):
+        v = v_r * math.cos(e[b, 2]) + Kx * e[b, 0]
+        omega = omega_r + v_r * (Ky * e[b, 1] + Ktheta * math.sin(e[b, 2]))
+        u[b, 0] = min(max(v, -v_max), v_max)
+        u[b, 1] = min(max(omega, -omega_max), omega_max)
+
+
+KANAYAMA, CORRADINI = 1, 2  # the laws the compiled closed loop runs (mlpfac.loop.compiled), by number
+
+
+@kernel()
+def law_step(law, c, e, v_r, omega_r, u, tele):
+    """One step of a law given by number, for B seeds: :func:`kanayama_step` with c = (Kx, Ky,
+    Ktheta, v_max, omega_max) or :func:`corradini_step` with c = (T, lambda_1..3, v_max, omega_max)
+    and its h_hat in ``tele`` (B, 3)."""
+    if law == KANAYAMA:
+        kanayama_step(e, v_r, omega_r, c[0], c[1], c[2], c[3], c[4], u)
+    else:
+        corradini_step(e, v_r, omega_r, c[0], c[1], c[2], c[3], c[4], c[5], tele, u)

@@ -43,12 +43,10 @@ from collections import deque
 
 import numpy as np
 
-from mlpfac.control.law import Law
+from mlpfac.control.law import Law, corradini_step, kanayama_step
 from mlpfac.jit import as_rows, seeds
-from mlpfac.loop.kernels import corradini_step, kanayama_step, tracking_errors
+from mlpfac.model import tracking_errors
 from mlpfac.plants.events import ControlPeriod, DelayLine, Event, SensorDelay, WheelRadius
-
-GAIN_KINDS = ("wheel_radius", "control_period")
 
 
 def told(event: Event) -> tuple[float, str, float]:

@@ -10,7 +10,6 @@ their figures (from each folder's metrics.json).
 
 from __future__ import annotations
 
-import json
 import subprocess
 import time
 from collections.abc import Sequence
@@ -35,13 +34,14 @@ from mlpfac.log.sinks import (
     check_recording,
     start_web_viewer,
 )
+from mlpfac.loop.metrics import RunMetrics
 from mlpfac.plots.colors import NAMES, controller_colors
 
 COMPARE_REF_COLOR: RGB = (110, 110, 110)  # the reference, when the runs' colours include orange
 SCALAR_ROOTS = ("errors", "controls", "wheels", "weight_change", "weights", "ekf", "h", "plant", "ctrl")
 
 
-def run_files(runs: Sequence[Path | str]) -> list[tuple[Path, dict]]:
+def run_files(runs: Sequence[Path | str]) -> list[tuple[Path, RunMetrics | None]]:
     """(run.rrd, metrics) of each run folder (or .rrd file beside its metrics.json); ConfigError
     naming the first that has no recording."""
     out = []
@@ -50,12 +50,9 @@ def run_files(runs: Sequence[Path | str]) -> list[tuple[Path, dict]]:
         if not f.is_file():
             raise ConfigError(str(d), "no run.rrd in this folder")
         try:
-            m = json.loads((f.parent / "metrics.json").read_text())
-            m = m if isinstance(m, dict) else {}
-            if not isinstance(m.get("phases", {}), dict) or not isinstance(m.get("events", []), list):
-                m = {}  # a metrics.json of another shape: the run is shown without its figures
-        except (OSError, ValueError, UnicodeDecodeError):
-            m = {}
+            m = RunMetrics.read(f.parent / "metrics.json")
+        except (OSError, ValueError, KeyError, TypeError, AttributeError, RecursionError):
+            m = None  # none, or of another shape: the run is shown without its figures
         out.append((f, m))
     if not out:
         raise ConfigError("view", "name at least one run folder")
@@ -124,7 +121,7 @@ def save_comparison(runs: Sequence[Path | str], path: Path | str) -> Path:
     """Write the runs' comparison recording to ``path`` (checked and read back like a run's): made
     beside it and renamed into place when whole, so a failure (a broken run.rrd, a full disk, a
     signal) leaves an earlier file at ``path`` as it was."""
-    from mlpfac.runs.files import Stage, check_save_file
+    from mlpfac.files import Stage, check_save_file
 
     files = run_files(runs)
     path = Path(path)
@@ -164,10 +161,10 @@ def _chunks(f: Path) -> list:
         raise ConfigError(str(f), "is not a whole rerun recording (truncated, or not an .rrd file)") from None
 
 
-def send_comparison(rec: rr.RecordingStream, files: list[tuple[Path, dict]]) -> None:
+def send_comparison(rec: rr.RecordingStream, files: list[tuple[Path, RunMetrics | None]]) -> None:
     """Every run's chunks under its own prefix, recoloured; the text panel; the layout."""
     labels = _labels([m for _, m in files], [f for f, _ in files])
-    colors = _colors([m.get("controller", label) for (_, m), label in zip(files, labels, strict=True)])
+    colors = _colors([m.controller if m else label for (_, m), label in zip(files, labels, strict=True)])
     rec.send_recording_name(" vs ".join(labels))
     paths: set[str] = set()
     refs = []
@@ -203,10 +200,10 @@ def _strip_points(chunk) -> np.ndarray:
     return np.asarray(v.flatten(), dtype=float).reshape(-1, 2)
 
 
-def _labels(ms: list[dict], files: list[Path]) -> list[str]:
+def _labels(ms: list[RunMetrics | None], files: list[Path]) -> list[str]:
     labels = []
     for m, f in zip(ms, files, strict=True):
-        base = f"{m['controller']}-s{m['seed']}" if "controller" in m and "seed" in m else f.parent.name or f.stem
+        base = f"{m.controller}-s{m.seed}" if m else f.parent.name or f.stem
         label, i = entity_part(base), 2
         while label in labels:
             label, i = f"{entity_part(base)}-{i}", i + 1
@@ -258,19 +255,20 @@ def _pale(c: RGB) -> RGB:
     return tuple(int(round(v + (255 - v) * 0.5)) for v in c)
 
 
-def _about(files: list[tuple[Path, dict]], labels: list[str], colors: list[tuple[RGB, str]]) -> str:
+def _about(files: list[tuple[Path, RunMetrics | None]], labels: list[str], colors: list[tuple[RGB, str]]) -> str:
     lines = ["**runs compared**: one colour per controller (pale: measured); grey: the reference", ""]
     for (f, m), label, (_, name) in zip(files, labels, colors, strict=True):
-        after = (m.get("phases") or {}).get("after") or (m.get("phases") or {}).get("before") or {}
-        rms = after.get("rms_position_error_m") if isinstance(after, dict) else None  # None: ended within its warm-up
-        where = " after the event" if "after" in (m.get("phases") or {}) else ""
+        phases = m.phases if m else {}
+        after = phases.get("after") or phases.get("before")
+        rms = after.rms_position_error_m if after else None  # None: ended within its warm-up
+        where = " after the event" if "after" in phases else ""
         fig = (
             f", position RMS{where} {rms * 1e3:.1f} mm"
             if isinstance(rms, int | float) and not isinstance(rms, bool)
             else ""
         )
-        lines.append(f"- **{label}** ({name}): {m.get('scenario', f.parent)}, {m.get('status', '?')}{fig}")
-    events = {(ev.get("time"), ev.get("text")) for _, m in files for ev in m.get("events") or []}
+        lines.append(f"- **{label}** ({name}): {m.scenario if m else f.parent}, {m.status if m else '?'}{fig}")
+    events = {(ev.get("time"), ev.get("text")) for _, m in files if m for ev in m.events if isinstance(ev, dict)}
     for t, text in sorted(events, key=str):
         lines.append(f"\n**event at {t:g} s**: {text} (dark-red diamonds on every plot)")
     return "\n".join(lines) + "\n"

@@ -1,7 +1,7 @@
 """The closed loop compiled between events: many control steps of one seed in one kernel call.
 
 For a plant with a compiled control step (the MuJoCo robot, :mod:`mlpfac.plants.compiled`) and a
-controller whose law is a kernel (Kanayama, Corradini: :func:`mlpfac.loop.kernels.law_step`), the
+controller whose law is a kernel (Kanayama, Corradini: :func:`mlpfac.control.law.law_step`), the
 runner steps each seed from one event (or sink flush) to the next with :func:`segment`. Every
 step is the runner's step, made of the same kernels the step-by-step loop calls with B = 1:
 error (2) of the measured pose, the law, error of the true pose, the record's rows, the runner's
@@ -13,8 +13,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from mlpfac.control.law import law_step
 from mlpfac.jit import kernel
-from mlpfac.loop.kernels import bad_seeds, law_step, tracking_errors
+from mlpfac.loop.kernels import bad_seeds
+from mlpfac.model import tracking_errors
 from mlpfac.plants.compiled import S_POSE, plant_step, with_robot
 
 BAD = -1  # the runner's test stopped the seed (a plant's own reasons are its codes, > 0)

@@ -13,13 +13,13 @@ from __future__ import annotations
 import dataclasses
 
 from mlpfac.control.adaptive.controller import VARIANTS, Adaptive
-from mlpfac.control.baselines import Corradini, Kanayama, PluginController
+from mlpfac.control.baselines import Controller, Corradini, Kanayama, PluginController
 from mlpfac.control.oracle import Oracle, told
 from mlpfac.plants import make_plant  # noqa: F401 (the plant half of the factory, as mlpfac.loop.factory.make_plant)
 from mlpfac.scenario.parse import Scenario
 
 
-def make_controller(scn: Scenario, instance: object | None = None):
+def make_controller(scn: Scenario, instance: object | None = None) -> Controller:
     """The scenario's controller: a named variant of the adaptive scheme, Corradini's or Kanayama's law,
     the oracle (the law told the scenario's events, :mod:`mlpfac.control.oracle`), or a user's own
     (:mod:`mlpfac.control.plugins`; ``instance``: an object of it, made by the caller, runs one seed)."""

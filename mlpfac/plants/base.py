@@ -26,6 +26,10 @@ class Plant(Protocol):
 
     supported_events: frozenset[str]
 
+    batched: bool
+    """True: one object steps B seeds (poses (B, 3), as the kinematic model); False: one seed, and
+    the runner steps a batch as one object per seed."""
+
     def reset(self, q0: np.ndarray, rng: np.random.Generator, u0: np.ndarray | None = None) -> None:
         """Start a run at pose ``q0``, moving at ``u0`` = (v, omega) (None: at rest); ``rng`` drives noise."""
 
@@ -54,6 +58,13 @@ class Plant(Protocol):
 
     def diverged(self) -> str | None:
         """A reason string if the simulation left its valid range (flipped, airborne, non-finite)."""
+
+    def provenance(self) -> dict:
+        """What it simulates, recorded in a scenario's ``[provenance]`` and checked when a
+        config.toml runs again ({} for the kinematic model, which is all in the scenario)."""
+
+    def found(self) -> dict:
+        """The ``[plant]`` keys the scenario left unset and the plant found in its model ({}: none)."""
 
     def geometry(self) -> list[dict]:
         """Static shapes of the robot for the 3D view, relative to the measured frame.

@@ -49,7 +49,7 @@ class KinematicPlant:
     def reset(self, q0: np.ndarray, rng, u0: np.ndarray | None = None) -> None:
         """``u0`` is ignored: the error model (7) has no velocity state."""
         from mlpfac.jit import seeds
-        from mlpfac.loop.kernels import kinematic_step
+        from mlpfac.model import kinematic_step
 
         rngs, self.single = seeds(rng)
         B, N = len(rngs), len(self.ref) - 1
@@ -109,6 +109,12 @@ class KinematicPlant:
         ok = np.isfinite(self.e).all(axis=-1)
         out = [None if x else "non-finite tracking error" for x in ok]
         return out[0] if self.single else out
+
+    def provenance(self) -> dict:
+        return {}  # the model is all in the scenario
+
+    def found(self) -> dict:
+        return {}
 
     def geometry(self) -> list[dict]:
         return [

@@ -65,6 +65,7 @@ class MujocoPlant(MujocoEvents):
     """
 
     supported_events = frozenset(EVENT_KINDS)
+    batched = False  # one robot: a batch is one object per seed
     # what the compiled step reads and events change: real wheel radius, axle height at rest, PI
     # gains, physics steps per control step
     real_radius, _z_rest = _Kept("fl", K.F_RADIUS), _Kept("fl", K.F_ZREST)

@@ -4,6 +4,6 @@ controller shared with the viewer (:mod:`.colors`). matplotlib is imported only 
 
 from mlpfac.plots.colors import controller_colors
 from mlpfac.plots.figure1 import figure1
-from mlpfac.plots.sweeps import outcome, sweep_plots
+from mlpfac.plots.sweeps import sweep_plots
 
-__all__ = ["controller_colors", "figure1", "outcome", "sweep_plots"]
+__all__ = ["controller_colors", "figure1", "sweep_plots"]

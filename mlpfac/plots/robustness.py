@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from mlpfac.exceptions import ConfigError
 from mlpfac.plots.colors import controller_colors, mpl
 
 
@@ -89,9 +90,19 @@ def _curves(ax, share_ax, fam: str, key: str, rows: list[dict], points: list[dic
     ax.set_title(fam, fontsize=10)
     ax.set_ylabel("median position RMS after the change [mm]")
     ax.legend(fontsize=7)
+    for a in (ax, share_ax):
+        _xscale(a, [r["point"][key] for r in rows])
     share_ax.set_ylabel("seeds tracking [%]")
     share_ax.set_ylim(-5, 105)
     share_ax.set_xlabel(key)
+
+
+def _xscale(ax, values: list[float]) -> None:
+    """A log scale for values over more than a decade (a friction from 1 to 0.05), else linear."""
+    if min(values) > 0 and max(values) >= 10 * min(values):
+        ax.set_xscale("log")
+        ax.set_xticks(sorted(set(values)), [f"{v:g}" for v in sorted(set(values))], minor=False)
+        ax.minorticks_off()
 
 
 def _map(fig, ax, fam: str, ctrl: str, keys: list[str], rows: list[dict]) -> None:
@@ -126,3 +137,82 @@ def _edges(v: list[float]) -> np.ndarray:
         return np.array([a[0] - 0.5, a[0] + 0.5])
     mid = (a[1:] + a[:-1]) / 2
     return np.concatenate([[a[0] - (mid[0] - a[0])], mid, [a[-1] + (a[-1] - mid[-1])]])
+
+
+ROW_KEYS = ("scenario", "controller", "point", "median_m", "tracking", "runs", "bound_m", "threshold_m")
+TOP_MM = 3e3  # where a median of diverged runs is drawn (x) on the panels
+
+
+def panels_plot(folders: list[Path]) -> bytes | None:
+    """A PNG: one figure of small panels from several sweeps' robustness.json, one panel per scenario with
+    one axis: the median position RMS after the change against the value per controller (a hollow
+    marker where not every seed tracks, an x at the top where the median diverged), the bound dashed,
+    the threshold (the tracking limit) dotted; one legend. None when no scenario has one axis."""
+    found = []
+    for folder in folders:
+        try:
+            data = json.loads((folder / "robustness.json").read_text())
+            for r in data["curves"]:  # what the panels read of each row, there
+                if gone := [k for k in ROW_KEYS if k not in r]:
+                    raise KeyError(gone[0])
+            for fam in dict.fromkeys(r["scenario"] for r in data["curves"]):
+                rows = [r for r in data["curves"] if r["scenario"] == fam]
+                if len(rows[0]["point"]) == 1:
+                    found.append((fam, next(iter(rows[0]["point"])), rows))
+        except (ValueError, KeyError, TypeError, AttributeError, IndexError) as err:  # edited by hand
+            raise ConfigError(
+                str(folder / "robustness.json"), f"not what a sweep writes ({type(err).__name__}: {err})"
+            ) from None
+    if not found:
+        return None
+    import io
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    ctrls = list(dict.fromkeys(r["controller"] for _, _, rows in found for r in rows))
+    colors = {k: mpl(v) for k, v in controller_colors(ctrls).items()}
+    cols = min(len(found), 4)
+    nrows = math.ceil(len(found) / cols)
+    fig, axs = plt.subplots(nrows, cols, figsize=(3.4 * cols, 2.9 * nrows + 0.6), squeeze=False, sharey=True,
+                            layout="constrained")  # fmt: skip
+    for ax, (fam, key, rows) in zip(axs.flat, found, strict=False):
+        for ctrl in dict.fromkeys(r["controller"] for r in rows):
+            rs = sorted((r for r in rows if r["controller"] == ctrl), key=lambda r: r["point"][key])
+            x = np.array([r["point"][key] for r in rs], dtype=float)
+            med = np.array([_finite(r["median_m"]) for r in rs]) * 1e3
+            c = colors[ctrl]
+            ax.plot(x, np.minimum(med, TOP_MM), "-", color=c, lw=1.2)
+            whole = np.array([r["tracking"] == r["runs"] for r in rs])
+            ax.plot(x[whole], med[whole], "o", color=c, ms=3.5)
+            ax.plot(x[~whole], np.minimum(med[~whole], TOP_MM), "o", mfc="white", mec=c, ms=4)
+            lost = np.isnan(med) | (med > TOP_MM)
+            ax.plot(x[lost], np.full(lost.sum(), TOP_MM), "x", color=c, ms=5)
+        one = sorted((r for r in rows if r["bound_m"] is not None), key=lambda r: r["point"][key])
+        bx = list(dict.fromkeys(r["point"][key] for r in one))
+        by = [1e3 * _finite(next(r["bound_m"] for r in one if r["point"][key] == v)) for v in bx]
+        ax.plot(bx, by, "k--", lw=1.1)
+        ax.axhline(1e3 * rows[0]["threshold_m"], color="0.3", ls=":", lw=1.2)
+        ax.set_yscale("log")
+        _xscale(ax, [r["point"][key] for r in rows])
+        ax.set_title(f"{fam}\n{key}", fontsize=8.5)
+        ax.tick_params(labelsize=7.5)
+    for ax in axs[:, 0]:
+        ax.set_ylabel("median position RMS\nafter the change [mm]", fontsize=8)
+    for ax in list(axs.flat)[len(found) :]:
+        ax.set_visible(False)
+    from matplotlib.lines import Line2D
+
+    handles = [Line2D([], [], color=colors[c], marker="o", ms=3.5, label=c) for c in ctrls] + [
+        Line2D([], [], color="k", ls="--", label="bound (best law told the change)"),
+        Line2D([], [], color="0.3", ls=":", label="tracking limit"),
+        Line2D([], [], color="0.5", marker="o", mfc="white", ls="", label="not every seed tracks"),
+        Line2D([], [], color="0.5", marker="x", ls="", label="median diverged"),
+    ]
+    fig.legend(handles=handles, loc="outside lower center", ncol=min(len(handles), 5), fontsize=7.5, frameon=False)
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=90)
+    plt.close(fig)
+    return buf.getvalue()

@@ -24,30 +24,23 @@ from pathlib import Path
 
 import numpy as np
 
+from mlpfac.loop.metrics import RunMetrics
 from mlpfac.plots.colors import controller_colors, mpl
 
 STEMS = ("sweep", "compare")
 
 
-def outcome(m: dict) -> str:
-    """ "tracking", "lost" or "diverged": the run's outcome where its metrics say it, else from
-    ``status`` ("ok": the error stayed under the divergence limit, counted as tracking)."""
-    for key in ("outcome", "tracking_status", "status"):
-        if m.get(key) in ("tracking", "lost", "diverged"):
-            return m[key]
-    return "tracking" if m.get("status") == "ok" else "diverged"
-
-
-def load_runs(out: Path) -> dict[tuple[str, str], list[dict]]:
+def load_runs(out: Path) -> dict[tuple[str, str], list[RunMetrics]]:
     """Every whole run's metrics under ``out``, by (scenario, controller), in seed order."""
-    runs: dict[tuple[str, str], list[dict]] = {}
+    runs: dict[tuple[str, str], list[RunMetrics]] = {}
     for f in sorted(out.glob("*/*/seed-*/metrics.json")):
         try:
             m = json.loads(f.read_text())
         except (OSError, ValueError, RecursionError):
             continue
         if isinstance(m, dict) and m.get("status") in ("ok", "diverged") and "phases" in m:
-            runs.setdefault((str(m.get("scenario")), str(m.get("controller"))), []).append(m)
+            run = RunMetrics.from_json(m)  # a KeyError, TypeError or ValueError: a file edited by hand
+            runs.setdefault((run.scenario, run.controller), []).append(run)
     return runs
 
 
@@ -109,37 +102,24 @@ def draw(path: Path, pairs: list[tuple[str, str]], runs: dict) -> Path:
     return path
 
 
-def _rms_bins(m: dict) -> tuple[float, np.ndarray] | None:
-    """(bin width [s], position RMS per bin [m]) from metrics.json's ``position_ms_bins``; None
-    for a run that has none."""
-    bins = m.get("position_ms_bins")
-    if not isinstance(bins, dict) or not isinstance(bins.get("m2"), list):
-        return None
-    m2 = np.array([np.nan if x is None else x for x in bins["m2"]], dtype=float)
-    return float(bins["bin_steps"]) * float(m["T"]), np.sqrt(m2)
-
-
 def _row_height(controllers: int) -> float:
     return max(3.4, 0.38 * controllers + 1.3)
 
 
-def _phase(ms: list[dict]) -> str:
-    has_after = any(
-        "after" in m["phases"] and m["phases"]["after"]["end_s"] > m["phases"]["after"]["start_s"] for m in ms
-    )
-    return "after" if has_after else "before"
+def _phase(ms: list[RunMetrics]) -> str:
+    return "after" if any(m.last_phase == "after" for m in ms) else "before"
 
 
-def _event_text(ms: list[dict]) -> tuple[float | None, str]:
+def _event_text(ms: list[RunMetrics]) -> tuple[float | None, str]:
     for m in ms:
-        for ev in m.get("events") or []:
+        for ev in m.events:
             return float(ev["time"]), str(ev.get("text") or ev.get("kind") or "event")
     return None, ""
 
 
-def finished(m: dict) -> bool:
+def finished(m: RunMetrics) -> bool:
     """A run that reached its end (tracking or lost): the runs a sweep's statistics are over."""
-    return outcome(m) in ("tracking", "lost")
+    return m.outcome in ("tracking", "lost")
 
 
 def log_ticks(axis, lo: float, hi: float) -> None:
@@ -164,12 +144,12 @@ def _distribution(ax, scn: str, ctrls: list[str], runs: dict, colors: dict) -> N
     for p, c in zip(pos, ctrls, strict=True):
         ms = runs[(scn, c)]
         ok = [m for m in ms if finished(m)]
-        pairs = [(m["phases"].get(phase, {}).get("rms_position_error_m"), outcome(m) == "lost") for m in ok]
+        pairs = [(m.phases[phase].rms_position_error_m if phase in m.phases else None, m.outcome == "lost") for m in ok]
         pairs = [(x * 1e3, lost) for x, lost in pairs if x is not None and np.isfinite(x)]
         v = np.array([x for x, _ in pairs])
         lost_v = np.array([lost for _, lost in pairs], dtype=bool)
         other = [
-            f"{sum(outcome(m) == k for m in ms)} {k}" for k in ("lost", "diverged") if any(outcome(m) == k for m in ms)
+            f"{sum(m.outcome == k for m in ms)} {k}" for k in ("lost", "diverged") if any(m.outcome == k for m in ms)
         ]
         labels.append(f"{c}  {len(ok)}/{len(ms)}" + (f"  median {np.median(v):.3g}" if len(v) else "  none finished"))
         if other:
@@ -200,7 +180,7 @@ def _distribution(ax, scn: str, ctrls: list[str], runs: dict, colors: dict) -> N
     ax.set_yticks(pos, labels, fontsize=8)
     for tick, c in zip(ax.get_yticklabels(), ctrls, strict=True):
         ms = runs[(scn, c)]
-        tick.set_color("black" if all(outcome(m) == "tracking" for m in ms) else "firebrick")
+        tick.set_color("black" if all(m.outcome == "tracking" for m in ms) else "firebrick")
     ax.set_ylim(pos[-1] - 0.6, 0.6)
     what = "after the event" if phase == "after" else "after the warm-up"
     ax.set_xlabel(f"position RMS {what} [mm]")
@@ -208,12 +188,12 @@ def _distribution(ax, scn: str, ctrls: list[str], runs: dict, colors: dict) -> N
     ax.grid(axis="x", alpha=0.3, which="both")
 
 
-def _over_time(ax, ctrls: list[str], groups: list[list[dict]], colors: dict) -> None:
+def _over_time(ax, ctrls: list[str], groups: list[list[RunMetrics]], colors: dict) -> None:
     t_event, text = _event_text([m for ms in groups for m in ms])
-    warm = max((m.get("excluded_s", [0, 0])[1] for ms in groups for m in ms), default=0.0)
+    warm = max((m.excluded_s[1] for ms in groups for m in ms), default=0.0)
     spans, missing, peak = [], 0, 0.0
     for c, ms in zip(ctrls, groups, strict=True):
-        series = [_rms_bins(m) for m in ms if finished(m)]
+        series = [m.rms_bins() for m in ms if finished(m)]
         missing += sum(s is None for s in series)
         series = [s for s in series if s is not None]
         if not series:

@@ -1,18 +1,20 @@
 """One run into a folder: config.toml, metrics.json, figure1.png and run.rrd, written beside the
-folder and put in place only when whole (:class:`mlpfac.runs.files.Stage`), under its lock. What
+folder and put in place only when whole (:class:`mlpfac.files.Stage`), under its lock. What
 ``mlpfac run`` does, and :func:`mlpfac.run` with ``out``.
 """
 
 from __future__ import annotations
 
+import json
 import sys
 from contextlib import nullcontext
 from dataclasses import dataclass, replace
 from pathlib import Path
 
 from mlpfac.exceptions import ConfigError, PluginError
-from mlpfac.interrupts import raise_swallowed
-from mlpfac.runs.files import Stage, check_run_folder, check_save_file, folder_lock, holds_finished_run
+from mlpfac.files import Stage, check_run_folder, check_save_file, folder_lock, write_atomic
+from mlpfac.interrupts import raise_swallowed, sigint_deferred
+from mlpfac.loop.metrics import metrics
 from mlpfac.runs.replay import DEFER_MAX_S, DeferredSink
 
 
@@ -114,7 +116,6 @@ def run_into_folder(scn, out: Path, built, recording: Recording, baseline=None, 
 def _keep_error(folder: Stage, out: Path, scn, err: PluginError, held: bool) -> None:
     """A run whose controller raised: its folder holds error.txt and config.toml (and what was
     recorded), unless ``out`` holds a finished run, which is kept."""
-    from mlpfac.runs.files import write_atomic
     from mlpfac.scenario.parse import to_toml
 
     if held:
@@ -160,7 +161,6 @@ def _run_into(folder: Stage, out: Path, scn, built, sink, baseline, painter) -> 
     fails is a ConfigError naming the file where it would have gone."""
     from mlpfac.interrupts import Terminated
     from mlpfac.loop.runner import run
-    from mlpfac.runs.files import write_run
 
     rec = run(scn, sink=sink, built=built)
     writing = folder.path / "metrics.json"
@@ -185,3 +185,26 @@ def _run_into(folder: Stage, out: Path, scn, built, sink, baseline, painter) -> 
 def _unwritten(name: str, err: OSError, out: Path) -> ConfigError:
     """A write that failed, as one line naming the file where it would have gone."""
     return ConfigError(name, f"cannot write ({err.strerror or err}); nothing was changed in {out}")
+
+
+def write_run(out: Path, scn, rec) -> dict:
+    """config.toml, then metrics.json (its presence means the folder is whole) of one run; run.rrd
+    is written by its sink. Returns the metrics."""
+    from mlpfac.scenario.parse import to_toml
+
+    m = metrics(rec)
+    with sigint_deferred():
+        (out / "metrics.json").unlink(missing_ok=True)  # a run being replaced is not whole meanwhile
+        write_atomic(out / "config.toml", to_toml(scn.table))
+        write_atomic(out / "metrics.json", json.dumps(m, indent=2) + "\n")
+    return m
+
+
+def holds_finished_run(out: Path) -> bool:
+    """A folder whose metrics.json says the run ended (ok or diverged), or a file that exists."""
+    if not out.is_dir():
+        return out.exists()
+    try:
+        return json.loads((out / "metrics.json").read_text()).get("status") != "interrupted"
+    except (OSError, ValueError, AttributeError):
+        return False

@@ -27,17 +27,16 @@ class Recorded(PlantSpec, Protocol):
 
 def recorded(scn: Recorded) -> tuple[dict, dict]:
     """Build the plant once (every check made): what it simulates, and the [plant] keys it found."""
-    from mlpfac import __version__
     from mlpfac.plants import make_plant
     from mlpfac.scenario.reference import sample
+    from mlpfac.version import __version__
 
     plant = make_plant(scn, sample(scn.reference, np.arange(2) * scn.T))
     out = {"mlpfac": __version__, "numpy": np.__version__}
-    if hasattr(plant, "provenance"):
-        out |= plant.provenance()
+    out |= plant.provenance()
     if scn.plugin is not None:
         out["controller"] = scn.plugin.provenance()
-    return out, plant.found() if hasattr(plant, "found") else {}
+    return out, plant.found()
 
 
 def check_model(recorded, config, where: str) -> None:

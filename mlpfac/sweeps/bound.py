@@ -27,18 +27,19 @@ import math
 from collections import Counter
 from pathlib import Path
 
-from mlpfac.sweeps.paired import _rms, median, outcome
+from mlpfac.loop.metrics import RunMetrics
+from mlpfac.sweeps.paired import compared_rms, median
 
 BOUND_LAWS = ("oracle", "oracle-kanayama", "corradini", "kanayama")
 
 
-def load(folders: list[Path]) -> dict[tuple[str, str, int], dict]:
+def load(folders: list[Path]) -> dict[tuple[str, str, int], RunMetrics]:
     """(scenario, controller, seed) -> the run's metrics, from the sweep folders in order."""
-    metrics: dict[tuple[str, str, int], dict] = {}
+    metrics: dict[tuple[str, str, int], RunMetrics] = {}
     for folder in folders:
         for path in sorted(Path(folder).glob("*/*/seed-*/metrics.json")):
-            m = json.loads(path.read_text())
-            metrics[(m["scenario"], m["controller"], int(m["seed"]))] = m
+            m = RunMetrics.read(path)
+            metrics[(m.scenario, m.controller, m.seed)] = m
     return metrics
 
 
@@ -57,7 +58,7 @@ def p_worse(x: list[float], y: list[float]) -> float | None:
 
 
 def bound_rows(
-    metrics: dict[tuple[str, str, int], dict], variants: list[str], laws: tuple[str, ...] = BOUND_LAWS
+    metrics: dict[tuple[str, str, int], RunMetrics], variants: list[str], laws: tuple[str, ...] = BOUND_LAWS
 ) -> list[dict]:
     """One row per scenario (in the order first met) with the bound and each variant against it."""
     scenarios = list(dict.fromkeys(s for s, _, _ in metrics))
@@ -67,19 +68,19 @@ def bound_rows(
         seeds = sorted(set.intersection(*({k for s, c, k in metrics if s == scn and c == n} for n in needed)))
         if not seeds:
             continue
-        per_law = {n: [_rms(metrics[(scn, n, k)]) for k in seeds] for n in laws}
+        per_law = {n: [compared_rms(metrics[(scn, n, k)]) for k in seeds] for n in laws}
         bound = [min(per_law[n][i] for n in laws) for i in range(len(seeds))]
         which = Counter(min(laws, key=lambda n: per_law[n][i]) for i in range(len(seeds))).most_common(1)[0][0]
         row = {"scenario": scn, "seeds": seeds, "bound_m": median(bound), "bound_law": which, "variants": {}}
         for name in variants:
             runs = [metrics[(scn, name, k)] for k in seeds]
-            x = [_rms(m) for m in runs]
+            x = [compared_rms(m) for m in runs]
             ratios = [a / b for a, b in zip(x, bound, strict=True)]
             row["variants"][name] = {
                 "median_m": median(x),
                 "ratio": median(ratios),
                 "worst_ratio": max(ratios),
-                "tracking": sum(outcome(m) == "tracking" for m in runs),
+                "tracking": sum(m.outcome == "tracking" for m in runs),
                 "runs": len(runs),
                 "p_worse_than_corradini": p_worse(x, per_law["corradini"]) if "corradini" in laws else None,
             }
@@ -118,20 +119,18 @@ def markdown(rows: list[dict], variants: list[str]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def window_rows(metrics: dict[tuple[str, str, int], dict], names: list[str], seconds: float) -> list[dict]:
+def window_rows(metrics: dict[tuple[str, str, int], RunMetrics], names: list[str], seconds: float) -> list[dict]:
     """Per scenario with an event and per controller of ``names``: the median over seeds of the
     position RMS in the ``seconds`` after the first event and from then to the end (0.1 s bins)."""
-    from mlpfac.sweeps.paired import window_rms
-
     rows = []
     for scn in dict.fromkeys(s for s, _, _ in metrics):
         row: dict = {"scenario": scn, "windows": {}}
         for name in names:
-            runs = [m for (s, c, _), m in sorted(metrics.items()) if s == scn and c == name and m["events"]]
+            runs = [m for (s, c, _), m in sorted(metrics.items()) if s == scn and c == name and m.events]
             if runs:
-                t = runs[0]["events"][0]["time"]
-                first = [window_rms(m, t, t + seconds) for m in runs]
-                then = [window_rms(m, t + seconds, m["steps"] * m["T"]) for m in runs]
+                t = runs[0].events[0]["time"]
+                first = [m.window_rms(t, t + seconds) for m in runs]
+                then = [m.window_rms(t + seconds, m.steps * m.T) for m in runs]
                 row["windows"][name] = tuple(median([x for x in xs if x is not None]) for xs in (first, then))
         if row["windows"]:
             rows.append(row)

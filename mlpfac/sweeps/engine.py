@@ -19,7 +19,7 @@ below is importable from here:
        DIR/<scenario>/<controller>/seed-0003/metrics.json   = run_metrics.metrics(rec)
 
    Each folder is written beside its place and renamed into it whole
-   (:func:`mlpfac.runs.files.write_folder_whole`): a killed sweep leaves it as it was or whole. A run counts as done (:func:`check_done`) when config.toml
+   (:func:`mlpfac.files.write_folder_whole`): a killed sweep leaves it as it was or whole. A run counts as done (:func:`check_done`) when config.toml
    equals the resolved scenario, metrics.json is a metrics dict of this scenario, controller and
    seed, and with ``save_rrd`` run.rrd has the size and sha256 recorded in metrics.json; any other
    folder is run again, and the summary says how many and why.
@@ -36,7 +36,7 @@ below is importable from here:
    own run without the event, in paired.csv / .md / .json and summary.md.
 
 How runs enter the statistics: each run is tracking, lost or diverged (``outcome`` in
-metrics.json, :func:`mlpfac.runs.metrics.outcome`); the position / heading RMS statistics (mean, median,
+metrics.json, :func:`mlpfac.loop.metrics.outcome`); the position / heading RMS statistics (mean, median,
 95 % confidence interval of the mean, Student t) are over the runs that finished (tracking or lost;
 status "ok"), next to the three counts. The worst seed is the diverged run that
 diverged first (fewest steps, then lowest seed) if any diverged, else the bounded run with the
@@ -58,7 +58,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from mlpfac.exceptions import ConfigError, OutputError, WorkerLostError  # noqa: F401 (also as mlpfac.sweeps.engine.*)
-from mlpfac.runs.files import folder_lock
+from mlpfac.files import folder_lock
 from mlpfac.sweeps.execute import (  # noqa: F401  (the engine's API, used as mlpfac.sweeps.engine.*)
     TMP_DIR,
     Outcome,
@@ -70,7 +70,6 @@ from mlpfac.sweeps.folders import (  # noqa: F401
     PHASES,
     _oserror,
     check_done,
-    load_done,
     metrics_problem,
     write_result,
 )

@@ -11,8 +11,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from mlpfac.exceptions import ConfigError, WorkerLostError
+from mlpfac.files import check_run_folder, folder_lock, remove_staged
 from mlpfac.interrupts import Terminated, raise_swallowed, sigint_deferred
-from mlpfac.runs.files import check_run_folder, folder_lock, remove_staged
+from mlpfac.loop.metrics import RunMetrics
 from mlpfac.sweeps.folders import _oserror, check_done, write_result
 from mlpfac.sweeps.plan import Job
 from mlpfac.sweeps.worker import _worker_init, one_blas_thread, pool_context, run_task
@@ -27,7 +28,7 @@ class Outcome:
     """What a sweep produced: the metrics of every whole run, in plan order, and the failures."""
 
     jobs: list[Job]
-    metrics: dict[tuple, dict]
+    metrics: dict[tuple, RunMetrics]
     errors: dict[tuple, str]
     skipped: int
     ran: int
@@ -125,7 +126,7 @@ def _execute(jobs, out, workers, client, batched, batch_size, save_rrd, progress
             if why is not None:
                 redo[why] = redo.get(why, 0) + 1
         else:
-            done[j.key] = m
+            done[j.key] = RunMetrics.from_json(m)
     outcome = Outcome(jobs, done, {}, skipped=len(done), ran=0, redo=redo)
     by_key = {j.key: j for j in todo}
     tasks = make_tasks(todo, batched, batch_size)
@@ -153,7 +154,7 @@ def _execute(jobs, out, workers, client, batched, batch_size, save_rrd, progress
                     outcome.errors[job.key] = res["error"]
                     failed += 1
                 else:
-                    outcome.metrics[job.key] = res["metrics"]
+                    outcome.metrics[job.key] = RunMetrics.from_json(res["metrics"])
                     failed += res["metrics"]["status"] != "ok"
                 if on_result is not None:
                     on_result(res)

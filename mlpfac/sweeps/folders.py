@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from mlpfac.exceptions import OutputError
-from mlpfac.runs.files import write_folder_whole
+from mlpfac.files import write_folder_whole
 
 if TYPE_CHECKING:
     from mlpfac.sweeps.plan import Job
@@ -128,11 +128,6 @@ def _sha256(path: Path) -> str:
         for block in iter(lambda: fh.read(1 << 20), b""):
             h.update(block)
     return h.hexdigest()
-
-
-def load_done(out: Path, job: Job, save_rrd: bool = False) -> dict | None:
-    """The metrics of ``job`` if its folder is whole and was run with the same configuration (see :func:`check_done`)."""
-    return check_done(out, job, save_rrd)[0]
 
 
 def _oserror(err: OSError, what: str) -> OutputError:

@@ -22,26 +22,11 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 
+from mlpfac.loop.metrics import RunMetrics
 from mlpfac.sweeps.plan import Job
 
 REFERENCES = ("corradini", "oracle")
 TWIN_IGNORES = ("name", "description", "events", "seed")  # what a scenario's twin without the event may differ in
-
-
-def window_rms(m: dict, start_s: float, end_s: float) -> float | None:
-    """Position RMS over [start_s, end_s) from the run's 0.1 s bins (None: no bins, or no whole bin)."""
-    bins = m.get("position_ms_bins")
-    if not bins or m.get("status") != "ok":
-        return None
-    w, ms, T = bins["bin_steps"], bins["m2"], m["T"]
-    lo, hi = round(start_s / T), min(round(end_s / T), m["steps"])
-    total = count = 0.0
-    for i, x in enumerate(ms):
-        a, b = i * w, min((i + 1) * w, m["steps"])
-        if a >= lo and a < hi:
-            total += x * (b - a)
-            count += b - a
-    return math.sqrt(total / count) if count else None
 
 
 def wilcoxon(x: list[float], y: list[float], alternative: str = "two-sided") -> float | None:
@@ -55,18 +40,12 @@ def wilcoxon(x: list[float], y: list[float], alternative: str = "two-sided") -> 
     return float(test(d, alternative=alternative).pvalue)
 
 
-def last_phase(m: dict) -> str:
-    ph = m["phases"]
-    return "after" if "after" in ph and ph["after"]["end_s"] > ph["after"]["start_s"] else "before"
-
-
-def _rms(m: dict | None) -> float | None:
-    """The compared figure: the last phase's position RMS; inf for a run that diverged; None if missing."""
+def compared_rms(m: RunMetrics | None) -> float | None:
+    """The compared figure: the last phase's position RMS; inf for a run that diverged or whose last
+    phase has no step; None if missing."""
     if m is None:
         return None
-    if m["status"] != "ok":
-        return math.inf
-    x = m["phases"][last_phase(m)]["rms_position_error_m"]
+    x = m.rms()
     return math.inf if x is None else x
 
 
@@ -112,7 +91,7 @@ def _ratios(x: list[float | None], y: list[float | None]) -> list[float]:
     return [a / b for a, b in zip(x, y, strict=True) if a is not None and b and math.isfinite(a) and math.isfinite(b)]
 
 
-def paired_rows(jobs: list[Job], metrics: dict[tuple, dict]) -> list[dict]:
+def paired_rows(jobs: list[Job], metrics: dict[tuple, RunMetrics]) -> list[dict]:
     """One row per scenario and controller (plan order): the paired figures of the module's docstring."""
     seeds: dict[tuple[str, str], list[int]] = {}
     for j in jobs:
@@ -121,14 +100,14 @@ def paired_rows(jobs: list[Job], metrics: dict[tuple, dict]) -> list[dict]:
     rows = []
     for (scn, ctrl), ss in seeds.items():
         ms = [metrics.get((scn, ctrl, s)) for s in ss]
-        x = [_rms(m) for m in ms]
+        x = [compared_rms(m) for m in ms]
         row: dict = {"scenario": scn, "controller": ctrl, "runs": sum(m is not None for m in ms)}
         for how in ("tracking", "lost", "diverged"):
-            row[how] = sum(m is not None and outcome(m) == how for m in ms)
+            row[how] = sum(m is not None and m.outcome == how for m in ms)
         done = [m for m in ms if m is not None]
-        row["phase"] = last_phase(done[0]) if done else None
+        row["phase"] = done[0].last_phase if done else None
         row["pos_rms_m_median"] = median([v for v in x if v is not None and math.isfinite(v)])
-        refs = {r: [_rms(metrics.get((scn, r, s))) for s in ss] for r in REFERENCES}
+        refs = {r: [compared_rms(metrics.get((scn, r, s))) for s in ss] for r in REFERENCES}
         row["x_oracle_median"] = median(_ratios(x, refs["oracle"]))
         row["oracle_pos_rms_m_median"] = median([v for v in refs["oracle"] if v is not None and math.isfinite(v)])
         for r in REFERENCES:
@@ -152,15 +131,10 @@ def _event_cost(metrics, scn, ctrl, seeds, twin, x) -> list[float | None]:
         if a is None or m is None or t is None:
             out.append(None)
             continue
-        ph = m["phases"].get("after")
-        b = window_rms(t, ph["start_s"], ph["end_s"]) if ph else None
+        ph = m.phases.get("after")
+        b = t.window_rms(ph.start_s, ph.end_s) if ph else None
         out.append(math.inf if not math.isfinite(a) else (a / b if b else None))
     return out
-
-
-def outcome(m: dict) -> str:
-    """tracking / lost / diverged (metrics written before outcomes were recorded: finished = tracking)."""
-    return m.get("outcome") or ("tracking" if m["status"] == "ok" else "diverged")
 
 
 def _p(p: float | None) -> str:

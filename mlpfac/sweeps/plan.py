@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from mlpfac.exceptions import ConfigError
-from mlpfac.runs.files import resolved
+from mlpfac.files import resolved
 from mlpfac.sweeps.vary import Vary
 
 MAX_RUNS = 100_000  # runs per sweep: a larger plan is refused before anything is loaded

@@ -14,8 +14,8 @@ the position RMS after the change, i.e. the last phase; a diverged run counts as
 The **breaking point** along an axis (the other axes held at each of their values) is, on each
 side of the nominal value, the last value going away from it at which the point holds, before
 the first at which it does not; "whole axis" when it holds to the axis' end. The nominal value is
-the one at which an event changes nothing (1 for a scale or factor, 0 steps of delay), else the
-file's own value (the axis' smallest where the file leaves the key out). Written as robustness.json / .md beside the sweep's tables, and drawn in
+the one at which an event changes nothing (1 for a scale or factor, 0 steps of delay, the robot's
+own friction for a friction event's ``mu``), else the file's own value (the axis' smallest where the file leaves the key out). Written as robustness.json / .md beside the sweep's tables, and drawn in
 robustness.png (:mod:`mlpfac.plots.robustness`).
 """
 
@@ -23,16 +23,19 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from pathlib import Path
 
 from mlpfac.exceptions import ConfigError
-from mlpfac.runs.files import write_atomic
-from mlpfac.sweeps.paired import _rms, median, outcome
+from mlpfac.files import write_atomic
+from mlpfac.loop.metrics import RunMetrics
+from mlpfac.sweeps.paired import compared_rms, median
 from mlpfac.sweeps.plan import Job
 
 TOLD = ("oracle", "oracle-kanayama")  # the laws told the change: the bound
 UNCHANGED = {"scale": 1.0, "factor": 1.0, "mass_scale": 1.0, "kv_scale": 1.0, "force_scale": 1.0, "steps": 0}
 SIDES = ("below", "above")
+FROM = re.compile(r"friction (\S+) -> ")  # the robot's own friction, in a friction event's record
 
 
 def check_threshold(threshold: float | None) -> float | None:
@@ -60,15 +63,23 @@ def median_interval(xs: list[float]) -> tuple[float | None, float | None]:
     return s[k - 1], s[n - k]
 
 
-def nominal(job: Job, key: str):
+def nominal(job: Job, key: str, metrics: RunMetrics | None = None):
     """The value of ``key`` at which nothing changes: 1 for an event's scale or factor, 0 steps of
-    delay, else the file's own value (None where the file leaves it out)."""
+    delay, a friction event's ``mu`` the robot's own (what the event changed, as the job's run
+    recorded it in ``metrics``), else the file's own value (None where the file leaves it out)."""
     from mlpfac.scenario.draws import get
     from mlpfac.scenario.parse import load
 
     last = key.rsplit(".", 1)[-1]
     if key.startswith("events.") and last in UNCHANGED:
         return UNCHANGED[last]
+    if key.startswith("events.") and last == "mu" and metrics is not None:
+        value = dict(job.point).get(key)
+        for ev in metrics.events:  # "tyre/floor sliding friction 1 -> 0.2"
+            if ev.get("kind") == "friction" and ev.get("params", {}).get("mu") == value:
+                found = FROM.search(ev.get("text", ""))
+                if found:
+                    return float(found[1])
     try:
         value = get(load(job.source, build=False).table, key)
     except (KeyError, ConfigError):
@@ -76,7 +87,7 @@ def nominal(job: Job, key: str):
     return value if isinstance(value, int | float) and not isinstance(value, bool) else None
 
 
-def curves(jobs: list[Job], metrics: dict[tuple, dict], threshold: float | None) -> list[dict]:
+def curves(jobs: list[Job], metrics: dict[tuple, RunMetrics], threshold: float | None) -> list[dict]:
     """One row per scenario, controller and grid point (plan order) of the jobs with a point."""
     cells: dict[tuple, list[Job]] = {}
     for j in jobs:
@@ -88,14 +99,14 @@ def curves(jobs: list[Job], metrics: dict[tuple, dict], threshold: float | None)
             best = told.setdefault((fam, point), {})
             for j in js:
                 if j.key in metrics:
-                    best[j.seed] = min(best.get(j.seed, math.inf), _rms(metrics[j.key]))
+                    best[j.seed] = min(best.get(j.seed, math.inf), compared_rms(metrics[j.key]))
     rows = []
     for (fam, ctrl, point), js in cells.items():
         ms = [metrics[j.key] for j in js if j.key in metrics]
-        xs = [_rms(m) for m in ms]
+        xs = [compared_rms(m) for m in ms]
         lo, hi = median_interval(xs)
-        limit = threshold if threshold is not None else median([m.get("lost_threshold_m", 0.2) for m in ms])
-        tracking = sum(outcome(m) == "tracking" for m in ms)
+        limit = threshold if threshold is not None else median([m.lost_threshold_m or 0.2 for m in ms])
+        tracking = sum(m.outcome == "tracking" for m in ms)
         med = median(xs)
         bound = told.get((fam, point), {})
         rows.append({
@@ -210,17 +221,18 @@ def markdown(points: list[dict], threshold: float | None, rows: list[dict] | Non
     return "\n".join(lines) + "\n" + note
 
 
-def write_robustness(out: Path, jobs: list[Job], metrics: dict[tuple, dict], meta: dict) -> list[Path]:
+def write_robustness(out: Path, jobs: list[Job], metrics: dict[tuple, RunMetrics], meta: dict) -> list[Path]:
     """robustness.json / .md / .png beside the sweep's tables (nothing when no job has a grid point)."""
     if not any(j.point for j in jobs):
         return []
     threshold = meta.get("threshold_m")
     rows = curves(jobs, metrics, threshold)
-    first = {}
+    first: dict[tuple[str, str], Job] = {}  # a job of each scenario and axis, one that finished if any did
     for j in jobs:
         for key, _ in j.point:
-            first.setdefault((j.family, key), j)
-    nominals = {fk: nominal(j, fk[1]) for fk, j in first.items()}
+            if (j.family, key) not in first or (j.key in metrics and first[j.family, key].key not in metrics):
+                first[j.family, key] = j
+    nominals = {fk: nominal(j, fk[1], metrics.get(j.key)) for fk, j in first.items()}
     points = breaking_points(rows, nominals)
     paths = [out / "robustness.json", out / "robustness.md"]
     write_atomic(paths[0], json.dumps({"meta": meta, "curves": rows, "breaking_points": points}, indent=2) + "\n")

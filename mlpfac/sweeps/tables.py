@@ -7,9 +7,10 @@ import math
 from collections.abc import Callable
 from pathlib import Path
 
-from mlpfac.runs.files import write_atomic
+from mlpfac.files import write_atomic
+from mlpfac.loop.metrics import OUTCOMES, RunMetrics
 from mlpfac.sweeps.folders import PHASES
-from mlpfac.sweeps.paired import PAIRED_COLUMNS, median, outcome, summary
+from mlpfac.sweeps.paired import PAIRED_COLUMNS, median, summary
 from mlpfac.sweeps.plan import Job
 
 
@@ -26,9 +27,9 @@ def _ci95(xs: list[float]) -> tuple[float | None, float | None]:
     return mean - half, mean + half
 
 
-def aggregate(jobs: list[Job], metrics: dict[tuple, dict]) -> list[dict]:
+def aggregate(jobs: list[Job], metrics: dict[tuple, RunMetrics]) -> list[dict]:
     """One row per scenario, controller and phase (in plan order) from the runs' metrics."""
-    groups: dict[tuple[str, str], list[dict]] = {}
+    groups: dict[tuple[str, str], list[RunMetrics]] = {}
     runs: dict[tuple[str, str], list[Job]] = {}
     for j in jobs:
         groups.setdefault((j.scenario, j.controller), [])
@@ -39,23 +40,21 @@ def aggregate(jobs: list[Job], metrics: dict[tuple, dict]) -> list[dict]:
     for (scn, ctrl), ms in groups.items():
         js = runs[(scn, ctrl)]
         n = len(ms)
-        ok = [m for m in ms if m["status"] == "ok"]
-        diverged = sorted((m for m in ms if m["status"] != "ok"), key=lambda m: (m["steps"], m["seed"]))
-        has_after = any(
-            "after" in m["phases"] and m["phases"]["after"]["end_s"] > m["phases"]["after"]["start_s"] for m in ms
-        )
+        ok = [m for m in ms if m.status == "ok"]
+        diverged = sorted((m for m in ms if m.status != "ok"), key=lambda m: (m.steps, m.seed))
+        has_after = any(m.last_phase == "after" for m in ms)
         for phase in PHASES if has_after else PHASES[:1]:
-            ph = [m["phases"][phase] for m in ok]
-            pos = [p["rms_position_error_m"] for p in ph if p["rms_position_error_m"] is not None]
-            head = [p["rms_heading_error_rad"] for p in ph if p["rms_heading_error_rad"] is not None]
-            mx = [p["max_position_error_m"] for p in ph if p["max_position_error_m"] is not None]
+            ph = [m.phases[phase] for m in ok]
+            pos = [p.rms_position_error_m for p in ph if p.rms_position_error_m is not None]
+            head = [p.rms_heading_error_rad for p in ph if p.rms_heading_error_rad is not None]
+            mx = [p.max_position_error_m for p in ph if p.max_position_error_m is not None]
             if diverged:
                 worst = diverged[0]
             else:
-                scored = [(m["phases"][phase]["rms_position_error_m"] or -1.0, -m["seed"], m) for m in ok]
+                scored = [(m.phases[phase].rms_position_error_m or -1.0, -m.seed, m) for m in ok]
                 worst = max(scored, key=lambda s: s[:2])[2] if scored else None
             row = {"scenario": scn, "controller": ctrl, "phase": phase, "runs": n, "bounded": len(ok)}
-            row |= {how: sum(outcome(m) == how for m in ms) for how in ("tracking", "lost", "diverged")}
+            row |= {how: sum(m.outcome == how for m in ms) for how in OUTCOMES}
             row["bounded_share"] = len(ok) / n if n else None
             for name, xs in (("pos_rms_m", pos), ("heading_rms_rad", head)):
                 lo, hi = _ci95(xs)
@@ -67,10 +66,10 @@ def aggregate(jobs: list[Job], metrics: dict[tuple, dict]) -> list[dict]:
                 }
             row["max_err_m_median"] = median(mx)
             row["max_err_m_max"] = max(mx) if mx else None
-            weights = [m["max_abs_weight"] for m in ms if m.get("max_abs_weight") is not None]
+            weights = [m.max_abs_weight for m in ms if m.max_abs_weight is not None]
             row["max_abs_weight"] = max(weights) if weights else None  # over every run, diverged ones too
-            row["worst_seed"] = worst["seed"] if worst else None
-            row["worst_status"] = worst["status"] if worst else None
+            row["worst_seed"] = worst.seed if worst else None
+            row["worst_status"] = worst.status if worst else None
             if js[0].point:  # a grid point of --vary: its values by key
                 row["vary"] = dict(js[0].point)
             if js[0].drawn:  # drawn per seed: each run's draw beside its figures, to plot one against the other
@@ -79,11 +78,11 @@ def aggregate(jobs: list[Job], metrics: dict[tuple, dict]) -> list[dict]:
     return rows
 
 
-def _drawn(job: Job, m: dict | None, phase: str) -> dict:
+def _drawn(job: Job, m: RunMetrics | None, phase: str) -> dict:
     """One run of a scenario that draws per seed: its seed, what was drawn, its outcome and position RMS."""
-    ph = (m or {}).get("phases", {}).get(phase) or {}
-    return {"seed": job.seed, **job.drawn, "outcome": outcome(m) if m else None,
-            "pos_rms_m": ph.get("rms_position_error_m")}  # fmt: skip
+    ph = m.phases.get(phase) if m else None
+    return {"seed": job.seed, **job.drawn, "outcome": m.outcome if m else None,
+            "pos_rms_m": ph.rms_position_error_m if ph else None}  # fmt: skip
 
 
 def _f(x: float | None, scale: float = 1.0, digits: int = 2) -> str:

@@ -20,10 +20,10 @@ if _folder and _owner == str(os.getppid()):
 try:
     import numpy as np
 
-    from mlpfac.loop.kernels import tracking_errors
+    from mlpfac.loop.metrics import metrics  # noqa: F401
     from mlpfac.loop.runner import run  # noqa: F401
+    from mlpfac.model import tracking_errors
     from mlpfac.plants import compiled  # noqa: F401
-    from mlpfac.runs.metrics import metrics  # noqa: F401
     from mlpfac.scenario.parse import load, parse  # noqa: F401
     from mlpfac.sweeps.worker import run_task  # noqa: F401
 

@@ -25,7 +25,7 @@ def run_task(jobs: list[Job], batched: bool = False, save_rrd: bool = False, tmp
     Recordings are made in ``tmp_dir`` (OUT/.tmp for a local sweep; the system's temporary folder
     on a Dask worker). An interrupted run raises KeyboardInterrupt: it must never be written as done.
     """
-    from mlpfac.runs.metrics import metrics
+    from mlpfac.loop.metrics import metrics
     from mlpfac.scenario.parse import parse
 
     if batched and len(jobs) > 1 and not save_rrd:
@@ -47,8 +47,8 @@ def run_task(jobs: list[Job], batched: bool = False, save_rrd: bool = False, tmp
 
 
 def _run_one(job: Job, save_rrd: bool, tmp_dir: str | None = None) -> dict:
+    from mlpfac.loop.metrics import metrics
     from mlpfac.loop.runner import run
-    from mlpfac.runs.metrics import metrics
     from mlpfac.scenario.parse import parse
 
     rrd_path = sink = None

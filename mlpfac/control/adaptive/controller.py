@@ -93,7 +93,7 @@ class Adaptive:
         from mlpfac.control.adaptive.input_model import (
             InputModel,  # the kernels: imported by a run, not by reading a scenario
         )
-        from mlpfac.control.adaptive.kernels import adaptive_step
+        from mlpfac.control.adaptive.kernels import adaptive_step, settings
         from mlpfac.jit import seeds
 
         rngs, self.single = seeds(rng)
@@ -130,23 +130,15 @@ class Adaptive:
         self._trace = np.zeros(B)
         self._H = np.zeros((B, 3, a))
         est, lim = self.est, self.law
-        ints = np.array(
-            [Lf, LG, c.networks.residual, self.prior is not None, est.Q is not None, nf, c.law_form == "kanayama"],
-            dtype=np.int64,
-        )
-        params = np.array(
-            [
-                c.networks.error_scale,
-                T,
-                *lim.lambdas,
-                np.inf if lim.v_max is None else lim.v_max,
-                np.inf if lim.omega_max is None else lim.omega_max,
-                est.forgetting,
-                np.inf if est.P_max is None else est.P_max,
-                *self.kanayama,
-            ],
-            dtype=float,
-        )
+        ints, params = settings(
+            Lf, LG, c.networks.residual, self.prior is not None, est.Q is not None, nf, c.law_form == "kanayama",
+            c.networks.error_scale, T, lim.lambdas,
+            np.inf if lim.v_max is None else lim.v_max,
+            np.inf if lim.omega_max is None else lim.omega_max,
+            est.forgetting,
+            np.inf if est.P_max is None else est.P_max,
+            self.kanayama,
+        )  # fmt: skip
         Q = est.Q if est.Q is not None else np.zeros((1, 1))
         self._args = (est.z, est.P, self._S, self._H, self._u, self._innovation, self._h_hat, self._trace)
         self._consts = (ints, params, est.R, Q)

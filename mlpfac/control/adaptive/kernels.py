@@ -1,7 +1,7 @@
 """Compiled kernels of the adaptive controller's hot path, batch-first: the networks (10)-(15) and
 their closed-form Jacobian (19)-(24), the EKF update (29)-(32), the law (35) with the corrected
-(36), and the adaptive step made of them. The rest of the loop (error, kinematic plant, baseline
-laws, divergence test) is in :mod:`mlpfac.loop.kernels`.
+(36) (:func:`mlpfac.control.law._law`), and the adaptive step made of them. The baseline laws are
+in :mod:`mlpfac.control.law`, the error (2) and the kinematic plant (7) in :mod:`mlpfac.model`.
 
 Every kernel takes a leading batch dimension B and loops over it inside, one seed after another,
 so a seed's arithmetic does not depend on B or on the other seeds: a seed in a batch of 64 gets
@@ -20,7 +20,7 @@ import math
 
 import numpy as np
 
-from mlpfac.control.law import V_R_MIN
+from mlpfac.control.law import _law
 from mlpfac.jit import kernel
 
 
@@ -197,17 +197,6 @@ def ekf_update(z, P, y, h, H, R, forgetting, Q, has_Q, P_max, innov):
 
 
 @kernel()
-def _law(e0, e1, e2, h1, h2, h5, v_r, T, l1, l2, l3, v_max, omega_max, u):
-    """(35) with the corrected gains (36); omega first, limited, then v with the omega sent."""
-    k2 = (1.0 - l2) * (1.0 - l3) / (T * max(v_r, V_R_MIN))
-    omega = (h5 + k2 * e1 + (2.0 - l2 - l3) * e2) / T
-    omega = min(max(omega, -omega_max), omega_max)
-    v = ((1.0 - l1) * e0 + h1 * omega + h2) / T
-    u[0] = min(max(v, -v_max), v_max)
-    u[1] = omega
-
-
-@kernel()
 def _law_kanayama(e0, e1, e2, h2, h5, v_r, T, Kx, Ky, Ktheta, v_max, omega_max, u):
     """Kanayama's structure with the estimates of (34) in its feedforward: v = h2 / T + Kx e1,
     omega = h5 / T + v_r (Ky e2 + Ktheta sin e3); with the nominal h2 = T v_r cos e3, h5 = T omega_r
@@ -216,6 +205,27 @@ def _law_kanayama(e0, e1, e2, h2, h5, v_r, T, Kx, Ky, Ktheta, v_max, omega_max, 
     omega = h5 / T + v_r * (Ky * e1 + Ktheta * math.sin(e2))
     u[0] = min(max(v, -v_max), v_max)
     u[1] = min(max(omega, -omega_max), omega_max)
+
+
+# adaptive_step's settings, by position in its ``ints`` and ``params`` (packed by :func:`settings`)
+I_LF, I_LG, I_RESIDUAL, I_PRIOR, I_HAS_Q, I_NF, I_KANAYAMA = range(7)
+P_C, P_T, P_L1, P_L2, P_L3, P_VMAX, P_OMEGAMAX, P_FORGETTING, P_PMAX, P_KX, P_KY, P_KTHETA = range(12)
+
+
+def settings(
+    L_f: int, L_G: int, residual: bool, prior: bool, has_Q: bool, n_f: int, kanayama: bool,
+    c: float, T: float, lambdas: tuple[float, float, float], v_max: float, omega_max: float,
+    forgetting: float, P_max: float, kanayama_gains: tuple[float, float, float],
+) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """(ints, params) of :func:`adaptive_step`: the networks' sizes and form, the nominal prior, Q,
+    the law's form; the input scale c on the errors, T, the eigenvalues of (36), the limits (inf:
+    none), the EKF's forgetting factor and bound on P (inf: none), Kanayama's gains Kx, Ky, Ktheta."""
+    ints = np.zeros(7, dtype=np.int64)
+    ints[[I_LF, I_LG, I_RESIDUAL, I_PRIOR, I_HAS_Q, I_NF, I_KANAYAMA]] = L_f, L_G, residual, prior, has_Q, n_f, kanayama
+    params = np.zeros(12)
+    params[[P_C, P_T, P_VMAX, P_OMEGAMAX, P_FORGETTING, P_PMAX]] = c, T, v_max, omega_max, forgetting, P_max
+    params[[P_L1, P_L2, P_L3]], params[[P_KX, P_KY, P_KTHETA]] = lambdas, kanayama_gains
+    return ints, params
 
 
 @kernel(
@@ -232,15 +242,18 @@ def adaptive_step(e, v_r, omega_r, first, z, P, S, H, u, innov, h_hat, trace, in
     State per seed, updated in place: z (B, alpha), P (B, alpha, alpha) and S (B, 11 + n_f + L_f + L_G) =
     [x_f (n_f), x_G (3), phi_f (L_f), phi_G (L_G), u_{k-1} (2), e_{k-1} (3), e_nom (3)].
     Out: u, innov (32), h_hat (34), trace (trace P); H (B, 3, alpha) the Jacobian of the update.
-    ints = (L_f, L_G, residual, prior, has_Q, n_f, kanayama) (n_f = 8: x_f ends with u_{k-1}; kanayama != 0:
-    :func:`_law_kanayama` instead of (35)); params = (c, T, lambda_1..3, v_max, omega_max,
-    forgetting, P_max, Kx, Ky, Ktheta) with c the input scale on the errors.
+    ``ints`` and ``params``: the settings, packed by :func:`settings` (n_f = 8: x_f ends with u_{k-1};
+    kanayama: :func:`_law_kanayama` instead of (35)).
     """
-    Lf, LG, residual, prior, has_Q, nf = ints[0], ints[1], ints[2] != 0, ints[3] != 0, ints[4] != 0, ints[5]
-    kanayama = ints[6] != 0
-    c, T, l1, l2, l3, v_max, omega_max, forgetting, P_max = (
-        params[0], params[1], params[2], params[3], params[4], params[5], params[6], params[7], params[8],
-    )  # fmt: skip
+    Lf, LG, nf = ints[I_LF], ints[I_LG], ints[I_NF]
+    residual, prior, has_Q, kanayama = (
+        ints[I_RESIDUAL] != 0,
+        ints[I_PRIOR] != 0,
+        ints[I_HAS_Q] != 0,
+        ints[I_KANAYAMA] != 0,
+    )
+    c, T, l1, l2, l3 = params[P_C], params[P_T], params[P_L1], params[P_L2], params[P_L3]
+    v_max, omega_max, forgetting, P_max = params[P_VMAX], params[P_OMEGAMAX], params[P_FORGETTING], params[P_PMAX]
     B, a = z.shape
     PHt = np.empty((3, a))
     W = np.empty((3, a))
@@ -287,7 +300,19 @@ def adaptive_step(e, v_r, omega_r, first, z, P, S, H, u, innov, h_hat, trace, in
         h_hat[b, 0], h_hat[b, 1], h_hat[b, 2] = h1, h2, h5
         if kanayama:
             _law_kanayama(
-                eb[0], eb[1], eb[2], h2, h5, v_r, T, params[9], params[10], params[11], v_max, omega_max, u[b]
+                eb[0],
+                eb[1],
+                eb[2],
+                h2,
+                h5,
+                v_r,
+                T,
+                params[P_KX],
+                params[P_KY],
+                params[P_KTHETA],
+                v_max,
+                omega_max,
+                u[b],
             )
         else:
             _law(eb[0], eb[1], eb[2], h1, h2, h5, v_r, T, l1, l2, l3, v_max, omega_max, u[b])

@@ -1,6 +1,7 @@
-"""A run's folder: metrics.json, config.toml (the scenario as resolved), written atomically; and
-:class:`Stage`, which writes a whole run folder (or a recording) beside its target and renames it
-into place only when it is whole, so a run never replaces a finished run by half of one.
+"""Files and folders written whole: a file written atomically (:func:`write_atomic`), a folder
+staged and renamed into place (:func:`write_folder_whole`, :class:`Stage`: a run folder or a
+recording written beside its target and put in place only when whole, so a run never replaces a
+finished run by half of one), a folder's lock, and the checks of a path before anything is written.
 
 Only the standard library at import time: the sweep's parent process imports this module too.
 """
@@ -8,7 +9,6 @@ Only the standard library at import time: the sweep's parent process imports thi
 from __future__ import annotations
 
 import errno
-import json
 import os
 import re
 import shutil
@@ -77,14 +77,6 @@ def folder_lock(target: Path, what: str = "--out") -> Iterator[None]:
         os.close(fd)  # closing the descriptor releases the lock
 
 
-def write_run_folder(out: Path, config: str, metrics: dict) -> None:
-    """config.toml, then metrics.json: its presence means the folder is whole."""
-    with sigint_deferred():
-        (out / "metrics.json").unlink(missing_ok=True)  # a run being replaced is not whole meanwhile
-        write_atomic(out / "config.toml", config)
-        write_atomic(out / "metrics.json", json.dumps(metrics, indent=2) + "\n")
-
-
 def write_folder_whole(target: Path, files: dict[str, str | bytes]) -> None:
     """The folder ``target`` holding just ``files`` (name -> text or bytes), written beside it at
     ``.NAME.tmp-XXXX`` and renamed into place: even a killed process leaves ``target`` as it was or
@@ -136,16 +128,6 @@ def _clear_staged(path: Path, target: Path) -> None:
         os.rename(path, target)
     else:
         _remove(path)
-
-
-def write_run(out: Path, scn, rec) -> dict:
-    """The folder of one run from the command line (run.rrd is written by its sink). Returns the metrics."""
-    from mlpfac.runs.metrics import metrics
-    from mlpfac.scenario.parse import to_toml
-
-    m = metrics(rec)
-    write_run_folder(out, to_toml(scn.table), m)
-    return m
 
 
 # ----------------------------------------------------------------------------------------------
@@ -212,16 +194,6 @@ def _check_ancestors(path: Path, where: str) -> None:
             if not up.is_dir():
                 raise ConfigError(where, f"{up} is a file, not a folder")
             return
-
-
-def holds_finished_run(out: Path) -> bool:
-    """A folder whose metrics.json says the run ended (ok or diverged), or a file that exists."""
-    if not out.is_dir():
-        return out.exists()
-    try:
-        return json.loads((out / "metrics.json").read_text()).get("status") != "interrupted"
-    except (OSError, ValueError, AttributeError):
-        return False
 
 
 class Stage:
