@@ -136,13 +136,12 @@ def _read_robot(
     config: MujocoConfig, stamp: tuple[int, int], periods: tuple[float, ...] = (), probe: bool = True
 ) -> Robot:
     """The robot of ``config`` (:func:`read_robot`); ``probe``: try its wheel servos, and where they
-    chatter (:func:`mlpfac.plants.defaults.chatters`) take a timestep left unset down to one that
-    integrates them (:func:`mlpfac.plants.defaults.servo_step`)."""
+    chatter (:func:`mlpfac.plants.defaults.chatters`) with ``servo_limit`` unset, keep their force
+    limits through their control instead (``servo_limit = "control"``, :func:`mlpfac.plants.edits.unclamp`)."""
     user = config
     spec, path = load_spec(config.model)
     where = config.model if is_menagerie(config.model) else str(path)
     m = _compile(spec, where)
-    spec_dt = float(m.opt.timestep)
     sha256 = fingerprint(m)
     chosen = defaults.keyframe(config, m)
     config = defaults.with_chosen(config, chosen)
@@ -207,7 +206,10 @@ def _read_robot(
     wheel_speed = wheel_parts.speed_limits(m, acts) if not drv.tendon else [None, None]
     if config.actuator == "torque":
         edits.to_torque_motors(spec, m, [a for a in (*acts, *seconds) if a >= 0 and not is_motor(m, a)])
-    if site is None or config.tyre == "sphere" or config.actuator == "torque" or config.timestep is not None:
+    unclamp = config.servo_limit == "control" and config.actuator == "velocity" and not drv.tendon
+    if unclamp:
+        edits.unclamp(spec, m, [a for a in (*acts, *seconds) if a >= 0])
+    if site is None or config.tyre == "sphere" or config.actuator == "torque" or config.timestep is not None or unclamp:
         m = _compile(spec, where)
     if config.casters != "model":  # floor contacts at rest that are not the wheels and drag: they slide
         bodies = {int(m.jnt_bodyid[j]) for j in driven}
@@ -286,18 +288,14 @@ def _read_robot(
         umax=umax,
     )
     defaults.check_drive(m, d, robot, config, where)
-    if not probe or config.actuator != "velocity" or user.timestep is not None:
+    if not probe or config.actuator != "velocity" or user.servo_limit is not None or not defaults.chatters(robot):
         return robot
-    if not defaults.chatters(robot):
-        return robot
-    step = defaults.smaller_timestep(defaults.servo_step(robot), periods or (dt,), spec_dt * defaults.SMALLEST_STEP)
-    if step is None:
-        raise ConfigError(where, defaults.chatter_refusal(robot, spec_dt * defaults.SMALLEST_STEP))
-    robot = _read_robot(dataclasses.replace(user, timestep=step), stamp, periods, probe=False)
+    robot = _read_robot(dataclasses.replace(user, servo_limit="control"), stamp, periods, probe=False)
     return dataclasses.replace(
         robot,
-        found=(*robot.found, "timestep"),
-        description=f"{robot.description}; timestep {step:g} s (the wheel servos chatter at {dt:g} s)",
+        found=(*robot.found, "servo_limit"),
+        description=f"{robot.description}; the wheel servos' force limit kept by their control (as MuJoCo "
+        f"clamps it they chatter at {dt:g} s)",
     )
 
 
