@@ -193,3 +193,16 @@ def test_a_budget_runs_each_scenario_on_its_robots(tmp_path, monkeypatch, capsys
     assert main(["check", str(budget), "--out", "d", "--workers", "1", "--robot", "nosuch"]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "--robot" in err and not (tmp_path / "d").exists()
+
+
+@pytest.mark.menagerie
+def test_list_says_what_each_menagerie_base_does_as_shipped(tmp_path, monkeypatch, capsys):
+    """What `mlpfac list` says of a base as shipped is what it does: RB-Y1A refused (above), TIAGo++ lost."""
+    assert main(["list"]) == 0
+    lines = {line.split()[0]: line for line in capsys.readouterr().out.splitlines() if line.startswith("  ")}
+    assert "refused as shipped" in lines["rainbow_robotics_rby1"] and "is lost" in lines["pal_tiago_dual"]
+    assert "MENAGERIE_ROOT=" in lines["pal_tiago"] and ";" not in lines["pal_tiago"]
+    monkeypatch.chdir(tmp_path)
+    argv = ["run", "eight-nominal", "--robot", "pal_tiago_dual", "--controller", "kanayama", "--duration", "4"]
+    main([*argv, "--no-log", "--no-plot", "--out", "run"])
+    assert json.loads((tmp_path / "run" / "metrics.json").read_text())["outcome"] != "tracking"
