@@ -81,3 +81,16 @@ def test_verify_says_what_it_cannot_verify(collected, tmp_path, capsys):
         "script: not verified: a script's table: run its command again to check it",
         "tiny: 1 of 1 runs bit-identical",
     ]
+
+
+def test_verify_plans_a_dataset_of_robots_from_its_command(tmp_path, capsys):
+    """A dataset of --robots (each scenario as SCENARIO+ROBOT in runs.json) behind an environment the
+    reader sets (MENAGERIE_ROOT=...): its runs planned again on their robots, bit-identical."""
+    out = tmp_path / "runs" / "robots"
+    argv = ["compare", "eight-nominal", "--robots", "diffdrive,cart", "--controllers", "kanayama", "--seeds", "0"]
+    assert main([*argv, "--duration", "1", "--out", str(out), "--workers", "1"]) == 0
+    command = f"MENAGERIE_ROOT=/path/to/mujoco_menagerie mlpfac {' '.join(argv)} --duration 1 --out runs/robots"
+    assert main(["report", str(tmp_path / "docs"), "--collect", f"robots={out}", "--command", command]) == 0
+    capsys.readouterr()
+    assert main(["report", str(tmp_path / "docs"), "--verify", "2"]) == 0
+    assert capsys.readouterr().out == "robots: 2 of 2 runs bit-identical\n"
