@@ -296,7 +296,7 @@ PICTURE_BYTES = 200_000  # the docs' robot pictures at most
 @pytest.mark.skipif(CHROMIUM is None, reason="no chromium binary (Debian: apt-get install chromium)")
 @pytest.mark.menagerie
 @pytest.mark.parametrize("robot", ROBOT_PICTURES)
-def test_web_viewer_renders_each_robot(tmp_path: Path, monkeypatch, robot: str) -> None:
+def test_web_viewer_renders_each_robot(tmp_path: Path, robot: str) -> None:
     """The first 8 s of eight-wheel-radius with kanayama on each robot of docs/robots.md that runs
     (``--robot``), drawn from its own meshes with the paths: kept, halved and in 256 colours, as
     docs/robot-ROBOT.png (PAL TIAGo's is docs/tiago-viewer.png, the shipped robot's docs/viewer.png)."""
@@ -306,9 +306,8 @@ def test_web_viewer_renders_each_robot(tmp_path: Path, monkeypatch, robot: str) 
     from mlpfac.cli import main
     from mlpfac.log import PATH_COLOR, REF_COLOR
 
-    monkeypatch.chdir(tmp_path)
     argv = ["run", "eight-wheel-radius", "--robot", robot, "--controller", "kanayama", "--duration", "8"]
-    main([*argv, "--out", "run", "--no-plot"])  # lost or not: the picture shows it
+    main([*argv, "--out", str(tmp_path / "run"), "--no-plot"])  # lost or not: the picture shows it
     png = render(
         tmp_path / "run" / "run.rrd",
         tmp_path,
