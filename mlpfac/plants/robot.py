@@ -132,13 +132,12 @@ def read_robot(config: MujocoConfig, periods: tuple[float, ...] = ()) -> Robot:
     return robot
 
 
-def _read_robot(
-    config: MujocoConfig, stamp: tuple[int, int], periods: tuple[float, ...] = (), probe: bool = True
-) -> Robot:
-    """The robot of ``config`` (:func:`read_robot`); ``probe``: try its wheel servos, and where they
-    chatter (:func:`mlpfac.plants.defaults.chatters`) with ``servo_limit`` unset, keep their force
-    limits through their control instead (``servo_limit = "control"``, :func:`mlpfac.plants.edits.unclamp`)."""
-    user = config
+def _read_robot(config: MujocoConfig, stamp: tuple[int, int], periods: tuple[float, ...] = ()) -> Robot:
+    """The robot of ``config`` (:func:`read_robot`). Its wheel servos are tried, and where they chatter
+    (:func:`mlpfac.plants.defaults.chatters`) with ``servo_limit`` unset, their force limits are kept
+    through their control instead (``servo_limit = "control"``, :func:`mlpfac.plants.edits.unclamp`):
+    the model compiled again, the robot settled again (the same robot as read with that key set)."""
+    user, probe = config, True
     spec, path = load_spec(config.model)
     where = config.model if is_menagerie(config.model) else str(path)
     m = _compile(spec, where)
@@ -206,10 +205,7 @@ def _read_robot(
     wheel_speed = wheel_parts.speed_limits(m, acts) if not drv.tendon else [None, None]
     if config.actuator == "torque":
         edits.to_torque_motors(spec, m, [a for a in (*acts, *seconds) if a >= 0 and not is_motor(m, a)])
-    unclamp = config.servo_limit == "control" and config.actuator == "velocity" and not drv.tendon
-    if unclamp:
-        edits.unclamp(spec, m, [a for a in (*acts, *seconds) if a >= 0])
-    if site is None or config.tyre == "sphere" or config.actuator == "torque" or config.timestep is not None or unclamp:
+    if site is None or config.tyre == "sphere" or config.actuator == "torque" or config.timestep is not None:
         m = _compile(spec, where)
     if config.casters != "model":  # floor contacts at rest that are not the wheels and drag: they slide
         bodies = {int(m.jnt_bodyid[j]) for j in driven}
@@ -225,78 +221,83 @@ def _read_robot(
         if skids:
             defaults.frictionless(spec, skids, floor)
             m = _compile(spec, where)
-    site = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, edits.POSE_SITE if site is None else m.site(site).name)
-    root = int(m.body_rootid[m.site_bodyid[site]])
-    jnt = int(m.body_jntadr[root])
-    if jnt < 0 or int(m.jnt_type[jnt]) != mujoco.mjtJoint.mjJNT_FREE:
-        kind, name = config.frame
-        raise ConfigError(
-            kind, f"the body tree of {kind} {name!r} must hang from a <freejoint/> (a robot free to drive)"
+    servos = [a for a in (*acts, *seconds) if a >= 0 and config.actuator == "velocity" and not drv.tendon]
+    if config.servo_limit == "control" and servos:
+        edits.unclamp(spec, m, servos)
+        m = _compile(spec, where)
+    site0, suffix = site, ""
+    while True:  # once, or twice: again with servo_limit = "control" where the servos chatter
+        site = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, edits.POSE_SITE if site0 is None else m.site(site0).name)
+        root = int(m.body_rootid[m.site_bodyid[site]])
+        jnt = int(m.body_jntadr[root])
+        if jnt < 0 or int(m.jnt_type[jnt]) != mujoco.mjtJoint.mjJNT_FREE:
+            kind, name = config.frame
+            raise ConfigError(
+                kind, f"the body tree of {kind} {name!r} must hang from a <freejoint/> (a robot free to drive)"
+            )
+        wheel_bodies = tuple(int(m.jnt_bodyid[j]) for j in driven)
+        tyres = tuple(g for b in wheel_bodies for g in collision_geoms(m, b) if int(m.geom_type[g]) in WHEEL_SHAPES)
+        dt = float(m.opt.timestep)
+        check_timestep(dt, "timestep", "the model's timestep ")
+        try:
+            d = mujoco.MjData(m)
+            _settle(m, d, dt, qpos0, ctrl0, int(m.jnt_dofadr[jnt]), where)
+        except mujoco.FatalError as err:  # an arena too small for the model (<size memory>), say
+            raise _cannot_simulate(where, err) from None
+        anchors = [d.xanchor[j].copy() for j in joints]
+        sign = wheel_parts.wheel_signs(config, d, site, joints, anchors)
+        dofs = (int(m.jnt_dofadr[joints[0]]), int(m.jnt_dofadr[joints[1]]))
+        if drv.tendon:
+            c, inverse, umax = [1.0, 1.0], *drive.mix(m, d.qpos, acts, dofs, sign)
+        else:
+            c = [s * g for s, g in zip(sign, m.actuator_gear[list(acts), 0], strict=True)]
+            inverse, umax = None, None
+        c2 = [
+            0.0 if a < 0 else float(s * m.actuator_gear[a, 0] * wheel_parts.same_way(m, d, a, j))
+            for a, s, j in zip(seconds, sign, joints, strict=True)
+        ]
+        limit = [w / abs(ci) for w, ci in zip(wheel_speed, c, strict=True) if w is not None]
+        robot = Robot(
+            where=where,
+            config=config,
+            found=(*found.keys, *chosen),
+            description=description + defaults.said(chosen, config) + suffix,
+            sha256=sha256,
+            spec=spec,
+            model=m,
+            dt=dt,
+            acts=(acts[0], acts[1]),
+            site=site,
+            root=root,
+            qroot=int(m.jnt_qposadr[jnt]),
+            droot=int(m.jnt_dofadr[jnt]),
+            dofs=dofs,
+            wheel_bodies=wheel_bodies,
+            tyres=tyres,
+            qpos_rest=d.qpos.copy(),
+            ctrl_rest=d.ctrl.copy(),
+            site_rest=(d.site_xpos[site].copy(), yaw(d.site_xmat[site])),
+            real_radius=max(wheel_parts.radius(m, g, int(m.body_jntadr[m.geom_bodyid[g]])) for g in tyres),
+            real_track=float(np.linalg.norm(anchors[1] - anchors[0])),
+            sign=sign,
+            act_per_wheel=(float(c[0]), float(c[1])),
+            geometry=shapes.static_geometry(m, d, site, root, visual_only),
+            max_wheel_speed=min(limit) if limit else None,
+            locked=tuple(locked),
+            seconds=(seconds[0], seconds[1]),
+            second_per_wheel=(c2[0], c2[1]),
+            mix=inverse,
+            umax=umax,
         )
-    wheel_bodies = tuple(int(m.jnt_bodyid[j]) for j in driven)
-    tyres = tuple(g for b in wheel_bodies for g in collision_geoms(m, b) if int(m.geom_type[g]) in WHEEL_SHAPES)
-    dt = float(m.opt.timestep)
-    check_timestep(dt, "timestep", "the model's timestep ")
-    try:
-        d = mujoco.MjData(m)
-        _settle(m, d, dt, qpos0, ctrl0, int(m.jnt_dofadr[jnt]), where)
-    except mujoco.FatalError as err:  # an arena too small for the model (<size memory>), say
-        raise _cannot_simulate(where, err) from None
-    anchors = [d.xanchor[j].copy() for j in joints]
-    sign = wheel_parts.wheel_signs(config, d, site, joints, anchors)
-    dofs = (int(m.jnt_dofadr[joints[0]]), int(m.jnt_dofadr[joints[1]]))
-    if drv.tendon:
-        c, inverse, umax = [1.0, 1.0], *drive.mix(m, d.qpos, acts, dofs, sign)
-    else:
-        c = [s * g for s, g in zip(sign, m.actuator_gear[list(acts), 0], strict=True)]
-        inverse, umax = None, None
-    c2 = [
-        0.0 if a < 0 else float(s * m.actuator_gear[a, 0] * wheel_parts.same_way(m, d, a, j))
-        for a, s, j in zip(seconds, sign, joints, strict=True)
-    ]
-    limit = [w / abs(ci) for w, ci in zip(wheel_speed, c, strict=True) if w is not None]
-    robot = Robot(
-        where=where,
-        config=config,
-        found=(*found.keys, *chosen),
-        description=description + defaults.said(chosen, config),
-        sha256=sha256,
-        spec=spec,
-        model=m,
-        dt=dt,
-        acts=(acts[0], acts[1]),
-        site=site,
-        root=root,
-        qroot=int(m.jnt_qposadr[jnt]),
-        droot=int(m.jnt_dofadr[jnt]),
-        dofs=dofs,
-        wheel_bodies=wheel_bodies,
-        tyres=tyres,
-        qpos_rest=d.qpos.copy(),
-        ctrl_rest=d.ctrl.copy(),
-        site_rest=(d.site_xpos[site].copy(), yaw(d.site_xmat[site])),
-        real_radius=max(wheel_parts.radius(m, g, int(m.body_jntadr[m.geom_bodyid[g]])) for g in tyres),
-        real_track=float(np.linalg.norm(anchors[1] - anchors[0])),
-        sign=sign,
-        act_per_wheel=(float(c[0]), float(c[1])),
-        geometry=shapes.static_geometry(m, d, site, root, visual_only),
-        max_wheel_speed=min(limit) if limit else None,
-        locked=tuple(locked),
-        seconds=(seconds[0], seconds[1]),
-        second_per_wheel=(c2[0], c2[1]),
-        mix=inverse,
-        umax=umax,
-    )
-    defaults.check_drive(m, d, robot, config, where)
-    if not probe or config.actuator != "velocity" or user.servo_limit is not None or not defaults.chatters(robot):
-        return robot
-    robot = _read_robot(dataclasses.replace(user, servo_limit="control"), stamp, periods, probe=False)
-    return dataclasses.replace(
-        robot,
-        found=(*robot.found, "servo_limit"),
-        description=f"{robot.description}; the wheel servos' force limit kept by their control (as MuJoCo "
-        f"clamps it they chatter at {dt:g} s)",
-    )
+        defaults.check_drive(m, d, robot, config, where)
+        chatter = probe and config.actuator == "velocity" and user.servo_limit is None and defaults.chatters(robot)
+        if not chatter:
+            return robot
+        edits.unclamp(spec, m, servos)  # kept within their limits by their control: no longer chatter
+        m = _compile(spec, where)
+        config, chosen, probe = defaults.with_chosen(config, {"servo_limit": "control"}), chosen, False
+        chosen |= {"servo_limit": "control"}
+        suffix = f"; the wheel servos' force limit kept by their control (as MuJoCo clamps it they chatter at {dt:g} s)"
 
 
 def _compile(spec: mujoco.MjSpec, where: str) -> mujoco.MjModel:
