@@ -9,10 +9,12 @@
 - ``casters``: ``"frictionless"`` when parts of the robot that are neither wheels nor jointed
   (a skid standing in for casters) touch the floor with friction at rest: they slide (condim 1);
 - ``timestep``: the model's when it divides the control period (and every period an event asks),
-  else the largest one below it that does;
-- ``servo_limit``: ``"control"`` where the wheel servos chatter as MuJoCo clamps their force
-  (:func:`chatters`): the plant keeps their force within its limit through their control, every
-  physics step, and MuJoCo integrates them implicitly (it does not a clamped servo).
+  else the largest one below it that does; where the wheel servos chatter at it as MuJoCo clamps
+  their force (:func:`chatters`), the largest that divides them and integrates the servos
+  (:func:`servo_step`), down to 1/16 of the model's;
+- ``servo_limit``: ``"control"`` where the servos chatter and no such timestep is left: the plant
+  keeps their force within its limit through their control, every physics step, and MuJoCo
+  integrates them implicitly (it does not a clamped servo).
 
 :func:`check_drive` refuses, in one line with the numbers, a robot whose wheels cannot move it as
 shipped, naming the keys that make it drive.
@@ -31,6 +33,7 @@ from mlpfac.plants.detect import ROUND
 
 HOME = "home"
 CHATTER_S = 0.3  # seconds of a steady wheel command the servos are tried with
+SMALLEST_STEP = 1 / 16  # a timestep is lowered (for servos that chatter) down to this share of the model's
 MAX_SUBSTEPS = 1000  # a timestep is looked for down to the period / this
 SERVO_SHARE = 0.5  # a wheel servo must reach this share of its top speed against its joint's damping
 FIX = 'set actuator = "torque" (the wheel-speed PI loop, pi_kp and pi_ki)'
@@ -95,6 +98,26 @@ def chatters(robot) -> bool:
         if not np.all(np.isfinite(d.qvel)) or np.max(np.abs(d.qvel)) > 1e3:
             return True
     return flips > n // 8
+
+
+def servo_step(robot) -> float:
+    """The largest timestep at which a clamped wheel servo cannot overshoot: 2 M / (kv gear^2), M
+    the wheel's inertia about its hinge (the explicit bound; a servo whose force is clamped is
+    integrated explicitly), the smallest over the drive's servos."""
+    m = robot.model
+    pairs = [(a, int(m.jnt_dofadr[m.actuator_trnid[a, 0]])) for a in (*robot.acts, *robot.seconds) if a >= 0]
+    return min(2 * float(m.dof_M0[dof]) / (float(m.actuator_gainprm[a, 0]) * float(m.actuator_gear[a, 0]) ** 2)
+               for a, dof in pairs)  # fmt: skip
+
+
+def smaller_timestep(dt: float, periods: tuple[float, ...], floor: float) -> float | None:
+    """The largest timestep at most ``dt`` that divides every period, None below ``floor``."""
+    chosen = timestep(_Unset(), dt, periods).get("timestep", dt)
+    return chosen if chosen >= floor * (1 - 1e-9) else None
+
+
+class _Unset:
+    timestep = None
 
 
 def _whole(period: float, dt: float) -> bool:

@@ -141,6 +141,7 @@ def _read_robot(config: MujocoConfig, stamp: tuple[int, int], periods: tuple[flo
     spec, path = load_spec(config.model)
     where = config.model if is_menagerie(config.model) else str(path)
     m = _compile(spec, where)
+    spec_dt = float(m.opt.timestep)
     sha256 = fingerprint(m)
     chosen = defaults.keyframe(config, m)
     config = defaults.with_chosen(config, chosen)
@@ -293,6 +294,16 @@ def _read_robot(config: MujocoConfig, stamp: tuple[int, int], periods: tuple[flo
         chatter = probe and config.actuator == "velocity" and user.servo_limit is None and defaults.chatters(robot)
         if not chatter:
             return robot
+        floor = spec_dt * defaults.SMALLEST_STEP
+        step = defaults.smaller_timestep(defaults.servo_step(robot), periods or (dt,), floor)
+        if step is not None and user.timestep is None:  # a timestep that integrates them, read again at it
+            robot = _read_robot(dataclasses.replace(user, timestep=step, servo_limit="model"), stamp, periods)
+            return dataclasses.replace(
+                robot,
+                config=dataclasses.replace(robot.config, servo_limit=None),
+                found=(*(k for k in robot.found if k != "servo_limit"), "timestep"),
+                description=f"{robot.description}; timestep {step:g} s (the wheel servos chatter at {dt:g} s)",
+            )
         edits.unclamp(spec, m, servos)  # kept within their limits by their control: no longer chatter
         m = _compile(spec, where)
         config, chosen, probe = defaults.with_chosen(config, {"servo_limit": "control"}), chosen, False
