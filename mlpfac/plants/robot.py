@@ -31,11 +31,9 @@ from mlpfac.plants.detect import (
     resolve,
 )
 from mlpfac.plants.model_file import fingerprint, is_menagerie, load_spec
+from mlpfac.plants.settle import SETTLE_S, cannot_simulate, settle
 
 MAX_SUBSTEPS = 10_000  # physics steps in one control period, at most
-SETTLE_S = 0.5  # seconds the robot settles on its wheels at least, at construction (the rest pose)
-SETTLE_MAX_S = 10.0  # ... and at most: then it must be at rest
-REST_SPEED = 1e-4  # at rest: the free body moves no faster than this (m/s, rad/s)
 
 
 @dataclass(frozen=True)
@@ -213,7 +211,7 @@ def _read_robot(config: MujocoConfig, stamp: tuple[int, int], periods: tuple[flo
         try:
             skids = defaults.skids(m, qpos0, ctrl0, SETTLE_S, root0, bodies)
         except mujoco.FatalError as err:  # an arena too small for the model (<size memory>), say
-            raise _cannot_simulate(where, err) from None
+            raise cannot_simulate(where, err) from None
         if skids and config.casters is None:
             config, chosen = (
                 defaults.with_chosen(config, {"casters": "frictionless"}),
@@ -242,9 +240,9 @@ def _read_robot(config: MujocoConfig, stamp: tuple[int, int], periods: tuple[flo
         check_timestep(dt, "timestep", "the model's timestep ")
         try:
             d = mujoco.MjData(m)
-            _settle(m, d, dt, qpos0, ctrl0, int(m.jnt_dofadr[jnt]), where)
+            settle(m, d, dt, qpos0, ctrl0, int(m.jnt_dofadr[jnt]), where)
         except mujoco.FatalError as err:  # an arena too small for the model (<size memory>), say
-            raise _cannot_simulate(where, err) from None
+            raise cannot_simulate(where, err) from None
         anchors = [d.xanchor[j].copy() for j in joints]
         sign = wheel_parts.wheel_signs(config, d, site, joints, anchors)
         dofs = (int(m.jnt_dofadr[joints[0]]), int(m.jnt_dofadr[joints[1]]))
@@ -353,44 +351,3 @@ def _pose_frame(spec: mujoco.MjSpec, m: mujoco.MjModel, config: MujocoConfig, wh
         return site
     edits.add_pose_site(spec, *edits.offset_from_site(m, site, offset))
     return None
-
-
-def _settle(
-    m: mujoco.MjModel, d: mujoco.MjData, dt: float, qpos: np.ndarray, ctrl: np.ndarray, droot: int, where: str
-) -> None:
-    """From the start pose and controls, let the robot settle on its wheels with zero wheel speed:
-    SETTLE_S at least, then on until its free body moves no faster than REST_SPEED (checked; a
-    caster wheel may spin on)."""
-    mujoco.mj_resetData(m, d)
-    d.qpos[:], d.ctrl[:] = qpos, ctrl
-    mujoco.mj_forward(m, d)
-    chunk = max(1, int(round(0.1 / dt)))
-    left = int(round(SETTLE_S / dt))
-    while left > 0:  # in pieces of 0.1 s of simulated time: a signal is seen between two
-        mujoco.mj_step(m, d, nstep=min(chunk, left))
-        left -= chunk
-        _no_warning(d, where)
-    while np.max(np.abs(d.qvel[droot : droot + 6])) > REST_SPEED:
-        if d.time > SETTLE_MAX_S:
-            raise ConfigError(
-                where,
-                f"the robot does not come to rest on its wheels within {SETTLE_MAX_S:g} s (speeds up to "
-                f'{np.max(np.abs(d.qvel[droot : droot + 6])):.2g}); lock what moves (other_actuators = "lock") or start from a keyframe',
-            )
-        mujoco.mj_step(m, d, nstep=chunk)
-        _no_warning(d, where)
-    mujoco.mj_forward(m, d)
-
-
-def _cannot_simulate(where: str, err: Exception) -> ConfigError:
-    """MuJoCo's fatal error (an arena too small for the model, ``<size memory>``), on one line."""
-    return ConfigError(where, f"MuJoCo cannot simulate the model: {' '.join(str(err).split())}")
-
-
-def _no_warning(d: mujoco.MjData, where: str) -> None:
-    """A ConfigError naming MuJoCo's warnings of ``d`` (an unstable model, an arena too small), if any."""
-    warned = [mujoco.mjtWarning(i).name for i, w in enumerate(d.warning) if w.number]
-    if warned:
-        raise ConfigError(
-            where, f"MuJoCo warned ({', '.join(warned)}) as the robot settled at rest: the model is not stable as it is"
-        )
