@@ -128,14 +128,17 @@ def _parser():
 
 
 def _plan(command: str, root: Path):
-    """The jobs of a recorded ``[cd DIR &&] mlpfac sweep|compare ...`` command, and the folder it
-    runs in; ConfigError for any other command."""
+    """The jobs of a recorded ``[NAME=VALUE ...] [cd DIR &&] mlpfac sweep|compare ...`` command (its
+    ``--robot``/``--robots`` too), and the folder it runs in; ConfigError for any other command."""
     words = shlex.split(command)
+    while words and "=" in words[0] and words[0].partition("=")[0].isidentifier():  # MENAGERIE_ROOT=... the reader sets
+        words = words[1:]
     where = root
     if len(words) > 3 and words[0] == "cd" and words[2] == "&&":
         where, words = root / words[1], words[3:]
     if words[:1] != ["mlpfac"] or words[1:2] not in (["sweep"], ["compare"]):
         raise ConfigError(command, "a script's table: run its command again to check it")
+    from mlpfac.scenario.on_robot import robots_flag, with_robots
     from mlpfac.scenario.parse import scenario_names
     from mlpfac.sweeps.plan import parse_controllers, parse_seeds, plan
     from mlpfac.sweeps.vary import parse_vary
@@ -144,9 +147,10 @@ def _plan(command: str, root: Path):
         args = _parser().parse_args(words[1:])
     except SystemExit:
         raise ConfigError(command, "not a command mlpfac reads") from None
+    robots = [args.robot] if args.robot is not None else robots_flag(args.robots, "--robots")
     with contextlib.chdir(where):
         jobs = plan(
-            args.scenarios or scenario_names(),
+            with_robots(args.scenarios or scenario_names(), robots),
             parse_controllers(args.controllers),
             parse_seeds(args.seeds),
             args.duration,

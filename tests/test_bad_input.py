@@ -115,6 +115,7 @@ BAD_FILES: dict[str, tuple[str | bytes, str]] = {
     "menagerie entry unknown": ('[plant]\nkind = "mujoco"\nmodel = "menagerie:pal_tiago/scene_fast"\n', "scene_velocity"),
     "payload on every body of the kinematic": (MINIMAL + '[[events]]\ntime = 0.2\nkind = "payload"\nmass_kg = 2.0\nbody = "*"\n', "kinematic plant cannot"),
     "casters choice": (ROBOT + 'casters = "wheels"\n', "[plant] casters"),
+    "servo_limit choice": (ROBOT + 'servo_limit = "joint"\n', "[plant] servo_limit"),
     "tendon actuators one": (ROBOT + 'tendon_actuators = ["forward"]\n', "tendon_actuators"),
     "tendon and wheel actuators": (ROBOT + 'tendon_actuators = ["a", "b"]\nleft_actuator = "c"\n', "not both"),
     "second wheel missing": (ROBOT + 'left_actuator_2 = "nosuch"\n', "[plant] left_actuator_2"),

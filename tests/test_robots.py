@@ -25,7 +25,7 @@ T = 0.01
 # Each base from its model alone: what must have been found or chosen (docs/robots.md).
 BASES = {
     "pal_tiago": {"keyframe": "home", "other_actuators": "lock", "tyre": "sphere", "actuator": "velocity"},
-    "pal_tiago_dual": {"left_actuator_2": "wheel_rear_left_joint_velocity", "tyre": "sphere", "actuator": "torque"},
+    "pal_tiago_dual": {"left_actuator_2": "wheel_rear_left_joint_velocity", "tyre": "sphere", "servo_limit": "control"},
     "hello_robot_stretch": {"tendon_actuators": ["forward", "turn"], "actuator": "torque", "other_actuators": "lock"},
     "hello_robot_stretch_3": {"keyframe": "home", "timestep": 0.01 / 45, "actuator": "velocity", "other_actuators": "lock"},
 }  # fmt: skip
@@ -34,22 +34,41 @@ BASES = {
 @pytest.mark.menagerie
 @pytest.mark.parametrize("name", sorted(BASES))
 def test_a_menagerie_base_from_its_name_alone(name):
-    torque = {"actuator": "torque"} if name == "pal_tiago_dual" else {}  # its servos refused (below)
-    plant = MujocoPlant(MujocoConfig(model=f"menagerie:{name}", **torque), T, (T,))
-    found = {**plant.found(), **torque}
+    plant = MujocoPlant(MujocoConfig(model=f"menagerie:{name}"), T, (T,))
+    found = plant.found()
     assert {k: pytest.approx(found.get(k)) for k in BASES[name]} == BASES[name]
     assert plant.robot.locked and plant.model.nu == (4 if name == "pal_tiago_dual" else 2)  # only the drive is left
-    assert plant.n_substeps * plant.model.opt.timestep == pytest.approx(T)
+    assert plant.n_substeps == (45 if name == "hello_robot_stretch_3" else 5)  # else the model's own 2 ms
+    if name == "hello_robot_stretch_3":  # what hangs from the locked arm and head (fingertips, a camera) too
+        assert {"rubber_left_x", "joint_head_nav_cam"} <= set(plant.robot.locked)
+
+
+def _wheels(plant, steps: int) -> tuple[np.ndarray, np.ndarray]:
+    """Wheel speed errors (rad/s) and wheel torques (N m) of ``steps`` control steps straight ahead."""
+    plant.reset(np.zeros(3), np.random.default_rng(0))
+    err, torque = [], []
+    for _ in range(steps):
+        plant.step(np.array([0.2, 0.0]))
+        tele = plant.telemetry()
+        err.append(tele["wheel_meas"] - tele["wheel_cmd"])
+        torque.append(tele["torque"].copy())
+    return np.array(err), np.array(torque)
 
 
 @pytest.mark.menagerie
-def test_tiago_dual_servos_are_refused_in_one_line_with_their_numbers():
-    """kv 2000 on wheels of 0.0011 kg m^2, clamped at 400 N m: they overshoot within any timestep
-    above 1.1e-6 s, and chatter (measured: the base leaves the floor within 5 s at 0.000125 s)."""
-    with pytest.raises(ConfigError) as err:
-        MujocoPlant(MujocoConfig(model="menagerie:pal_tiago_dual"), T, (T,))
-    text = str(err.value)
-    assert "\n" not in text and "kv 2000" in text and "1.1e-06 s" in text and 'actuator = "torque"' in text
+def test_stiff_servos_kept_within_their_force_limit_by_their_control_do_not_chatter():
+    """TIAGo++'s wheel servos (kv 2000 on wheels of 0.0011 kg m^2, clamped at 400 N m) chatter at the
+    model's 2 ms as MuJoCo clamps their force (a clamped servo is integrated explicitly): their
+    speed swings by hundreds of rad/s. Kept within the limit through their control (servo_limit =
+    "control", chosen), MuJoCo integrates them implicitly: they hold the speed asked, within the limit."""
+    clamped = MujocoPlant(MujocoConfig(model="menagerie:pal_tiago_dual", servo_limit="model"), T, (T,))
+    kept = MujocoPlant(MujocoConfig(model="menagerie:pal_tiago_dual"), T, (T,))
+    assert kept.config.servo_limit == "control" and kept.model.opt.timestep == clamped.model.opt.timestep
+    err, _ = _wheels(clamped, 3)
+    assert np.max(np.abs(err)) > 10.0
+    err, torque = _wheels(kept, 100)
+    assert np.max(np.abs(err[20:])) < 0.05 and np.max(np.abs(torque)) <= 400.0 * (1 + 1e-9)
+    assert kept.provenance()["torque_limit_Nm"] == [400.0, 400.0]  # the limit the control keeps, said
 
 
 @pytest.mark.menagerie
@@ -173,3 +192,16 @@ def test_a_budget_runs_each_scenario_on_its_robots(tmp_path, monkeypatch, capsys
     assert main(["check", str(budget), "--out", "d", "--workers", "1", "--robot", "nosuch"]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "--robot" in err and not (tmp_path / "d").exists()
+
+
+@pytest.mark.menagerie
+def test_list_says_what_each_menagerie_base_does_as_shipped(tmp_path, monkeypatch, capsys):
+    """What `mlpfac list` says of a base as shipped is what it does: RB-Y1A refused (above), TIAGo++ lost."""
+    assert main(["list"]) == 0
+    lines = {line.split()[0]: line for line in capsys.readouterr().out.splitlines() if line.startswith("  ")}
+    assert "refused as shipped" in lines["rainbow_robotics_rby1"] and "is lost" in lines["pal_tiago_dual"]
+    assert "MENAGERIE_ROOT=" in lines["pal_tiago"] and ";" not in lines["pal_tiago"]
+    monkeypatch.chdir(tmp_path)
+    argv = ["run", "eight-nominal", "--robot", "pal_tiago_dual", "--controller", "kanayama", "--duration", "4"]
+    main([*argv, "--no-log", "--no-plot", "--out", "run"])
+    assert json.loads((tmp_path / "run" / "metrics.json").read_text())["outcome"] != "tracking"

@@ -128,3 +128,16 @@ def test_every_documented_robustness_dataset_re_plans_to_its_runs(name):
     runs = json.loads((folder / RUNS_FILE).read_text())["runs"]
     jobs, _ = _plan(json.loads((folder / "meta.json").read_text())["command"], DOCS.parent)
     assert sorted(j.key for j in jobs) == sorted((r["scenario"], r["controller"], r["seed"]) for r in runs)
+
+
+def test_verify_plans_a_dataset_of_robots_from_its_command(tmp_path, capsys):
+    """A dataset of --robots (each scenario as SCENARIO+ROBOT in runs.json) behind an environment the
+    reader sets (MENAGERIE_ROOT=...): its runs planned again on their robots, bit-identical."""
+    out = tmp_path / "runs" / "robots"
+    argv = ["compare", "eight-nominal", "--robots", "diffdrive,cart", "--controllers", "kanayama", "--seeds", "0"]
+    assert main([*argv, "--duration", "1", "--out", str(out), "--workers", "1"]) == 0
+    command = f"MENAGERIE_ROOT=/path/to/mujoco_menagerie mlpfac {' '.join(argv)} --duration 1 --out runs/robots"
+    assert main(["report", str(tmp_path / "docs"), "--collect", f"robots={out}", "--command", command]) == 0
+    capsys.readouterr()
+    assert main(["report", str(tmp_path / "docs"), "--verify", "2"]) == 0
+    assert capsys.readouterr().out == "robots: 2 of 2 runs bit-identical\n"

@@ -287,3 +287,35 @@ def test_web_viewer_renders_tiago_from_its_meshes(tmp_path: Path) -> None:
         lambda img: _shows(img, {"reference path": REF_COLOR, "driven path": PATH_COLOR}, {"event marks": EVENT_COLOR}),
     )
     _keep(png, "tiago-viewer.png")
+
+
+ROBOT_PICTURES = ("cart", "hello_robot_stretch", "hello_robot_stretch_3", "rby1a")
+PICTURE_BYTES = 200_000  # the docs' robot pictures at most
+
+
+@pytest.mark.skipif(CHROMIUM is None, reason="no chromium binary (Debian: apt-get install chromium)")
+@pytest.mark.menagerie
+@pytest.mark.parametrize("robot", ROBOT_PICTURES)
+def test_web_viewer_renders_each_robot(tmp_path: Path, robot: str) -> None:
+    """The first 8 s of eight-wheel-radius with kanayama on each robot of docs/robots.md that runs
+    (``--robot``), drawn from its own meshes with the paths: kept, halved and in 256 colours, as
+    docs/robot-ROBOT.png (PAL TIAGo's is docs/tiago-viewer.png, the shipped robot's docs/viewer.png)."""
+    pytest.importorskip("mujoco_menagerie")
+    from PIL import Image
+
+    from mlpfac.cli import main
+    from mlpfac.log import PATH_COLOR, REF_COLOR
+
+    argv = ["run", "eight-wheel-radius", "--robot", robot, "--controller", "kanayama", "--duration", "8"]
+    main([*argv, "--out", str(tmp_path / "run"), "--no-plot"])  # lost or not: the picture shows it
+    png = render(
+        tmp_path / "run" / "run.rrd",
+        tmp_path,
+        lambda img: _shows(img, {"reference path": REF_COLOR, "driven path": PATH_COLOR}, {}),
+    )
+    small = io.BytesIO()
+    Image.open(io.BytesIO(png)).convert("RGB").resize((WIDTH // 2, HEIGHT // 2), Image.LANCZOS).quantize(256).save(
+        small, "PNG", optimize=True
+    )
+    assert len(small.getvalue()) < PICTURE_BYTES
+    _keep(small.getvalue(), f"robot-{robot}.png")

@@ -36,16 +36,20 @@ from mlpfac.plants.events import delay_push
 from mlpfac.plants.ik import body_velocity_vw, wheel_speeds_lr
 
 # ints: I_AL2, I_AR2 a second wheel's actuator on each side (skid-steer; -1: none), I_MIX 1 for two
-# motors on tendons over both wheels (a (v, omega) drive; I_AL, I_AR are those motors)
-I_AL, I_AR, I_DL, I_DR, I_SITE, I_NSUB, I_TORQUE, I_NOISE, I_AL2, I_AR2, I_MIX = range(11)
-N_INTS = 11
+# motors on tendons over both wheels (a (v, omega) drive; I_AL, I_AR are those motors), I_CLAMP 1 for
+# servos whose force limit the plant keeps through their control (servo_limit = "control"), I_DL2,
+# I_DR2 the second wheels' dof addresses
+I_AL, I_AR, I_DL, I_DR, I_SITE, I_NSUB, I_TORQUE, I_NOISE, I_AL2, I_AR2, I_MIX, I_CLAMP, I_DL2, I_DR2 = range(14)
+N_INTS = 14
 # fl
 F_CL, F_CR, F_SL, F_SR, F_IK_R, F_IK_TRACK, F_WMAX, F_DT, F_KP, F_KI, F_TLMAX, F_TRMAX, F_RADIUS, F_ZREST = range(14)
 F_STD = 14  # three pose-noise standard deviations
 F_CL2, F_CR2 = 17, 18  # the second wheels' actuator units per forward wheel unit
 F_MIX = 19  # (2, 2) row-major: the tendon motors' controls per forward wheel torque (left, right)
 F_UMAX = 23  # the tendon motors' control limits (inf: none)
-N_FL = 25
+F_BAND = 25  # servo_limit = "control": each servo's (left, right, left 2, right 2) force limit / kv (control units)
+F_GEAR = 29  # ... and its gear (actuator velocity per joint velocity)
+N_FL = 33
 # st: the unwrapped heading, simulated time, the PI integrals, the true pose (x, y, theta), and 1
 # once MuJoCo warned during a step of this robot (set by the warning handler below)
 S_THETA, S_TIME, S_IL, S_IR = range(4)
@@ -174,13 +178,25 @@ def yaw(xmat: np.ndarray) -> float:
 def _physics(mp, dp, ctrl, qvel, ints, fl, st, wl, wr):
     """One control period: the wheel commands held for n physics steps, each ``mj_step2`` (actuation,
     integration) then ``mj_step1`` (the new state's positions, velocities, sensors). The velocity
-    servos are MuJoCo's; the torque drive is a discrete wheel-speed PI loop evaluated every physics
+    servos are MuJoCo's (with ``I_CLAMP`` their controls kept within their force limits, :func:`_within`,
+    every physics step); the torque drive is a discrete wheel-speed PI loop evaluated every physics
     step: tau = kp e + ki I, clamped to the torque limit, I integrating e only while tau is not
     clamped (no wind-up)."""
     n, al, ar, dl, dr = ints[I_NSUB], ints[I_AL], ints[I_AR], ints[I_DL], ints[I_DR]
     cl, cr = fl[F_CL], fl[F_CR]
     al2, ar2 = ints[I_AL2], ints[I_AR2]
-    if ints[I_TORQUE] == 0:
+    if ints[I_TORQUE] == 0 and ints[I_CLAMP]:
+        dl2, dr2 = ints[I_DL2], ints[I_DR2]
+        for _ in range(n):
+            ctrl[al] = _within(cl * wl, qvel[dl], fl, 0)
+            ctrl[ar] = _within(cr * wr, qvel[dr], fl, 1)
+            if al2 >= 0:
+                ctrl[al2] = _within(fl[F_CL2] * wl, qvel[dl2], fl, 2)
+            if ar2 >= 0:
+                ctrl[ar2] = _within(fl[F_CR2] * wr, qvel[dr2], fl, 3)
+            mj_step2(mp, dp)
+            mj_step1(mp, dp)
+    elif ints[I_TORQUE] == 0:
         ctrl[al] = cl * wl
         ctrl[ar] = cr * wr
         if al2 >= 0:
@@ -223,6 +239,15 @@ def _physics(mp, dp, ctrl, qvel, ints, fl, st, wl, wr):
             mj_step1(mp, dp)
         st[S_IL], st[S_IR] = il, ir
     st[S_TIME] += n * fl[F_DT]
+
+
+@kernel()
+def _within(c, w, fl, i):
+    """Servo i's control ``c`` kept within its force limit from the joint speed ``w``: kv |c - gear w|
+    at most the limit (force = kv (ctrl - gear w)); MuJoCo then integrates the servo implicitly, which
+    it does not while it clamps the force itself (a clamped stiff servo on a light wheel chatters)."""
+    v, band = fl[F_GEAR + i] * w, fl[F_BAND + i]
+    return min(max(c, v - band), v + band)
 
 
 @kernel()

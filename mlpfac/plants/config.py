@@ -63,6 +63,9 @@ class MujocoConfig:
     other_actuators: str | None = None  # "hold": keep the keyframe's controls; "lock": fix their joints at the keyframe
     tyre: str | None = None  # "model": the wheels' own collision geoms; "sphere": a sphere tyre on each wheel
     casters: str | None = None  # "model": other floor contacts as modelled; "frictionless": they slide (condim 1)
+    servo_limit: str | None = (
+        None  # "model": MuJoCo clamps the wheel servos' force; "control": the plant does, each physics step
+    )
     timestep: float | None = None  # physics timestep (s); None: the model's
     wheel_radius: float | None = None  # radius the IK believes (m); None: read from the model
     track: float | None = None  # wheel separation the IK believes (m); None: read from the model
@@ -77,6 +80,7 @@ class MujocoConfig:
             "other_actuators": ("hold", "lock"),
             "tyre": ("model", "sphere"),
             "casters": ("model", "frictionless"),
+            "servo_limit": ("model", "control"),
         }
         for name, allowed in choices.items():
             if getattr(self, name) not in allowed and getattr(self, name) is not None:

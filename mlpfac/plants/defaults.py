@@ -9,9 +9,12 @@
 - ``casters``: ``"frictionless"`` when parts of the robot that are neither wheels nor jointed
   (a skid standing in for casters) touch the floor with friction at rest: they slide (condim 1);
 - ``timestep``: the model's when it divides the control period (and every period an event asks),
-  else the largest one below it that does; where the wheel servos chatter at it (their force
-  clamped), the largest that divides them and integrates the servos (:func:`servo_step`), down to
-  1/16 of the model's.
+  else the largest one below it that does; where the wheel servos chatter at it as MuJoCo clamps
+  their force (:func:`chatters`), the largest that divides them and integrates the servos
+  (:func:`servo_step`), down to 1/16 of the model's;
+- ``servo_limit``: ``"control"`` where the servos chatter and no such timestep is left: the plant
+  keeps their force within its limit through their control, every physics step, and MuJoCo
+  integrates them implicitly (it does not a clamped servo).
 
 :func:`check_drive` refuses, in one line with the numbers, a robot whose wheels cannot move it as
 shipped, naming the keys that make it drive.
@@ -219,15 +222,3 @@ def check_drive(m: mujoco.MjModel, d: mujoco.MjData, robot, config, where: str) 
     if said:
         fix = FIX + (' and casters = "frictionless"' if drag and sum(drag) >= push else "")
         raise ConfigError(where, f"cannot drive as shipped: {'; '.join(said)}: {fix} in [plant]")
-
-
-def chatter_refusal(robot, floor: float) -> str:
-    """Why the wheel servos cannot run here, in numbers, and the keys that drive the robot instead."""
-    m, a = robot.model, robot.acts[0]
-    dof = robot.dofs[0]
-    return (
-        f"the wheel servos chatter (kv {float(m.actuator_gainprm[a, 0]):g}, gear {float(m.actuator_gear[a, 0]):g}, "
-        f"their force clamped, on a wheel of {float(m.dof_M0[dof]):.3g} kg m^2): integrating them needs a timestep "
-        f"of {servo_step(robot):.2g} s, below {floor:g} s (1/16 of the model's): "
-        'set actuator = "torque" (the wheel-speed PI loop, pi_kp and pi_ki) in [plant], or a timestep'
-    )

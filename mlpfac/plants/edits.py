@@ -30,7 +30,7 @@ def offset_from_site(m: mujoco.MjModel, site: int, offset) -> tuple[int, np.ndar
 
 def lock_other_joints(spec: mujoco.MjSpec, m: mujoco.MjModel, qpos: np.ndarray, keep: tuple[int, ...]) -> list[str]:
     """Fix every joint moved by an actuator not in ``keep`` (through the joint, or a fixed tendon), or
-    coupled to such a joint by an equality, at its pose in ``qpos``; remove those actuators, the
+    coupled to such a joint by an equality, and every joint of what hangs from them, at its pose in ``qpos``; remove those actuators, the
     tendons, equalities and sensors on what is fixed (and the keyframes, whose sizes no longer fit).
     The locked bodies become rigid parts of their parents (fused when the model compiles with
     ``fusestatic``). Returns the joints' names."""
@@ -43,6 +43,11 @@ def lock_other_joints(spec: mujoco.MjSpec, m: mujoco.MjModel, qpos: np.ndarray, 
         t = int(m.actuator_trnid[a, 0])
         joints |= {t} if int(m.actuator_trntype[a]) == JOINT_TRN else set(_tendon_joints(m, t))
     bodies = _coupled({int(m.jnt_bodyid[j]) for j in joints}, m)
+    below = set(bodies)  # what hangs from a locked part (a fingertip, a camera) is fixed with it
+    for b in range(1, m.nbody):  # parents come before their children
+        if int(m.body_parentid[b]) in below:
+            below.add(b)
+    bodies |= {b for b in below if int(m.body_jntnum[b])}
     gone = {j for j in range(m.njnt) if int(m.jnt_bodyid[j]) in bodies}
     locked = []
     for b in sorted(bodies):
@@ -169,17 +174,39 @@ def to_torque_motors(spec: mujoco.MjSpec, m: mujoco.MjModel, acts) -> None:
             act.ctrllimited = mujoco.mjtLimited.mjLIMITED_FALSE
 
 
-def torque_limit(m: mujoco.MjModel, a: int, c: float, torque_drive: bool) -> float:
+def torque_limit(m: mujoco.MjModel, a: int, c: float, torque_drive: bool, kept: bool = False) -> float:
     """Largest forward wheel torque (N m at the joint) of drive ``a`` (``c`` actuator units per
     joint unit), wherever the model limits it: the actuator's force (or, for the torque drive, its
-    control) range, and the joint's ``actuatorfrcrange``; inf when nothing limits it."""
-    limited = m.actuator_ctrllimited[a] if torque_drive else m.actuator_forcelimited[a]
+    control) range, and the joint's ``actuatorfrcrange``; inf when nothing limits it. ``kept``: the
+    plant keeps the servo's limits (:func:`unclamp`): a range that is not zero limits."""
+    limited = m.actuator_ctrllimited[a] if torque_drive else m.actuator_forcelimited[a] or kept
     lo, hi = m.actuator_ctrlrange[a] if torque_drive else m.actuator_forcerange[a]
-    out = min(-lo, hi) * abs(c) if limited else math.inf
+    out = min(-lo, hi) * abs(c) if limited and (lo or hi) else math.inf
     j = int(m.actuator_trnid[a, 0])
-    if m.jnt_actfrclimited[j]:
+    if m.jnt_actfrclimited[j] or (kept and np.any(m.jnt_actfrcrange[j])):
         out = min(out, float(min(-m.jnt_actfrcrange[j, 0], m.jnt_actfrcrange[j, 1])))
     return out
+
+
+def unclamp(spec: mujoco.MjSpec, m: mujoco.MjModel, acts) -> None:
+    """The velocity servos' force limits (theirs and their joints' ``actuatorfrcrange``) kept as ranges
+    but no longer applied by MuJoCo (servo_limit = "control": the plant keeps them through the
+    control); a range that did not limit is zeroed, so that a range that is not zero limits."""
+    off = mujoco.mjtLimited.mjLIMITED_FALSE
+    for a in acts:
+        act, joint = spec.actuators[a], spec.joints[int(m.actuator_trnid[a, 0])]
+        if not m.actuator_forcelimited[a]:
+            act.forcerange = [0.0, 0.0]
+        if not m.jnt_actfrclimited[int(m.actuator_trnid[a, 0])]:
+            joint.actfrcrange = [0.0, 0.0]
+        act.forcelimited, joint.actfrclimited = off, off
+
+
+def servo_band(m: mujoco.MjModel, a: int) -> float:
+    """How far servo ``a``'s control may stand from its actuator's speed with its force within its
+    limits (:func:`unclamp`): the force limit (the actuator's and its joint's over the gear) / kv."""
+    gear = abs(float(m.actuator_gear[a, 0]))
+    return torque_limit(m, a, gear, False, kept=True) / gear / float(m.actuator_gainprm[a, 0])
 
 
 def mesh_shape(m: mujoco.MjModel, g: int) -> dict:

@@ -33,7 +33,7 @@ import numpy as np
 from mlpfac.plants import compiled as K  # noqa: N812 - the kernel's layout constants, K.F_DT ...
 from mlpfac.plants import drive
 from mlpfac.plants.config import MujocoConfig
-from mlpfac.plants.edits import torque_limit
+from mlpfac.plants.edits import servo_band, torque_limit
 from mlpfac.plants.events import EVENT_KINDS, DelayLine
 from mlpfac.plants.ik import wheel_speeds
 from mlpfac.plants.model_file import is_menagerie, menagerie_version
@@ -97,6 +97,10 @@ class MujocoPlant(MujocoEvents):
         self.ints[[K.I_AL, K.I_AR, K.I_DL, K.I_DR, K.I_SITE]] = (*r.acts, *r.dofs, r.site)
         self.ints[K.I_TORQUE] = self.config.actuator == "torque"
         self.ints[[K.I_AL2, K.I_AR2, K.I_MIX]] = (*r.seconds, r.mix is not None)
+        self.ints[K.I_CLAMP] = self.config.servo_limit == "control" and self.config.actuator == "velocity"
+        self._servos = [(i, a) for i, a in enumerate((*r.acts, *r.seconds)) if a >= 0 and self.ints[K.I_CLAMP]]
+        self.ints[[K.I_DL2, K.I_DR2]] = [int(r.model.jnt_dofadr[r.model.actuator_trnid[a, 0]]) if a >= 0 else 0
+                                         for a in r.seconds]  # fmt: skip
         self.fl[[K.F_CL2, K.F_CR2]] = r.second_per_wheel
         self._umax()
         self._torque_max = self._force_limits()
@@ -108,7 +112,11 @@ class MujocoPlant(MujocoEvents):
             self.fl[K.F_STD : K.F_STD + 3] = self._noise
 
     def _umax(self) -> None:
-        """The tendon drive's inverse and its motors' control limits (of the current model) into fl."""
+        """The drive's limits of the current model into fl: the tendon drive's inverse and its motors'
+        control limits; servos whose force limit the plant keeps (``servo_limit = "control"``): each
+        one's gear and force limit / kv (:func:`mlpfac.plants.edits.servo_band`)."""
+        for i, a in self._servos:  # left, right, left second, right second
+            self.fl[K.F_GEAR + i], self.fl[K.F_BAND + i] = self.model.actuator_gear[a, 0], servo_band(self.model, a)
         if self.robot.mix is not None:
             self.fl[K.F_MIX : K.F_MIX + 4] = self.robot.mix.ravel()
             self.fl[K.F_UMAX : K.F_UMAX + 2] = [drive.ctrl_limit(self.model, a) for a in self._acts]
@@ -243,8 +251,10 @@ class MujocoPlant(MujocoEvents):
         """Largest forward wheel torque of each drive (N m at the joint), inf when not limited."""
         if self.robot.mix is not None:
             return drive.wheel_torque_limits(self.robot.mix, self.fl[K.F_UMAX : K.F_UMAX + 2])
-        torque = self.config.actuator == "torque"
-        tl, tr = (torque_limit(self.model, a, c, torque) for a, c in zip(self._acts, self._act_per_wheel, strict=True))
+        torque, kept = self.config.actuator == "torque", bool(self.ints[K.I_CLAMP])
+        tl, tr = (
+            torque_limit(self.model, a, c, torque, kept) for a, c in zip(self._acts, self._act_per_wheel, strict=True)
+        )
         return tl, tr
 
     def telemetry(self) -> dict[str, np.ndarray | float]:

@@ -31,11 +31,9 @@ from mlpfac.plants.detect import (
     resolve,
 )
 from mlpfac.plants.model_file import fingerprint, is_menagerie, load_spec
+from mlpfac.plants.settle import SETTLE_S, cannot_simulate, settle
 
 MAX_SUBSTEPS = 10_000  # physics steps in one control period, at most
-SETTLE_S = 0.5  # seconds the robot settles on its wheels at least, at construction (the rest pose)
-SETTLE_MAX_S = 10.0  # ... and at most: then it must be at rest
-REST_SPEED = 1e-4  # at rest: the free body moves no faster than this (m/s, rad/s)
 
 
 @dataclass(frozen=True)
@@ -132,13 +130,12 @@ def read_robot(config: MujocoConfig, periods: tuple[float, ...] = ()) -> Robot:
     return robot
 
 
-def _read_robot(
-    config: MujocoConfig, stamp: tuple[int, int], periods: tuple[float, ...] = (), probe: bool = True
-) -> Robot:
-    """The robot of ``config`` (:func:`read_robot`); ``probe``: try its wheel servos, and where they
-    chatter (:func:`mlpfac.plants.defaults.chatters`) take a timestep left unset down to one that
-    integrates them (:func:`mlpfac.plants.defaults.servo_step`)."""
-    user = config
+def _read_robot(config: MujocoConfig, stamp: tuple[int, int], periods: tuple[float, ...] = ()) -> Robot:
+    """The robot of ``config`` (:func:`read_robot`). Its wheel servos are tried, and where they chatter
+    (:func:`mlpfac.plants.defaults.chatters`) with ``servo_limit`` unset, their force limits are kept
+    through their control instead (``servo_limit = "control"``, :func:`mlpfac.plants.edits.unclamp`):
+    the model compiled again, the robot settled again (the same robot as read with that key set)."""
+    user, probe = config, True
     spec, path = load_spec(config.model)
     where = config.model if is_menagerie(config.model) else str(path)
     m = _compile(spec, where)
@@ -214,7 +211,7 @@ def _read_robot(
         try:
             skids = defaults.skids(m, qpos0, ctrl0, SETTLE_S, root0, bodies)
         except mujoco.FatalError as err:  # an arena too small for the model (<size memory>), say
-            raise _cannot_simulate(where, err) from None
+            raise cannot_simulate(where, err) from None
         if skids and config.casters is None:
             config, chosen = (
                 defaults.with_chosen(config, {"casters": "frictionless"}),
@@ -223,82 +220,93 @@ def _read_robot(
         if skids:
             defaults.frictionless(spec, skids, floor)
             m = _compile(spec, where)
-    site = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, edits.POSE_SITE if site is None else m.site(site).name)
-    root = int(m.body_rootid[m.site_bodyid[site]])
-    jnt = int(m.body_jntadr[root])
-    if jnt < 0 or int(m.jnt_type[jnt]) != mujoco.mjtJoint.mjJNT_FREE:
-        kind, name = config.frame
-        raise ConfigError(
-            kind, f"the body tree of {kind} {name!r} must hang from a <freejoint/> (a robot free to drive)"
+    servos = [a for a in (*acts, *seconds) if a >= 0 and config.actuator == "velocity" and not drv.tendon]
+    if config.servo_limit == "control" and servos:
+        edits.unclamp(spec, m, servos)
+        m = _compile(spec, where)
+    site0, suffix = site, ""
+    while True:  # once, or twice: again with servo_limit = "control" where the servos chatter
+        site = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, edits.POSE_SITE if site0 is None else m.site(site0).name)
+        root = int(m.body_rootid[m.site_bodyid[site]])
+        jnt = int(m.body_jntadr[root])
+        if jnt < 0 or int(m.jnt_type[jnt]) != mujoco.mjtJoint.mjJNT_FREE:
+            kind, name = config.frame
+            raise ConfigError(
+                kind, f"the body tree of {kind} {name!r} must hang from a <freejoint/> (a robot free to drive)"
+            )
+        wheel_bodies = tuple(int(m.jnt_bodyid[j]) for j in driven)
+        tyres = tuple(g for b in wheel_bodies for g in collision_geoms(m, b) if int(m.geom_type[g]) in WHEEL_SHAPES)
+        dt = float(m.opt.timestep)
+        check_timestep(dt, "timestep", "the model's timestep ")
+        try:
+            d = mujoco.MjData(m)
+            settle(m, d, dt, qpos0, ctrl0, int(m.jnt_dofadr[jnt]), where)
+        except mujoco.FatalError as err:  # an arena too small for the model (<size memory>), say
+            raise cannot_simulate(where, err) from None
+        anchors = [d.xanchor[j].copy() for j in joints]
+        sign = wheel_parts.wheel_signs(config, d, site, joints, anchors)
+        dofs = (int(m.jnt_dofadr[joints[0]]), int(m.jnt_dofadr[joints[1]]))
+        if drv.tendon:
+            c, inverse, umax = [1.0, 1.0], *drive.mix(m, d.qpos, acts, dofs, sign)
+        else:
+            c = [s * g for s, g in zip(sign, m.actuator_gear[list(acts), 0], strict=True)]
+            inverse, umax = None, None
+        c2 = [
+            0.0 if a < 0 else float(s * m.actuator_gear[a, 0] * wheel_parts.same_way(m, d, a, j))
+            for a, s, j in zip(seconds, sign, joints, strict=True)
+        ]
+        limit = [w / abs(ci) for w, ci in zip(wheel_speed, c, strict=True) if w is not None]
+        robot = Robot(
+            where=where,
+            config=config,
+            found=(*found.keys, *chosen),
+            description=description + defaults.said(chosen, config) + suffix,
+            sha256=sha256,
+            spec=spec,
+            model=m,
+            dt=dt,
+            acts=(acts[0], acts[1]),
+            site=site,
+            root=root,
+            qroot=int(m.jnt_qposadr[jnt]),
+            droot=int(m.jnt_dofadr[jnt]),
+            dofs=dofs,
+            wheel_bodies=wheel_bodies,
+            tyres=tyres,
+            qpos_rest=d.qpos.copy(),
+            ctrl_rest=d.ctrl.copy(),
+            site_rest=(d.site_xpos[site].copy(), yaw(d.site_xmat[site])),
+            real_radius=max(wheel_parts.radius(m, g, int(m.body_jntadr[m.geom_bodyid[g]])) for g in tyres),
+            real_track=float(np.linalg.norm(anchors[1] - anchors[0])),
+            sign=sign,
+            act_per_wheel=(float(c[0]), float(c[1])),
+            geometry=shapes.static_geometry(m, d, site, root, visual_only),
+            max_wheel_speed=min(limit) if limit else None,
+            locked=tuple(locked),
+            seconds=(seconds[0], seconds[1]),
+            second_per_wheel=(c2[0], c2[1]),
+            mix=inverse,
+            umax=umax,
         )
-    wheel_bodies = tuple(int(m.jnt_bodyid[j]) for j in driven)
-    tyres = tuple(g for b in wheel_bodies for g in collision_geoms(m, b) if int(m.geom_type[g]) in WHEEL_SHAPES)
-    dt = float(m.opt.timestep)
-    check_timestep(dt, "timestep", "the model's timestep ")
-    try:
-        d = mujoco.MjData(m)
-        _settle(m, d, dt, qpos0, ctrl0, int(m.jnt_dofadr[jnt]), where)
-    except mujoco.FatalError as err:  # an arena too small for the model (<size memory>), say
-        raise _cannot_simulate(where, err) from None
-    anchors = [d.xanchor[j].copy() for j in joints]
-    sign = wheel_parts.wheel_signs(config, d, site, joints, anchors)
-    dofs = (int(m.jnt_dofadr[joints[0]]), int(m.jnt_dofadr[joints[1]]))
-    if drv.tendon:
-        c, inverse, umax = [1.0, 1.0], *drive.mix(m, d.qpos, acts, dofs, sign)
-    else:
-        c = [s * g for s, g in zip(sign, m.actuator_gear[list(acts), 0], strict=True)]
-        inverse, umax = None, None
-    c2 = [
-        0.0 if a < 0 else float(s * m.actuator_gear[a, 0] * wheel_parts.same_way(m, d, a, j))
-        for a, s, j in zip(seconds, sign, joints, strict=True)
-    ]
-    limit = [w / abs(ci) for w, ci in zip(wheel_speed, c, strict=True) if w is not None]
-    robot = Robot(
-        where=where,
-        config=config,
-        found=(*found.keys, *chosen),
-        description=description + defaults.said(chosen, config),
-        sha256=sha256,
-        spec=spec,
-        model=m,
-        dt=dt,
-        acts=(acts[0], acts[1]),
-        site=site,
-        root=root,
-        qroot=int(m.jnt_qposadr[jnt]),
-        droot=int(m.jnt_dofadr[jnt]),
-        dofs=dofs,
-        wheel_bodies=wheel_bodies,
-        tyres=tyres,
-        qpos_rest=d.qpos.copy(),
-        ctrl_rest=d.ctrl.copy(),
-        site_rest=(d.site_xpos[site].copy(), yaw(d.site_xmat[site])),
-        real_radius=max(wheel_parts.radius(m, g, int(m.body_jntadr[m.geom_bodyid[g]])) for g in tyres),
-        real_track=float(np.linalg.norm(anchors[1] - anchors[0])),
-        sign=sign,
-        act_per_wheel=(float(c[0]), float(c[1])),
-        geometry=shapes.static_geometry(m, d, site, root, visual_only),
-        max_wheel_speed=min(limit) if limit else None,
-        locked=tuple(locked),
-        seconds=(seconds[0], seconds[1]),
-        second_per_wheel=(c2[0], c2[1]),
-        mix=inverse,
-        umax=umax,
-    )
-    defaults.check_drive(m, d, robot, config, where)
-    if not probe or config.actuator != "velocity" or user.timestep is not None:
-        return robot
-    if not defaults.chatters(robot):
-        return robot
-    step = defaults.smaller_timestep(defaults.servo_step(robot), periods or (dt,), spec_dt * defaults.SMALLEST_STEP)
-    if step is None:
-        raise ConfigError(where, defaults.chatter_refusal(robot, spec_dt * defaults.SMALLEST_STEP))
-    robot = _read_robot(dataclasses.replace(user, timestep=step), stamp, periods, probe=False)
-    return dataclasses.replace(
-        robot,
-        found=(*robot.found, "timestep"),
-        description=f"{robot.description}; timestep {step:g} s (the wheel servos chatter at {dt:g} s)",
-    )
+        defaults.check_drive(m, d, robot, config, where)
+        chatter = probe and config.actuator == "velocity" and user.servo_limit is None and defaults.chatters(robot)
+        if not chatter:
+            return robot
+        floor = spec_dt * defaults.SMALLEST_STEP
+        step = defaults.smaller_timestep(defaults.servo_step(robot), periods or (dt,), floor)
+        if step is not None and user.timestep is None:  # a timestep that integrates them, read again at it
+            robot = _read_robot(dataclasses.replace(user, timestep=step, servo_limit="model"), stamp, periods)
+            return dataclasses.replace(
+                robot,
+                config=dataclasses.replace(robot.config, servo_limit=None),
+                found=(*(k for k in robot.found if k != "servo_limit"), "timestep"),
+                description=f"{robot.description}; timestep {step:g} s (the wheel servos chatter at {dt:g} s)",
+            )
+        edits.unclamp(spec, m, servos)  # kept within their limits by their control: no longer chatter
+        m = _compile(spec, where)
+        config, chosen, probe = defaults.with_chosen(config, {"servo_limit": "control"}), chosen, False
+        chosen |= {"servo_limit": "control"}
+        suffix = f"; the wheel servos' force limit kept by their control (as MuJoCo clamps it they chatter at {dt:g} s)"
 
 
 def _compile(spec: mujoco.MjSpec, where: str) -> mujoco.MjModel:
@@ -343,44 +351,3 @@ def _pose_frame(spec: mujoco.MjSpec, m: mujoco.MjModel, config: MujocoConfig, wh
         return site
     edits.add_pose_site(spec, *edits.offset_from_site(m, site, offset))
     return None
-
-
-def _settle(
-    m: mujoco.MjModel, d: mujoco.MjData, dt: float, qpos: np.ndarray, ctrl: np.ndarray, droot: int, where: str
-) -> None:
-    """From the start pose and controls, let the robot settle on its wheels with zero wheel speed:
-    SETTLE_S at least, then on until its free body moves no faster than REST_SPEED (checked; a
-    caster wheel may spin on)."""
-    mujoco.mj_resetData(m, d)
-    d.qpos[:], d.ctrl[:] = qpos, ctrl
-    mujoco.mj_forward(m, d)
-    chunk = max(1, int(round(0.1 / dt)))
-    left = int(round(SETTLE_S / dt))
-    while left > 0:  # in pieces of 0.1 s of simulated time: a signal is seen between two
-        mujoco.mj_step(m, d, nstep=min(chunk, left))
-        left -= chunk
-        _no_warning(d, where)
-    while np.max(np.abs(d.qvel[droot : droot + 6])) > REST_SPEED:
-        if d.time > SETTLE_MAX_S:
-            raise ConfigError(
-                where,
-                f"the robot does not come to rest on its wheels within {SETTLE_MAX_S:g} s (speeds up to "
-                f'{np.max(np.abs(d.qvel[droot : droot + 6])):.2g}); lock what moves (other_actuators = "lock") or start from a keyframe',
-            )
-        mujoco.mj_step(m, d, nstep=chunk)
-        _no_warning(d, where)
-    mujoco.mj_forward(m, d)
-
-
-def _cannot_simulate(where: str, err: Exception) -> ConfigError:
-    """MuJoCo's fatal error (an arena too small for the model, ``<size memory>``), on one line."""
-    return ConfigError(where, f"MuJoCo cannot simulate the model: {' '.join(str(err).split())}")
-
-
-def _no_warning(d: mujoco.MjData, where: str) -> None:
-    """A ConfigError naming MuJoCo's warnings of ``d`` (an unstable model, an arena too small), if any."""
-    warned = [mujoco.mjtWarning(i).name for i, w in enumerate(d.warning) if w.number]
-    if warned:
-        raise ConfigError(
-            where, f"MuJoCo warned ({', '.join(warned)}) as the robot settled at rest: the model is not stable as it is"
-        )

@@ -31,6 +31,12 @@ MENAGERIE_BASES = (
     "hello_robot_stretch_3",
     "rainbow_robotics_rby1",
 )
+AS_SHIPPED = {  # what a Menagerie base does from its name alone (tests/test_robots.py checks each)
+    "pal_tiago_dual": "runs, but is lost: its four wheels, two a side and without the rollers of its "
+    "omnidirectional base, cannot turn it (docs/robots.md)",
+    "rainbow_robotics_rby1": "refused as shipped: its wheel servos (kv 1) cannot turn the wheels against their "
+    "damping; --robot rby1a drives it",
+}
 SHIPPED = {"diffdrive": "scene.xml", "cart": "cart-scene.xml", "rby1a": "rby1a.toml"}  # this package's (models/)
 SPEEDS = {"eight": ("wx", "wy"), "circle": ("rate",), "line": ("speed",), "lemniscate": ("rate",)}
 DEFAULT_SPEEDS = {"eight": (0.25, 0.5), "circle": (0.5,), "line": (0.5,), "lemniscate": (0.3,)}
@@ -128,13 +134,12 @@ def robots_here() -> list[tuple[str, str]]:
     for name in MENAGERIE_BASES:
         if cache.root is not None:
             here = (cache.root / name).is_dir()
-            out.append((name, f"MuJoCo Menagerie, {'in' if here else 'not in'} MENAGERIE_ROOT={cache.root}"))
+            where = f"MuJoCo Menagerie, {'in' if here else 'not in'} MENAGERIE_ROOT={cache.root}"
         elif cache.is_cached(mm.get(name)):
-            out.append((name, f"MuJoCo Menagerie, downloaded ({cache.dir})"))
+            where = f"MuJoCo Menagerie, downloaded ({cache.dir})"
         else:
-            out.append(
-                (name, "MuJoCo Menagerie, not downloaded: fetched on first use online; offline set MENAGERIE_ROOT")
-            )
+            where = "MuJoCo Menagerie, not downloaded: fetched on first use online; offline set MENAGERIE_ROOT"
+        out.append((name, f"{where}; {AS_SHIPPED[name]}" if name in AS_SHIPPED else where))
     return out
 
 
