@@ -136,7 +136,7 @@ NOT_DATA = {
     "results-tiago.md": (
         "±5 rad/s (0.49 m/s)",  # the wheels' limit and the eight's speeds
         "0.11-0.36 m/s",
-        "(0.26 m RMS after the event",  # seed 5's lost run: this dataset keeps no runs.json
+        "(0.20 and 0.33 m RMS after the event",  # the two lost runs of corradini (runs.json, in m)
         "tracks to 0.30 mm",  # `mlpfac run` of a copy of tiago-nominal.toml without pose noise
     ),
 }
