@@ -10,7 +10,8 @@
    N x the per-run floor: N runs x control steps x bare MuJoCo physics per control step
    (``perf_floor.PhysicsFloor``: ``mj_step`` x substeps on the same MJCF, constant command;
    the best of interleaved blocks), over the 2 cores;
-3. 2 workers against 1 on the first ``--pair-runs`` runs of the map (interleaved, the best of ``--repeat``).
+3. 2 workers against 1 on the first ``--pair-runs`` runs of the map (interleaved, the best of ``--repeat``),
+   beside what the machine itself gives two processes against one (bare physics, nothing of mlpfac).
 """
 
 from __future__ import annotations
@@ -26,7 +27,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from bench_sweep import process_tree_cpu, report, side_by_side  # noqa: E402
+from bench_sweep import machine_ratio, process_tree_cpu, report, side_by_side  # noqa: E402
 from perf_floor import PhysicsFloor  # noqa: E402
 
 from mlpfac.scenario.parse import load  # noqa: E402
@@ -107,6 +108,9 @@ def workers(jobs: list, runs: int, repeat: int, tmp: Path) -> None:
     t = side_by_side({1: once(1), 2: once(2)}, repeat)
     report("3. 2 workers / 1 worker (runs per second)", t[1] / t[2], ">= 1.9", t[1] / t[2] >= 1.9,
            f"({len(sub)} runs: {t[1]:.2f} s vs {t[2]:.2f} s)")  # fmt: skip
+    ceiling = machine_ratio()
+    report("   the machine: bare physics, 2 processes / 1", ceiling, "-", None, "(nothing of mlpfac's: the ceiling)")
+    report("   the sweep's ratio / the machine's", t[1] / t[2] / ceiling, "-", None)
 
 
 if __name__ == "__main__":

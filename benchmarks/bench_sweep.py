@@ -106,6 +106,34 @@ def process_tree_cpu(every: float = 0.05):
         spent[0] = cpu(resource.RUSAGE_SELF) - own0 + children
 
 
+def _physics(steps: int) -> float:
+    """Wall seconds of ``steps`` bare ``mj_step`` calls of the shipped robot's MJCF, in this process."""
+    import mujoco
+
+    m = mujoco.MjModel.from_xml_path(str(ROOT / "models" / "scene.xml"))
+    d = mujoco.MjData(m)
+    t0 = time.perf_counter()
+    mujoco.mj_step(m, d, nstep=steps)
+    return time.perf_counter() - t0
+
+
+def machine_ratio(steps: int = 200_000, repeat: int = 2) -> float:
+    """What this machine gives two processes against one, with nothing of mlpfac's: the same bare
+    MuJoCo physics run in two forked processes at once against one alone (throughput ratio, the best
+    of ``repeat``). Two cores that slow each other (shared caches, memory bandwidth, a host's other
+    guests) cap any two-worker sweep below 2 by this much."""
+    import multiprocessing as mp
+
+    best = 0.0
+    with mp.get_context("fork").Pool(2) as pool:
+        for _ in range(repeat):
+            one = _physics(steps)
+            t0 = time.perf_counter()
+            pool.map(_physics, [steps, steps])
+            best = max(best, 2 * one / (time.perf_counter() - t0))
+    return best
+
+
 def bench_sweep(seeds: int, duration: float, repeat: int) -> None:
     print(f"1. sweep throughput ({os.cpu_count()} CPUs)")
     jobs = sweep.plan(["eight-nominal"], ["adaptive"], list(range(seeds)), duration)
@@ -134,6 +162,9 @@ def bench_sweep(seeds: int, duration: float, repeat: int) -> None:
         f"CPU s of the last repeat {cpu_s[1]:.2f} vs {cpu_s[2]:.2f})"
     )
     report("2 workers / 1 worker (runs per second)", ratio, ">= 1.9", ratio >= 1.9, detail)
+    ceiling = machine_ratio()
+    report("   the machine: bare physics, 2 processes / 1", ceiling, "-", None, "(nothing of mlpfac's: the ceiling)")
+    report("   the sweep's ratio / the machine's", ratio / ceiling, "-", None)
 
 
 def bench_batched(batch_seeds: int, batch_duration: float, repeat: int) -> None:
