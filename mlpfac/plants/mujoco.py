@@ -265,6 +265,10 @@ class MujocoPlant(MujocoEvents):
         overwritten by the next step: copy what you keep."""
         return self._tele
 
+    def mujoco_warnings(self) -> dict[str, int]:
+        """MuJoCo's warning counters that are not zero, by name (``{}`` when all is well)."""
+        return {mujoco.mjtWarning(i).name: int(w.number) for i, w in enumerate(self.data.warning) if w.number}
+
     def diverged(self) -> str | None:
         """Why the robot's state is not one to go on from (:func:`mlpfac.plants.compiled.diverged`), or None."""
         return self.why(K.diverged(self._args))
