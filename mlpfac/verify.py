@@ -138,8 +138,7 @@ def _plan(command: str, root: Path):
         where, words = root / words[1], words[3:]
     if words[:1] != ["mlpfac"] or words[1:2] not in (["sweep"], ["compare"]):
         raise ConfigError(command, "a script's table: run its command again to check it")
-    from mlpfac.scenario.on_robot import robots_flag, with_robots
-    from mlpfac.scenario.parse import scenario_names
+    from mlpfac.sweeps.cli import scenarios_of
     from mlpfac.sweeps.plan import parse_controllers, parse_seeds, plan
     from mlpfac.sweeps.vary import parse_vary
 
@@ -147,10 +146,9 @@ def _plan(command: str, root: Path):
         args = _parser().parse_args(words[1:])
     except SystemExit:
         raise ConfigError(command, "not a command mlpfac reads") from None
-    robots = [args.robot] if args.robot is not None else robots_flag(args.robots, "--robots")
     with contextlib.chdir(where):
         jobs = plan(
-            with_robots(args.scenarios or scenario_names(), robots),
+            scenarios_of(args),
             parse_controllers(args.controllers),
             parse_seeds(args.seeds),
             args.duration,

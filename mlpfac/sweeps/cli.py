@@ -88,22 +88,26 @@ def run_sweep_cli(args: argparse.Namespace) -> int:
 
 
 def run_compare_cli(args: argparse.Namespace) -> int:
-    if not args.scenarios:
-        from mlpfac.scenario.parse import scenario_names
-
-        args.scenarios = scenario_names()
     return _run_cli(args, "compare", COMPARE_COLUMNS)
+
+
+def scenarios_of(args: argparse.Namespace) -> list[str]:
+    """The scenarios a parsed ``sweep`` / ``compare`` command line runs, each on its robots
+    (``--robot``, ``--robots``); ``compare`` without scenarios: every shipped one. The command and
+    ``report --verify``, which plans a dataset's recorded command again, read a command line the same way."""
+    from mlpfac.scenario.on_robot import robots_flag, with_robots
+    from mlpfac.scenario.parse import scenario_names
+
+    robots = [args.robot] if args.robot is not None else robots_flag(args.robots, "--robots")
+    return with_robots(args.scenarios or scenario_names(), robots)
 
 
 def _run_cli(args: argparse.Namespace, stem: str, columns) -> int:
     """Validate everything, then run; 0 done, 1 some run failed or a worker was lost, 2 bad input
     or a failed write (one line naming the path), 130 interrupted (Ctrl-C), 143 terminated (SIGTERM)."""
-    from mlpfac.scenario.on_robot import robots_flag, with_robots
-
     cmd = shlex.join(["mlpfac", *sys.argv[1:]]) if sys.argv[1:] else f"mlpfac {stem} ..."
-    robots = [args.robot] if args.robot is not None else robots_flag(args.robots, "--robots")
     done = sweep_folder(
-        with_robots(args.scenarios, robots), args.controllers, args.seeds, args.out, duration=args.duration, workers=args.workers,
+        scenarios_of(args), args.controllers, args.seeds, args.out, duration=args.duration, workers=args.workers,
         batched=args.batched, batch_size=args.batch_size, scheduler=args.scheduler,
         scheduler_timeout=args.scheduler_timeout, save_rrd=args.save_rrd, stem=stem, columns=columns, command=cmd,
         vary=args.vary, threshold=args.threshold,
