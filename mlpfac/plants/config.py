@@ -16,6 +16,7 @@ from mlpfac.exceptions import ConfigError
 from mlpfac.plants.model_file import is_menagerie, menagerie_name, model_path, shipped_model
 
 LIMITS = ("wheel_radius", "track", "max_wheel_speed", "timestep")
+ARMATURE_MAX = 1e3  # kg m^2 on a wheel's hinge, at most (a truck's wheel is about 10)
 NOISE_STD_MAX = 10.0  # m and rad of pose noise, at most
 TIMESTEP_MIN, TIMESTEP_MAX = 1e-5, 0.1  # physics timestep (s): finer would take hours, coarser is not physics
 
@@ -67,6 +68,7 @@ class MujocoConfig:
         None  # "model": MuJoCo clamps the wheel servos' force; "control": the plant does, each physics step
     )
     timestep: float | None = None  # physics timestep (s); None: the model's
+    armature: float | None = None  # rotor inertia on each driven wheel's hinge (kg m^2); None: the model's
     wheel_radius: float | None = None  # radius the IK believes (m); None: read from the model
     track: float | None = None  # wheel separation the IK believes (m); None: read from the model
     max_wheel_speed: float | None = None  # rad/s, kept by scaling (v, omega); None: the model's; inf: none
@@ -107,6 +109,11 @@ class MujocoConfig:
         for name in LIMITS:
             _positive(name, getattr(self, name), optional=True, inf=name == "max_wheel_speed")
         check_timestep(self.timestep, "timestep")
+        arm = self.armature
+        if arm is not None and (
+            isinstance(arm, bool) or not isinstance(arm, int | float) or not 0 <= arm <= ARMATURE_MAX
+        ):
+            raise ConfigError("armature", f"must be a number in 0 .. {ARMATURE_MAX:g} kg m^2, got {arm!r}")
         _positive("pi_kp", self.pi_kp)
         ki = self.pi_ki
         if isinstance(ki, bool) or not isinstance(ki, int | float) or not math.isfinite(ki) or ki < 0:

@@ -12,6 +12,11 @@
   else the largest one below it that does; where the wheel servos chatter at it as MuJoCo clamps
   their force (:func:`chatters`), the largest that divides them and integrates the servos
   (:func:`servo_step`), down to 1/16 of the model's;
+- ``armature``: on a skid-steer whose wheels have no rotor inertia in the model, M r^2 / n on
+  each of its n wheels (M the robot's mass, r the wheel radius): a wheel that moves only its own
+  kilogram grips the floor along its rim with a far softer MuJoCo contact than the robot's mass
+  holds it across, and a skid-steer that must scrub sideways to turn then turns at a few per cent
+  of its command; a geared motor's rotor, reflected through its gear, is what a real wheel has;
 - ``servo_limit``: ``"control"`` where the servos chatter and no such timestep is left: the plant
   keeps their force within its limit through their control, every physics step, and MuJoCo
   integrates them implicitly (it does not a clamped servo).
@@ -62,6 +67,14 @@ def tyre(config, m: mujoco.MjModel, geoms: list[int], floor: int) -> dict:
     if any(int(m.geom_type[g]) not in ROUND or int(m.geom_priority[g]) <= floor for g in geoms):
         return {"tyre": "sphere"}
     return {}
+
+
+def armature(config, m: mujoco.MjModel, dofs: list[int], mass: float, radius: float) -> dict:
+    """``{"armature": M r^2 / n}`` (3 digits) when it is unset, the drive has more than two wheels
+    (a skid-steer) and none of their hinges has rotor inertia in the model."""
+    if config.armature is not None or len(dofs) <= 2 or any(float(m.dof_armature[d]) > 0 for d in dofs):
+        return {}
+    return {"armature": float(f"{mass * radius**2 / len(dofs):.3g}")}
 
 
 def timestep(config, dt: float, periods: tuple[float, ...]) -> dict:
@@ -136,6 +149,8 @@ def said(chosen: dict, config) -> str:
         parts.append("sphere tyres")
     if "casters" in chosen:
         parts.append("frictionless skids")
+    if "armature" in chosen:
+        parts.append(f"rotor inertia {config.armature:g} kg m^2 on each wheel")
     if "timestep" in chosen:
         parts.append(f"timestep {config.timestep:g} s")
     return f"; chosen: {', '.join(parts)}" if parts else ""

@@ -160,6 +160,12 @@ def sphere_tyres(spec: mujoco.MjSpec, m: mujoco.MjModel, wheels, radius: float, 
         geom.contype, geom.conaffinity = 0, 0
 
 
+def set_armature(spec: mujoco.MjSpec, joints: list[int], armature: float) -> None:
+    """Rotor inertia ``armature`` (kg m^2) on each of the wheels' hinges."""
+    for j in joints:
+        spec.joints[j].armature = armature
+
+
 def to_torque_motors(spec: mujoco.MjSpec, m: mujoco.MjModel, acts) -> None:
     """Turn the velocity servos into torque motors (force = ctrl) limited to the same force range
     (a servo's control range is a speed, not a torque: it is dropped)."""

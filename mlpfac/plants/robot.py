@@ -201,10 +201,17 @@ def _read_robot(config: MujocoConfig, stamp: tuple[int, int], periods: tuple[flo
     if config.tyre == "sphere":
         radius = config.wheel_radius or max(wheel_parts.radius(m, g, j) for j, geoms in wheels for g in geoms)
         edits.sphere_tyres(spec, m, wheels, radius, floor + 1)
+    if len(driven) > 2:  # a skid-steer
+        radius = max(wheel_parts.radius(m, g, j) for j, geoms in wheels for g in geoms if g in rims)
+        more = defaults.armature(config, m, [int(m.jnt_dofadr[j]) for j in driven], m.body_subtreemass[root0], radius)
+        config, chosen = defaults.with_chosen(config, more), chosen | more
+    if config.armature is not None:
+        edits.set_armature(spec, driven, config.armature)
     wheel_speed = wheel_parts.speed_limits(m, acts) if not drv.tendon else [None, None]
     if config.actuator == "torque":
         edits.to_torque_motors(spec, m, [a for a in (*acts, *seconds) if a >= 0 and not is_motor(m, a)])
-    if site is None or config.tyre == "sphere" or config.actuator == "torque" or config.timestep is not None:
+    edited = config.tyre == "sphere" or config.actuator == "torque" or config.armature is not None
+    if site is None or edited or config.timestep is not None:
         m = _compile(spec, where)
     if config.casters != "model":  # floor contacts at rest that are not the wheels and drag: they slide
         bodies = {int(m.jnt_bodyid[j]) for j in driven}
@@ -243,8 +250,14 @@ def _read_robot(config: MujocoConfig, stamp: tuple[int, int], periods: tuple[flo
             settle(m, d, dt, qpos0, ctrl0, int(m.jnt_dofadr[jnt]), where)
         except mujoco.FatalError as err:  # an arena too small for the model (<size memory>), say
             raise cannot_simulate(where, err) from None
-        anchors = [d.xanchor[j].copy() for j in joints]
-        sign = wheel_parts.wheel_signs(config, d, site, joints, anchors)
+        anchors = [d.xanchor[j].copy() for j in driven]
+        track = float(np.linalg.norm(anchors[1] - anchors[0]))
+        turns = ""
+        if len(driven) > 2:  # a skid-steer: the track it turns with (wheel_parts.skid_track)
+            track, base = wheel_parts.skid_track(anchors)
+            width = np.linalg.norm(anchors[1] - anchors[0])
+            turns = f" turning as a track of {track:.3g} m ({width:.3g} m across, {base:.3g} m front to rear)"
+        sign = wheel_parts.wheel_signs(config, d, site, joints, anchors[:2])
         dofs = (int(m.jnt_dofadr[joints[0]]), int(m.jnt_dofadr[joints[1]]))
         if drv.tendon:
             c, inverse, umax = [1.0, 1.0], *drive.mix(m, d.qpos, acts, dofs, sign)
@@ -260,7 +273,7 @@ def _read_robot(config: MujocoConfig, stamp: tuple[int, int], periods: tuple[flo
             where=where,
             config=config,
             found=(*found.keys, *chosen),
-            description=description + defaults.said(chosen, config) + suffix,
+            description=description + turns + defaults.said(chosen, config) + suffix,
             sha256=sha256,
             spec=spec,
             model=m,
@@ -277,7 +290,7 @@ def _read_robot(config: MujocoConfig, stamp: tuple[int, int], periods: tuple[flo
             ctrl_rest=d.ctrl.copy(),
             site_rest=(d.site_xpos[site].copy(), yaw(d.site_xmat[site])),
             real_radius=max(wheel_parts.radius(m, g, int(m.body_jntadr[m.geom_bodyid[g]])) for g in tyres),
-            real_track=float(np.linalg.norm(anchors[1] - anchors[0])),
+            real_track=track,
             sign=sign,
             act_per_wheel=(float(c[0]), float(c[1])),
             geometry=shapes.static_geometry(m, d, site, root, visual_only),

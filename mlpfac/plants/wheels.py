@@ -17,6 +17,21 @@ def radius(m: mujoco.MjModel, g: int, joint: int) -> float:
     return float(m.geom_size[g, 0]) if int(m.geom_type[g]) in ROUND else edits.mesh_radius(m, g, joint)
 
 
+def skid_track(anchors: list[np.ndarray]) -> tuple[float, float]:
+    """A skid-steer's track as its IK turns it, and its wheelbase, from its wheels' hinge anchors
+    (left, right, then each side's second): W + L^2 / W for wheels W apart across and L along.
+
+    Turning, every wheel slides; where each one's friction is saturated (Coulomb's, the same on
+    every wheel), the moments about the middle balance when the base turns at omega = u W/2 /
+    ((W/2)^2 + (L/2)^2) for rim speeds +-u: a differential drive of that track (the instantaneous
+    centres of rotation of the skid-steer's kinematics, Mandow et al. 2007, with their factor
+    chi = 1 + (L/W)^2)."""
+    width = float(np.linalg.norm(anchors[1] - anchors[0]))
+    base = [float(np.linalg.norm(anchors[i] - a)) for i, a in zip((0, 1), anchors[2:], strict=False)]
+    length = sum(base) / len(base)
+    return width + length**2 / width, length
+
+
 def floor_priority(m: mujoco.MjModel, root: int) -> int:
     """The highest contact priority of the geoms that are not the robot's (the floor's)."""
     return max((int(m.geom_priority[g]) for g in range(m.ngeom) if m.body_rootid[m.geom_bodyid[g]] != root), default=0)

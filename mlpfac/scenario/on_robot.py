@@ -32,8 +32,8 @@ MENAGERIE_BASES = (
     "rainbow_robotics_rby1",
 )
 AS_SHIPPED = {  # what a Menagerie base does from its name alone (tests/test_robots.py checks each)
-    "pal_tiago_dual": "runs, but is lost: its four wheels, two a side and without the rollers of its "
-    "omnidirectional base, cannot turn it (docs/robots.md)",
+    "pal_tiago_dual": "a skid-steer as modelled (four plain wheels, not the mecanum wheels of its omnidirectional "
+    "base): given a rotor on each wheel, it turns as a track of 0.98 m (docs/robots.md)",
     "rainbow_robotics_rby1": "refused as shipped: its wheel servos (kv 1) cannot turn the wheels against their "
     "damping; --robot rby1a drives it",
 }
