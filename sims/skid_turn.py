@@ -3,8 +3,9 @@ to turn in place and on an arc, open loop, with and without what the plant choos
 
 For each row the plant gets a steady (v, omega) for 3 s and prints the yaw rate and speed the base
 reaches over the last 2 s, against those asked:
-- ``armature = 0, track = W``: the model as shipped, the IK turning with the wheels' own track;
-- ``armature = M r^2/4, track = W``: a rotor on each wheel (the ``armature`` rule), the same IK;
+- ``armature = 0, track = W``: the model as shipped, the IK turning with the wheels' own track
+  (and with stiffer friction: elliptic cones with impratio 100, or MuJoCo's noslip solver);
+- ``armature = A, track = W``: a rotor on each wheel (M r^2/4 is the ``armature`` rule), the same IK;
 - ``chosen``: the rotor and the track it turns with, W + L^2 / W (what ``menagerie:pal_tiago_dual``
   runs with from its name).
 Usage: MENAGERIE_ROOT=... python sims/skid_turn.py
@@ -39,17 +40,21 @@ def main() -> None:
     chosen.reset(np.zeros(3), np.random.default_rng(0))
     left, right = (int(m.actuator_trnid[a, 0]) for a in chosen.robot.acts)
     shipped_track = float(np.linalg.norm(d.xanchor[left] - d.xanchor[right]))  # W: the wheels' hinges apart
-    rows = {
-        "armature = 0, track = W": MujocoConfig(model=MODEL, armature=0.0, track=shipped_track),
-        f"armature = {chosen.config.armature:g}, track = W": MujocoConfig(
-            model=MODEL, armature=chosen.config.armature, track=shipped_track
-        ),
-        f"chosen (armature {chosen.config.armature:g}, track {chosen.ik_track:.3g} m)": MujocoConfig(model=MODEL),
-    }
+    arm = chosen.config.armature
+    rows = [  # (name, [plant] keys, MuJoCo options set on the compiled model)
+        ("armature = 0, track = W", {"armature": 0.0, "track": shipped_track}, {}),
+        ("armature = 0, track = W, elliptic cones, impratio 100", {"armature": 0.0, "track": shipped_track},
+         {"cone": 1, "impratio": 100.0}),
+        ("armature = 0, track = W, noslip solver", {"armature": 0.0, "track": shipped_track}, {"noslip_iterations": 10}),
+        *((f"armature = {a:g}, track = W", {"armature": a, "track": shipped_track}, {}) for a in (0.01, arm, 1.0)),
+        (f"chosen (armature {arm:g}, track {chosen.ik_track:.3g} m)", {}, {}),
+    ]  # fmt: skip
     print("| plant | asked v, omega | reached v, omega | omega reached / asked |")
     print("| --- | --- | --- | --- |")
-    for name, config in rows.items():
-        plant = MujocoPlant(config, T)
+    for name, keys, options in rows:
+        plant = MujocoPlant(MujocoConfig(model=MODEL, **keys), T)
+        for key, value in options.items():
+            setattr(plant.model.opt, key, value)
         for v, omega in ASKED:
             rv, rw = reached(plant, v, omega)
             print(f"| {name} | {v:g} m/s, {omega:g} rad/s | {rv:.3f} m/s, {rw:.3f} rad/s | {rw / omega:.2f} |")

@@ -171,6 +171,13 @@ def test_the_bound_table_has_its_known_answer(tmp_path, capsys):
     main([str(tmp_path), "--variants", "v"])
     out = capsys.readouterr().out
     assert "| s | 0-4 | 2.00 (oracle-kanayama) | 3.00 (3x; inf) | 4 / 5 |" in out
+    # the bound of the laws told the change alone: per-seed 1, 1, 3, 2, 2.5; Corradini's law, not
+    # one of them, still the law the p is against
+    (told,) = bound_rows(load([tmp_path]), ["v"], ("oracle", "oracle-kanayama"))
+    assert told["bound_m"] == pytest.approx(2.0 * mm) and told["variants"]["v"]["ratio"] == pytest.approx(
+        3.0
+    )  # 1.5, 3, 2/3, inf, 4
+    assert told["variants"]["v"]["p_worse_than_corradini"] == v["p_worse_than_corradini"]
 
 
 def test_p_worse_is_one_sided():

@@ -289,7 +289,7 @@ def test_web_viewer_renders_tiago_from_its_meshes(tmp_path: Path) -> None:
     _keep(png, "tiago-viewer.png")
 
 
-ROBOT_PICTURES = ("cart", "hello_robot_stretch", "hello_robot_stretch_3", "rby1a")
+ROBOT_PICTURES = ("cart", "pal_tiago_dual", "hello_robot_stretch", "hello_robot_stretch_3", "rby1a")
 PICTURE_BYTES = 200_000  # the docs' robot pictures at most
 
 
