@@ -396,12 +396,12 @@ def entry() -> None:
     try:
         code = main()
         sys.stdout.flush()  # stdout on a full disk (/dev/full) fails here, said in one line
-    except (KeyboardInterrupt, ImportError) as err:  # a signal before main's own handling began (importing)
-        code = exits.interrupted(err)
-        if code is None:
-            raise
     except OSError as err:
         code = exits.failed_write(err, "stdout")
+    except (KeyboardInterrupt, Exception) as err:  # a signal main's own handling did not meet: while importing
+        code = exits.interrupted(err)  # (an ImportError), or raised inside a class being made (a RuntimeError)
+        if code is None:
+            raise
     code = 0 if code is None else code
     plugins = sys.modules.get("mlpfac.control.plugins")
     others = [t for t in threading.enumerate() if t is not threading.current_thread()]

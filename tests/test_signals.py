@@ -76,3 +76,22 @@ def test_a_signal_at_a_random_time_stops_within_2_s_and_leaves_no_partial_folder
     # the signal's own code; 0 when it came after the end; killed by it before Python set its handlers
     assert proc.returncode in (code, 0, -sig), f"{where} (done before: {done_before})\n{err}"
     assert _not_partial(tmp_path) == [], where
+
+
+def test_a_signal_wrapped_by_python_in_another_error_still_ends_cleanly(tmp_path):
+    """A SIGTERM that lands while Python makes a class (matplotlib's, imported to draw a sweep's
+    figure) comes out as a RuntimeError caused by it: the command still ends as terminated, 143,
+    in one line, with no traceback."""
+    code = (
+        "import mlpfac.cli as cli\n"
+        "from mlpfac.interrupts import Terminated\n"
+        "def main():\n"
+        "    try:\n"
+        "        raise Terminated()\n"
+        "    except Terminated as err:\n"
+        "        raise RuntimeError(\"Error calling __set_name__ on '_axis_method_wrapper'\") from err\n"
+        "cli.main = main\n"
+        "cli.entry()\n"
+    )
+    proc = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 143 and proc.stderr.strip() == "mlpfac: terminated", proc.stderr
