@@ -16,7 +16,7 @@ from mlpfac.exceptions import ConfigError
 from mlpfac.plants.model_file import is_menagerie, menagerie_name, model_path, shipped_model
 
 LIMITS = ("wheel_radius", "track", "max_wheel_speed", "timestep")
-ARMATURE_MAX = 1e3  # kg m^2 on a wheel's hinge, at most (a truck's wheel is about 10)
+ARMATURE_MAX = 1e3  # kg m^2 on a wheel's hinge, at most
 NOISE_STD_MAX = 10.0  # m and rad of pose noise, at most
 TIMESTEP_MIN, TIMESTEP_MAX = 1e-5, 0.1  # physics timestep (s): finer would take hours, coarser is not physics
 

@@ -24,8 +24,7 @@ def skid_track(anchors: list[np.ndarray]) -> tuple[float, float]:
     Turning, every wheel slides; where each one's friction is saturated (Coulomb's, the same on
     every wheel), the moments about the middle balance when the base turns at omega = u W/2 /
     ((W/2)^2 + (L/2)^2) for rim speeds +-u: a differential drive of that track (the instantaneous
-    centres of rotation of the skid-steer's kinematics, Mandow et al. 2007, with their factor
-    chi = 1 + (L/W)^2)."""
+    centres of rotation of skid-steer kinematics, with their expansion factor chi = 1 + (L/W)^2)."""
     width = float(np.linalg.norm(anchors[1] - anchors[0]))
     base = [float(np.linalg.norm(anchors[i] - a)) for i, a in zip((0, 1), anchors[2:], strict=False)]
     length = sum(base) / len(base)
