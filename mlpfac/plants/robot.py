@@ -251,11 +251,10 @@ def _read_robot(config: MujocoConfig, stamp: tuple[int, int], periods: tuple[flo
         except mujoco.FatalError as err:  # an arena too small for the model (<size memory>), say
             raise cannot_simulate(where, err) from None
         anchors = [d.xanchor[j].copy() for j in driven]
-        track = float(np.linalg.norm(anchors[1] - anchors[0]))
-        turns = ""
+        width = float(np.linalg.norm(anchors[1] - anchors[0]))
+        track, turns = width, ""
         if len(driven) > 2:  # a skid-steer: the track it turns with (wheel_parts.skid_track)
             track, base = wheel_parts.skid_track(anchors)
-            width = np.linalg.norm(anchors[1] - anchors[0])
             turns = f"; turning as a track of {track:.3g} m ({width:.3g} m across, {base:.3g} m front to rear)"
         sign = wheel_parts.wheel_signs(config, d, site, joints, anchors[:2])
         dofs = (int(m.jnt_dofadr[joints[0]]), int(m.jnt_dofadr[joints[1]]))
