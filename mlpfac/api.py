@@ -12,7 +12,6 @@ installed name, a class, or (for :func:`run`) an object of a class (:mod:`mlpfac
 
 from __future__ import annotations
 
-import json
 import shutil
 import tempfile
 import warnings
@@ -139,6 +138,7 @@ def sweep(
     kept and the next call resumes them). ``robots``: every scenario on each (as ``--robots``)."""
     from mlpfac.scenario.on_robot import with_robots
     from mlpfac.sweeps import engine
+    from mlpfac.sweeps.robustness import read_robustness
 
     not_in_a_worker("sweep")
     if isinstance(scenarios, str | Path):
@@ -182,7 +182,7 @@ def sweep(
             threshold=threshold,
         )
         robust = Path(out if out is not None else tmp) / "robustness.json"
-        robustness = json.loads(robust.read_text()) if robust in result.paths else None
+        robustness = read_robustness(robust) if robust in result.paths else None
     finally:
         if tmp is not None:
             shutil.rmtree(tmp, ignore_errors=True)

@@ -277,6 +277,8 @@ def cmd_plot(args: argparse.Namespace) -> int:
                 written = sweep_plots(folder)
         except OSError as err:
             raise ConfigError(str(err.filename or folder), f"cannot write ({err.strerror or err})") from None
+        except ConfigError:  # a robustness.json edited by hand: its field named
+            raise
         except (TypeError, ValueError, KeyError, AttributeError, IndexError) as err:  # a metrics.json edited by hand
             raise ConfigError(
                 str(folder), f"a metrics.json under it is not what a run writes ({type(err).__name__}: {err})"

@@ -48,6 +48,11 @@ MARKER = re.compile(r"^<!-- table: (?P<spec>.+?) -->\n(?P<body>.*?)^<!-- /table 
 VIEWS = ("sweep", "compare", "paired", "summary", "robustness", "text")
 DATA_FILES = ("sweep.json", "compare.json", "paired.json", "robustness.json")
 OPTIONS = ("view", "scenarios", "controllers", "labels")
+ROW_TEXTS: dict[str, tuple[type, ...]] = {  # the fields of a sweep's rows that are no number
+    "scenario": (str,), "controller": (str,), "phase": (str,), "worst_status": (str,), "no_event_twin": (str, type(None)),
+    "vary": (dict,),
+}  # fmt: skip
+DATA_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]*")  # a data folder's name (--collect NAME=...)
 
 
 def parse_spec(spec: str, where: str) -> tuple[str, dict[str, str]]:
@@ -82,14 +87,17 @@ def select(rows: list[dict], scenarios: str | None, controllers: str | None) -> 
 
 def render(folder: Path, opts: dict[str, str]) -> str:
     """The Markdown table a data folder gives for one view and its options."""
-    from mlpfac.sweeps.paired import PAIRED_COLUMNS, summary
-    from mlpfac.sweeps.tables import COMPARE_COLUMNS, SWEEP_COLUMNS, markdown
-
     view = opts.get("view", "summary")
     if view == "text":
         return read_data(folder, "table.md")
     name = {"sweep": "sweep.json", "compare": "compare.json", "robustness": "robustness.json"}.get(view, "paired.json")
-    data = read_json(folder, name)
+    if view == "robustness":
+        from mlpfac.sweeps.robustness import read_robustness
+
+        read_data(folder, name)  # a missing file named as the other views name it
+        data = read_robustness(folder / name)
+    else:
+        data = read_json(folder, name)
     rows = data.get("breaking_points" if view == "robustness" else "rows")
     if not isinstance(rows, list) or not all(
         isinstance(r, dict) and "scenario" in r and "controller" in r for r in rows
@@ -97,6 +105,28 @@ def render(folder: Path, opts: dict[str, str]) -> str:
         raise ConfigError(
             str(folder / name), "expected the rows a sweep writes (each with its scenario and controller)"
         )
+    if view != "robustness":  # (robustness.json is checked as it is read)
+        _check_rows(rows, folder / name)
+    try:
+        return _render(folder, view, opts, data, rows)
+    except KeyError as err:
+        raise ConfigError(str(folder / name), f"a row has no field {err}: not what a sweep writes") from None
+
+
+def _check_rows(rows: list[dict], path: Path) -> None:
+    """Each field of a sweep's rows of the type a sweep writes: ConfigError naming the file, the row and the field."""
+    for i, r in enumerate(rows):
+        for key, v in r.items():
+            want = ROW_TEXTS.get(key, (int, float, type(None)))
+            if not isinstance(v, want) or (isinstance(v, bool) and bool not in want):
+                kind = "a text" if str in want else "a table" if dict in want else "a number or null"
+                raise ConfigError(f"{path} rows[{i}].{key}", f"expected {kind}, got {v!r}")
+
+
+def _render(folder: Path, view: str, opts: dict[str, str], data: dict, rows: list[dict]) -> str:
+    from mlpfac.sweeps.paired import PAIRED_COLUMNS, summary
+    from mlpfac.sweeps.tables import COMPARE_COLUMNS, SWEEP_COLUMNS, markdown
+
     try:
         rows = select(rows, opts.get("scenarios"), opts.get("controllers"))
     except ConfigError as err:
@@ -227,6 +257,16 @@ def collect(folder: Path, results: Path, command: str | None = None, version: st
     return folder
 
 
+def _collect_item(item: str) -> tuple[str, str]:
+    """(NAME, RESULTS) of ``--collect NAME=RESULTS``; NAME is one folder's name inside DOCS/data."""
+    name, sep, results = item.partition("=")
+    if not (sep and name and results):
+        raise ConfigError("--collect", f"expected NAME=RESULTS, got {item!r}")
+    if not DATA_NAME.fullmatch(name):  # not a path: ../x, a/b, . or /abs would write outside DOCS/data
+        raise ConfigError(f"--collect {item}", f"NAME is one data folder's name (letters, digits, - _ .), got {name!r}")
+    return name, results
+
+
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.description = "Write every marked table of DOCS/*.md from the data folder it names (mlpfac/results.py)."
     p.add_argument("docs", nargs="?", type=cli_path, default=Path("docs"), help="the folder of pages (default docs)")
@@ -257,10 +297,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run_cli(args: argparse.Namespace) -> int:
     """``mlpfac report``: collect, then check (exit 1 if a table differs) or write the tables."""
-    for item in args.collect:
-        name, sep, results = item.partition("=")
-        if not (sep and name and results):
-            raise ConfigError("--collect", f"expected NAME=RESULTS, got {item!r}")
+    collects = [_collect_item(item) for item in args.collect]  # every one checked before any is copied
+    for name, results in collects:
         print(f"{results} -> {collect(args.docs / 'data' / name, Path(results), args.made_by, args.code_version)}")
     if args.verify is not None:
         from mlpfac.verify import verify

@@ -174,8 +174,16 @@ def baseline_folder(text: str | Path) -> Path:
         if p.suffix != ".json":
             raise ConfigError(where, "expected a sweep folder or its sweep.json")
         p = p.parent
-    if next(p.glob("*/*/seed-*/metrics.json"), None) is None:
+    found = sorted(p.glob("*/*/seed-*/metrics.json"))
+    if not found:
         raise ConfigError(where, "holds no finished runs (<scenario>/<controller>/seed-*/metrics.json)")
+    for path in found:  # a figure no run writes is found before anything runs
+        try:
+            json.loads(path.read_text(), parse_constant=lambda name, path=path: _not_finite(name, path))
+        except ConfigError:
+            raise
+        except (OSError, ValueError, RecursionError):
+            continue  # not a whole run: left out as missing, as before
     return p
 
 
@@ -184,10 +192,18 @@ def baseline_runs(folder: Path, group: Group) -> Runs:
     without a valid metrics.json of that run is missing)."""
     out = {}
     for j in group.jobs:
+        path = j.folder(folder) / "metrics.json"
         try:
-            m = json.loads((j.folder(folder) / "metrics.json").read_text())
-        except (OSError, ValueError):
+            m = json.loads(path.read_text(), parse_constant=lambda name, path=path: _not_finite(name, path))
+        except (OSError, ValueError) as err:
+            if isinstance(err, ConfigError):
+                raise
             continue
         if metrics_problem(m, j) is None:
             out[j.seed] = RunMetrics.from_json(m)
     return out
+
+
+def _not_finite(name: str, path: Path) -> float:
+    """A baseline's figure that no run writes (NaN, Infinity: a run writes null): a bad baseline, not a miss."""
+    raise ConfigError(f"--baseline {path}", f"holds {name}, which no run writes (a figure that is not finite is null)")

@@ -19,6 +19,7 @@ import numpy as np
 import rerun as rr
 
 from mlpfac.exceptions import ConfigError
+from mlpfac.interrupts import Terminated
 from mlpfac.log.layout import ABOUT, layout
 from mlpfac.log.recorder import APPLICATION_ID, disconnect
 from mlpfac.log.schema import REFSPEED_COLOR, RGB, entity_part
@@ -31,6 +32,7 @@ from mlpfac.log.sinks import (
     _start_viewer,
     _stop,
     _url_host,
+    check_bind,
     check_recording,
     start_web_viewer,
 )
@@ -69,6 +71,7 @@ def view(run_dirs: Sequence[Path | str], bind: str = LOCALHOST) -> subprocess.Po
     never listens.
     """
     files = run_files(run_dirs)
+    check_bind(bind)
     _check_display("view")
     port = _free_port()
     if len(files) == 1:
@@ -92,6 +95,7 @@ def serve(run_dirs: Sequence[Path | str], bind: str, ports: tuple[int, int], say
     Says the page's address and the SSH tunnel that shows it elsewhere; serves until Ctrl-C."""
     from mlpfac.log.sinks import tunnel_line
 
+    check_bind(bind)
     _check_ports(bind, ports)
     files = run_files(run_dirs)
     server, grpc_url, page = start_web_viewer(bind, ports, [files[0][0]] if len(files) == 1 else [])
@@ -110,7 +114,9 @@ def serve(run_dirs: Sequence[Path | str], bind: str, ports: tuple[int, int], say
         say("serving until Ctrl-C")
         while server.poll() is None:
             time.sleep(0.5)
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as err:  # Ctrl-C: the way to stop serving; SIGTERM ends the command as terminated
+        if isinstance(err, Terminated):
+            raise
         return
     finally:
         _stop(server)

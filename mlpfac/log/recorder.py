@@ -16,6 +16,7 @@ from collections.abc import Sequence
 import numpy as np
 import rerun as rr
 
+from mlpfac.interrupts import Terminated
 from mlpfac.log.about import about_text
 from mlpfac.log.layout import ABOUT, blueprint, marked_origins
 from mlpfac.log.scene import PATH_STRIDE, POSE_STRIDE, send_poses, send_static_scene, strided
@@ -173,8 +174,9 @@ class RerunSink:
             try:
                 while True:
                     time.sleep(1.0)
-            except KeyboardInterrupt:
-                pass
+            except KeyboardInterrupt as err:  # Ctrl-C: the way to stop serving; SIGTERM ends the command as terminated
+                if isinstance(err, Terminated):
+                    raise
             finally:
                 self.close()
 

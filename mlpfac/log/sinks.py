@@ -63,6 +63,8 @@ def make_sink(
     if save is not None:
         save = Path(save)
         _check_writable(save)
+    if serve or spawn:
+        check_bind(bind)
     if serve:
         _check_ports(bind, ports)
     rec = rr.RecordingStream(APPLICATION_ID, recording_id=recording_id, send_properties=False)
@@ -85,6 +87,18 @@ def make_sink(
     sink = RerunSink(rec, recording_name=recording_name, serving=serve, viewer_url=viewer_url, description=description)
     sink.server = server
     return sink
+
+
+def check_bind(bind: str) -> None:
+    """ConfigError naming ``--bind`` when it is no IP address (the rerun viewer takes nothing else)."""
+    import ipaddress
+
+    try:
+        ipaddress.ip_address(bind)
+    except ValueError:
+        raise ConfigError(
+            "--bind", f"{bind!r} is not an IP address (127.0.0.1, 0.0.0.0 for every interface, ::1, ...)"
+        ) from None
 
 
 def _check_ports(bind: str, ports: tuple[int, int]) -> None:

@@ -10,20 +10,20 @@ first value) of the median position RMS, each point that holds ringed.
 
 from __future__ import annotations
 
-import json
 import math
 from pathlib import Path
 
 import numpy as np
 
-from mlpfac.exceptions import ConfigError
 from mlpfac.plots.colors import controller_colors, mpl
 
 
 def robustness_plot(out: Path) -> list[Path]:
     """Draw ``out``/robustness.png from ``out``/robustness.json; returns the file written."""
-    data = json.loads((out / "robustness.json").read_text())
-    rows, points = data["curves"], data["breaking_points"]
+    from mlpfac.sweeps.robustness import read_robustness
+
+    data = read_robustness(out / "robustness.json")
+    rows, points = data["curves"], data.get("breaking_points", [])
     if not rows:
         return []
     import matplotlib
@@ -139,7 +139,6 @@ def _edges(v: list[float]) -> np.ndarray:
     return np.concatenate([[a[0] - (mid[0] - a[0])], mid, [a[-1] + (a[-1] - mid[-1])]])
 
 
-ROW_KEYS = ("scenario", "controller", "point", "median_m", "tracking", "runs", "bound_m", "threshold_m")
 TOP_MM = 3e3  # where a median of diverged runs is drawn (x) on the panels
 
 
@@ -148,21 +147,15 @@ def panels_plot(folders: list[Path]) -> bytes | None:
     one axis: the median position RMS after the change against the value per controller (a hollow
     marker where not every seed tracks, an x at the top where the median diverged), the bound dashed,
     the threshold (the tracking limit) dotted; one legend. None when no scenario has one axis."""
+    from mlpfac.sweeps.robustness import read_robustness
+
     found = []
     for folder in folders:
-        try:
-            data = json.loads((folder / "robustness.json").read_text())
-            for r in data["curves"]:  # what the panels read of each row, there
-                if gone := [k for k in ROW_KEYS if k not in r]:
-                    raise KeyError(gone[0])
-            for fam in dict.fromkeys(r["scenario"] for r in data["curves"]):
-                rows = [r for r in data["curves"] if r["scenario"] == fam]
-                if len(rows[0]["point"]) == 1:
-                    found.append((fam, next(iter(rows[0]["point"])), rows))
-        except (ValueError, KeyError, TypeError, AttributeError, IndexError) as err:  # edited by hand
-            raise ConfigError(
-                str(folder / "robustness.json"), f"not what a sweep writes ({type(err).__name__}: {err})"
-            ) from None
+        data = read_robustness(folder / "robustness.json")  # edited by hand: a ConfigError naming the field
+        for fam in dict.fromkeys(r["scenario"] for r in data["curves"]):
+            rows = [r for r in data["curves"] if r["scenario"] == fam]
+            if len(rows[0]["point"]) == 1:
+                found.append((fam, next(iter(rows[0]["point"])), rows))
     if not found:
         return None
     import io

@@ -51,15 +51,49 @@ class FolderRun:
 def check_outputs(out: Path, recording: Recording) -> Recording:
     """Before anything runs: ``out`` can hold a run, and ``recording.save`` is a file outside it.
     Returns the recording with ``save`` dropped where it is ``out/run.rrd`` (where it goes anyway)."""
-    check_run_folder(out)
+    try:
+        check_run_folder(out)
+        _check_length(out, "--out")
+    except OSError as err:  # the system refused the path itself
+        raise ConfigError(f"--out {out}", f"cannot be a folder here ({err.strerror or err})") from None
     save = recording.save
     if save is not None and save.absolute() == (out / "run.rrd").absolute():
         save = None
     if save is not None:
-        check_save_file(save)
+        try:
+            check_save_file(save)
+            _check_length(save, "--save")
+        except OSError as err:
+            raise ConfigError(f"--save {save}", f"cannot be a file here ({err.strerror or err})") from None
         if out.absolute() in save.absolute().parents:
             raise ConfigError(f"--save {save}", f"is inside --out {out}, which a run replaces whole")
     return replace(recording, save=save)
+
+
+STAGED_NAME = ".{}.tmp-XXXXXXXX"  # what a name becomes while it is written beside its place (mlpfac.files.Stage)
+
+
+def _check_length(path: Path, flag: str) -> None:
+    """A ConfigError naming ``flag`` when ``path``, or its name as staged beside it, is longer than
+    the file system takes (found before the run, not when its folder is put in place)."""
+    import os
+
+    here = path.absolute().parent
+    while not here.exists() and here != here.parent:
+        here = here.parent
+    try:
+        name_max, path_max = os.pathconf(here, "PC_NAME_MAX"), os.pathconf(here, "PC_PATH_MAX")
+    except (OSError, ValueError):
+        return
+    long = next((p for p in path.parts if len(os.fsencode(p)) > name_max), None)
+    if long is None and len(os.fsencode(STAGED_NAME.format(path.name))) > name_max:
+        long = path.name
+    if long is not None:
+        raise ConfigError(
+            f"{flag} {path}", f"the name {long[:40]!r}... is longer than the {name_max} bytes allowed here"
+        )
+    if len(os.fsencode(str(path.absolute()))) + len(STAGED_NAME) + 16 > path_max:
+        raise ConfigError(f"{flag} {path}", f"is longer than the {path_max} bytes a path may have here")
 
 
 def run_into_folder(scn, out: Path, built, recording: Recording, baseline=None, painter=None) -> FolderRun:

@@ -115,6 +115,10 @@ def robot_table(robot: str) -> dict:
     plant = table.get("plant")
     if set(table) != {"plant"} or not isinstance(plant, dict) or not isinstance(plant.get("model"), str):
         raise ConfigError(f"--robot {path}", "a robot file holds one [plant] table with its model")
+    if plant.get("kind", "mujoco") != "mujoco":
+        raise ConfigError(
+            f"--robot {path} [plant] kind", f'must be "mujoco" (a robot file\'s model), got {plant["kind"]!r}'
+        )
     plant = {"kind": "mujoco", **plant}
     if not plant["model"].startswith("menagerie:"):
         plant["model"] = str((path.parent / plant["model"]).resolve())

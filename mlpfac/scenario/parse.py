@@ -182,6 +182,8 @@ def load(
     scenario on another robot (:mod:`mlpfac.scenario.on_robot`). ``values`` sets numbers of the file by
     their dotted keys (:mod:`mlpfac.scenario.draws`) before it is checked, as if written in it.
     """
+    if not isinstance(name_or_path, str | os.PathLike) or not str(name_or_path):
+        raise ConfigError("scenario", f"expected a shipped scenario's name or a .toml file, got {name_or_path!r}")
     path = Path(name_or_path)
     if path.suffix != ".toml":
         if str(name_or_path) not in scenario_names():

@@ -95,11 +95,17 @@ def scenarios_of(args: argparse.Namespace) -> list[str]:
     """The scenarios a parsed ``sweep`` / ``compare`` command line runs, each on its robots
     (``--robot``, ``--robots``); ``compare`` without scenarios: every shipped one. The command and
     ``report --verify``, which plans a dataset's recorded command again, read a command line the same way."""
+    from mlpfac.exceptions import ConfigError
     from mlpfac.scenario.on_robot import robots_flag, with_robots
     from mlpfac.scenario.parse import scenario_names
 
     robots = [args.robot] if args.robot is not None else robots_flag(args.robots, "--robots")
-    return with_robots(args.scenarios or scenario_names(), robots)
+    try:
+        return with_robots(args.scenarios or scenario_names(), robots)
+    except ConfigError as err:  # a robot of --robots is named by its own flag
+        if args.robots is None or not err.where.startswith("--robot"):
+            raise
+        raise ConfigError("--robots" + err.where.removeprefix("--robot"), err.what) from None
 
 
 def _run_cli(args: argparse.Namespace, stem: str, columns) -> int:

@@ -10,9 +10,7 @@ from pathlib import Path
 
 from mlpfac.exceptions import ConfigError
 from mlpfac.files import resolved
-from mlpfac.sweeps.vary import Vary
-
-MAX_RUNS = 100_000  # runs per sweep: a larger plan is refused before anything is loaded
+from mlpfac.sweeps.vary import MAX_RUNS, Vary
 
 
 def parse_seeds(text: str, limit: int | None = MAX_RUNS) -> list[int]:

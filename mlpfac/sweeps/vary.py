@@ -27,6 +27,7 @@ from mlpfac.scenario.draws import KINDS, SKIPPED, Distribution, distribution, ge
 
 Point = tuple[tuple[str, Any], ...]  # (key, value) per axis, in the order of the axes
 FLAG = "--vary"
+MAX_RUNS = 100_000  # runs per sweep (and so values per axis): a larger plan is refused before anything is built
 
 
 @dataclass(frozen=True)
@@ -88,25 +89,44 @@ def _values(key: str, text: str, where: str) -> tuple[Any, ...] | Distribution:
         n = _number(parts[2], where)
         if not isinstance(n, int) or n < 2:
             raise ConfigError(where, f"a range is LOW:HIGH:COUNT with a whole COUNT >= 2, got {text!r}")
+        if n > MAX_RUNS:  # counted before a value is made
+            raise ConfigError(where, f"{n} values is more than the limit of {MAX_RUNS} runs per sweep")
         if isinstance(lo, int) and isinstance(hi, int) and (hi - lo) % (n - 1) == 0:
-            return tuple(lo + (hi - lo) // (n - 1) * i for i in range(n))
-        # as a user would write them: 12 significant digits (1.2, not 1.2000000000000002)
-        return tuple(float(f"{lo + (hi - lo) * i / (n - 1):.12g}") for i in range(n))
+            values = tuple(lo + (hi - lo) // (n - 1) * i for i in range(n))
+        else:  # as a user would write them: 12 significant digits (1.2, not 1.2000000000000002)
+            values = tuple(float(f"{lo + (hi - lo) * i / (n - 1):.12g}") for i in range(n))
+        return _distinct(values, text, where)
     if len(parts) != 1:
         raise ConfigError(
             where, f"expected a list 1.0,1.5, a range 1.0:2.0:11 or uniform:A:B / normal:M:SD, got {text!r}"
         )
+    if text.count(",") >= MAX_RUNS:
+        raise ConfigError(where, f"more than the limit of {MAX_RUNS} values (runs per sweep)")
     values = tuple(_number(p, where) for p in text.split(",") if p.strip())
     if not values:
         raise ConfigError(where, "no value given")
-    if len(set(values)) != len(values):
-        raise ConfigError(where, f"a value appears twice in {text!r}")
+    return _distinct(values, text, where)
+
+
+def _distinct(values: tuple, text: str, where: str) -> tuple:
+    """``values``, each once: a value twice would be two grid points of one name (one folder)."""
+    seen = set()
+    for v in values:
+        if v in seen:
+            raise ConfigError(where, f"the value {v!r} appears twice in {text!r}: each value of an axis once")
+        seen.add(v)
     return values
 
 
 def parse_vary(texts: list[str] | dict | None) -> Vary:
     """``--vary`` flags (``["events.0.scale=1:2:11", ...]``), or the API's ``{key: values}`` (a list,
     a range text, or a distribution text or table), checked as text only (see :func:`grid`)."""
+    if texts is None:
+        return Vary()
+    if not isinstance(texts, dict | list | tuple):
+        raise ConfigError(
+            "vary", f"expected {{KEY: VALUES}} or a list of 'KEY=VALUES' texts (as --vary), got {texts!r}"
+        )
     if not texts:
         return Vary()
     items: list[tuple[str, Any]] = []
@@ -129,6 +149,8 @@ def parse_vary(texts: list[str] | dict | None) -> Vary:
             draws[key] = distribution(raw, where)
             continue
         if isinstance(raw, list | tuple):
+            if len(raw) > MAX_RUNS:
+                raise ConfigError(where, f"{len(raw)} values is more than the limit of {MAX_RUNS} runs per sweep")
             text = ",".join(str(v) for v in raw)
             if any(isinstance(v, bool) or not isinstance(v, int | float) for v in raw):
                 raise ConfigError(where, f"expected numbers, got {list(raw)!r}")
@@ -213,7 +235,13 @@ def grid(src: str, vary: Vary, duration: float | None = None, robot: str | None 
 
 
 def _check_duration(vary: Vary, numbers: dict, duration: float) -> None:
-    """A ConfigError for a value of an event that ``--duration`` leaves out (it would vary nothing)."""
+    """A ConfigError for ``duration`` varied beside ``--duration`` (which would set every point's), and
+    for a value of an event that ``--duration`` leaves out (it would vary nothing)."""
+    if any(a.key == "duration" for a in vary.axes) or "duration" in vary.draws:
+        raise ConfigError(
+            f"{FLAG} duration",
+            f"conflicts with --duration {duration:g}, which would run every point that long: give one",
+        )
     times = {a.key: a.values for a in vary.axes if a.key.startswith("events.") and a.key.endswith(".time")}
     for key, values in times.items():
         late = next((v for v in values if v >= duration), None)
