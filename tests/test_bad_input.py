@@ -249,7 +249,8 @@ BAD_FLAGS = {
     "robot file missing": (["paper", "--robot", "missing.xml"], "not found"),
     "robot file a folder": (["paper", "--robot", "sims.toml"], "folder"),
     "robot file not a robot": (["paper", "--robot", "robot.toml"], "one [plant] table"),
-}
+    "robot file of the kinematic plant": (["paper", "--robot", "kin-robot.toml"], "--robot kin-robot.toml [plant] kind: must be"),
+}  # fmt: skip
 
 
 @pytest.mark.parametrize("case", sorted(BAD_FLAGS))
@@ -258,6 +259,7 @@ def test_bad_flag(tmp_path, capsys, monkeypatch, case):
     monkeypatch.chdir(tmp_path)
     (tmp_path / "sims.toml").mkdir()
     (tmp_path / "robot.toml").write_text('duration = 3.0\n[plant]\nmodel = "x.xml"\n')
+    (tmp_path / "kin-robot.toml").write_text('[plant]\nkind = "kinematic"\nmodel = "x.xml"\n')
     assert main(["run", *argv, "--no-log", "--out", str(tmp_path / "out")]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and needle in err, err
@@ -283,7 +285,14 @@ BAD_VIEW_PLOT = {
     "check: --workers 0": (["check", "missing.toml", "--workers", "0"], "--workers"),
     "sweep: --robots with an empty name": (["sweep", "paper", "--robots", "diffdrive,,cart"], "--robots"),
     "compare: --robot unknown": (["compare", "paper", "--robot", "nosuch"], "--robot"),
-}
+    "sweep: --robots unknown": (["sweep", "paper", "--robots", "diffdrive,cartt"], "--robots: 'cartt' is neither"),
+    "view --serve: --bind not an address": (["view", "D", "--serve", "--bind", "not an address"], "--bind: 'not an address' is not an IP"),
+    "view: --bind not an address": (["view", "D", "--bind", "localhost"], "--bind: 'localhost' is not an IP"),
+    "report --collect ../x": (["report", "docs", "--collect", "../x=D", "--command", "c"], "--collect ../x=D: NAME is one"),
+    "report --collect a/b": (["report", "docs", "--collect", "a/b=D", "--command", "c"], "--collect a/b=D: NAME is one"),
+    "report --collect .": (["report", "docs", "--collect", ".=D", "--command", "c"], "--collect .=D: NAME is one"),
+    "report --collect an absolute path": (["report", "docs", "--collect", "/tmp/x=D", "--command", "c"], "--collect /tmp/x=D"),
+}  # fmt: skip
 
 
 @pytest.mark.parametrize("case", sorted(BAD_VIEW_PLOT))

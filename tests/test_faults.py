@@ -7,11 +7,13 @@ fails without its fix."""
 from __future__ import annotations
 
 import json
+import math
 import os
 import socket
 import subprocess
 import sys
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -143,9 +145,14 @@ def test_a_file_size_limit_in_a_run_without_log_or_plot_is_one_line(here):
     assert not (here / "o").exists()
 
 
-def test_a_name_too_long_for_out_is_one_line(here, capsys):
-    assert main(["run", "kin.toml", "--no-log", "--no-plot", "--out", "x" * 300]) == 2
-    assert "File name too long" in _one_line(capsys.readouterr().err)
+@pytest.mark.parametrize("name", ["x" * 300, "x" * 250, "/".join(["x" * 200] * 25)])
+def test_a_name_too_long_for_out_is_one_line_naming_out(here, capsys, name):
+    """Too long for the file system: the name itself, the name it has while staged beside its
+    place, or the whole path; found before the run."""
+    assert main(["run", "kin.toml", "--no-log", "--no-plot", "--out", name]) == 2
+    line = _one_line(capsys.readouterr().err)
+    assert line.startswith(f"mlpfac: error: --out {name}: ") and "long" in line, line
+    assert sorted(p.name for p in here.iterdir()) == ["b.toml", "kin.toml"]
 
 
 def test_plot_of_a_corrupt_metrics_json_is_one_line(here, capsys):
@@ -163,7 +170,15 @@ REPORT_PAGES = {
     "unclosed marker": ("# p\n<!-- table: data/x view=summary -->\n| a |\n", "page.md:2: a table marker without"),
     "wrong-typed rows": (
         "<!-- table: data/x view=sweep -->\n<!-- /table -->\n",
-        "its data are not what a sweep writes",
+        "data/x/sweep.json rows[0].runs: expected a number or null, got 'many'",
+    ),
+    "a row without a field": (
+        "<!-- table: data/x view=summary -->\n<!-- /table -->\n",
+        "data/x/paired.json: a row has no field 'pos_rms_m_median'",
+    ),
+    "a robustness row of the wrong type": (
+        "<!-- table: data/x view=robustness -->\n<!-- /table -->\n",
+        "data/x/robustness.json curves[0].median_m: expected a number or null, got 'far'",
     ),
 }
 
@@ -176,9 +191,60 @@ def test_report_of_a_bad_page_or_data_is_one_line(here, capsys, case):
     (docs / "page.md").write_text(page)
     rows = [{"scenario": "s", "controller": "c", "phase": "before", "runs": "many", "pos_rms_m_mean": "x"}]
     (docs / "data" / "x" / "sweep.json").write_text(json.dumps({"meta": {}, "rows": rows}))
+    paired = [{"scenario": "s", "controller": "c", "phase": "before", "runs": 1}]
+    (docs / "data" / "x" / "paired.json").write_text(json.dumps({"meta": {}, "rows": paired}))
+    curve = dict(CURVE, median_m="far")
+    (docs / "data" / "x" / "robustness.json").write_text(json.dumps({"meta": {}, "curves": [curve], "breaking_points": []}))
     assert main(["report", "docs"]) == 2
     assert needle in _one_line(capsys.readouterr().err)
     assert (docs / "page.md").read_text() == page
+
+
+CURVE = {"scenario": "s", "controller": "c", "point": {"events.0.scale": 2.0}, "runs": 6, "finished": 6,
+         "tracking": 0, "tracking_share": 0.0, "median_m": math.inf, "ci_lo_m": 0.5, "ci_hi_m": math.inf,
+         "threshold_m": 0.2, "bound_m": 0.01, "holds": False}  # fmt: skip
+
+
+def test_robustness_json_of_diverged_runs_is_json_and_reads_back_infinite(tmp_path):
+    """A median over runs that diverged is infinite: null in the file (JSON has no Infinity), as in
+    metrics.json, and infinite again when read (the file of an earlier version, with Infinity, too)."""
+    from mlpfac.sweeps.robustness import _finite, read_robustness
+
+    data = {"meta": {"threshold_m": None}, "curves": [CURVE], "breaking_points": []}
+    text = json.dumps(_finite(data), allow_nan=False)
+    assert '"median_m": null' in text and '"ci_hi_m": null' in text and "Infinity" not in text
+    for written in (text, json.dumps(data)):  # now, and as an earlier version wrote it
+        (tmp_path / "robustness.json").write_text(written)
+        (row,) = read_robustness(tmp_path / "robustness.json")["curves"]
+        assert row == CURVE
+    shipped = Path(__file__).resolve().parents[1] / "docs" / "data"
+    for f in shipped.glob("*/robustness.json"):
+        json.loads(f.read_text(), parse_constant=lambda name, f=f: pytest.fail(f"{f} holds {name}"))
+
+
+def test_plot_panels_over_a_wrong_typed_robustness_json_is_one_line_and_keeps_the_png(here, capsys):
+    (here / "S").mkdir()
+    (here / "S" / "robustness.json").write_text(json.dumps({"meta": {}, "curves": [dict(CURVE, point=5)]}))
+    (here / "out.png").write_bytes(b"earlier")
+    assert main(["plot", "S", "--panels", "out.png"]) == 2
+    assert _one_line(capsys.readouterr().err).endswith("robustness.json curves[0].point: expected a table, got 5")
+    assert (here / "out.png").read_bytes() == b"earlier"
+    (here / "S" / "robustness.json").write_text(json.dumps({"meta": {}, "curves": [dict(CURVE, tracking="all")]}))
+    assert main(["plot", "S"]) == 2
+    assert _one_line(capsys.readouterr().err).endswith("curves[0].tracking: expected a number, got 'all'")
+
+
+def test_a_baseline_holding_nan_is_a_bad_baseline(here, capsys):
+    assert main(["sweep", "kin.toml", "--seeds", "0-1", "--workers", "1", "--out", "B"]) == 0
+    (m, *_) = sorted(here.glob("B/*/*/seed-*/metrics.json"))
+    m.write_text(m.read_text().replace('"rms_position_error_m": ', '"rms_position_error_m": NaN, "x": ', 1))
+    budget = 'scenarios = ["kin.toml"]\nseeds = "0-1"\n[[budget]]\nno_worse_than_baseline = 1.1\n'
+    (here / "nan.toml").write_text(budget)
+    capsys.readouterr()
+    assert main(["check", "nan.toml", "--baseline", "B", "--workers", "1", "--out", "C"]) == 2
+    line = _one_line(capsys.readouterr().err)
+    assert line.startswith(f"mlpfac: error: --baseline {m.relative_to(here)}: holds NaN"), line
+    assert not (here / "C").exists()
 
 
 def test_metrics_of_a_run_that_blew_up_are_json_without_warnings():
@@ -228,7 +294,10 @@ API_CALLS = {
     "sweep(scheduler=42)": (lambda: mlpfac.sweep("paper", scheduler=42), "scheduler"),
     "check(42)": (lambda: mlpfac.check(42), "budget"),
     "check(workers='2')": (lambda: mlpfac.check("b.toml", workers="2"), "--workers"),
-}
+    "sweep(vary=42)": (lambda: mlpfac.sweep("paper", ["kanayama"], vary=42), "vary"),
+    "sweep(vary=a huge range)": (lambda: mlpfac.sweep("paper", ["kanayama"], vary={"T": "0.01:0.02:1000000000"}), "--vary T=0.01:0.02:1000000000"),
+    "scenario.load(42)": (lambda: mlpfac.scenario.load(42), "scenario"),
+}  # fmt: skip
 
 
 @pytest.mark.parametrize("case", sorted(API_CALLS))

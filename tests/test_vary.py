@@ -101,6 +101,9 @@ BAD_VARY = {  # --vary: the text the one line must hold
     "an event --duration leaves out": (["events.0.factor=2", "--duration", "1"], "left out by --duration 1: it would"),
     "an event time --duration leaves out": (["events.0.time=1,20"], "--vary events.0.time=20: the event would be left"),
     "a file's draw's end": (["FILE"], "drawn.toml events.0.factor = uniform(-1, 2) (its end -1): must be positive"),
+    "duration beside --duration": (["duration=12,14"], "--vary duration: conflicts with --duration 13"),
+    "a range of one value": (["events.0.factor=1.5:1.5:3"], "--vary events.0.factor=1.5:1.5:3: the value 1.5 appears twice"),
+    "a range past the limit": (["events.0.factor=1:2:1000000000"], "1000000000 values is more than the limit of 100000"),
 }
 
 
@@ -236,7 +239,7 @@ def test_a_law_breaks_where_its_speed_limit_falls_below_the_reference(tmp_path, 
     capsys.readouterr()
     assert main(["plot", str(out), str(edited), "--panels", str(tmp_path / "no.png")]) == 2
     err = capsys.readouterr().err.strip()
-    assert err == f"mlpfac: error: {edited / 'robustness.json'}: not what a sweep writes (KeyError: 'controller')"
+    assert err == f"mlpfac: error: {edited / 'robustness.json'} curves[0].controller: missing"
     assert not (tmp_path / "no.png").exists()
 
 

@@ -29,8 +29,11 @@ def _listening(port: int) -> bool:
         return s.connect_ex(("127.0.0.1", port)) == 0
 
 
-@pytest.mark.parametrize("runs", [1, 2])
-def test_view_serve_serves_saved_runs_until_ctrl_c(tmp_path, runs):
+@pytest.mark.parametrize(
+    ("runs", "signum", "code"), [(1, signal.SIGINT, 0), (2, signal.SIGINT, 0), (1, signal.SIGTERM, 143)]
+)
+def test_view_serve_serves_saved_runs_until_ctrl_c(tmp_path, runs, signum, code):
+    """Ctrl-C is the way to stop serving (exit 0); SIGTERM ends it as terminated (143), the viewer stopped either way."""
     folders = []
     for seed in range(runs):  # shorter than the warm-up: a run without figures is shown all the same
         mlpfac.run("paper", controller="kanayama", seed=seed, duration=0.5, out=tmp_path / f"r{seed}")
@@ -52,8 +55,8 @@ def test_view_serve_serves_saved_runs_until_ctrl_c(tmp_path, runs):
         with urllib.request.urlopen(f"http://127.0.0.1:{web}/", timeout=10) as page:
             assert page.status == 200
         assert _listening(grpc)
-        proc.send_signal(signal.SIGINT)
-        assert proc.wait(timeout=10) == 0, proc.stderr.read()
+        proc.send_signal(signum)
+        assert proc.wait(timeout=10) == code, proc.stderr.read()
     finally:
         if proc.poll() is None:
             proc.kill()

@@ -70,8 +70,8 @@ def view(run_dirs: Sequence[Path | str], bind: str = LOCALHOST) -> subprocess.Po
     a folder without run.rrd, when there is no display, and when the viewer exits at once or
     never listens.
     """
-    files = run_files(run_dirs)
     check_bind(bind)
+    files = run_files(run_dirs)
     _check_display("view")
     port = _free_port()
     if len(files) == 1:
