@@ -194,7 +194,9 @@ def test_report_of_a_bad_page_or_data_is_one_line(here, capsys, case):
     paired = [{"scenario": "s", "controller": "c", "phase": "before", "runs": 1}]
     (docs / "data" / "x" / "paired.json").write_text(json.dumps({"meta": {}, "rows": paired}))
     curve = dict(CURVE, median_m="far")
-    (docs / "data" / "x" / "robustness.json").write_text(json.dumps({"meta": {}, "curves": [curve], "breaking_points": []}))
+    (docs / "data" / "x" / "robustness.json").write_text(
+        json.dumps({"meta": {}, "curves": [curve], "breaking_points": []})
+    )
     assert main(["report", "docs"]) == 2
     assert needle in _one_line(capsys.readouterr().err)
     assert (docs / "page.md").read_text() == page

@@ -102,8 +102,14 @@ BAD_VARY = {  # --vary: the text the one line must hold
     "an event time --duration leaves out": (["events.0.time=1,20"], "--vary events.0.time=20: the event would be left"),
     "a file's draw's end": (["FILE"], "drawn.toml events.0.factor = uniform(-1, 2) (its end -1): must be positive"),
     "duration beside --duration": (["duration=12,14"], "--vary duration: conflicts with --duration 13"),
-    "a range of one value": (["events.0.factor=1.5:1.5:3"], "--vary events.0.factor=1.5:1.5:3: the value 1.5 appears twice"),
-    "a range past the limit": (["events.0.factor=1:2:1000000000"], "1000000000 values is more than the limit of 100000"),
+    "a range of one value": (
+        ["events.0.factor=1.5:1.5:3"],
+        "--vary events.0.factor=1.5:1.5:3: the value 1.5 appears twice",
+    ),
+    "a range past the limit": (
+        ["events.0.factor=1:2:1000000000"],
+        "1000000000 values is more than the limit of 100000",
+    ),
 }
 
 
