@@ -68,7 +68,7 @@ def line(name: str, samples: list[tuple[float, float]], ref: float | None = None
     return wall
 
 
-def bench_run(repeats: int, cold: int, before: str | None) -> None:
+def bench_run(repeats: int, cold: int, before: str | None, warm_only: bool = False) -> None:
     floor = [sys.executable, str(floor_script()), str(MODEL), "--child"]
     out = Path(tempfile.mkdtemp(prefix="bench-latency-"))
     runs = {"": [*MLPFAC, "run", "eight-nominal", "--out", str(out / "run")]}
@@ -81,6 +81,8 @@ def bench_run(repeats: int, cold: int, before: str | None) -> None:
         fl.append(timed(floor))
         for k, cmd in runs.items():
             warm[k].append(timed(cmd))
+            if warm_only:
+                continue
             cache = out / f"numba-{i}"
             fresh[k].append(timed(cmd, env=dict(os.environ, NUMBA_CACHE_DIR=str(cache))))
             shutil.rmtree(cache, ignore_errors=True)
@@ -88,7 +90,8 @@ def bench_run(repeats: int, cold: int, before: str | None) -> None:
     ref = line("floor process", fl)
     for k in runs:
         line(f"{k}warm", warm[k], ref, "target <= 2x")
-        line(f"{k}fresh NUMBA_CACHE_DIR", fresh[k], ref, "target <= 5x")
+        if not warm_only:
+            line(f"{k}fresh NUMBA_CACHE_DIR", fresh[k], ref, "target <= 5x")
     if cold:
         first, again, fl = [], [], []
         for i in range(cold):  # a new venv, `pip install .` (not timed), its first run, then warm runs
@@ -175,9 +178,10 @@ def main() -> int:
     )
     ap.add_argument("--before", metavar="MLPFAC", help="another install's mlpfac command, timed beside this one")
     ap.add_argument("--only", choices=("run", "quick", "workers"))
+    ap.add_argument("--warm-only", action="store_true", help="the run: warm only, no fresh NUMBA_CACHE_DIR")
     a = ap.parse_args()
     if a.only in (None, "run"):
-        bench_run(a.repeats, a.cold, a.before)
+        bench_run(a.repeats, a.cold, a.before, a.warm_only)
     if a.only in (None, "quick"):
         bench_quick(a.repeats)
     if a.only in (None, "workers"):

@@ -316,6 +316,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     that replaces it only when whole (:mod:`mlpfac.runs.folder`), under --out's lock."""
     from mlpfac.exceptions import ConfigError
     from mlpfac.runs.folder import Recording, check_outputs, run_into_folder
+    from mlpfac.runs.replay import DEFER_MAX_S, import_beside
     from mlpfac.scenario.parse import load
 
     scn = load(args.scenario, robot=args.robot).with_overrides(args.controller, args.seed, args.duration)
@@ -336,6 +337,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         out,
         Recording(args.save, args.spawn, args.connect, args.serve, args.bind, args.no_log, (args.grpc_port, args.port)),
     )
+    if recording.to_file and scn.duration <= DEFER_MAX_S:  # its recording is written after the run:
+        import_beside("mlpfac.log")  # rerun imported meanwhile (after the figure's process was forked)
     from mlpfac.loop.runner import build  # the run's imports (MuJoCo, the kernels): after the checks of the input
 
     done = run_into_folder(scn, out, build(scn), recording, baseline, args.painter)
