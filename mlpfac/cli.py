@@ -163,14 +163,21 @@ def main(argv: list[str] | None = None) -> int:
     try:
         if args.command == "run":
             from mlpfac.plots.painter import painting
+            from mlpfac.runs.replay import DEFER_MAX_S
+            from mlpfac.runs.writer import writing
             from mlpfac.scenario.parse import load
 
-            load(args.scenario, build=False)  # a bad name or file fails here, before the figure's process starts
+            scn = load(args.scenario, build=False)  # a bad name or file fails here, before the figure's process starts
             if args.robot is not None:
                 from mlpfac.scenario.on_robot import model_of
 
                 model_of(args.robot)
-            with painting(args.baseline != "none" and not args.no_plot) as args.painter:  # figure1 drawn beside
+            to_file = not (args.no_log or args.spawn or args.connect or args.serve)
+            deferred = to_file and (args.duration if args.duration is not None else scn.duration) <= DEFER_MAX_S
+            with (
+                painting(args.baseline != "none" and not args.no_plot) as args.painter,  # figure1 drawn beside
+                writing(deferred, args.painter.fds() if args.painter else ()) as args.writer,  # run.rrd too
+            ):
                 return cmd_run(args)
         if args.command == "list":
             return cmd_list()
@@ -316,7 +323,6 @@ def cmd_run(args: argparse.Namespace) -> int:
     that replaces it only when whole (:mod:`mlpfac.runs.folder`), under --out's lock."""
     from mlpfac.exceptions import ConfigError
     from mlpfac.runs.folder import Recording, check_outputs, run_into_folder
-    from mlpfac.runs.replay import DEFER_MAX_S, import_beside
     from mlpfac.scenario.parse import load
 
     scn = load(args.scenario, robot=args.robot).with_overrides(args.controller, args.seed, args.duration)
@@ -337,11 +343,9 @@ def cmd_run(args: argparse.Namespace) -> int:
         out,
         Recording(args.save, args.spawn, args.connect, args.serve, args.bind, args.no_log, (args.grpc_port, args.port)),
     )
-    if recording.to_file and scn.duration <= DEFER_MAX_S:  # its recording is written after the run:
-        import_beside("mlpfac.log")  # rerun imported meanwhile (after the figure's process was forked)
     from mlpfac.loop.runner import build  # the run's imports (MuJoCo, the kernels): after the checks of the input
 
-    done = run_into_folder(scn, out, build(scn), recording, baseline, args.painter)
+    done = run_into_folder(scn, out, build(scn), recording, baseline, args.painter, args.writer)
     rec = done.rec
     if done.kept:
         kept = " and ".join(map(str, done.kept))

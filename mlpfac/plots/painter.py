@@ -42,6 +42,10 @@ class Painter:
         os.close(child_out)
         self.pid, self._send, self._receive = pid, os.fdopen(parent_out, "wb"), os.fdopen(parent_in, "rb")
 
+    def fds(self) -> list[int]:
+        """This process's ends of the pipes to the child (for a process forked after it to close)."""
+        return [] if self.pid is None else [self._send.fileno(), self._receive.fileno()]
+
     def figure1(self, rec, baseline, path: Path) -> list[str]:
         """Write Figure 1 to ``path``; the panels drawn (as :func:`mlpfac.plots.figure1.figure1`)."""
         if self.pid is not None:

@@ -96,7 +96,7 @@ def _check_length(path: Path, flag: str) -> None:
         raise ConfigError(f"{flag} {path}", f"is longer than the {path_max} bytes a path may have here")
 
 
-def run_into_folder(scn, out: Path, built, recording: Recording, baseline=None, painter=None) -> FolderRun:
+def run_into_folder(scn, out: Path, built, recording: Recording, baseline=None, painter=None, writer=None) -> FolderRun:
     """Under the locks of ``out`` (and ``recording.save``): run into the stages, then put them in
     place. ``baseline`` (a scenario) is run for panel (h) of figure1.png (None: no figure).
 
@@ -114,11 +114,13 @@ def run_into_folder(scn, out: Path, built, recording: Recording, baseline=None, 
         rrd_path = saved.path if saved else folder.path / "run.rrd"
         rrd_shown = save if saved else out / "run.rrd"
         if recording.to_file and scn.duration <= DEFER_MAX_S:  # written after the run, while the figure is drawn
-            sink = DeferredSink(lambda: _open_sink(recording, scn, (rrd_path, rrd_shown)))
+            names = Names(scn.name, scn.controller, scn.seed, scn.description)
+            job = (recording, names, (rrd_path, rrd_shown))
+            sink = DeferredSink(lambda: open_sink(recording, names, job[2]), writer, job)  # written by ``writer``
             if painter is not None:
                 painter.meanwhile.append(sink.replay_quietly)
         else:
-            sink = _open_sink(recording, scn, (rrd_path, rrd_shown) if recording.to_file else None)
+            sink = open_sink(recording, scn, (rrd_path, rrd_shown) if recording.to_file else None)
         try:
             rec, m = _run_into(folder, out, scn, built, sink, baseline, painter)
             if recording.to_file:
@@ -127,9 +129,10 @@ def run_into_folder(scn, out: Path, built, recording: Recording, baseline=None, 
                         sink.replay()
                     except OSError as err:  # rerun could not write or close the file (a full disk, say)
                         raise _unwritten(str(rrd_shown), err, out) from None
-                from mlpfac.log.sinks import check_recording
+                if not (isinstance(sink, DeferredSink) and sink.checked):  # (the writer read it back)
+                    from mlpfac.log.sinks import check_recording
 
-                check_recording(rrd_path, rrd_shown)
+                    check_recording(rrd_path, rrd_shown)
             raise_swallowed()  # a Ctrl-C that landed in a __del__ (rerun's) stops the run's folder too
         except BaseException as err:
             if sink is not None:
@@ -161,8 +164,19 @@ def _keep_error(folder: Stage, out: Path, scn, err: PluginError, held: bool) -> 
     print(f"mlpfac: the run failed; its traceback is in {out / 'error.txt'}", file=sys.stderr)
 
 
-def _open_sink(recording: Recording, scn, save: tuple[Path, Path] | None):
-    """The sink ``recording`` asks for; ``save``: (the file written, the name it will have)."""
+@dataclass(frozen=True)
+class Names:
+    """What a recording is named by: the scenario's name, controller, seed and description."""
+
+    name: str
+    controller: str
+    seed: int
+    description: str
+
+
+def open_sink(recording: Recording, scn, save: tuple[Path, Path] | None):
+    """The sink ``recording`` asks for (``scn``: a scenario, or its :class:`Names`); ``save``: (the
+    file written, the name it will have)."""
     if recording.off:
         return None
     from mlpfac.log import sinks
@@ -197,6 +211,8 @@ def _run_into(folder: Stage, out: Path, scn, built, sink, baseline, painter) -> 
     from mlpfac.loop.runner import run
 
     rec = run(scn, sink=sink, built=built)
+    if isinstance(sink, DeferredSink):
+        sink.hand_off()  # the recording written beside the figure's baseline run, where a writer's process waits
     writing = folder.path / "metrics.json"
     try:
         m = write_run(folder.path, scn, rec)

@@ -12,11 +12,10 @@ they were when it was called, and the recording holds the same data.
 
 from __future__ import annotations
 
-import importlib
-import sys
-import threading
 from collections.abc import Callable
 from contextlib import suppress
+
+from mlpfac.exceptions import ConfigError
 
 DEFER_MAX_S = 60.0  # simulated seconds up to which a run's file recording is written after the run
 
@@ -26,12 +25,19 @@ class DeferredSink:
 
     serving = False
 
-    def __init__(self, make: Callable[[], object]) -> None:
+    def __init__(self, make: Callable[[], object], writer=None, job: tuple = ()) -> None:
         self._make = make
         self._calls: list[tuple[str, tuple]] = []
         self._sink = None
         self._replayed = False
         self._error: Exception | None = None
+        self._writer, self._job, self._sent = writer, job, False  # a Writer (mlpfac.runs.writer) and its job
+        self.checked = False  # the file was read back whole where it was written
+
+    def hand_off(self) -> None:
+        """The run has ended: hand its calls to the writer's process, if there is one, now."""
+        if self._writer is not None and not self._sent:
+            self._sent = self._writer.send((self._calls, *self._job))
 
     def begin(self, record, geometry=(), ref_path=None) -> None:
         self._calls.append(("begin", (record, geometry, ref_path)))
@@ -43,7 +49,17 @@ class DeferredSink:
         self._calls.append(("end", (record,)))
 
     def replay(self) -> None:
-        """Open the real sink and make the calls it was spared (once); the sink closes at ``end``."""
+        """Open the real sink and make the calls it was spared (once); the sink closes at ``end``.
+        With a writer's process: its answer (the same error), or, when it could not write, here."""
+        if not self._replayed and self._sent:
+            answer = self._writer.answer()
+            if answer is not None:
+                self._replayed = True
+                kind, *details = answer
+                if kind == "ok":
+                    self.checked = True
+                else:
+                    self._error = ConfigError(*details) if kind == "config" else OSError(*details)
         if not self._replayed:
             self._replayed = True
             try:
@@ -62,21 +78,7 @@ class DeferredSink:
             self.replay()
 
     def close(self) -> None:
+        if self._writer is not None:
+            self._writer.close()
         if self._sink is not None:
             self._sink.close()
-
-
-def import_beside(name: str) -> None:
-    """Start importing module ``name`` in a daemon thread, so that a short run's recording, written
-    after the run, finds rerun imported: the import (about 0.25 s, 1 s where imports are slow) then
-    overlaps the run's own imports and its simulation, whose compiled kernels release the GIL. Start
-    it only after any fork (a child forked while a thread imports could inherit a held import lock);
-    a failed import is met again, and said, where the module is used."""
-    if name in sys.modules:
-        return
-
-    def load() -> None:
-        with suppress(BaseException):
-            importlib.import_module(name)
-
-    threading.Thread(target=load, name=f"import {name}", daemon=True).start()

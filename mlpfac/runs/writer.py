@@ -1,0 +1,135 @@
+"""A short run's recording written beside the run: a child process, forked before the run's own
+imports (after the figure's, :mod:`mlpfac.plots.painter`), imports rerun (:mod:`mlpfac.log`) while
+this process imports MuJoCo and simulates, then takes the sink calls the run made
+(:class:`~mlpfac.runs.replay.DeferredSink`), makes them on the file sink, closes it and reads the
+file back (:func:`mlpfac.log.sinks.check_recording`). Where imports are slow, rerun's (about 1 s)
+is then paid while the run is computed instead of after it, in a process of its own (a thread of
+this one would share its interpreter lock with the run's imports).
+
+The child takes no part in Ctrl-C (this process handles it and ends the child); a failure comes
+back as the same ConfigError or OSError, naming the same file; anything else, or a child gone, and
+the recording is written here. On a platform without ``fork`` it is written here.
+"""
+
+from __future__ import annotations
+
+import os
+import pickle
+import signal
+import sys
+import threading
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager, suppress
+
+
+class Writer:
+    """The child process that writes the recording (``pid`` None: none, write it here)."""
+
+    def __init__(self, inherited: Sequence[int] = ()) -> None:
+        self.pid: int | None = None
+        if sys.platform != "linux":  # fork is safe to use here only where it is the default
+            return
+        sys.stdout.flush()
+        sys.stderr.flush()
+        child_in, parent_out = os.pipe()  # (read end, write end)
+        parent_in, child_out = os.pipe()
+        pid = os.fork()
+        if pid == 0:  # the child: never returns
+            for fd in (parent_out, parent_in, *inherited):  # the pipes of this process's other children
+                with suppress(OSError):
+                    os.close(fd)
+            _child(child_in, child_out)
+        os.close(child_in)
+        os.close(child_out)
+        self.pid, self._send, self._receive = pid, os.fdopen(parent_out, "wb"), os.fdopen(parent_in, "rb")
+
+    def send(self, job: tuple) -> bool:
+        """Hand the child ``(calls, recording, names, save)``; False when there is no child (any more)."""
+        if self.pid is None:
+            return False
+        try:
+            pickle.dump(job, self._send, protocol=pickle.HIGHEST_PROTOCOL)
+            self._send.close()
+        except (OSError, pickle.PicklingError, TypeError, AttributeError):
+            self.close()
+            return False
+        return True
+
+    def answer(self) -> tuple | None:
+        """The child's answer (``("ok",)``, ``("config", where, what)``, ``("oserror", errno,
+        strerror, filename)``), None when it could not write (then write here); the child is reaped."""
+        try:
+            answer = pickle.load(self._receive)
+        except (OSError, EOFError, pickle.UnpicklingError):
+            answer = None
+        self.close()
+        return None if answer is None or answer[0] == "error" else answer
+
+    def close(self) -> None:
+        """End the child (if it still runs) and reap it."""
+        if self.pid is None:
+            return
+        pid, self.pid = self.pid, None
+        for f in (self._send, self._receive):
+            with suppress(OSError):
+                f.close()
+        with suppress(ProcessLookupError):
+            os.kill(pid, signal.SIGKILL)
+        os.waitpid(pid, 0)
+
+
+@contextmanager
+def writing(wanted: bool, inherited: Sequence[int] = ()) -> Iterator[Writer | None]:
+    """A :class:`Writer` while the block runs (None if not ``wanted``), its child ended after."""
+    writer = Writer(inherited) if wanted else None
+    try:
+        yield writer
+    finally:
+        if writer is not None:
+            writer.close()
+
+
+def _child(receive_fd: int, send_fd: int) -> None:
+    """Import rerun while the job is read (a thread: the job may be larger than a pipe holds), write
+    the recording, answer, and exit without running the parent's exit handlers."""
+    code = 0
+    try:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+        got: list = []
+
+        def read() -> None:
+            with os.fdopen(receive_fd, "rb") as f:
+                try:
+                    got.append(pickle.load(f))
+                except EOFError:  # nothing to write (no run, or it failed)
+                    got.append(None)
+
+        reader = threading.Thread(target=read, daemon=True)
+        reader.start()
+        from mlpfac.exceptions import ConfigError
+        from mlpfac.log.sinks import check_recording
+        from mlpfac.runs.folder import open_sink
+
+        reader.join()
+        if not got or got[0] is None:
+            os._exit(0)
+        calls, recording, names, save = got[0]
+        try:
+            sink = open_sink(recording, names, save)
+            for name, args in calls:
+                getattr(sink, name)(*args)  # the sink closes at "end"
+            check_recording(*save)
+            answer: tuple = ("ok",)
+        except ConfigError as err:
+            answer = ("config", err.where, err.what)
+        except OSError as err:
+            answer = ("oserror", err.errno, err.strerror, err.filename)
+        except Exception as err:  # written again in the parent, which reports it as it would have
+            answer = ("error", repr(err))
+        with os.fdopen(send_fd, "wb") as f:
+            pickle.dump(answer, f)
+    except BaseException:
+        code = 1
+    finally:
+        os._exit(code)
