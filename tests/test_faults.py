@@ -317,3 +317,29 @@ def test_a_mujoco_compile_error_is_one_line(here, capsys):
     assert main(["run", "m.toml", "--no-log", "--no-plot", "--out", "o"]) == 2
     line = _one_line(capsys.readouterr().err)
     assert "MuJoCo cannot load the model: Error: size 0 must be positive in geom Element name" in line, line
+
+
+# --- the recording written beside the run --------------------------------------------------------
+
+ONLY_THE_CHILD = """
+import sys
+from mlpfac.cli import main
+code = main(["run", "kin.toml", "--no-plot", "--out", "o"])
+print(code, "rerun" in sys.modules)
+"""
+
+
+def test_a_short_runs_recording_is_written_by_a_child_and_a_lost_one_is_replaced(here, monkeypatch, capsys):
+    """The command's process never imports rerun (a child forked before the run writes run.rrd and
+    reads it back); a child that is gone before it writes leaves the recording to the command."""
+    proc = subprocess.run([sys.executable, "-c", ONLY_THE_CHILD], capture_output=True, text=True, cwd=here)
+    assert proc.stdout.splitlines()[-1] == "0 False", proc.stdout + proc.stderr
+    assert (here / "o" / "run.rrd").stat().st_size > 10_000
+    from mlpfac.runs import writer
+
+    monkeypatch.setattr(writer, "_child", lambda *fds: os._exit(0))  # forked, then gone at once
+    assert main(["run", "kin.toml", "--no-plot", "--out", "p"]) == 0
+    assert capsys.readouterr().err == ""
+    from mlpfac.log.sinks import check_recording
+
+    check_recording(here / "p" / "run.rrd")  # whole
