@@ -90,6 +90,15 @@ def bench_run(repeats: int, cold: int, before: str | None, warm_only: bool = Fal
     ref = line("floor process", fl)
     for k in runs:
         line(f"{k}warm", warm[k], ref, "target <= 2x")
+    if before:  # paired by round: what load on a shared machine does to both cancels
+        ratios = sorted(a[0] / b[0] for a, b in zip(warm[""], warm["before: "], strict=True))
+        print(
+            f"  this / before, per round: median {statistics.median(ratios):.2f} (range {ratios[0]:.2f}-{ratios[-1]:.2f})"
+        )
+        ratios = sorted(a[0] / f[0] for a, f in zip(warm[""], fl, strict=True))
+        print(
+            f"  this / floor, per round: median {statistics.median(ratios):.2f} (range {ratios[0]:.2f}-{ratios[-1]:.2f})"
+        )
         if not warm_only:
             line(f"{k}fresh NUMBA_CACHE_DIR", fresh[k], ref, "target <= 5x")
     if cold:
