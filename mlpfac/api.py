@@ -136,9 +136,9 @@ def sweep(
     The returned list has ``.errors`` ({(scenario, controller, seed): traceback}) and ``.paired``
     (the rows of paired.json). Ctrl-C raises KeyboardInterrupt (with ``out``, the runs written are
     kept and the next call resumes them). ``robots``: every scenario on each (as ``--robots``)."""
+    from mlpfac.plots.robustness import read_robustness
     from mlpfac.scenario.on_robot import with_robots
     from mlpfac.sweeps import engine
-    from mlpfac.sweeps.robustness import read_robustness
 
     not_in_a_worker("sweep")
     if isinstance(scenarios, str | Path):

@@ -92,7 +92,7 @@ def render(folder: Path, opts: dict[str, str]) -> str:
         return read_data(folder, "table.md")
     name = {"sweep": "sweep.json", "compare": "compare.json", "robustness": "robustness.json"}.get(view, "paired.json")
     if view == "robustness":
-        from mlpfac.sweeps.robustness import read_robustness
+        from mlpfac.plots.robustness import read_robustness
 
         read_data(folder, name)  # a missing file named as the other views name it
         data = read_robustness(folder / name)

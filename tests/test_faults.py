@@ -210,7 +210,8 @@ CURVE = {"scenario": "s", "controller": "c", "point": {"events.0.scale": 2.0}, "
 def test_robustness_json_of_diverged_runs_is_json_and_reads_back_infinite(tmp_path):
     """A median over runs that diverged is infinite: null in the file (JSON has no Infinity), as in
     metrics.json, and infinite again when read (the file of an earlier version, with Infinity, too)."""
-    from mlpfac.sweeps.robustness import _finite, read_robustness
+    from mlpfac.plots.robustness import read_robustness
+    from mlpfac.sweeps.robustness import _finite
 
     data = {"meta": {"threshold_m": None}, "curves": [CURVE], "breaking_points": []}
     text = json.dumps(_finite(data), allow_nan=False)

@@ -10,18 +10,18 @@ first value) of the median position RMS, each point that holds ringed.
 
 from __future__ import annotations
 
+import json
 import math
 from pathlib import Path
 
 import numpy as np
 
+from mlpfac.exceptions import ConfigError
 from mlpfac.plots.colors import controller_colors, mpl
 
 
 def robustness_plot(out: Path) -> list[Path]:
     """Draw ``out``/robustness.png from ``out``/robustness.json; returns the file written."""
-    from mlpfac.sweeps.robustness import read_robustness
-
     data = read_robustness(out / "robustness.json")
     rows, points = data["curves"], data.get("breaking_points", [])
     if not rows:
@@ -147,8 +147,6 @@ def panels_plot(folders: list[Path]) -> bytes | None:
     one axis: the median position RMS after the change against the value per controller (a hollow
     marker where not every seed tracks, an x at the top where the median diverged), the bound dashed,
     the threshold (the tracking limit) dotted; one legend. None when no scenario has one axis."""
-    from mlpfac.sweeps.robustness import read_robustness
-
     found = []
     for folder in folders:
         data = read_robustness(folder / "robustness.json")  # edited by hand: a ConfigError naming the field
@@ -209,3 +207,80 @@ def panels_plot(folders: list[Path]) -> bytes | None:
     fig.savefig(buf, format="png", dpi=90)
     plt.close(fig)
     return buf.getvalue()
+
+
+MIN_INTERVAL_RUNS = 6  # the fewest runs whose median has a 95 % interval (median_interval)
+CURVE_FIELDS: dict[str, tuple[type, ...]] = {
+    "scenario": (str,), "controller": (str,), "point": (dict,), "runs": (int,), "finished": (int,),
+    "tracking": (int,), "tracking_share": (int, float, type(None)), "median_m": (int, float, type(None)),
+    "ci_lo_m": (int, float, type(None)), "ci_hi_m": (int, float, type(None)), "threshold_m": (int, float),
+    "bound_m": (int, float, type(None)), "holds": (bool,),
+}  # fmt: skip
+POINT_FIELDS: dict[str, tuple[type, ...]] = {
+    "scenario": (str,), "controller": (str,), "axis": (str,), "at": (dict,), "nominal": (int, float, type(None)),
+}  # fmt: skip
+SIDE_FIELDS: dict[str, tuple[type, ...]] = {
+    "holds_to": (int, float, type(None)), "fails_at": (int, float, type(None)), "whole_axis": (bool,),
+}  # fmt: skip
+
+
+TYPE_NAMES = {
+    int: "a number",
+    float: "a number",
+    type(None): "null",
+    str: "a text",
+    dict: "a table",
+    bool: "true or false",
+}
+
+
+def _typed(row, fields: dict[str, tuple[type, ...]], where: str) -> None:
+    if not isinstance(row, dict):
+        raise ConfigError(where, f"expected a table of {', '.join(fields)}, got {type(row).__name__}")
+    for key, types in fields.items():
+        if key not in row:
+            raise ConfigError(f"{where}.{key}", "missing")
+        v = row[key]
+        if not isinstance(v, types) or (isinstance(v, bool) and bool not in types):
+            names = " or ".join(dict.fromkeys(TYPE_NAMES.get(t, t.__name__) for t in types))
+            raise ConfigError(f"{where}.{key}", f"expected {names}, got {v!r}")
+
+
+def _numbers(table: dict, where: str) -> None:
+    for k, v in table.items():
+        if not isinstance(k, str) or isinstance(v, bool) or not isinstance(v, int | float):
+            raise ConfigError(f"{where}.{k}", f"expected a number, got {v!r}")
+
+
+def read_robustness(path: Path) -> dict:
+    """robustness.json as :func:`mlpfac.sweeps.robustness.write_robustness` wrote it, every field it holds checked (a ConfigError
+    naming the file and the field), the medians and intervals of diverged runs infinite again: null
+    where runs finished (an earlier file's ``Infinity`` reads too). A null bound is no finite bound."""
+    try:
+        data = json.loads(Path(path).read_text())
+    except (OSError, UnicodeDecodeError, ValueError) as err:
+        raise ConfigError(str(path), f"cannot read it as JSON ({getattr(err, 'strerror', None) or err})") from None
+    if not isinstance(data, dict) or not isinstance(data.get("curves"), list):
+        raise ConfigError(f"{path} curves", "expected the list of rows a sweep writes")
+    if not isinstance(data.get("breaking_points", []), list) or not isinstance(data.get("meta", {}), dict):
+        raise ConfigError(str(path), "expected breaking_points (a list) and meta (a table) as a sweep writes them")
+    threshold = data.get("meta", {}).get("threshold_m")
+    if threshold is not None and (isinstance(threshold, bool) or not isinstance(threshold, int | float)):
+        raise ConfigError(f"{path} meta.threshold_m", f"expected a number or null, got {threshold!r}")
+    for i, r in enumerate(data["curves"]):
+        where = f"{path} curves[{i}]"
+        _typed(r, CURVE_FIELDS, where)
+        _numbers(r["point"], f"{where}.point")
+        if r["finished"]:
+            r["median_m"] = math.inf if r["median_m"] is None else r["median_m"]
+        if r["finished"] >= MIN_INTERVAL_RUNS:
+            r["ci_lo_m"] = math.inf if r["ci_lo_m"] is None else r["ci_lo_m"]
+            r["ci_hi_m"] = math.inf if r["ci_hi_m"] is None else r["ci_hi_m"]
+    for i, b in enumerate(data.get("breaking_points", [])):
+        where = f"{path} breaking_points[{i}]"
+        _typed(b, POINT_FIELDS, where)
+        _numbers(b["at"], f"{where}.at")
+        for side in ("below", "above"):  # (mlpfac.sweeps.robustness.SIDES)
+            if side in b:
+                _typed(b[side], SIDE_FIELDS, f"{where}.{side}")
+    return data

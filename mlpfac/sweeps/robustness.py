@@ -243,31 +243,6 @@ def write_robustness(out: Path, jobs: list[Job], metrics: dict[tuple, RunMetrics
     return paths + robustness_plot(out)
 
 
-MIN_INTERVAL_RUNS = 6  # the fewest runs whose median has a 95 % interval (median_interval)
-CURVE_FIELDS: dict[str, tuple[type, ...]] = {
-    "scenario": (str,), "controller": (str,), "point": (dict,), "runs": (int,), "finished": (int,),
-    "tracking": (int,), "tracking_share": (int, float, type(None)), "median_m": (int, float, type(None)),
-    "ci_lo_m": (int, float, type(None)), "ci_hi_m": (int, float, type(None)), "threshold_m": (int, float),
-    "bound_m": (int, float, type(None)), "holds": (bool,),
-}  # fmt: skip
-POINT_FIELDS: dict[str, tuple[type, ...]] = {
-    "scenario": (str,), "controller": (str,), "axis": (str,), "at": (dict,), "nominal": (int, float, type(None)),
-}  # fmt: skip
-SIDE_FIELDS: dict[str, tuple[type, ...]] = {
-    "holds_to": (int, float, type(None)), "fails_at": (int, float, type(None)), "whole_axis": (bool,),
-}  # fmt: skip
-
-
-TYPE_NAMES = {
-    int: "a number",
-    float: "a number",
-    type(None): "null",
-    str: "a text",
-    dict: "a table",
-    bool: "true or false",
-}
-
-
 def _finite(x):
     """``x`` with every float that is not finite replaced by None (JSON has no Infinity), as in metrics.json."""
     if isinstance(x, dict):
@@ -275,55 +250,3 @@ def _finite(x):
     if isinstance(x, list | tuple):
         return [_finite(v) for v in x]
     return None if isinstance(x, float) and not math.isfinite(x) else x
-
-
-def _typed(row, fields: dict[str, tuple[type, ...]], where: str) -> None:
-    if not isinstance(row, dict):
-        raise ConfigError(where, f"expected a table of {', '.join(fields)}, got {type(row).__name__}")
-    for key, types in fields.items():
-        if key not in row:
-            raise ConfigError(f"{where}.{key}", "missing")
-        v = row[key]
-        if not isinstance(v, types) or (isinstance(v, bool) and bool not in types):
-            names = " or ".join(dict.fromkeys(TYPE_NAMES.get(t, t.__name__) for t in types))
-            raise ConfigError(f"{where}.{key}", f"expected {names}, got {v!r}")
-
-
-def _numbers(table: dict, where: str) -> None:
-    for k, v in table.items():
-        if not isinstance(k, str) or isinstance(v, bool) or not isinstance(v, int | float):
-            raise ConfigError(f"{where}.{k}", f"expected a number, got {v!r}")
-
-
-def read_robustness(path: Path) -> dict:
-    """robustness.json as :func:`write_robustness` wrote it, every field it holds checked (a ConfigError
-    naming the file and the field), the medians and intervals of diverged runs infinite again: null
-    where runs finished (an earlier file's ``Infinity`` reads too). A null bound is no finite bound."""
-    try:
-        data = json.loads(Path(path).read_text())
-    except (OSError, UnicodeDecodeError, ValueError) as err:
-        raise ConfigError(str(path), f"cannot read it as JSON ({getattr(err, 'strerror', None) or err})") from None
-    if not isinstance(data, dict) or not isinstance(data.get("curves"), list):
-        raise ConfigError(f"{path} curves", "expected the list of rows a sweep writes")
-    if not isinstance(data.get("breaking_points", []), list) or not isinstance(data.get("meta", {}), dict):
-        raise ConfigError(str(path), "expected breaking_points (a list) and meta (a table) as a sweep writes them")
-    threshold = data.get("meta", {}).get("threshold_m")
-    if threshold is not None and (isinstance(threshold, bool) or not isinstance(threshold, int | float)):
-        raise ConfigError(f"{path} meta.threshold_m", f"expected a number or null, got {threshold!r}")
-    for i, r in enumerate(data["curves"]):
-        where = f"{path} curves[{i}]"
-        _typed(r, CURVE_FIELDS, where)
-        _numbers(r["point"], f"{where}.point")
-        if r["finished"]:
-            r["median_m"] = math.inf if r["median_m"] is None else r["median_m"]
-        if r["finished"] >= MIN_INTERVAL_RUNS:
-            r["ci_lo_m"] = math.inf if r["ci_lo_m"] is None else r["ci_lo_m"]
-            r["ci_hi_m"] = math.inf if r["ci_hi_m"] is None else r["ci_hi_m"]
-    for i, b in enumerate(data.get("breaking_points", [])):
-        where = f"{path} breaking_points[{i}]"
-        _typed(b, POINT_FIELDS, where)
-        _numbers(b["at"], f"{where}.at")
-        for side in SIDES:
-            if side in b:
-                _typed(b[side], SIDE_FIELDS, f"{where}.{side}")
-    return data
