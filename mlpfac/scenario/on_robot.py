@@ -152,12 +152,10 @@ def robot_name(robot: str) -> str:
 
 def on_robot(table: dict, robot: str) -> dict:
     """The scenario ``table`` (as read from its file) put on ``robot`` by the module's rule."""
-    import numpy as np
-
     from mlpfac.plants.config import MujocoConfig
     from mlpfac.plants.events import ControlPeriod, parse_event
     from mlpfac.plants.robot import read_robot
-    from mlpfac.scenario.reference import make_reference, sample
+    from mlpfac.scenario.reference import make_reference
 
     out = copy.deepcopy(table)
     out.pop("provenance", None)  # what another robot's run simulated
@@ -176,23 +174,14 @@ def on_robot(table: dict, robot: str) -> dict:
         raise ConfigError(f"--robot {robot}", f"not a [plant] key: {err}") from None
     except ConfigError as err:
         raise ConfigError(f"--robot {robot}: {err.where}".rstrip(": "), err.what) from None
-    w_max = wheel_speed_limit(r)
     ref = dict(out.get("reference", {"kind": "eight"}))
     kind = ref.get("kind", "eight")
-    if w_max is not None and kind in SPEEDS:
-        curve = make_reference(kind, {k: v for k, v in ref.items() if k != "kind"})
-        rows = sample(curve, np.linspace(0.0, 4 * duration, PEAK_SAMPLES))
-        peak = float(np.max((np.abs(rows[:, 3]) + np.abs(rows[:, 4]) * r.real_track / 2) / r.real_radius))
-        k = min(1.0, SHARE * w_max / peak)
-        said = f"reference x{k:.3g} in speed (peak wheel speed {k * peak:.3g} of {w_max:.3g} rad/s)"
-        if k < 1.0:
-            for key, default in zip(SPEEDS[kind], DEFAULT_SPEEDS[kind], strict=True):
-                ref[key] = float(f"{k * float(ref.get(key, default)):.6g}")
-        out["reference"] = ref
-        ctrl = out.setdefault("controller", {})
-        ctrl["v_max"] = float(f"{r.real_radius * w_max:.6g}")
-        ctrl["omega_max"] = float(f"{2 * r.real_radius * w_max / r.real_track:.6g}")
-        said += f", v_max {ctrl['v_max']:g} m/s, omega_max {ctrl['omega_max']:g} rad/s"
+    curve = make_reference(kind, {k: v for k, v in ref.items() if k != "kind"}) if kind in SPEEDS else None
+    fit = fitted(ref, curve, duration, r)
+    if fit is not None:
+        out["reference"], limits, said = fit
+        out.setdefault("controller", {}).update(limits)
+        said += _limits_said(limits)
         out["description"] = f"{out.get('description', '')} On {robot}: {said}.".strip()
     out["plant"] = plant
     out["events"] = [_same_change(ev) for ev in raw]
@@ -200,6 +189,84 @@ def on_robot(table: dict, robot: str) -> dict:
         del out["events"]
     out["name"] = f"{out.get('name', 'scenario')}+{robot_name(robot)}"
     return out
+
+
+def peak_wheel_speed(curve, duration: float, r) -> float:
+    """The fastest a wheel of robot ``r`` turns along the reference ``curve`` (rad/s): the peak of
+    (|v_r| + |omega_r| b / 2) / r, sampled over 4 x ``duration``."""
+    import numpy as np
+
+    from mlpfac.scenario.reference import sample
+
+    rows = sample(curve, np.linspace(0.0, 4 * duration, PEAK_SAMPLES))
+    return float(np.max((np.abs(rows[:, 3]) + np.abs(rows[:, 4]) * r.real_track / 2) / r.real_radius))
+
+
+def fitted(ref: dict, curve, duration: float, r) -> tuple[dict, dict, str] | None:
+    """The module's rule on robot ``r``: the reference table ``ref`` (its curve ``curve``) slowed in
+    time to a peak wheel speed of at most SHARE of the robot's limit, the controller's limits from the
+    robot, and what was done in words; None where the robot has no wheel-speed limit or the reference
+    no speed (``--robot`` and a scenario file that leaves the reference's speed unset both come here)."""
+    w_max = wheel_speed_limit(r)
+    kind = ref.get("kind", "eight")
+    if w_max is None or kind not in SPEEDS:
+        return None
+    peak = peak_wheel_speed(curve, duration, r)
+    k = min(1.0, SHARE * w_max / peak)
+    said = f"reference x{k:.3g} in speed (peak wheel speed {k * peak:.3g} of {w_max:.3g} rad/s)"
+    ref = dict(ref)
+    if k < 1.0:
+        for key, default in zip(SPEEDS[kind], DEFAULT_SPEEDS[kind], strict=True):
+            ref[key] = float(f"{k * float(ref.get(key, default)):.6g}")
+    limits = {
+        "v_max": float(f"{r.real_radius * w_max:.6g}"),
+        "omega_max": float(f"{2 * r.real_radius * w_max / r.real_track:.6g}"),
+    }
+    return ref, limits, said
+
+
+def _limits_said(ctrl: dict) -> str:
+    return f", v_max {ctrl['v_max']:g} m/s, omega_max {ctrl['omega_max']:g} rad/s"
+
+
+def on_its_robot(table: dict, scn) -> tuple[dict, dict]:
+    """A scenario file's reference on the MuJoCo robot it names (``scn``, the file parsed; ``table``,
+    as read): where the reference's speed is left to the defaults, the table fitted by the module's
+    rule (:func:`fitted`; the controller's limits only where the file leaves them unset); where the
+    file sets it and asks more than the robot's wheels give, the table as it is, warned. Returns the
+    table and ``[provenance]`` words for the run's first line (``reference_fit``, ``reference_warning``)."""
+    from mlpfac.plants.events import ControlPeriod
+    from mlpfac.plants.robot import read_robot
+
+    ref = dict(table.get("reference", {"kind": "eight"}))
+    kind = ref.get("kind", "eight")
+    if kind not in SPEEDS:
+        return table, {}
+    periods = (scn.T, *(ev.factor * scn.T for ev in scn.events if isinstance(ev, ControlPeriod)))
+    r = read_robot(scn.plant_config, periods)  # the robot the run reads again (cached)
+    if not any(key in ref for key in (*SPEEDS[kind], "speed")):
+        fit = fitted(ref, scn.reference, scn.duration, r)
+        if fit is None:
+            return table, {}
+        ref, limits, said = fit
+        ctrl = dict(table.get("controller", {}))
+        ctrl |= {k: v for k, v in limits.items() if k not in ctrl}
+        said += _limits_said(ctrl) + " (the rule of --robot)"
+        out = table | {"reference": ref, "controller": ctrl}
+        out["description"] = f"{table.get('description', '')} Fitted to the robot: {said}.".strip()
+        return out, {"reference_fit": said}
+    w_max = wheel_speed_limit(r)
+    if w_max is None:
+        return table, {}
+    peak = peak_wheel_speed(scn.reference, scn.duration, r)
+    if peak <= w_max:
+        return table, {}
+    speed = float(f"{SHARE * w_max / peak * scn.reference.speed:.3g}")
+    return table, {
+        "reference_warning": f"the reference asks a peak wheel speed of {peak:.3g} rad/s of wheels that give "
+        f"{w_max:.3g} rad/s (x{peak / w_max:.3g}): beyond it the IK slows both wheels (the path's curvature kept) "
+        f"and the robot falls behind; [reference] speed = {speed:g} drives it at {SHARE:g} of the limit"
+    }
 
 
 def wheel_speed_limit(r) -> float | None:
