@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import copy
 import importlib.resources
-import math
 from pathlib import Path
 
 from mlpfac.exceptions import ConfigError
@@ -33,7 +32,7 @@ MENAGERIE_BASES = (
 )
 AS_SHIPPED = {  # what a Menagerie base does from its name alone (tests/test_robots.py checks each)
     "pal_tiago_dual": "a skid-steer as modelled (four plain wheels, not the mecanum wheels of its omnidirectional "
-    "base): given a rotor on each wheel, it turns as a track of 0.98 m (docs/robots.md)",
+    "base): given a rotor on each wheel, it turns as a track of 1.09 m, measured as it settles (docs/robots.md)",
     "rainbow_robotics_rby1": "refused as shipped: its wheel servos (kv 1) cannot turn the wheels against their "
     "damping; --robot rby1a drives it",
 }
@@ -154,7 +153,7 @@ def on_robot(table: dict, robot: str) -> dict:
     """The scenario ``table`` (as read from its file) put on ``robot`` by the module's rule."""
     from mlpfac.plants.config import MujocoConfig
     from mlpfac.plants.events import ControlPeriod, parse_event
-    from mlpfac.plants.robot import read_robot
+    from mlpfac.plants.mujoco import robot_of
     from mlpfac.scenario.reference import make_reference
 
     out = copy.deepcopy(table)
@@ -169,7 +168,7 @@ def on_robot(table: dict, robot: str) -> dict:
     events = [parse_event(ev, duration, f"[[events]] #{i + 1}") for i, ev in enumerate(raw)]
     periods = (T, *(ev.factor * T for ev in events if isinstance(ev, ControlPeriod)))
     try:
-        r = read_robot(MujocoConfig(**{k: v for k, v in plant.items() if k != "kind"}), periods)
+        r = robot_of(MujocoConfig(**{k: v for k, v in plant.items() if k != "kind"}), periods)
     except TypeError as err:
         raise ConfigError(f"--robot {robot}", f"not a [plant] key: {err}") from None
     except ConfigError as err:
@@ -207,6 +206,8 @@ def fitted(ref: dict, curve, duration: float, r) -> tuple[dict, dict, str] | Non
     time to a peak wheel speed of at most SHARE of the robot's limit, the controller's limits from the
     robot, and what was done in words; None where the robot has no wheel-speed limit or the reference
     no speed (``--robot`` and a scenario file that leaves the reference's speed unset both come here)."""
+    from mlpfac.plants.wheels import wheel_speed_limit
+
     w_max = wheel_speed_limit(r)
     kind = ref.get("kind", "eight")
     if w_max is None or kind not in SPEEDS:
@@ -235,15 +236,16 @@ def on_its_robot(table: dict, scn) -> tuple[dict, dict]:
     rule (:func:`fitted`; the controller's limits only where the file leaves them unset); where the
     file sets it and asks more than the robot's wheels give, the table as it is, warned. Returns the
     table and ``[provenance]`` words for the run's first line (``reference_fit``, ``reference_warning``)."""
-    from mlpfac.plants.events import ControlPeriod
-    from mlpfac.plants.robot import read_robot
+    import numpy as np
+
+    from mlpfac.plants import make_plant
+    from mlpfac.scenario.reference import sample
 
     ref = dict(table.get("reference", {"kind": "eight"}))
     kind = ref.get("kind", "eight")
     if kind not in SPEEDS:
         return table, {}
-    periods = (scn.T, *(ev.factor * scn.T for ev in scn.events if isinstance(ev, ControlPeriod)))
-    r = read_robot(scn.plant_config, periods)  # the robot the run reads again (cached)
+    r = make_plant(scn, sample(scn.reference, np.arange(2) * scn.T)).robot  # every check made; its read cached
     if not any(key in ref for key in (*SPEEDS[kind], "speed")):
         fit = fitted(ref, scn.reference, scn.duration, r)
         if fit is None:
@@ -255,6 +257,8 @@ def on_its_robot(table: dict, scn) -> tuple[dict, dict]:
         out = table | {"reference": ref, "controller": ctrl}
         out["description"] = f"{table.get('description', '')} Fitted to the robot: {said}.".strip()
         return out, {"reference_fit": said}
+    from mlpfac.plants.wheels import wheel_speed_limit
+
     w_max = wheel_speed_limit(r)
     if w_max is None:
         return table, {}
@@ -267,24 +271,6 @@ def on_its_robot(table: dict, scn) -> tuple[dict, dict]:
         f"{w_max:.3g} rad/s (x{peak / w_max:.3g}): beyond it the IK slows both wheels (the path's curvature kept) "
         f"and the robot falls behind; [reference] speed = {speed:g} drives it at {SHARE:g} of the limit"
     }
-
-
-def wheel_speed_limit(r) -> float | None:
-    """The robot's wheel-speed limit (rad/s): its servos', else where its largest wheel torque meets
-    its wheel joints' damping; None when the model sets neither."""
-    if r.max_wheel_speed is not None:
-        return float(r.max_wheel_speed)
-    from mlpfac.plants.edits import torque_limit
-
-    m = r.model
-    damping = min(float(m.dof_damping[dof]) for dof in r.dofs)
-    if r.mix is not None:
-        from mlpfac.plants.drive import wheel_torque_limits
-
-        torque = min(wheel_torque_limits(r.mix, r.umax)) / 2  # both wheels at once
-    else:
-        torque = min(torque_limit(m, a, c, True) for a, c in zip(r.acts, r.act_per_wheel, strict=True))
-    return torque / damping if damping > 0 and math.isfinite(torque) else None
 
 
 def _same_change(ev: dict) -> dict:
