@@ -14,7 +14,8 @@ nominal ones), and held for one control period of ``n_substeps`` physics steps,
   driven by a discrete wheel-speed PI loop evaluated once per physics step.
 
 The pose (x, y, theta) is read at a site on the axle midpoint (``axle_mid``, or the frame
-:mod:`mlpfac.plants.detect` finds); theta is unwrapped
+:mod:`mlpfac.plants.detect` finds; a skid-steer's found frame is moved to its kinematic centre, and
+the track it turns as is measured, as it settles: :func:`mlpfac.plants.settle.turning`); theta is unwrapped
 across steps. Events (:mod:`mlpfac.plants.mujoco_events`) edit the model's
 :class:`mujoco.MjSpec` and recompile it keeping the state (``spec.recompile``).
 

@@ -9,6 +9,9 @@ controller put on another robot, by one rule (docs/robots.md):
   servos' control range, or, for a drive without one, the speed at which the wheels' largest torque
   meets their joints' damping;
 - the controller's limits follow the robot's: ``v_max = r w_max``, ``omega_max = 2 r w_max / b``;
+- a scenario file that names its MuJoCo robot gets the same reference rule (:func:`fitted`, one
+  code) where it leaves the reference's speed unset, and a warning in numbers where it sets one
+  the wheels cannot drive (:func:`on_its_robot`);
 - events mean the same physical change: relative ones as they are (wheel radius x1.5 is x1.5 of
   this robot's wheel, mass x3 of its base), absolute ones too (a 5 kg payload, a floor of friction
   0.2, a 40 ms delay); a payload on a body of the other robot goes on this one's base.
