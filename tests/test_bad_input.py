@@ -110,6 +110,8 @@ BAD_FILES: dict[str, tuple[str | bytes, str]] = {
     "timestep negative": (ROBOT + "timestep = -0.002\n", "[plant] timestep"),
     "timestep not dividing T": (ROBOT + "timestep = 0.003\n", "[plant] T"),
     "max wheel speed zero": (ROBOT + "max_wheel_speed = 0.0\n", "max_wheel_speed"),
+    "turning track zero": (ROBOT + "turning_track = 0.0\n", "turning_track"),
+    "turning track a string": (ROBOT + 'turning_track = "wide"\n', "turning_track"),
     "menagerie no robot": ('[plant]\nkind = "mujoco"\nmodel = "menagerie:"\n', "menagerie:ROBOT/ENTRY"),
     "menagerie robot unknown": ('[plant]\nkind = "mujoco"\nmodel = "menagerie:pal_tiagoo/scene"\n', "pal_tiago"),
     "menagerie entry unknown": ('[plant]\nkind = "mujoco"\nmodel = "menagerie:pal_tiago/scene_fast"\n', "scene_velocity"),

@@ -15,7 +15,7 @@ import numpy as np
 from mlpfac.exceptions import ConfigError
 from mlpfac.plants.model_file import is_menagerie, menagerie_name, model_path, shipped_model
 
-LIMITS = ("wheel_radius", "track", "max_wheel_speed", "timestep")
+LIMITS = ("wheel_radius", "track", "turning_track", "max_wheel_speed", "timestep")
 ARMATURE_MAX = 1e3  # kg m^2 on a wheel's hinge, at most
 NOISE_STD_MAX = 10.0  # m and rad of pose noise, at most
 TIMESTEP_MIN, TIMESTEP_MAX = 1e-5, 0.1  # physics timestep (s): finer would take hours, coarser is not physics
@@ -71,6 +71,7 @@ class MujocoConfig:
     armature: float | None = None  # rotor inertia on each driven wheel's hinge (kg m^2); None: the model's
     wheel_radius: float | None = None  # radius the IK believes (m); None: read from the model
     track: float | None = None  # wheel separation the IK believes (m); None: read from the model
+    turning_track: float | None = None  # a skid-steer's: the track it turns as (m); None: measured as it settles
     max_wheel_speed: float | None = None  # rad/s, kept by scaling (v, omega); None: the model's; inf: none
     pose_noise_std: float | tuple[float, ...] = 0.0  # std of Gaussian noise on (x, y, theta): scalar or 3
     pi_kp: float = 0.5  # torque drive: PI proportional gain, N m per rad/s of wheel-speed error

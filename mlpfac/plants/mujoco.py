@@ -14,7 +14,8 @@ nominal ones), and held for one control period of ``n_substeps`` physics steps,
   driven by a discrete wheel-speed PI loop evaluated once per physics step.
 
 The pose (x, y, theta) is read at a site on the axle midpoint (``axle_mid``, or the frame
-:mod:`mlpfac.plants.detect` finds); theta is unwrapped
+:mod:`mlpfac.plants.detect` finds; a skid-steer's found frame is moved to its kinematic centre, and
+the track it turns as is measured, as it settles: :func:`mlpfac.plants.settle.turning`); theta is unwrapped
 across steps. Events (:mod:`mlpfac.plants.mujoco_events`) edit the model's
 :class:`mujoco.MjSpec` and recompile it keeping the state (``spec.recompile``).
 
@@ -25,6 +26,7 @@ derived quantity (site pose, ``cvel``, sensors) belongs to the current state.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import mujoco
@@ -38,7 +40,9 @@ from mlpfac.plants.events import EVENT_KINDS, DelayLine
 from mlpfac.plants.ik import wheel_speeds
 from mlpfac.plants.model_file import is_menagerie, menagerie_version
 from mlpfac.plants.mujoco_events import MujocoEvents
-from mlpfac.plants.robot import read_robot
+from mlpfac.plants.robot import Robot, read_robot
+from mlpfac.plants.settle import TURN_SHARE, turning
+from mlpfac.plants.wheels import wheel_speed_limit
 
 DIVERGENCE_WARNINGS = ("mjWARN_BADQPOS", "mjWARN_BADQVEL", "mjWARN_BADQACC")  # MuJoCo resets the data on these
 NOISE_CHUNK = 1024  # pose-noise draws made at once: the same stream as one draw of 3 per step
@@ -72,6 +76,36 @@ class MujocoPlant(MujocoEvents):
     _kp, _ki, _n = _Kept("fl", K.F_KP), _Kept("fl", K.F_KI), _Kept("ints", K.I_NSUB, int)
 
     def __init__(self, config: MujocoConfig, T: float, periods: tuple[float, ...] = ()) -> None:
+        self._build(config, T, periods)
+        if self.robot.seconds != (-1, -1) and config.turning_track is None:
+            self._turning(config, T, periods)
+
+    def _turning(self, config: MujocoConfig, T: float, periods: tuple[float, ...]) -> None:
+        """A skid-steer's turning measured once it has settled (:func:`mlpfac.plants.settle.turning`),
+        and the robot built again with what was measured as ``[plant]`` keys, found (written into
+        config.toml: a run of it measures nothing): the track it turns as, and a pose frame found in
+        the middle of its wheels moved to its kinematic centre, where it moves along its heading."""
+        r = self.robot
+        track, ahead, said = turning(self, TURN_SHARE * (wheel_speed_limit(r) or 1.0))
+        if not math.isfinite(track):
+            self.robot = dataclasses.replace(r, description=f"{r.description}; its turning not measured ({said})")
+            return
+        keys: dict = {"turning_track": float(f"{track:.3g}")}
+        if "frame_offset" in r.found and abs(ahead) < track / 2:
+            ox, oy, oz = r.config.offset
+            keys["frame_offset"] = (round(float(ox) + ahead, 4) + 0.0, float(oy), float(oz))
+        self._build(dataclasses.replace(r.config, **keys), T, periods)  # every part named: read once
+        way = f"{abs(ahead) * 1e3:.0f} mm {'ahead' if ahead >= 0 else 'back'}"
+        moved = f", the pose frame moved {way} to its kinematic centre" if len(keys) > 1 else ""
+        chosen = r.description[_turns_end(r.description) :]  # what the first read chose, said after the track
+        self.robot = dataclasses.replace(
+            self.robot,
+            found=(*(k for k in r.found if k not in keys), *keys),
+            description=f"{self.robot.description[: _turns_end(self.robot.description)]}{chosen}; measured as it "
+            f"settled, {said}: the track{moved}",
+        )
+
+    def _build(self, config: MujocoConfig, T: float, periods: tuple[float, ...]) -> None:
         self.T = float(T)
         self.robot = r = read_robot(config, tuple(periods) or (self.T,))
         self.config = r.config  # every part named: what the model said where ``config`` did not
@@ -326,3 +360,14 @@ class MujocoPlant(MujocoEvents):
         if self.robot.locked:
             out["locked_joints"] = list(self.robot.locked)
         return out
+
+
+def _turns_end(description: str) -> int:
+    """Where a skid-steer's description says the track it turns as, its end."""
+    return description.index(")", description.index("; turning as a track of")) + 1
+
+
+def robot_of(config: MujocoConfig, periods: tuple[float, ...]) -> Robot:
+    """The robot a run of ``config`` has (control period ``periods[0]``): read, and a skid-steer's
+    turning measured."""
+    return MujocoPlant(config, periods[0], periods).robot

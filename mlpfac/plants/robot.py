@@ -253,9 +253,12 @@ def _read_robot(config: MujocoConfig, stamp: tuple[int, int], periods: tuple[flo
         anchors = [d.xanchor[j].copy() for j in driven]
         width = float(np.linalg.norm(anchors[1] - anchors[0]))
         track, turns = width, ""
-        if len(driven) > 2:  # a skid-steer: the track it turns with (wheel_parts.skid_track)
-            track, base = wheel_parts.skid_track(anchors)
-            turns = f"; turning as a track of {track:.3g} m ({width:.3g} m across, {base:.3g} m front to rear)"
+        if len(driven) > 2:  # a skid-steer: the track it turns as (turning_track, else wheel_parts.skid_track)
+            rule, base = wheel_parts.skid_track(anchors)
+            track = rule if config.turning_track is None else float(config.turning_track)
+            turns = f"; turning as a track of {track:.3g} m ({width:.3g} m across, {base:.3g} m front to rear" + (
+                ")" if config.turning_track is None else f"; W + L^2/W would be {rule:.3g} m)"
+            )
         sign = wheel_parts.wheel_signs(config, d, site, joints, anchors[:2])
         dofs = (int(m.jnt_dofadr[joints[0]]), int(m.jnt_dofadr[joints[1]]))
         if drv.tendon:

@@ -3,11 +3,13 @@ their limits, the floor's contact priority (read once by :func:`mlpfac.plants.ro
 
 from __future__ import annotations
 
+import math
+
 import mujoco
 import numpy as np
 
 from mlpfac.exceptions import ConfigError
-from mlpfac.plants import edits
+from mlpfac.plants import drive, edits
 from mlpfac.plants.config import MujocoConfig
 from mlpfac.plants.detect import ROUND, base_frame, is_motor, is_velocity_servo, names
 
@@ -18,8 +20,9 @@ def radius(m: mujoco.MjModel, g: int, joint: int) -> float:
 
 
 def skid_track(anchors: list[np.ndarray]) -> tuple[float, float]:
-    """A skid-steer's track as its IK turns it, and its wheelbase, from its wheels' hinge anchors
-    (left, right, then each side's second): W + L^2 / W for wheels W apart across and L along.
+    """The rule for a skid-steer's turning track, and its wheelbase, from its wheels' hinge anchors
+    (left, right, then each side's second): W + L^2 / W for wheels W apart across and L along (the
+    plant measures the track instead, :func:`mlpfac.plants.settle.turning`; the rule is said beside it).
 
     Turning, every wheel slides; where each one's friction is saturated (Coulomb's, the same on
     every wheel), the moments about the middle balance when the base turns at omega = u W/2 /
@@ -99,3 +102,17 @@ def left_first(m: mujoco.MjModel, config: MujocoConfig, joints: list[int], qpos:
     origin, R = base_frame(m, d, config, int(m.body_rootid[m.jnt_bodyid[joints[0]]]))
     side = [float((d.xanchor[j] - origin) @ R[:, 1]) for j in joints]
     return joints if side[0] > side[1] else joints[::-1]
+
+
+def wheel_speed_limit(r) -> float | None:
+    """The robot's wheel-speed limit (rad/s): its servos', else where its largest wheel torque meets
+    its wheel joints' damping; None when the model sets neither."""
+    if r.max_wheel_speed is not None:
+        return float(r.max_wheel_speed)
+    m = r.model
+    damping = min(float(m.dof_damping[dof]) for dof in r.dofs)
+    if r.mix is not None:
+        torque = min(drive.wheel_torque_limits(r.mix, r.umax)) / 2  # both wheels at once
+    else:
+        torque = min(edits.torque_limit(m, a, c, True) for a, c in zip(r.acts, r.act_per_wheel, strict=True))
+    return torque / damping if damping > 0 and math.isfinite(torque) else None

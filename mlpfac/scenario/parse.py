@@ -179,7 +179,9 @@ def load(
     The robot's parts the file leaves to the model (its wheels, its pose frame) are written into the
     table's ``[plant]`` as found, so that config.toml names them. ``build=False`` reads and checks
     the file alone (a listing), without building the plant. ``robot`` (``--robot``) puts the
-    scenario on another robot (:mod:`mlpfac.scenario.on_robot`). ``values`` sets numbers of the file by
+    scenario on another robot (:mod:`mlpfac.scenario.on_robot`); without it, a MuJoCo robot's file
+    whose reference leaves its speed unset gets it fitted to the robot by the same rule, and one that
+    asks more than the wheels give is warned (``[provenance] reference_fit``, ``reference_warning``). ``values`` sets numbers of the file by
     their dotted keys (:mod:`mlpfac.scenario.draws`) before it is checked, as if written in it.
     """
     path = Path(name_or_path)
@@ -211,7 +213,15 @@ def load(
     scn = parse(table, str(path))
     if not build:  # the file's data only (a listing): no robot is read, none downloaded
         return scn
+    said = {}
+    if robot is None and scn.plant_kind == "mujoco":  # its reference fitted to its robot, or warned
+        from mlpfac.scenario.on_robot import on_its_robot
+
+        fitted, said = on_its_robot(table, scn)
+        if fitted is not table:
+            table, scn = fitted, parse(fitted, str(path), check_model=False)
     table["provenance"], found = provenance.recorded(scn)
+    table["provenance"] |= said
     if found:  # the robot's parts the file left to the model: written in, so its config.toml re-runs the same
         table["plant"] = table["plant"] | found
         return parse(table, str(path), check_model=False)
