@@ -279,10 +279,14 @@ class MujocoPlant(MujocoEvents):
         return read_model(self.robot.model, self.robot, self._torque_limits_of(self.robot.model))
 
     def true_dynamics(self):
-        """The dynamic model of the robot as it is now (after events): what an oracle is told."""
+        """The dynamic model of the robot as it is now (after events: its wheels' true radius, its
+        masses, its drive's torque limit): what an oracle is told."""
+        import dataclasses
+
         from mlpfac.plants.dynamics import read_model
 
-        return read_model(self.model, self.robot, self._torque_max)
+        model = read_model(self.model, self.robot, self._torque_max)
+        return dataclasses.replace(model, wheel_radius_m=float(self.real_radius))
 
     def _torque_limits_of(self, m) -> tuple[float, float]:
         if self.robot.mix is not None:
