@@ -52,9 +52,9 @@ ENVIRONMENTS = {
 
 def child(runs: list[str]) -> None:
     """Run each run in this process and print its runs.json row (one JSON list)."""
+    from mlpfac.report.verify import run_row
     from mlpfac.sweeps.plan import plan
     from mlpfac.sweeps.worker import run_task
-    from mlpfac.verify import run_row
 
     rows = []
     for r in runs:
@@ -75,7 +75,7 @@ def main() -> None:
     args = ap.parse_args()
     if args.child:
         return child(args.runs)
-    from mlpfac.verify import differ
+    from mlpfac.report.verify import differ
 
     base, each = None, {}
     print(f"{len(args.runs)} runs: {', '.join(args.runs)}\n")

@@ -147,7 +147,7 @@ def build_parser() -> argparse.ArgumentParser:
         "robustness.json: each controller's median against the value, the bound, the tracking limit",
     )
 
-    from mlpfac import results as report
+    from mlpfac.report import results as report
 
     report.add_arguments(sub.add_parser("report", help="write the results tables of the docs from their data"))
     return parser
@@ -229,7 +229,7 @@ def cmd_list() -> int:
 
 
 def cmd_report(args: argparse.Namespace) -> int:
-    from mlpfac import results as report
+    from mlpfac.report import results as report
 
     return report.run_cli(args)
 

@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from mlpfac.cli import main
-from mlpfac.verify import RUNS_FILE, digest, verify
+from mlpfac.report.verify import RUNS_FILE, digest, verify
 
 COMMAND = "mlpfac sweep paper --controllers kanayama,corradini --seeds 0-2 --duration 1 --out runs/tiny"
 
@@ -92,7 +92,7 @@ GRID = (
 def test_a_vary_dataset_re_plans_its_grid_and_draws(tmp_path, capsys):
     """The recorded --vary of a dataset is planned again: the same grid points (the runs' keys) and
     the same draws (the same bits), so every run of a robustness dataset can be verified."""
-    from mlpfac.verify import _plan
+    from mlpfac.report.verify import _plan
 
     root = tmp_path / "repo"
     out = root / "runs" / "grid"
@@ -122,7 +122,7 @@ ROBUST = sorted(p.name for p in (DOCS / "data").glob("robust-*"))
 def test_every_documented_robustness_dataset_re_plans_to_its_runs(name):
     """Each robustness dataset keeps every run's figures, and its recorded command (its --vary)
     plans exactly those runs again, so report --verify can check any of them."""
-    from mlpfac.verify import _plan
+    from mlpfac.report.verify import _plan
 
     folder = DOCS / "data" / name
     runs = json.loads((folder / RUNS_FILE).read_text())["runs"]

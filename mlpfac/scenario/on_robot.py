@@ -38,7 +38,7 @@ AS_SHIPPED = {  # what a Menagerie base does from its name alone (tests/test_rob
     "damping; --robot rby1a drives it",
 }
 SHIPPED = {"diffdrive": "scene.xml", "cart": "cart-scene.xml", "rby1a": "rby1a.toml"}  # this package's (models/)
-SPEEDS = {"eight": ("wx", "wy"), "circle": ("rate",), "line": ("speed",), "lemniscate": ("rate",)}
+SPEEDS = {"eight": ("wx", "wy"), "circle": ("rate",), "line": ("v",), "lemniscate": ("rate",)}
 DEFAULT_SPEEDS = {"eight": (0.25, 0.5), "circle": (0.5,), "line": (0.5,), "lemniscate": (0.3,)}
 PEAK_SAMPLES = 2001
 
