@@ -231,3 +231,47 @@ def test_the_dynamic_oracle_is_told_the_payload(tmp_path):
     (_, kind, _, model) = ctrl.changes[0]
     assert kind == "payload" and model.mass_kg == pytest.approx(ctrl.robot.mass_kg + 5.0)
     assert model.yaw_inertia_kg_m2 > ctrl.robot.yaw_inertia_kg_m2
+
+
+def test_the_torque_loop_is_chosen_from_the_model():
+    """Unset PI gains are scaled to the inertia a wheel drives: our robot gets the gains tuned on it
+    (0.5, 10: the published eight-torque runs' bits), the 24 kg robot 17.7 times them, said on the
+    robot's line and written into config.toml; gains the file sets are kept."""
+    from mlpfac.plants.config import MujocoConfig
+    from mlpfac.plants.mujoco import MujocoPlant
+
+    ours = MujocoPlant(MujocoConfig(model=str(SCENE), actuator="torque"), 0.01)
+    assert (ours.config.pi_kp, ours.config.pi_ki) == (0.5, 10.0)
+    tug = MujocoPlant(MujocoConfig(model=str(TUG)), 0.01)
+    j = 24 * 0.1**2 / 2 + 0.025  # m r^2 / 2 + I_w
+    scale = j / (5.5 * 0.05**2 / 2 + 0.0013125)
+    assert tug.config.pi_kp == float(f"{0.5 * scale:.3g}") and tug.config.pi_ki == float(f"{10 * scale:.3g}")
+    assert {"pi_kp", "pi_ki"} <= set(tug.found()) and "wheel-speed PI gains kp 8.85" in tug.robot.description
+    kept = MujocoPlant(MujocoConfig(model=str(TUG), pi_kp=2.0), 0.01)
+    assert kept.config.pi_kp == 2.0 and kept.config.pi_ki == tug.config.pi_ki and "pi_kp" not in kept.found()
+    servos = MujocoPlant(MujocoConfig(model=str(SCENE)), 0.01)
+    assert servos.config.pi_kp is None and "pi_kp" not in servos.found()
+
+
+@pytest.mark.parametrize("controller", ["kanayama", "fierro-lewis", "adaptive-dynamic"])
+def test_the_tug_tracks_from_its_mjcf_alone(controller):
+    """The 24 kg robot, its load ahead of the axle, 4 N m motors: within 10 mm before the wheel radius
+    changes, with Kanayama's law through the torque loop chosen from the model, and at the torque level."""
+    scn = load("eight-wheel-radius", robot=str(TUG)).with_overrides(controller, 0, duration=12.0)
+    rec = mlpfac.run(scn)
+    assert rec.status == "ok" and before_mm(rec) < 10.0
+
+
+def test_adaptive_dynamic_learns_what_the_nominal_model_misses():
+    """The 24 kg robot's base three times as heavy at 12.5 s: fierro-lewis's nominal model is wrong
+    from there on; adaptive-dynamic's networks learn what it misses and track closer after it."""
+    scn = load("eight-payload", robot=str(TUG))
+    after = {}
+    for name in ("fierro-lewis", "adaptive-dynamic"):
+        rec = mlpfac.run(scn.with_overrides(name, 0))
+        assert rec.status == "ok"
+        after[name] = mlpfac.metrics(rec)["phases"]["after"]["rms_position_error_m"]
+        if name == "adaptive-dynamic":
+            z = rec.ctrl["z"]
+            assert np.isfinite(z).all() and np.abs(z[rec.n - 1, :24]).max() > 1e-4  # its output weights moved
+    assert after["adaptive-dynamic"] < 0.9 * after["fierro-lewis"]

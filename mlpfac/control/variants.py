@@ -56,6 +56,6 @@ VARIANTS["adaptive-real"] = VARIANTS["adaptive-input-delay"] | {
 VARIANTS["adaptive-real-fast"] = VARIANTS["adaptive-real"] | {"input_P_alarm": 2e-2}
 
 # The shipped controllers of the torque level (mlpfac/control/dynamic.py): they command the wheels' torques.
-TORQUE_LEVEL = ("fierro-lewis", "oracle-dynamic")
+TORQUE_LEVEL = ("fierro-lewis", "adaptive-dynamic", "oracle-dynamic")
 # Every shipped controller (the oracles: mlpfac/control/oracle.py); any other name is a plug-in's.
 CONTROLLERS = (*VARIANTS, "corradini", "kanayama", "oracle", "oracle-kanayama", *TORQUE_LEVEL)

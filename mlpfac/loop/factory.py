@@ -16,6 +16,7 @@ import math
 import numpy as np
 
 from mlpfac.control.adaptive.controller import VARIANTS, Adaptive
+from mlpfac.control.adaptive.dynamic_level import AdaptiveDynamic
 from mlpfac.control.baselines import Controller, Corradini, Kanayama, PluginController
 from mlpfac.control.dynamic import OUTER_GAINS, FierroLewis, OracleDynamic
 from mlpfac.control.oracle import Oracle, told
@@ -67,6 +68,8 @@ def _torque_level(scn: Scenario, instance: object | None, plant) -> Controller:
     limits = (math.inf if law.v_max is None else law.v_max, math.inf if law.omega_max is None else law.omega_max)
     if scn.controller == "fierro-lewis":
         return FierroLewis(robot, scn.T, gains, limits)
+    if scn.controller == "adaptive-dynamic":
+        return AdaptiveDynamic(robot, scn.T, gains, limits)
     changes = []
     if scn.events:
         changed = make_plant(scn, ref)

@@ -73,12 +73,12 @@ class MujocoConfig:
     track: float | None = None  # wheel separation the IK believes (m); None: read from the model
     max_wheel_speed: float | None = None  # rad/s, kept by scaling (v, omega); None: the model's; inf: none
     pose_noise_std: float | tuple[float, ...] = 0.0  # std of Gaussian noise on (x, y, theta): scalar or 3
-    # what a torque-level controller measures beside the pose: std of Gaussian noise on the base's
-    # twist (v in m/s, omega in rad/s: a number or 2) and on the encoders' wheel speeds (rad/s)
-    twist_noise_std: float | tuple[float, ...] = 0.0
-    wheel_speed_noise_std: float = 0.0
-    pi_kp: float = 0.5  # torque drive: PI proportional gain, N m per rad/s of wheel-speed error
-    pi_ki: float = 10.0  # torque drive: PI integral gain, N m per rad of integrated error
+    twist_noise_std: float | tuple[float, float] = (
+        0.0  # std of noise on the twist a torque-level controller measures: v (m/s), omega (rad/s)
+    )
+    wheel_speed_noise_std: float = 0.0  # std of noise on the wheel speeds a torque-level controller measures (rad/s)
+    pi_kp: float | None = None  # torque drive: PI proportional gain, N m per rad/s; None: scaled to the robot's inertia
+    pi_ki: float | None = None  # torque drive: PI integral gain, N m per rad; None: scaled to the robot's inertia
 
     def __post_init__(self) -> None:
         choices = {
@@ -118,9 +118,11 @@ class MujocoConfig:
             isinstance(arm, bool) or not isinstance(arm, int | float) or not 0 <= arm <= ARMATURE_MAX
         ):
             raise ConfigError("armature", f"must be a number in 0 .. {ARMATURE_MAX:g} kg m^2, got {arm!r}")
-        _positive("pi_kp", self.pi_kp)
+        _positive("pi_kp", self.pi_kp, optional=True)
         ki = self.pi_ki
-        if isinstance(ki, bool) or not isinstance(ki, int | float) or not math.isfinite(ki) or ki < 0:
+        if ki is not None and (
+            isinstance(ki, bool) or not isinstance(ki, int | float) or not math.isfinite(ki) or ki < 0
+        ):
             raise ConfigError("pi_ki", f"must be a number >= 0, got {ki!r}")
         self.noise_std()
         self.motion_noise_std()

@@ -164,7 +164,7 @@ class MujocoPlant(MujocoEvents):
 
         self.rng = rng
         self._n = self.n_substeps
-        self._kp, self._ki = float(self.config.pi_kp), float(self.config.pi_ki)
+        self._kp, self._ki = float(self.config.pi_kp or 0.0), float(self.config.pi_ki or 0.0)  # None: no PI loop
         self._umax()
         self._torque_max = self._force_limits()
         self.st = np.zeros(K.N_ST)
