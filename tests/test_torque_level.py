@@ -275,3 +275,46 @@ def test_adaptive_dynamic_learns_what_the_nominal_model_misses():
             z = rec.ctrl["z"]
             assert np.isfinite(z).all() and np.abs(z[rec.n - 1, :24]).max() > 1e-4  # its output weights moved
     assert after["adaptive-dynamic"] < 0.9 * after["fierro-lewis"]
+
+
+BATCHED_TORQUE = '''
+import numpy as np
+
+
+class BatchTorque:
+    """Kanayama's velocities, then torques through the robot's mass and inertia: the batch form."""
+
+    level = "torque"
+    batched = True
+    name = "batch-torque"
+
+    def __init__(self, T, robot):
+        self.r, self.b, iw = robot.wheel_radius_m, robot.track_m / 2, robot.wheel_inertia_kg_m2
+        self.m = robot.mass_kg + 2 * iw / self.r**2
+        self.i = robot.yaw_inertia_kg_m2 + 2 * self.b**2 * iw / self.r**2
+        self.rate = 0.5 / T
+
+    def step(self, obs):
+        e, tw = np.atleast_2d(obs.e), np.atleast_2d(obs.twist)
+        v_c = obs.r[3] * np.cos(e[:, 2]) + 10.0 * e[:, 0]
+        w_c = obs.r[4] + obs.r[3] * (150.0 * e[:, 1] + 16.0 * np.sin(e[:, 2]))
+        f = self.m * (obs.r_dot[0] + self.rate * (v_c - tw[:, 0])) * self.r
+        t = self.i * (obs.r_dot[1] + self.rate * (w_c - tw[:, 1])) * self.r / self.b
+        out = np.stack([(f - t) / 2, (f + t) / 2], axis=1)
+        return out if np.ndim(obs.e) == 2 else out[0]
+'''
+
+
+def test_a_batch_form_torque_class_gives_its_seeds_one_by_one_runs(tmp_path):
+    """The batch form (obs arrays (B, ...), torques (B, 2)) in a --batched sweep, every seed's figures
+    those of the sweep without it; fierro-lewis batched likewise."""
+    (tmp_path / "bt.py").write_text(BATCHED_TORQUE)
+    (tmp_path / "t.toml").write_text(TORQUE.replace("duration = 0.5", "duration = 3.0"))
+    args = ["sweep", "t.toml", "--controllers", "bt.py:BatchTorque,fierro-lewis", "--seeds", "0-2", "--workers", "1"]
+    one, batch = cli([*args, "--out", "a"], tmp_path), cli([*args, "--out", "b", "--batched"], tmp_path)
+    assert one.returncode == batch.returncode == 0, batch.stderr
+    for name in ("batch-torque", "fierro-lewis"):
+        for seed in range(3):
+            f = f"t/{name}/seed-{seed:04d}/metrics.json"
+            a, b = (json.loads((tmp_path / d / f).read_text()) for d in ("a", "b"))
+            assert a["rms_position_error_m"] == b["rms_position_error_m"] and a["outcome"] == "tracking"
