@@ -318,3 +318,19 @@ def test_a_batch_form_torque_class_gives_its_seeds_one_by_one_runs(tmp_path):
             f = f"t/{name}/seed-{seed:04d}/metrics.json"
             a, b = (json.loads((tmp_path / d / f).read_text()) for d in ("a", "b"))
             assert a["rms_position_error_m"] == b["rms_position_error_m"] and a["outcome"] == "tracking"
+
+
+@pytest.mark.parametrize(
+    "event", ['kind = "sensor_delay"\nsteps = 3', 'kind = "control_period"\nfactor = 1.5'], ids=["delay", "period"]
+)
+def test_the_dynamic_oracle_told_the_period_and_the_delay(tmp_path, event):
+    """After a sensor delay of 3 steps, or a control period x1.5, fierro-lewis loses the eight (beyond
+    10 mm); told the change, oracle-dynamic tracks within 3 mm: the pose predicted over the delay, or
+    the reference in the robot's time."""
+    text = TORQUE.replace("duration = 0.5", "duration = 8.0") + "pose_noise_std = 0.001\n"
+    (tmp_path / "e.toml").write_text(text + f"[[events]]\ntime = 3.0\n{event}\n")
+    after = {}
+    for name in ("fierro-lewis", "oracle-dynamic"):
+        rec = mlpfac.run(str(tmp_path / "e.toml"), controller=name, seed=0)
+        after[name] = mlpfac.metrics(rec)["phases"]["after"]["rms_position_error_m"]
+    assert after["fierro-lewis"] > 0.01 and after["oracle-dynamic"] < 0.003, after

@@ -20,8 +20,10 @@ each control step. The controller's limits |v| <= v_max, |omega| <= omega_max bo
 ``oracle-dynamic`` is ``fierro-lewis`` told every change (:func:`mlpfac.control.oracle.told` and the
 true model read from the changed robot after each event, :meth:`MujocoPlant.true_dynamics`): a
 payload, a weak actuator, a wheel radius change its true model (a floor's friction does not enter
-the rolling model: told, it changes nothing); a control period x c its velocity gain / c (the
-torque is held c T); a sensor delay the pose predicted over it as ``oracle`` predicts it (the
+the rolling model: told, it changes nothing); a control period x c (the robot moves c T a step
+while the reference moves T) the reference in the robot's time (v_r, omega_r / c, their rates / c^2),
+Kx / c (Kanayama's command / c, as ``oracle-kanayama``'s) and the velocity gain / c (the torque is
+held c T); a sensor delay the pose predicted over it as ``oracle`` predicts it (the
 measured twist is as old as the pose: the law uses it as it is).
 """
 
@@ -132,8 +134,9 @@ class OracleDynamic(FierroLewis):
             _, kind, number, model = self.pending.pop(0)
             if model is not None:
                 self.p = model.packed()
-            if kind == "control_period":
-                self.hold, self._g[G_KV] = number, self.g[G_KV] / number
+            if kind == "control_period":  # the robot moves c T per step: the path at 1/c of the speed
+                self.hold = number
+                self._g[G_KX], self._g[G_KV] = self.g[G_KX] / number, self.g[G_KV] / number
             elif kind == "sensor_delay":
                 self.pose_step.delay(int(number))
         self.k += 1
@@ -141,7 +144,12 @@ class OracleDynamic(FierroLewis):
         age = k - self.pose_step.read()
         if age > 0:  # the error of the pose predicted over the delay, through the velocities asked since
             e = self._pred._predict(e, r, list(self.sent)[-age:])
-        fierro_lewis_step(e, r, _flat(obs.r_dot), tw, self.p, self._g, self._tau, self._vc)
+        r_dot = _flat(obs.r_dot)
+        if self.hold != 1.0:  # v_r, omega_r / c and their rates / c^2: the reference in the robot's time
+            c = self.hold
+            r = np.array([r[0], r[1], r[2], r[3] / c, r[4] / c])
+            r_dot = r_dot / (c * c)
+        fierro_lewis_step(e, r, r_dot, tw, self.p, self._g, self._tau, self._vc)
         if self._depth:
             self.sent.append((self._vc.copy(), self.hold * T))
         return self._tau[0].copy() if self.single else self._tau
