@@ -44,8 +44,11 @@ EXTENSIONS = {"core": "mlpfac._kernels", "mujoco": "mlpfac.plants._kernels"}
 MODULES = {  # the modules whose kernels each extension holds
     "core": (
         "mlpfac.model",
+        "mlpfac.dynamics",
         "mlpfac.control.law",
+        "mlpfac.control.dynamic",
         "mlpfac.control.adaptive.kernels",
+        "mlpfac.control.adaptive.dynamic_level",
         "mlpfac.loop.kernels",
         "mlpfac.control.adaptive.input_model",
         "mlpfac.control.adaptive.delay_bank",

@@ -160,6 +160,12 @@ BAD_FILES: dict[str, tuple[str | bytes, str]] = {
     "distribution unknown": (MINIMAL + EVENT.replace("1.5", "{ lognormal = [1.5, 0.1] }"), "factor"),
     "drawn without a distribution": (MINIMAL + "[drawn]\nduration = 0.5\n", "[drawn] duration: no distribution"),
     "drawn a string": (MINIMAL + 'drawn = "x"\n', "drawn"),
+    "torque-level controller on the kinematic plant": (MINIMAL + '[controller]\nname = "fierro-lewis"\n', '[plant] kind: fierro-lewis is a torque-level controller'),
+    "torque-level controller on velocity servos": ('duration = 0.5\n[controller]\nname = "adaptive-dynamic"\n' + ROBOT + 'actuator = "velocity"\n', '[plant] actuator: adaptive-dynamic is a torque-level controller'),
+    "twist noise huge": (ROBOT + "twist_noise_std = 1e300\n", "[plant] twist_noise_std"),
+    "twist noise three numbers": (ROBOT + "twist_noise_std = [0.1, 0.1, 0.1]\n", "[plant] twist_noise_std"),
+    "wheel speed noise negative": (ROBOT + "wheel_speed_noise_std = -0.1\n", "[plant] wheel_speed_noise_std"),
+    "PI gain zero": (ROBOT + 'actuator = "torque"\npi_kp = 0.0\n', "[plant] pi_kp"),
     "drawn not the seed's draw": (MINIMAL + EVENT.replace("1.5", "{ uniform = [1.0, 2.0] }") + '[drawn]\n"events.0.factor" = 1.0\n', "is not what seed 0 draws"),
 }  # fmt: skip
 

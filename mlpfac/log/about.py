@@ -17,6 +17,9 @@ CONTROLLERS = {
     "kanayama": "Kanayama's kinematic law, no learning",
     "oracle": "the law (35) given the plant's true functions",
     "oracle-kanayama": "Kanayama's law told the plant's changes (the true radius, period and delay)",
+    "fierro-lewis": "wheel torques: Kanayama's law backstepped through computed torque with the nominal dynamic model",
+    "adaptive-dynamic": "wheel torques: fierro-lewis with MLPs and an EKF learning the dynamic model's error",
+    "oracle-dynamic": "wheel torques: fierro-lewis told the plant's changes (its true dynamic model)",
 }
 COLOURS = (
     "**colours**: v, omega: commanded blue, measured orange, reference grey; wheels: left blue, right red, "

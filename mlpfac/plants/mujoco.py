@@ -128,6 +128,8 @@ class MujocoPlant(MujocoEvents):
         self._geometry = r.geometry
         self._noise = config.noise_std()
         self._changed = False
+        self._motion_std = config.motion_noise_std()
+        self._motion: DelayLine | None = None  # (v, omega, wheel_l, wheel_r) as measured: torque_commands()
         self.ints[[K.I_AL, K.I_AR, K.I_DL, K.I_DR, K.I_SITE]] = (*r.acts, *r.dofs, r.site)
         self.ints[K.I_TORQUE] = self.config.actuator == "torque"
         self.ints[[K.I_AL2, K.I_AR2, K.I_MIX]] = (*r.seconds, r.mix is not None)
@@ -196,7 +198,7 @@ class MujocoPlant(MujocoEvents):
 
         self.rng = rng
         self._n = self.n_substeps
-        self._kp, self._ki = float(self.config.pi_kp), float(self.config.pi_ki)
+        self._kp, self._ki = float(self.config.pi_kp or 0.0), float(self.config.pi_ki or 0.0)  # None: no PI loop
         self._umax()
         self._torque_max = self._force_limits()
         self.st = np.zeros(K.N_ST)
@@ -206,6 +208,14 @@ class MujocoPlant(MujocoEvents):
         self._views()
         K.read_pose(self._site_xpos, self._site_xmat, self.st)
         K.measure(self.ints, self.fl, self.st, self.draws(1)[0], self._history.hist, self._history.fill)
+        if self.ints[K.I_TAU]:
+            self._motion_rng = rng.spawn(1)[0]  # its own stream: the pose noise's is the same with or without it
+            self._motion = DelayLine(np.zeros(4))
+            v = np.zeros(6)
+            mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_SITE, self._site, v, 0)
+            th = float(q0[2])
+            wheels = [s * d.qvel[dof] for s, dof in zip(self._sign, self._dofs, strict=True)]
+            self._measure_motion(v[3] * math.cos(th) + v[4] * math.sin(th), v[2], *wheels)
 
     def _views(self) -> None:
         """What the compiled step reads and writes: the current model and data (their addresses and
@@ -277,9 +287,60 @@ class MujocoPlant(MujocoEvents):
         return self._history.read()
 
     def step(self, u: np.ndarray) -> None:
-        """One control step (:func:`mlpfac.plants.compiled.plant_step`)."""
+        """One control step (:func:`mlpfac.plants.compiled.plant_step`): u = (v, omega), or the wheels'
+        torques (tau_l, tau_r) in N m after :meth:`torque_commands`."""
         K.watch(self.st)
         K.plant_step(float(u[0]), float(u[1]), self.draws(1)[0], self.tele, self._args)
+        if self._motion is not None:
+            t = self.tele
+            self._measure_motion(t[2], t[3], t[6], t[7])
+
+    # --- a torque-level controller's robot --------------------------------------------------------
+
+    def torque_commands(self) -> None:
+        """From the next reset on, the command is the wheels' torques (tau_l, tau_r) in N m, applied
+        to the torque motors (clamped to their limit) and held for the control period, and the plant
+        measures the base's twist and the wheel speeds (:meth:`motion`). Only a torque drive takes it."""
+        if self.config.actuator != "torque":
+            raise ValueError("wheel torques are commanded to a torque drive only")
+        self.ints[K.I_TAU] = 1
+
+    def dynamics(self):
+        """The nominal dynamic model of the robot (:class:`mlpfac.dynamics.RobotModel`), read from its
+        nominal MuJoCo model at rest (:func:`mlpfac.plants.dynamics.read_model`)."""
+        from mlpfac.plants.dynamics import read_model
+
+        return read_model(self.robot.model, self.robot, self._torque_limits_of(self.robot.model))
+
+    def true_dynamics(self):
+        """The dynamic model of the robot as it is now (after events: its wheels' true radius, its
+        masses, its drive's torque limit): what an oracle is told."""
+        import dataclasses
+
+        from mlpfac.plants.dynamics import read_model
+
+        model = read_model(self.model, self.robot, self._torque_max)
+        return dataclasses.replace(model, wheel_radius_m=float(self.real_radius))
+
+    def _torque_limits_of(self, m) -> tuple[float, float]:
+        if self.robot.mix is not None:
+            return drive.wheel_torque_limits(self.robot.mix, self.robot.umax)
+        return tuple(
+            torque_limit(m, a, c, self.config.actuator == "torque", bool(self.ints[K.I_CLAMP]))
+            for a, c in zip(self._acts, self._act_per_wheel, strict=True)
+        )
+
+    def _measure_motion(self, v: float, omega: float, wl: float, wr: float) -> None:
+        x = np.array([v, omega, wl, wr])
+        std = self._motion_std
+        if std is not None:
+            x += std * self._motion_rng.standard_normal(4)
+        self._motion.push(x)
+
+    def motion(self) -> np.ndarray:
+        """(v, omega, wheel_l, wheel_r) as measured (noise and delay of the scenario's sensors): the
+        base's twist at the pose frame (m/s, rad/s) and the encoders' wheel speeds (rad/s, forward positive)."""
+        return self._motion.read()
 
     def _force_limits(self) -> tuple[float, float]:
         """Largest forward wheel torque of each drive (N m at the joint), inf when not limited."""

@@ -118,6 +118,8 @@ class MujocoEvents:
             return f"plant holds each command {old * self._dt:g} -> {self._n * self._dt:g} s ({self._n} physics steps; controller keeps T = {self.T:g} s)"
         if isinstance(event, SensorDelay):
             text = self._history.delay(event.steps)
+            if self._motion is not None:  # the twist and the wheel speeds a torque-level controller sees
+                self._motion.delay(event.steps)
             self._pack()
             return text
         spec = self._spec

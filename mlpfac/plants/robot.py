@@ -306,7 +306,7 @@ def _read_robot(config: MujocoConfig, stamp: tuple[int, int], periods: tuple[flo
         defaults.check_drive(m, d, robot, config, where)
         chatter = probe and config.actuator == "velocity" and user.servo_limit is None and defaults.chatters(robot)
         if not chatter:
-            return robot
+            return _pi_chosen(robot)
         floor = spec_dt * defaults.SMALLEST_STEP
         step = defaults.smaller_timestep(defaults.servo_step(robot), periods or (dt,), floor)
         if step is not None and user.timestep is None:  # a timestep that integrates them, read again at it
@@ -322,6 +322,20 @@ def _read_robot(config: MujocoConfig, stamp: tuple[int, int], periods: tuple[flo
         config, chosen, probe = defaults.with_chosen(config, {"servo_limit": "control"}), chosen, False
         chosen |= {"servo_limit": "control"}
         suffix = f"; the wheel servos' force limit kept by their control (as MuJoCo clamps it they chatter at {dt:g} s)"
+
+
+def _pi_chosen(robot: Robot) -> Robot:
+    """The robot with its torque drive's unset PI gains chosen for its inertia (:func:`mlpfac.plants.defaults.pi_gains`)."""
+    from mlpfac.plants.dynamics import read_model
+
+    if robot.config.actuator != "torque" or None not in (robot.config.pi_kp, robot.config.pi_ki):
+        return robot
+    model = read_model(robot.model, robot, (1.0, 1.0))
+    chosen = defaults.pi_gains(robot.config, model.mass_kg, model.wheel_radius_m, model.wheel_inertia_kg_m2)
+    config = defaults.with_chosen(robot.config, chosen)
+    said = defaults.said(chosen, config)
+    text = robot.description + (said if "; chosen:" not in robot.description else said.replace("; chosen:", ","))
+    return dataclasses.replace(robot, config=config, found=(*robot.found, *chosen), description=text)
 
 
 def _compile(spec: mujoco.MjSpec, where: str) -> mujoco.MjModel:
