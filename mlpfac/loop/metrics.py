@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from mlpfac.loop.record import RunRecord
+from mlpfac.model import each
 
 LOST_FRACTION = 0.05  # a finished run is "lost" when a phase's position RMS exceeds this share of the path's size
 BIN_S = 0.1  # seconds per bin of the position error's mean square in metrics.json (any window of whole bins)
@@ -28,7 +29,7 @@ def _stats(rec: RunRecord, lo: int, hi: int) -> dict:
             "max_position_error_m": None,
             "rms_heading_error_rad": None,
         }
-    pos = np.hypot(e[:, 0], e[:, 1])
+    pos = each(math.hypot, e[:, 0], e[:, 1])  # glibc's, not numpy's SIMD loop (docs/reproducibility.md)
     return {
         "start_s": lo * rec.T,
         "end_s": hi * rec.T,

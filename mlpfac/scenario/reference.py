@@ -8,11 +8,13 @@ along the sampled times, so it is continuous over a run.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from mlpfac.exceptions import ConfigError
+from mlpfac.model import each
 
 
 @dataclass(frozen=True)
@@ -25,8 +27,8 @@ class Eight:
     wy: float = 0.5  # rad/s (2 wx: an eight)
 
     def derivatives(self, t: np.ndarray) -> tuple[np.ndarray, ...]:
-        cx, sx = np.cos(self.wx * t), np.sin(self.wx * t)
-        cy, sy = np.cos(self.wy * t), np.sin(self.wy * t)
+        cx, sx = each(math.cos, self.wx * t), each(math.sin, self.wx * t)
+        cy, sy = each(math.cos, self.wy * t), each(math.sin, self.wy * t)
         return (
             self.ax * cx,
             self.ay * sy,
@@ -47,7 +49,7 @@ class Circle:
     cy: float = 0.0  # m
 
     def derivatives(self, t: np.ndarray) -> tuple[np.ndarray, ...]:
-        c, s = np.cos(self.rate * t), np.sin(self.rate * t)
+        c, s = each(math.cos, self.rate * t), each(math.sin, self.rate * t)
         r, w = self.radius, self.rate
         return (self.cx + r * c, self.cy + r * s, -r * w * s, r * w * c, -r * w * w * c, -r * w * w * s)
 
@@ -62,7 +64,7 @@ class Line:
     y0: float = 0.0  # m
 
     def derivatives(self, t: np.ndarray) -> tuple[np.ndarray, ...]:
-        dx, dy = self.speed * np.cos(self.heading), self.speed * np.sin(self.heading)
+        dx, dy = self.speed * math.cos(self.heading), self.speed * math.sin(self.heading)
         zero = np.zeros_like(t)
         return (self.x0 + dx * t, self.y0 + dy * t, dx + zero, dy + zero, zero, zero)
 
@@ -77,7 +79,7 @@ class Lemniscate:
 
     def derivatives(self, t: np.ndarray) -> tuple[np.ndarray, ...]:
         s, w, a = self.rate * t, self.rate, self.a
-        sn, cs = np.sin(s), np.cos(s)
+        sn, cs = each(math.sin, s), each(math.cos, s)
         d = 1.0 + sn**2
         x = a * cs / d
         y = a * sn * cs / d
@@ -86,7 +88,7 @@ class Lemniscate:
         xs = a * sn * (s2 - 3.0) / d**2  # dx/ds
         ys = -a * (3.0 * s2 - 1.0) / d**2  # dy/ds
         xss = -a * cs * (s2 * s2 - 12.0 * s2 + 3.0) / d**3
-        yss = -a * (14.0 * np.sin(2.0 * s) + 3.0 * np.sin(4.0 * s)) / (4.0 * d**3)
+        yss = -a * (14.0 * each(math.sin, 2.0 * s) + 3.0 * each(math.sin, 4.0 * s)) / (4.0 * d**3)
         return x, y, w * xs, w * ys, w * w * xss, w * w * yss
 
 
@@ -101,7 +103,7 @@ def sample(curve: Eight | Circle | Line | Lemniscate, t: np.ndarray) -> np.ndarr
     t = np.asarray(t, dtype=float)
     x, y, dx, dy, ddx, ddy = curve.derivatives(t)
     speed2 = dx * dx + dy * dy
-    theta = np.unwrap(np.arctan2(dy, dx))
+    theta = np.unwrap(each(math.atan2, dy, dx))
     v = np.sqrt(speed2)
     omega = (dx * ddy - dy * ddx) / speed2
     return np.stack([x, y, theta, v, omega], axis=-1)
