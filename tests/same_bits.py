@@ -1,6 +1,6 @@
 """Runs whose bits must not depend on the processor: what tests/test_same_bits.py runs in subprocesses.
 
-``python tests/same_bits.py [--menagerie] [--trap]`` prints one JSON object, a digest per run (of
+``python tests/same_bits.py [--menagerie | --only-menagerie] [--trap]`` prints one JSON object, a digest per run (of
 every array of its record and of its metrics.json): the same object under every SIMD dispatch
 numpy and OpenBLAS can be told to take. With ``--trap`` every call of numpy's processor-dispatched
 maths (:data:`TRAPPED`) and of ``np.linalg`` raises while a run is built and stepped, and, in a
@@ -70,6 +70,7 @@ RUNS = [
     ("eight-payload", ("corradini", "kanayama", "adaptive", "adaptive-ukf", "oracle"), 1.0, ["events.0.time=0.6"]),
     ("eight-payload", ("adaptive-real",), 1.0, ["events.0.time=0.6", "events.0.mass_scale=normal:3:0.5"]),
     ("eight-torque", ("corradini", "adaptive-input-delay"), 0.6, []),
+    ("eight-sensor-delay", ("oracle", "oracle-kanayama"), 1.0, ["events.0.time=0.5"]),
     ("cart-sensor-delay", ("kanayama", "adaptive-real-fast"), 1.0, ["events.0.time=0.5"]),
 ]
 MENAGERIE = [("tiago-friction", ("corradini", "adaptive"), 1.0, ["events.0.time=0.5"])]
@@ -133,6 +134,7 @@ def record_digest(rec, metrics: dict) -> str:
 def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--menagerie", action="store_true")
+    parser.add_argument("--only-menagerie", action="store_true")
     parser.add_argument("--trap", action="store_true")
     args = parser.parse_args()
     from mlpfac.control.variants import CONTROLLERS
@@ -146,7 +148,9 @@ def main() -> None:
         install_trap()
     out = {}
     os.chdir(ROOT)
-    for scenario, controllers, duration, vary in RUNS + (MENAGERIE if args.menagerie else []):
+    for scenario, controllers, duration, vary in (
+        MENAGERIE if args.only_menagerie else RUNS + (MENAGERIE if args.menagerie else [])
+    ):
         with armed():  # the robot is read and its reference fitted here
             jobs = plan([scenario], list(controllers or CONTROLLERS), [3], duration, parse_vary(vary))
         for job in jobs:

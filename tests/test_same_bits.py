@@ -1,0 +1,128 @@
+"""The same bits on every x86-64 processor (docs/reproducibility.md), tested two ways that do not
+depend on the machine the tests run on:
+
+- the runs of tests/same_bits.py (every shipped controller, our robot, the cart, torque motors, an
+  event moved by a ``--vary`` point, a drawn plant; TIAGo with the ``menagerie`` marker) in
+  subprocesses under every SIMD dispatch numpy and OpenBLAS can be told to take, each giving the
+  bits of the default;
+- the same runs with numpy's processor-dispatched maths wrapped to raise, and every BLAS and LAPACK
+  function numpy, its linalg and scipy's BLAS (numba's ``np.dot``) call replaced by a trap
+  (a preloaded library), armed while a run is planned, built and stepped: a new call in the
+  simulated path fails here whatever the processor.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import pytest
+from conftest import menagerie_missing
+
+HERE = Path(__file__).resolve().parent
+HARNESS = HERE / "same_bits.py"
+NUMPY_AVX512 = "X86_V4 AVX512_ICL AVX512_SPR"
+DISPATCHES = {  # name: environment
+    "default": {},
+    "numpy-no-avx512": {"NPY_DISABLE_CPU_FEATURES": NUMPY_AVX512},
+    "numpy-no-avx2-fma": {"NPY_DISABLE_CPU_FEATURES": f"X86_V3 {NUMPY_AVX512}"},
+    "openblas-skylakex": {"OPENBLAS_CORETYPE": "SkylakeX"},
+    "openblas-haswell": {"OPENBLAS_CORETYPE": "Haswell"},
+    "openblas-sandybridge": {"OPENBLAS_CORETYPE": "Sandybridge"},
+    "openblas-prescott": {"OPENBLAS_CORETYPE": "Prescott"},
+}
+PROBE = "import numpy as np; a = np.ones((64, 64)); a @ a"
+
+
+def runs(env: dict, *args: str) -> dict:
+    """The harness's digests in a fresh process with ``env`` set."""
+    out = subprocess.run(
+        [sys.executable, "-X", "faulthandler", str(HARNESS), *args],
+        env=os.environ | env,
+        capture_output=True,
+        text=True,
+        timeout=900,
+    )
+    assert out.returncode == 0, f"{env}: exit {out.returncode}\n{out.stderr[-4000:]}"
+    return json.loads(out.stdout)
+
+
+def runs_here(env: dict) -> bool:
+    """Whether this processor can take the dispatch (OpenBLAS's AVX-512 kernels need AVX-512)."""
+    return subprocess.run([sys.executable, "-c", PROBE], env=os.environ | env, capture_output=True).returncode == 0
+
+
+def under_every_dispatch(*args: str) -> dict[str, dict]:
+    """The digests under each dispatch this processor can take, two processes at a time."""
+    names = [n for n, env in DISPATCHES.items() if runs_here(env)]
+    with ThreadPoolExecutor(2) as pool:
+        found = pool.map(lambda n: runs(DISPATCHES[n], *args), names)
+    return dict(zip(names, found, strict=True))
+
+
+def assert_same(found: dict[str, dict], runs_at_least: int) -> None:
+    base = found["default"]
+    assert len(base) >= runs_at_least
+    for name, digests in found.items():
+        moved = sorted(k for k in base if digests.get(k) != base[k])
+        assert not moved, f"under {name} ({DISPATCHES[name]}) these runs' bits moved: {moved}"
+
+
+@pytest.fixture(scope="module")
+def dispatched() -> dict[str, dict]:
+    return under_every_dispatch()
+
+
+def test_every_dispatch_gives_the_same_bits(dispatched):
+    assert "openblas-prescott" in dispatched and "numpy-no-avx2-fma" in dispatched
+    assert_same(dispatched, 30)
+
+
+@pytest.mark.menagerie
+def test_every_dispatch_gives_the_same_bits_on_tiago():
+    found = under_every_dispatch("--only-menagerie")
+    assert all(k.startswith("tiago") for k in found["default"])
+    assert_same(found, 2)
+
+
+@pytest.fixture(scope="module")
+def shim(tmp_path_factory) -> Path:
+    lib = HERE / "same_bits.py"
+    sys.path.insert(0, str(lib.parent))
+    from same_bits import build_shim
+
+    built = build_shim(tmp_path_factory.mktemp("trap"))
+    if built is None:
+        pytest.skip("needs a C compiler and nm to build the BLAS trap")
+    return built
+
+
+def test_nothing_in_the_simulated_path_calls_dispatched_maths_or_blas(shim, dispatched):
+    """The runs with the trap armed: the same digests (the trap changes nothing it does not stop)."""
+    args = ("--trap",) + (() if menagerie_missing() else ("--menagerie",))
+    found = runs({"LD_PRELOAD": str(shim)}, *args)
+    assert {k: v for k, v in found.items() if k in dispatched["default"]} == dispatched["default"]
+
+
+@pytest.mark.parametrize(
+    "snippet, says",
+    [
+        ("np.ones(3) @ np.ones(3)", "scipy_cblas_ddot64_"),
+        ("np.ones((4, 4)) @ np.ones((4, 4))", "scipy_cblas_dgemm64_"),
+        ("np.linalg.cholesky(np.eye(3))", "np.linalg.cholesky called"),
+        ("np.tanh(np.ones(3))", "np.tanh called"),
+        ("np.arctan2(1.0, 2.0)", "np.arctan2 called"),
+    ],
+)
+def test_the_trap_catches(shim, snippet, says):
+    """The trap can fail: each kind of call it stands in front of, armed, ends the process naming it."""
+    code = f"import sys; sys.path.insert(0, {str(HERE)!r}); import numpy as np, same_bits as sb\n"
+    code += f"sb.install_trap()\n{snippet}\nwith sb.armed():\n    {snippet}\n"
+    out = subprocess.run(
+        [sys.executable, "-c", code], env=os.environ | {"LD_PRELOAD": str(shim)}, capture_output=True, text=True
+    )
+    assert out.returncode != 0 and says in out.stderr, out.stderr[-2000:]
