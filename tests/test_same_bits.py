@@ -126,3 +126,42 @@ def test_the_trap_catches(shim, snippet, says):
         [sys.executable, "-c", code], env=os.environ | {"LD_PRELOAD": str(shim)}, capture_output=True, text=True
     )
     assert out.returncode != 0 and says in out.stderr, out.stderr[-2000:]
+
+
+BUDGET = """scenarios = ["paper"]
+controllers = ["adaptive-ukf", "adaptive-cautious"]
+seeds = "0-1"
+duration = 3.0
+
+[[budget]]
+name = "as the baseline"
+no_worse_than_baseline = 1.0
+"""
+
+
+def test_a_baseline_from_one_dispatch_judges_another_by_the_same_figures(tmp_path):
+    """``mlpfac check --baseline``: the baseline made under the default dispatch, the check run with
+    numpy's AVX2 and FMA off and OpenBLAS's oldest kernels: every run's metrics.json the same bits."""
+    from mlpfac.verify import digest
+
+    (tmp_path / "budget.toml").write_text(BUDGET)
+    (tmp_path / "base.toml").write_text(BUDGET.replace("no_worse_than_baseline = 1.0", "diverged = 0"))
+    cli = [str(Path(sys.executable).with_name("mlpfac")), "check", "--workers", "1"]
+    other = {"NPY_DISABLE_CPU_FEATURES": f"X86_V3 {NUMPY_AVX512}", "OPENBLAS_CORETYPE": "Prescott"}
+    for budget, out, env, extra in (
+        ("base.toml", "base", {}, []),
+        ("budget.toml", "other", other, ["--baseline", "base", "--summary", "check.md"]),
+    ):
+        done = subprocess.run(
+            [*cli, budget, "--out", out, *extra], cwd=tmp_path, env=os.environ | env, capture_output=True, text=True
+        )
+        assert done.returncode == 0, done.stderr[-2000:]
+
+    def figures(out: str) -> dict:
+        return {
+            f.relative_to(tmp_path / out).parent: digest(json.loads(f.read_text()))
+            for f in (tmp_path / out).glob("*/*/seed-*/metrics.json")
+        }
+
+    assert len(figures("base")) == 4 and figures("other") == figures("base")
+    assert "mlpfac check: pass" in (tmp_path / "check.md").read_text()
