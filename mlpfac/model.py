@@ -82,7 +82,10 @@ def eigh(A: np.ndarray, sweeps: int = 10) -> tuple[np.ndarray, np.ndarray]:
     A = np.array(A, dtype=float)
     n = A.shape[-1]
     V = np.array(np.broadcast_to(np.eye(n), A.shape))
+    off = ~np.eye(n, dtype=bool)
     for _ in range(sweeps):
+        if not np.any(A[..., off]):  # diagonal to the bit: a rotation would change nothing
+            break
         for p in range(n - 1):
             for q in range(p + 1, n):
                 apq = A[..., p, q]

@@ -14,6 +14,7 @@ depend on the machine the tests run on:
 from __future__ import annotations
 
 import json
+import math
 import os
 import subprocess
 import sys
@@ -165,3 +166,28 @@ def test_a_baseline_from_one_dispatch_judges_another_by_the_same_figures(tmp_pat
 
     assert len(figures("base")) == 4 and figures("other") == figures("base")
     assert "mlpfac check: pass" in (tmp_path / "check.md").read_text()
+
+
+@pytest.mark.parametrize("n", [1, 2, 3, 6])
+def test_the_linear_algebra_written_out_agrees_with_lapack(n):
+    """mlpfac.model's Cholesky, solves and Jacobi eigenvalues (batched, as the UKF calls them)
+    against numpy's LAPACK, to rounding; a semi-definite matrix's zero pivot gives a zero column."""
+    import numpy as np
+
+    from mlpfac.model import cholesky, each, eigh, solve_lower, solve_spd
+
+    rng = np.random.default_rng(n)
+    M = rng.standard_normal((5, n, n))
+    P = M @ np.swapaxes(M, -1, -2) + 0.1 * np.eye(n)
+    L = cholesky(P)
+    np.testing.assert_allclose(L, np.linalg.cholesky(P), rtol=1e-10, atol=1e-12)
+    B = rng.standard_normal((5, n, 2))
+    np.testing.assert_allclose(solve_lower(L, B), np.linalg.solve(L, B), rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(solve_spd(P, B), np.linalg.solve(P, B), rtol=1e-9, atol=1e-12)
+    S = M + np.swapaxes(M, -1, -2)
+    w, V = eigh(S)
+    np.testing.assert_allclose(np.sort(w, axis=-1), np.linalg.eigvalsh(S), rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose((V * w[..., None, :]) @ np.swapaxes(V, -1, -2), S, atol=1e-12)
+    assert (cholesky(np.diag([4.0, 0.0, 9.0])) == np.diag([2.0, 0.0, 3.0])).all()
+    x = np.linspace(-3.0, 3.0, 7).reshape(7, 1)
+    assert each(math.atan2, x, 2.0).shape == (7, 1) and each(math.atan2, x, 2.0)[0, 0] == math.atan2(-3.0, 2.0)
