@@ -63,7 +63,8 @@ SURVEY: set[str] = set()
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 
-# (scenario, controllers, duration, --vary): short runs that reach every controller, our robot, the
+# (scenario, controllers, duration, --vary): short runs that reach every controller (None: every
+# shipped one, on FALLBACK those the kinematic model cannot run), our robot, the
 # cart, torque motors, an event (moved early by a --vary point) and a drawn plant
 RUNS = [
     ("paper", None, 3.0, ["events.0.time=2.5"]),
@@ -73,6 +74,7 @@ RUNS = [
     ("eight-sensor-delay", ("oracle", "oracle-kanayama"), 1.0, ["events.0.time=0.5"]),
     ("cart-sensor-delay", ("kanayama", "adaptive-real-fast"), 1.0, ["events.0.time=0.5"]),
 ]
+FALLBACK = "eight-torque"  # where a shipped controller runs that the kinematic model cannot (torque level)
 MENAGERIE = [("tiago-friction", ("corradini", "adaptive"), 1.0, ["events.0.time=0.5"])]
 
 
@@ -138,6 +140,7 @@ def main() -> None:
     parser.add_argument("--trap", action="store_true")
     args = parser.parse_args()
     from mlpfac.control.variants import CONTROLLERS
+    from mlpfac.exceptions import ConfigError
     from mlpfac.loop.metrics import metrics
     from mlpfac.loop.runner import run
     from mlpfac.scenario.parse import parse
@@ -151,8 +154,15 @@ def main() -> None:
     for scenario, controllers, duration, vary in (
         MENAGERIE if args.only_menagerie else RUNS + (MENAGERIE if args.menagerie else [])
     ):
-        with armed():  # the robot is read and its reference fitted here
-            jobs = plan([scenario], list(controllers or CONTROLLERS), [3], duration, parse_vary(vary))
+        jobs = []
+        for c in controllers or CONTROLLERS:
+            with armed():  # the robot is read and its reference fitted here
+                try:
+                    jobs += plan([scenario], [c], [3], duration, parse_vary(vary))
+                except ConfigError:  # a controller the kinematic model cannot run (one acting on torques)
+                    if controllers is not None:
+                        raise
+                    jobs += plan([FALLBACK], [c], [3], 1.0, parse_vary([]))
         for job in jobs:
             with armed():
                 rec = run(parse(job.table, job.source))

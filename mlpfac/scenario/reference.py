@@ -87,8 +87,8 @@ class Lemniscate:
         s2 = sn * sn
         xs = a * sn * (s2 - 3.0) / d**2  # dx/ds
         ys = -a * (3.0 * s2 - 1.0) / d**2  # dy/ds
-        xss = -a * cs * (s2 * s2 - 12.0 * s2 + 3.0) / d**3
-        yss = -a * (14.0 * each(math.sin, 2.0 * s) + 3.0 * each(math.sin, 4.0 * s)) / (4.0 * d**3)
+        xss = -a * cs * (s2 * s2 - 12.0 * s2 + 3.0) / (d * d * d)  # not d**3: numpy's pow is dispatched
+        yss = -a * (14.0 * each(math.sin, 2.0 * s) + 3.0 * each(math.sin, 4.0 * s)) / (4.0 * (d * d * d))
         return x, y, w * xs, w * ys, w * w * xss, w * w * yss
 
 
