@@ -128,7 +128,7 @@ def main() -> None:
         return libm(args.environments.split(","))
     from mlpfac.verify import differ
 
-    base, each = None, {}
+    base, each, ran = None, {}, []
     print(f"{len(args.runs)} runs: {', '.join(args.runs)}\n")
     print("| environment | bit-identical | largest relative difference (run, figure) | outcome changed | s |")
     print("|---|---:|---|---|---:|")
@@ -150,6 +150,7 @@ def main() -> None:
                 raise SystemExit(f"{name}: {out.stderr.strip().splitlines()[-1]}")
             took = time.perf_counter() - t0
         rows = json.loads(out.stdout.splitlines()[-1])
+        ran.append(name)
         if base is None:
             base = rows
         same = sum(a["digest"] == b["digest"] for a, b in zip(base, rows, strict=True))
@@ -163,7 +164,7 @@ def main() -> None:
                 flipped.append(f"{r}: {a['outcome']} -> {b['outcome']}")
         diff = f"{worst:.2g} ({where})" if worst else "-"
         print(f"| {name} | {same} of {len(rows)} | {diff} | {', '.join(flipped) or '-'} | {took:.0f} |", flush=True)
-    print(f"\nper run, after the event (else the whole run): position RMS / max, mm, in {args.environments}\n")
+    print(f"\nper run, after the event (else the whole run): position RMS / max, mm, in {', '.join(ran)}\n")
     for r, figures in each.items():
         print(f"- {r}: {' | '.join(figures)}")
 
