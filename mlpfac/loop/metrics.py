@@ -13,7 +13,6 @@ from pathlib import Path
 import numpy as np
 
 from mlpfac.loop.record import RunRecord
-from mlpfac.model import each
 
 LOST_FRACTION = 0.05  # a finished run is "lost" when a phase's position RMS exceeds this share of the path's size
 BIN_S = 0.1  # seconds per bin of the position error's mean square in metrics.json (any window of whole bins)
@@ -29,6 +28,8 @@ def _stats(rec: RunRecord, lo: int, hi: int) -> dict:
             "max_position_error_m": None,
             "rms_heading_error_rad": None,
         }
+    from mlpfac.model import each  # here: importing the kernels' module checks MLPFAC_KERNELS
+
     pos = each(math.hypot, e[:, 0], e[:, 1])  # glibc's, not numpy's SIMD loop (docs/reproducibility.md)
     return {
         "start_s": lo * rec.T,
