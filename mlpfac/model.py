@@ -78,31 +78,52 @@ def solve_spd(A: np.ndarray, B: np.ndarray) -> np.ndarray:
 
 def eigh(A: np.ndarray, sweeps: int = 10) -> tuple[np.ndarray, np.ndarray]:
     """Eigenvalues w (..., n) and eigenvectors V (columns, (..., n, n)) of symmetric A, A = V diag(w) V',
-    by cyclic Jacobi rotations (``sweeps`` of them: quadratic convergence, for small n)."""
-    A = np.array(A, dtype=float)
-    n = A.shape[-1]
-    V = np.array(np.broadcast_to(np.eye(n), A.shape))
-    off = ~np.eye(n, dtype=bool)
-    for _ in range(sweeps):
-        if not np.any(A[..., off]):  # diagonal to the bit: a rotation would change nothing
-            break
-        for p in range(n - 1):
-            for q in range(p + 1, n):
-                apq = A[..., p, q]
-                with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-                    theta = (A[..., q, q] - A[..., p, p]) / (2.0 * apq)
-                    t = np.where(theta >= 0.0, 1.0, -1.0) / (np.abs(theta) + np.sqrt(theta * theta + 1.0))
-                t = np.where((apq != 0.0) & np.isfinite(t), t, 0.0)
-                c = 1.0 / np.sqrt(t * t + 1.0)
-                s = t * c
-                for M in (A, V):  # columns p, q rotated
-                    Mp, Mq = M[..., :, p].copy(), M[..., :, q].copy()
-                    M[..., :, p] = c[..., None] * Mp - s[..., None] * Mq
-                    M[..., :, q] = s[..., None] * Mp + c[..., None] * Mq
-                Ap, Aq = A[..., p, :].copy(), A[..., q, :].copy()  # and rows p, q of A
-                A[..., p, :] = c[..., None] * Ap - s[..., None] * Aq
-                A[..., q, :] = s[..., None] * Ap + c[..., None] * Aq
-    return np.diagonal(A, axis1=-2, axis2=-1).copy(), V
+    by cyclic Jacobi rotations (at most ``sweeps``: quadratic convergence, for small n; compiled)."""
+    A = np.asarray(A, dtype=float)
+    rows = np.ascontiguousarray(A.reshape(-1, *A.shape[-2:]))
+    w, V = np.empty(rows.shape[:2]), np.empty_like(rows)
+    jacobi(rows, sweeps, w, V)
+    return w.reshape(A.shape[:-1]), V.reshape(A.shape)
+
+
+@kernel("void(f8[:, :, ::1], i8, f8[:, ::1], f8[:, :, ::1])")
+def jacobi(A, sweeps, w, V):
+    """:func:`eigh` of each symmetric A[b] (B, n, n) into w[b] (B, n) and V[b] (B, n, n)."""
+    n = A.shape[1]
+    for b in range(A.shape[0]):
+        a = A[b].copy()
+        v = V[b]
+        v[:] = 0.0
+        for i in range(n):
+            v[i, i] = 1.0
+        for _ in range(sweeps):
+            off = False
+            for p in range(n):
+                for q in range(n):
+                    off = off or (p != q and a[p, q] != 0.0)
+            if not off:  # diagonal to the bit: a rotation would change nothing
+                break
+            for p in range(n - 1):
+                for q in range(p + 1, n):
+                    apq = a[p, q]
+                    if apq == 0.0:
+                        continue
+                    theta = (a[q, q] - a[p, p]) / (2.0 * apq)
+                    t = (1.0 if theta >= 0.0 else -1.0) / (abs(theta) + math.sqrt(theta * theta + 1.0))
+                    if not math.isfinite(t) or t == 0.0:
+                        continue
+                    c = 1.0 / math.sqrt(t * t + 1.0)
+                    s = t * c
+                    for k in range(n):  # columns p, q of a and v, then rows p, q of a
+                        ap, aq = a[k, p], a[k, q]
+                        a[k, p], a[k, q] = c * ap - s * aq, s * ap + c * aq
+                        vp, vq = v[k, p], v[k, q]
+                        v[k, p], v[k, q] = c * vp - s * vq, s * vp + c * vq
+                    for k in range(n):
+                        ap, aq = a[p, k], a[q, k]
+                        a[p, k], a[q, k] = c * ap - s * aq, s * ap + c * aq
+        for i in range(n):
+            w[b, i] = a[i, i]
 
 
 def wrap(angle: np.ndarray | float) -> np.ndarray | float:
