@@ -39,7 +39,7 @@ def make_plant(scn: PlantSpec, ref: np.ndarray):
             plant = MujocoPlant(scn.plant_config, scn.T, periods)
     except ConfigError as err:
         where = err.where if err.where.startswith(scn.source) else f"{scn.source} [plant] {err.where}".rstrip()
-        raise ConfigError(where, err.what) from None
+        raise type(err)(where, err.what) from None  # UnavailableError stays itself
     if getattr(scn, "level", "velocity") == "torque":  # a controller of the wheels' torques
         actuator = getattr(getattr(plant, "config", None), "actuator", None)
         if actuator != "torque":

@@ -185,7 +185,11 @@ class MujocoPlant(MujocoEvents):
         Rz = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
         root = slice(self._qroot, self._qroot + 7)
         pos, quat = d.qpos[root][:3].copy(), d.qpos[root][3:].copy()
-        d.qpos[self._qroot : self._qroot + 3] = Rz @ (pos - p_site) + [float(q0[0]), float(q0[1]), p_site[2]]
+        d.qpos[self._qroot : self._qroot + 3] = np.einsum("ij,j->i", Rz, pos - p_site) + [
+            float(q0[0]),
+            float(q0[1]),
+            p_site[2],
+        ]
         mujoco.mju_mulQuat(
             d.qpos[self._qroot + 3 : self._qroot + 7],
             np.array([math.cos(turn / 2), 0.0, 0.0, math.sin(turn / 2)]),
@@ -271,7 +275,9 @@ class MujocoPlant(MujocoEvents):
         omega_w = np.array([0.0, 0.0, omega])
         v_site = np.array([v * math.cos(theta), v * math.sin(theta), 0.0])
         d.qvel[self._droot : self._droot + 3] = v_site + np.cross(omega_w, d.xpos[self._root] - d.site_xpos[self._site])
-        d.qvel[self._droot + 3 : self._droot + 6] = d.xmat[self._root].reshape(3, 3).T @ omega_w  # local frame
+        d.qvel[self._droot + 3 : self._droot + 6] = np.einsum(
+            "ji,j->i", d.xmat[self._root].reshape(3, 3), omega_w
+        )  # local
         w = wheel_speeds(v, omega, self.real_radius, self._real_track)
         for dof, sign, wi in zip(self._dofs, self._sign, w, strict=True):
             d.qvel[dof] = sign * wi

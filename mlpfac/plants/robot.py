@@ -18,6 +18,7 @@ import mujoco
 import numpy as np
 
 from mlpfac.exceptions import ConfigError
+from mlpfac.model import norm
 from mlpfac.plants import defaults, drive, edits, shapes
 from mlpfac.plants import wheels as wheel_parts
 from mlpfac.plants.compiled import yaw
@@ -251,7 +252,7 @@ def _read_robot(config: MujocoConfig, stamp: tuple[int, int], periods: tuple[flo
         except mujoco.FatalError as err:  # an arena too small for the model (<size memory>), say
             raise cannot_simulate(where, err) from None
         anchors = [d.xanchor[j].copy() for j in driven]
-        width = float(np.linalg.norm(anchors[1] - anchors[0]))
+        width = norm(anchors[1] - anchors[0])
         track, turns = width, ""
         if len(driven) > 2:  # a skid-steer: the track it turns as (turning_track, else wheel_parts.skid_track)
             rule, base = wheel_parts.skid_track(anchors)

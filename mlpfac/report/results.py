@@ -253,6 +253,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         metavar="N",
         help="run N (default 3) sampled runs of every dataset again from its recorded command; exit 1 if one differs",
     )
+    p.add_argument(
+        "--strict", action="store_true", help="with --verify: a dataset that cannot run here (its robot) is an error"
+    )
 
 
 def run_cli(args: argparse.Namespace) -> int:
@@ -263,13 +266,9 @@ def run_cli(args: argparse.Namespace) -> int:
             raise ConfigError("--collect", f"expected NAME=RESULTS, got {item!r}")
         print(f"{results} -> {collect(args.docs / 'data' / name, Path(results), args.made_by, args.code_version)}")
     if args.verify is not None:
-        from mlpfac.report.verify import verify
+        from mlpfac.report.verify import run_cli as verify
 
-        differs = False
-        for v in verify(args.docs, args.verify):  # a line per dataset as it is done
-            print(v.line(), flush=True)
-            differs |= v.differs
-        return 1 if differs else 0
+        return verify(args.docs, args.verify, args.strict)  # a line per dataset as it is done
     if args.check:
         old = stale(args.docs)
         for page in old:

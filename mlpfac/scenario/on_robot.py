@@ -175,7 +175,7 @@ def on_robot(table: dict, robot: str) -> dict:
     except TypeError as err:
         raise ConfigError(f"--robot {robot}", f"not a [plant] key: {err}") from None
     except ConfigError as err:
-        raise ConfigError(f"--robot {robot}: {err.where}".rstrip(": "), err.what) from None
+        raise type(err)(f"--robot {robot}: {err.where}".rstrip(": "), err.what) from None
     ref = dict(out.get("reference", {"kind": "eight"}))
     kind = ref.get("kind", "eight")
     curve = make_reference(kind, {k: v for k, v in ref.items() if k != "kind"}) if kind in SPEEDS else None

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from mlpfac.exceptions import ConfigError
+from mlpfac.model import each
 
 
 @dataclass(frozen=True)
@@ -30,8 +31,8 @@ class Eight:
     speed: float = 1.0  # x, the same path traversed this many times as fast
 
     def derivatives(self, t: np.ndarray) -> tuple[np.ndarray, ...]:
-        cx, sx = np.cos(self.wx * t), np.sin(self.wx * t)
-        cy, sy = np.cos(self.wy * t), np.sin(self.wy * t)
+        cx, sx = each(math.cos, self.wx * t), each(math.sin, self.wx * t)
+        cy, sy = each(math.cos, self.wy * t), each(math.sin, self.wy * t)
         return (
             self.ax * cx,
             self.ay * sy,
@@ -53,7 +54,7 @@ class Circle:
     speed: float = 1.0  # x, the same path traversed this many times as fast
 
     def derivatives(self, t: np.ndarray) -> tuple[np.ndarray, ...]:
-        c, s = np.cos(self.rate * t), np.sin(self.rate * t)
+        c, s = each(math.cos, self.rate * t), each(math.sin, self.rate * t)
         r, w = self.radius, self.rate
         return (self.cx + r * c, self.cy + r * s, -r * w * s, r * w * c, -r * w * w * c, -r * w * w * s)
 
@@ -85,7 +86,7 @@ class Lemniscate:
 
     def derivatives(self, t: np.ndarray) -> tuple[np.ndarray, ...]:
         s, w, a = self.rate * t, self.rate, self.a
-        sn, cs = np.sin(s), np.cos(s)
+        sn, cs = each(math.sin, s), each(math.cos, s)
         d = 1.0 + sn**2
         x = a * cs / d
         y = a * sn * cs / d
@@ -93,8 +94,8 @@ class Lemniscate:
         s2 = sn * sn
         xs = a * sn * (s2 - 3.0) / d**2  # dx/ds
         ys = -a * (3.0 * s2 - 1.0) / d**2  # dy/ds
-        xss = -a * cs * (s2 * s2 - 12.0 * s2 + 3.0) / d**3
-        yss = -a * (14.0 * np.sin(2.0 * s) + 3.0 * np.sin(4.0 * s)) / (4.0 * d**3)
+        xss = -a * cs * (s2 * s2 - 12.0 * s2 + 3.0) / (d * d * d)  # not d**3: numpy's pow is dispatched
+        yss = -a * (14.0 * each(math.sin, 2.0 * s) + 3.0 * each(math.sin, 4.0 * s)) / (4.0 * (d * d * d))
         return x, y, w * xs, w * ys, w * w * xss, w * w * yss
 
 
@@ -111,7 +112,7 @@ def sample(curve: Eight | Circle | Line | Lemniscate, t: np.ndarray) -> np.ndarr
     x, y, dx, dy, ddx, ddy = curve.derivatives(k * t)
     dx, dy, ddx, ddy = k * dx, k * dy, k * k * ddx, k * k * ddy
     speed2 = dx * dx + dy * dy
-    theta = np.unwrap(np.arctan2(dy, dx))
+    theta = np.unwrap(each(math.atan2, dy, dx))
     v = np.sqrt(speed2)
     omega = (dx * ddy - dy * ddx) / speed2
     return np.stack([x, y, theta, v, omega], axis=-1)
