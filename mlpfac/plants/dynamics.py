@@ -24,6 +24,7 @@ import mujoco
 import numpy as np
 
 from mlpfac.dynamics import RobotModel
+from mlpfac.model import dot
 
 
 def read_model(m: mujoco.MjModel, robot, torque_limits: tuple[float, float]) -> RobotModel:
@@ -59,13 +60,13 @@ def read_model(m: mujoco.MjModel, robot, torque_limits: tuple[float, float]) -> 
     return RobotModel(
         mass_kg=mass,
         yaw_inertia_kg_m2=inertia,
-        com_offset_m=float(com @ heading),
+        com_offset_m=dot(com, heading),
         wheel_radius_m=float(robot.real_radius),
         track_m=float(robot.real_track),
         wheel_inertia_kg_m2=0.5 * (wheel[0] + wheel[1]),
         torque_limit_Nm=float(min(torque_limits)),
         wheel_damping_Nm_s=0.5 * (damping[0] + damping[1]),
-        com_lateral_m=float(com @ left),
+        com_lateral_m=dot(com, left),
     )
 
 
