@@ -2,6 +2,7 @@
 in environments that stand in for other machines. Not a test.
 
     python benchmarks/machine_spread.py [--runs SCENARIO/CONTROLLER/SEED ...] [--environments built,...]
+    python benchmarks/machine_spread.py --libm [--environments built,libm-no-fma]
 
 Each environment runs the same runs (full length) in a fresh process, and each run's metrics are
 compared with those of the first environment, this machine as it is: bit-identical (the digest of
@@ -15,9 +16,15 @@ difference of a figure ``runs.json`` keeps, and any outcome that changed. The en
 - ``libm-no-fma``: glibc's maths library (exp, sin, cos, atan2, ...) as on a processor without
   FMA and AVX2 (``GLIBC_TUNABLES=glibc.cpu.hwcaps=-AVX2,-FMA``: glibc picks its functions by the
   processor's features, and their variants differ in the last bits);
-- ``numpy-baseline``: numpy without the instructions beyond its baseline (``NPY_DISABLE_CPU_FEATURES``);
-- ``blas-other-cpu``: OpenBLAS with the kernels of another processor (``OPENBLAS_CORETYPE``) on two
-  threads, as numpy's and scipy's linear algebra would run elsewhere.
+- ``numpy-no-avx512``: numpy without its AVX-512 code (``NPY_DISABLE_CPU_FEATURES``), as on a
+  processor with AVX2 alone (a no-op on one without AVX-512);
+- ``numpy-baseline``: numpy without its AVX2, FMA and AVX-512 code, as on an older processor;
+- ``blas-skylakex``, ``blas-haswell``, ``blas-sandybridge``, ``blas-prescott``: OpenBLAS with the
+  kernels of that processor (``OPENBLAS_CORETYPE``) on two threads, as numpy's and scipy's linear
+  algebra would run elsewhere (SkylakeX only on a processor with AVX-512: skipped elsewhere).
+
+mlpfac's simulated path calls none of numpy's processor-dispatched maths nor BLAS/LAPACK
+(tests/test_same_bits.py traps them), so only ``libm-no-fma`` should move a bit.
 """
 
 from __future__ import annotations
@@ -45,16 +52,54 @@ ENVIRONMENTS = {
     "numba": {"MLPFAC_KERNELS": "jit"},
     "numba-generic": {"MLPFAC_KERNELS": "jit", "NUMBA_CPU_NAME": "generic"},
     "libm-no-fma": {"GLIBC_TUNABLES": "glibc.cpu.hwcaps=-AVX2,-FMA"},
-    "numpy-baseline": {"NPY_DISABLE_CPU_FEATURES": "AVX2 FMA3 F16C AVX AVX512F AVX512CD AVX512_SKX"},
-    "blas-other-cpu": {"OPENBLAS_CORETYPE": "Prescott", "OPENBLAS_NUM_THREADS": "2"},
+    "numpy-no-avx512": {"NPY_DISABLE_CPU_FEATURES": "X86_V4 AVX512_ICL AVX512_SPR"},
+    "numpy-baseline": {"NPY_DISABLE_CPU_FEATURES": "X86_V3 X86_V4 AVX512_ICL AVX512_SPR"},
+    **{
+        f"blas-{cpu.lower()}": {"OPENBLAS_CORETYPE": cpu, "OPENBLAS_NUM_THREADS": "2"}
+        for cpu in ("SkylakeX", "Haswell", "Sandybridge", "Prescott")
+    },
 }
+PROBE = "import numpy as np; a = np.ones((64, 64)); a @ a"  # OpenBLAS's kernels run on this processor
+
+
+LIBM = ("sin", "cos", "tan", "atan", "atan2", "exp", "expm1", "log", "log1p", "pow", "tanh", "hypot")
+ARGUMENTS = 200_000
+
+
+def libm_child() -> None:
+    """Each function of glibc's maths library the runs call (through Python's math, as numba's
+    kernels call them) on the same pseudo-random arguments: their bits, one JSON object."""
+    import math
+    import random
+
+    rng = random.Random(1)
+    xs = [rng.uniform(-10.0, 10.0) for _ in range(ARGUMENTS)]
+    args = {"atan2": lambda x: (x, 0.7 * x + 1.0), "hypot": lambda x: (x, 0.7 * x + 1.0)}
+    args |= {"pow": lambda x: (abs(x) + 0.1, 0.37), "log": lambda x: (abs(x) + 0.01,), "log1p": lambda x: (abs(x),)}
+    out = {f: [getattr(math, f)(*args.get(f, lambda x: (x,))(x)).hex() for x in xs] for f in LIBM}
+    print(json.dumps(out))
+
+
+def libm(environments: list[str]) -> None:
+    """How many of the arguments give other bits, per function, in each environment against the first."""
+    found = {}
+    for name in environments:
+        cmd = [sys.executable, __file__, "--libm-child"]
+        out = subprocess.run(cmd, env=os.environ | ENVIRONMENTS[name], capture_output=True, text=True, check=True)
+        found[name] = json.loads(out.stdout)
+    first, *others = environments
+    print(f"| function | {' | '.join(others)} (of {ARGUMENTS} arguments, against {first}) |")
+    print("|---|" + "---:|" * len(others))
+    for f in LIBM:
+        moved = [sum(a != b for a, b in zip(found[first][f], found[o][f], strict=True)) for o in others]
+        print(f"| {f} | {' | '.join(map(str, moved))} |")
 
 
 def child(runs: list[str]) -> None:
     """Run each run in this process and print its runs.json row (one JSON list)."""
+    from mlpfac.report.verify import run_row
     from mlpfac.sweeps.plan import plan
     from mlpfac.sweeps.worker import run_task
-    from mlpfac.verify import run_row
 
     rows = []
     for r in runs:
@@ -71,18 +116,27 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--runs", nargs="+", default=list(RUNS), metavar="SCENARIO/CONTROLLER/SEED")
     ap.add_argument("--environments", default=",".join(ENVIRONMENTS), help="the first is the reference")
+    ap.add_argument("--libm", action="store_true", help="glibc's maths functions alone, per environment")
     ap.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
+    ap.add_argument("--libm-child", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.child:
         return child(args.runs)
-    from mlpfac.verify import differ
+    if args.libm_child:
+        return libm_child()
+    if args.libm:
+        return libm(args.environments.split(","))
+    from mlpfac.report.verify import differ
 
-    base, each = None, {}
+    base, each, ran = None, {}, []
     print(f"{len(args.runs)} runs: {', '.join(args.runs)}\n")
     print("| environment | bit-identical | largest relative difference (run, figure) | outcome changed | s |")
     print("|---|---:|---|---|---:|")
     for name in args.environments.split(","):
         extra = ENVIRONMENTS[name]
+        if subprocess.run([sys.executable, "-c", PROBE], env=os.environ | extra, capture_output=True).returncode:
+            print(f"| {name} | not on this processor | | | |", flush=True)
+            continue
         with tempfile.TemporaryDirectory() as cache:  # numba's cache of its own: nothing shared between them
             env = os.environ | extra | {"NUMBA_CACHE_DIR": cache}
             t0 = time.perf_counter()
@@ -96,6 +150,7 @@ def main() -> None:
                 raise SystemExit(f"{name}: {out.stderr.strip().splitlines()[-1]}")
             took = time.perf_counter() - t0
         rows = json.loads(out.stdout.splitlines()[-1])
+        ran.append(name)
         if base is None:
             base = rows
         same = sum(a["digest"] == b["digest"] for a, b in zip(base, rows, strict=True))
@@ -109,7 +164,7 @@ def main() -> None:
                 flipped.append(f"{r}: {a['outcome']} -> {b['outcome']}")
         diff = f"{worst:.2g} ({where})" if worst else "-"
         print(f"| {name} | {same} of {len(rows)} | {diff} | {', '.join(flipped) or '-'} | {took:.0f} |", flush=True)
-    print(f"\nper run, after the event (else the whole run): position RMS / max, mm, in {args.environments}\n")
+    print(f"\nper run, after the event (else the whole run): position RMS / max, mm, in {', '.join(ran)}\n")
     for r, figures in each.items():
         print(f"- {r}: {' | '.join(figures)}")
 

@@ -147,7 +147,7 @@ def build_parser() -> argparse.ArgumentParser:
         "robustness.json: each controller's median against the value, the bound, the tracking limit",
     )
 
-    from mlpfac import results as report
+    from mlpfac.report import results as report
 
     report.add_arguments(sub.add_parser("report", help="write the results tables of the docs from their data"))
     return parser
@@ -236,7 +236,7 @@ def cmd_list() -> int:
 
 
 def cmd_report(args: argparse.Namespace) -> int:
-    from mlpfac import results as report
+    from mlpfac.report import results as report
 
     return report.run_cli(args)
 
@@ -327,8 +327,10 @@ def cmd_run(args: argparse.Namespace) -> int:
 
     scn = load(args.scenario, robot=args.robot).with_overrides(args.controller, args.seed, args.duration)
     found = scn.table.get("provenance", {})
-    if found.get("found"):  # the robot's parts the scenario left to the model: what was found
-        print(f"robot: {found['robot']}")
+    if found.get("reference_warning"):  # a reference the robot's wheels cannot drive: said first
+        print(f"warning: {found['reference_warning']}")
+    if found.get("found") or found.get("reference_fit"):  # what the model answered and what was chosen
+        print(f"robot: {'; '.join(found[k] for k in ('robot', 'reference_fit') if found.get(k))}")
     if scn.dropped_events:
         times = ", ".join(f"{t:g} s" for t in scn.dropped_events)
         print(f"note: --duration {scn.duration:g} s ends before the event at {times}: this run has no such event")

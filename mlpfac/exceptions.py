@@ -19,6 +19,11 @@ class ConfigError(MlpfacError, ValueError):
         return (type(self), (self.where, self.what))
 
 
+class UnavailableError(ConfigError):
+    """What a run needs is not on this machine (a MuJoCo Menagerie robot offline): bad input for a
+    run, a dataset skipped, with this reason, for ``mlpfac report --verify``."""
+
+
 class ScriptStopped(BaseException):  # noqa: N818 - not an error: the import of a script ends there
     """Raised in a sweep worker by a call of mlpfac's API at the top level of a user's script that
     the worker imports for its controller class: the import ends there, with what the script

@@ -44,8 +44,11 @@ EXTENSIONS = {"core": "mlpfac._kernels", "mujoco": "mlpfac.plants._kernels"}
 MODULES = {  # the modules whose kernels each extension holds
     "core": (
         "mlpfac.model",
+        "mlpfac.dynamics",
         "mlpfac.control.law",
+        "mlpfac.control.dynamic",
         "mlpfac.control.adaptive.kernels",
+        "mlpfac.control.adaptive.dynamic_level",
         "mlpfac.loop.kernels",
         "mlpfac.control.adaptive.input_model",
         "mlpfac.control.adaptive.delay_bank",
@@ -56,6 +59,10 @@ MODULES = {  # the modules whose kernels each extension holds
 }
 FILES = tuple(m.removeprefix("mlpfac.").replace(".", "/") + ".py" for ms in MODULES.values() for m in ms) + ("jit.py",)
 JIT = {"cache": True, "error_model": "numpy", "nogil": True}  # numpy's inf or NaN for a division by zero
+# No fastmath (so no fused multiply-add, no reassociation): numba's code rounds each operation, on any
+# processor. And no Intel SVML, which numba uses for loops of transcendental functions when the
+# icc_rt package is installed: its vectorised results differ from glibc's by processor.
+os.environ["NUMBA_DISABLE_INTEL_SVML"] = "1"
 EXPORTS: dict[str, list[tuple[str, object, Callable]]] = {ext: [] for ext in EXTENSIONS}  # symbol, signature, kernel
 SALT: dict[str, str] = {}  # what else an extension's built code depends on (see built)
 WHY: dict[str, str] = {}  # why an extension's built module is not used

@@ -4,10 +4,126 @@ compiled and batch-first (:mod:`mlpfac.jit`): the error (2) of B poses and the k
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 
 from mlpfac.jit import kernel
+
+# Maths whose bits do not depend on the processor (docs/reproducibility.md): glibc's libm through
+# :mod:`math`, element by element, and small linear algebra written out in correctly rounded
+# arithmetic (+, -, *, /, sqrt; einsum, which never calls BLAS), never numpy's SIMD transcendental
+# loops nor BLAS or LAPACK, whose results depend on the processor's instruction set.
+
+
+def each(fn: Callable[..., float], *xs) -> np.ndarray:
+    """``fn`` (a function of :mod:`math`) on every element of the arrays ``xs``, broadcast together."""
+    arrays = np.broadcast_arrays(*(np.asarray(x, dtype=float) for x in xs))
+    flat = np.fromiter(map(fn, *(a.ravel().tolist() for a in arrays)), float, arrays[0].size)
+    return flat.reshape(arrays[0].shape)
+
+
+def dot(a: np.ndarray, b: np.ndarray) -> float:
+    """a . b of two vectors, summed in order."""
+    total = 0.0
+    for x, y in zip(np.ravel(a).tolist(), np.ravel(b).tolist(), strict=True):
+        total += x * y
+    return total
+
+
+def norm(a: np.ndarray) -> float:
+    """|a| of a vector."""
+    return math.sqrt(dot(a, a))
+
+
+def matmul(A: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """A B over the last two axes, batched like ``@`` (einsum's own loops, not BLAS)."""
+    return np.einsum("...ij,...jk->...ik", A, B)
+
+
+def cholesky(A: np.ndarray) -> np.ndarray:
+    """L lower-triangular with L L' = A (..., n, n) for A symmetric positive semi-definite (a pivot
+    that is not positive gives a zero column)."""
+    A = np.asarray(A, dtype=float)
+    L = np.zeros_like(A)
+    for j in range(A.shape[-1]):
+        row = L[..., j, :j]
+        d = np.sqrt(np.maximum(A[..., j, j] - np.einsum("...k,...k->...", row, row), 0.0))
+        L[..., j, j] = d
+        col = A[..., j + 1 :, j] - np.einsum("...ik,...k->...i", L[..., j + 1 :, :j], row)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            L[..., j + 1 :, j] = np.where(d[..., None] > 0.0, col / d[..., None], 0.0)
+    return L
+
+
+def solve_lower(L: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """X with L X = B, L (..., n, n) lower-triangular, B (..., n, k): forward substitution."""
+    X = np.array(np.broadcast_to(B, np.broadcast_shapes(L.shape[:-2], B.shape[:-2]) + B.shape[-2:]), dtype=float)
+    for i in range(L.shape[-1]):
+        X[..., i, :] = (X[..., i, :] - np.einsum("...j,...jk->...k", L[..., i, :i], X[..., :i, :])) / L[..., i, i, None]
+    return X
+
+
+def solve_spd(A: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """X with A X = B for A (..., n, n) symmetric positive definite (Cholesky), B (..., n, k)."""
+    L = cholesky(A)
+    Y = solve_lower(L, B)
+    U = np.swapaxes(L, -1, -2)
+    for i in reversed(range(U.shape[-1])):
+        Y[..., i, :] = (Y[..., i, :] - np.einsum("...j,...jk->...k", U[..., i, i + 1 :], Y[..., i + 1 :, :])) / U[
+            ..., i, i, None
+        ]
+    return Y
+
+
+def eigh(A: np.ndarray, sweeps: int = 10) -> tuple[np.ndarray, np.ndarray]:
+    """Eigenvalues w (..., n) and eigenvectors V (columns, (..., n, n)) of symmetric A, A = V diag(w) V',
+    by cyclic Jacobi rotations (at most ``sweeps``: quadratic convergence, for small n; compiled)."""
+    A = np.asarray(A, dtype=float)
+    rows = np.ascontiguousarray(A.reshape(-1, *A.shape[-2:]))
+    w, V = np.empty(rows.shape[:2]), np.empty_like(rows)
+    jacobi(rows, sweeps, w, V)
+    return w.reshape(A.shape[:-1]), V.reshape(A.shape)
+
+
+@kernel("void(f8[:, :, ::1], i8, f8[:, ::1], f8[:, :, ::1])")
+def jacobi(A, sweeps, w, V):
+    """:func:`eigh` of each symmetric A[b] (B, n, n) into w[b] (B, n) and V[b] (B, n, n)."""
+    n = A.shape[1]
+    for b in range(A.shape[0]):
+        a = A[b].copy()
+        v = V[b]
+        v[:] = 0.0
+        for i in range(n):
+            v[i, i] = 1.0
+        for _ in range(sweeps):
+            off = False
+            for p in range(n):
+                for q in range(n):
+                    off = off or (p != q and a[p, q] != 0.0)
+            if not off:  # diagonal to the bit: a rotation would change nothing
+                break
+            for p in range(n - 1):
+                for q in range(p + 1, n):
+                    apq = a[p, q]
+                    if apq == 0.0:
+                        continue
+                    theta = (a[q, q] - a[p, p]) / (2.0 * apq)
+                    t = (1.0 if theta >= 0.0 else -1.0) / (abs(theta) + math.sqrt(theta * theta + 1.0))
+                    if not math.isfinite(t) or t == 0.0:
+                        continue
+                    c = 1.0 / math.sqrt(t * t + 1.0)
+                    s = t * c
+                    for k in range(n):  # columns p, q of a and v, then rows p, q of a
+                        ap, aq = a[k, p], a[k, q]
+                        a[k, p], a[k, q] = c * ap - s * aq, s * ap + c * aq
+                        vp, vq = v[k, p], v[k, q]
+                        v[k, p], v[k, q] = c * vp - s * vq, s * vp + c * vq
+                    for k in range(n):
+                        ap, aq = a[p, k], a[q, k]
+                        a[p, k], a[q, k] = c * ap - s * aq, s * ap + c * aq
+        for i in range(n):
+            w[b, i] = a[i, i]
 
 
 def wrap(angle: np.ndarray | float) -> np.ndarray | float:
@@ -17,7 +133,7 @@ def wrap(angle: np.ndarray | float) -> np.ndarray | float:
 
 def tracking_error(q: np.ndarray, q_r: np.ndarray) -> np.ndarray:
     """Eq. (2): the error of pose q = (x, y, theta) to q_r, in the robot's frame; e3 wrapped. (3,)"""
-    c, s = np.cos(q[2]), np.sin(q[2])
+    c, s = math.cos(q[2]), math.sin(q[2])
     dx, dy = q_r[0] - q[0], q_r[1] - q[1]
     return np.array([c * dx + s * dy, -s * dx + c * dy, wrap(q_r[2] - q[2])])
 
@@ -25,13 +141,13 @@ def tracking_error(q: np.ndarray, q_r: np.ndarray) -> np.ndarray:
 def pose_from_error(e: np.ndarray, q_r: np.ndarray) -> np.ndarray:
     """The pose q whose error (2) to q_r is e (the inverse of :func:`tracking_error`). (3,)"""
     theta = q_r[2] - e[2]
-    c, s = np.cos(theta), np.sin(theta)
+    c, s = math.cos(theta), math.sin(theta)
     return np.array([q_r[0] - (c * e[0] - s * e[1]), q_r[1] - (s * e[0] + c * e[1]), theta])
 
 
 def f_true(e: np.ndarray, v_r: float, omega_r: float, T: float) -> np.ndarray:
     """Eq. (5): the drift of the Euler-discretised error dynamics (3). (3,)"""
-    return np.array([e[0] + T * v_r * np.cos(e[2]), e[1] + T * v_r * np.sin(e[2]), e[2] + T * omega_r])
+    return np.array([e[0] + T * v_r * math.cos(e[2]), e[1] + T * v_r * math.sin(e[2]), e[2] + T * omega_r])
 
 
 def G_true(e: np.ndarray, T: float) -> np.ndarray:
@@ -41,7 +157,7 @@ def G_true(e: np.ndarray, T: float) -> np.ndarray:
 
 def h_true(e: np.ndarray, v_r: float, omega_r: float, T: float) -> np.ndarray:
     """Eq. (34) with the true functions: (h1, h2, h5) = (G_12, f_1 - e1, f_3 - e3). (3,)"""
-    return np.array([T * e[1], T * v_r * np.cos(e[2]), T * omega_r])
+    return np.array([T * e[1], T * v_r * math.cos(e[2]), T * omega_r])
 
 
 @kernel("void(f8[:, ::1], f8[::1], f8[:, ::1])")

@@ -6,17 +6,23 @@ reaches over the last 2 s, against those asked:
 - ``armature = 0, track = W``: the model as shipped, the IK turning with the wheels' own track
   (and with stiffer friction: elliptic cones with impratio 100, or MuJoCo's noslip solver);
 - ``armature = A, track = W``: a rotor on each wheel (M r^2/4 is the ``armature`` rule), the same IK;
-- ``chosen``: the rotor and the track it turns with, W + L^2 / W (what ``menagerie:pal_tiago_dual``
-  runs with from its name).
-Usage: MENAGERIE_ROOT=... python sims/skid_turn.py
+- ``rule``: the rotor and the track W + L^2 / W;
+- ``chosen``: the rotor and the track measured as it settles (``turning_track``), its pose frame at
+  its kinematic centre (what ``menagerie:pal_tiago_dual`` runs with from its name).
+The rows other than ``chosen`` set ``turning_track`` (nothing measured) and keep the pose frame in
+the middle of the wheels.
+Usage: MENAGERIE_ROOT=... python sims/skid_turn.py [MODEL] (another skid-steer: tests/data/skid_short.xml)
 """
 
 from __future__ import annotations
+
+import sys
 
 import numpy as np
 
 from mlpfac.plants.config import MujocoConfig
 from mlpfac.plants.mujoco import MujocoPlant
+from mlpfac.plants.wheels import skid_track
 
 T = 0.01
 MODEL = "menagerie:pal_tiago_dual"
@@ -34,25 +40,28 @@ def reached(plant: MujocoPlant, v: float, omega: float, seconds: float = 3.0) ->
     return float(np.hypot(*(b - a)[:2]) / (seconds - 1)), float((b - a)[2] / (seconds - 1))
 
 
-def main() -> None:
-    chosen = MujocoPlant(MujocoConfig(model=MODEL), T)
+def main(model: str = MODEL) -> None:
+    chosen = MujocoPlant(MujocoConfig(model=model), T)
     m, d = chosen.model, chosen.data
     chosen.reset(np.zeros(3), np.random.default_rng(0))
     left, right = (int(m.actuator_trnid[a, 0]) for a in chosen.robot.acts)
     shipped_track = float(np.linalg.norm(d.xanchor[left] - d.xanchor[right]))  # W: the wheels' hinges apart
     arm = chosen.config.armature
+    wheels = [int(m.actuator_trnid[a, 0]) for a in (*chosen.robot.acts, *chosen.robot.seconds)]
+    rule, _ = skid_track([d.xanchor[j].copy() for j in wheels])  # W + L^2 / W
+    w = {"track": shipped_track, "turning_track": rule}
     rows = [  # (name, [plant] keys, MuJoCo options set on the compiled model)
-        ("armature = 0, track = W", {"armature": 0.0, "track": shipped_track}, {}),
-        ("armature = 0, track = W, elliptic cones, impratio 100", {"armature": 0.0, "track": shipped_track},
-         {"cone": 1, "impratio": 100.0}),
-        ("armature = 0, track = W, noslip solver", {"armature": 0.0, "track": shipped_track}, {"noslip_iterations": 10}),
-        *((f"armature = {a:g}, track = W", {"armature": a, "track": shipped_track}, {}) for a in (0.01, arm, 1.0)),
-        (f"chosen (armature {arm:g}, track {chosen.ik_track:.3g} m)", {}, {}),
+        ("armature = 0, track = W", {"armature": 0.0, **w}, {}),
+        ("armature = 0, track = W, elliptic cones, impratio 100", {"armature": 0.0, **w}, {"cone": 1, "impratio": 100.0}),
+        ("armature = 0, track = W, noslip solver", {"armature": 0.0, **w}, {"noslip_iterations": 10}),
+        *((f"armature = {a:g}, track = W", {"armature": a, **w}, {}) for a in (0.01, arm, 1.0)),
+        (f"rule (armature {arm:g}, track W + L^2/W = {rule:.3g} m)", {"turning_track": rule}, {}),
+        (f"chosen (armature {arm:g}, track {chosen.ik_track:.3g} m measured)", {}, {}),
     ]  # fmt: skip
     print("| plant | asked v, omega | reached v, omega | omega reached / asked |")
     print("| --- | --- | --- | --- |")
     for name, keys, options in rows:
-        plant = MujocoPlant(MujocoConfig(model=MODEL, **keys), T)
+        plant = MujocoPlant(MujocoConfig(model=model, **keys), T)
         for key, value in options.items():
             setattr(plant.model.opt, key, value)
         for v, omega in ASKED:
@@ -61,4 +70,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    main(*sys.argv[1:2])

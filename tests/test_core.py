@@ -8,7 +8,7 @@ from mlpfac.control.adaptive.networks import Networks
 from mlpfac.control.law import Law
 from mlpfac.exceptions import ConfigError
 from mlpfac.model import G_true, f_true, h_true, pose_from_error, tracking_error, wrap
-from mlpfac.scenario.reference import Circle, Eight, Lemniscate, Line, sample
+from mlpfac.scenario.reference import Circle, Eight, Lemniscate, Line, make_reference, sample
 
 NETS = [Networks(), Networks(L_f=5, L_G=3, error_scale=20.0), Networks(residual=True), Networks(velocity_inputs=True)]
 
@@ -127,7 +127,7 @@ def test_tracking_error_round_trip_and_wrap():
     assert wrap(np.pi) == np.pi and wrap(-np.pi) == np.pi and abs(wrap(3 * np.pi) - np.pi) < 1e-12
 
 
-@pytest.mark.parametrize("curve", [Eight(), Circle(), Line(), Lemniscate()])
+@pytest.mark.parametrize("curve", [Eight(), Circle(), Line(), Lemniscate(), Eight(speed=2.5), Lemniscate(speed=0.4)])
 def test_references_are_consistent(curve):
     t = np.linspace(0.0, 30.0, 30001)
     r = sample(curve, t)
@@ -137,6 +137,17 @@ def test_references_are_consistent(curve):
     np.testing.assert_allclose(np.gradient(r[:, 2], h)[2:-2], r[2:-2, 4], atol=1e-4)  # omega_r = theta_r'
     np.testing.assert_allclose((np.cos(r[:, 2]) * r[:, 3])[2:-2], dx[2:-2], atol=1e-4)  # (1)
     assert np.max(np.abs(np.diff(r[:, 2]))) < 0.01  # continuous heading
+
+
+@pytest.mark.parametrize("kind", ["eight", "circle", "line", "lemniscate"])
+def test_speed_traverses_the_same_path_faster(kind):
+    """reference.speed = k: the path of speed 1 at t is reached at t / k, with v_r and omega_r x k."""
+    t = np.linspace(0.0, 30.0, 3001)
+    slow = sample(make_reference(kind, {}), t)
+    fast = sample(make_reference(kind, {"speed": 2.0}), t / 2.0)  # k t exact for k = 2
+    np.testing.assert_array_equal(fast[:, :3], slow[:, :3])
+    np.testing.assert_array_equal(fast[:, 3:], 2.0 * slow[:, 3:])
+    assert np.array_equal(sample(make_reference(kind, {"speed": 1.0}), t), slow)  # speed 1: the same bits
 
 
 def test_figure_of_eight_speed_range():

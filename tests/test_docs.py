@@ -10,9 +10,9 @@ from pathlib import Path
 
 import pytest
 
-from mlpfac import results as report
 from mlpfac.cli import main
 from mlpfac.exceptions import ConfigError
+from mlpfac.report import results as report
 
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"
@@ -329,7 +329,7 @@ def _files() -> dict[str, str]:
 
 
 CHEAP = [(page, body) for page in PAGES for info, body in fenced(page, "sh") if info == "cheap"]
-WRITTEN = "<!-- Written by `python -m mlpfac.doc_pages"  # the reference pages: signatures, not snippets
+WRITTEN = "<!-- Written by `python -m mlpfac.pages"  # the reference pages: signatures, not snippets
 SNIPPETS = [
     (page, body)
     for page in PAGES
@@ -390,9 +390,9 @@ def test_no_page_or_script_points_outside_the_repository():
 
 
 def test_the_pages_written_from_the_code_are_what_the_code_gives(tmp_path: Path, capsys):
-    from mlpfac import doc_pages
+    from mlpfac.pages import doc_pages
 
-    assert doc_pages.stale(DOCS) == [], "run: python -m mlpfac.doc_pages docs"
+    assert doc_pages.stale(DOCS) == [], "run: python -m mlpfac.pages docs"
     docs = tmp_path / "docs"
     docs.mkdir()
     assert doc_pages.main([str(docs), "--check"]) == 1  # missing: stale
@@ -404,7 +404,7 @@ def test_the_pages_written_from_the_code_are_what_the_code_gives(tmp_path: Path,
 
 @pytest.mark.parametrize("foreign", ["a file of someone else's", "a folder"])
 def test_the_page_writer_replaces_only_its_own_pages(tmp_path: Path, capsys, foreign: str):
-    from mlpfac import doc_pages
+    from mlpfac.pages import doc_pages
 
     docs = tmp_path / "docs"
     docs.mkdir()

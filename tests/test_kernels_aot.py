@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from mlpfac import jit
-from mlpfac.control.variants import CONTROLLERS
+from mlpfac.control.variants import CONTROLLERS, TORQUE_LEVEL
 from mlpfac.exceptions import ConfigError
 
 # Short runs that call every exported kernel between them: every shipped controller (the adaptive
@@ -22,13 +22,20 @@ from mlpfac.exceptions import ConfigError
 # compiled closed loop, a delay line of integers: the oracle's), the torque-driven wheels, the
 # kinematic plant, and batches of seeds (B > 1) on both plants.
 RUNS = (
-    *(("eight-nominal", c) for c in CONTROLLERS),
+    *(("eight-nominal", c) for c in CONTROLLERS if c not in TORQUE_LEVEL),
+    *(("eight-torque", c) for c in TORQUE_LEVEL),  # the wheels' torques: a robot with torque motors
     ("eight-sensor-delay", "oracle"),
     ("eight-torque", "kanayama"),
     ("paper", "adaptive-prior"),
     ("paper", "kanayama"),
 )
-BATCHES = (("paper", "adaptive"), ("paper", "adaptive-cautious"), ("paper", "corradini"), ("eight-nominal", "adaptive"))
+BATCHES = (
+    ("paper", "adaptive"),
+    ("paper", "adaptive-cautious"),
+    ("paper", "corradini"),
+    ("eight-nominal", "adaptive"),
+    ("eight-torque", "adaptive-dynamic"),
+)
 
 SCRIPT = textwrap.dedent(
     """

@@ -137,6 +137,32 @@ def test_payload_adds_mass_to_a_named_body():
     assert plant.model.body_mass[w] == pytest.approx(0.25)
 
 
+def test_a_load_placed_off_centre_moves_the_centre_of_mass_by_the_lever_rule():
+    """mass_kg at (offset, lateral) of the pose frame: the robot's mass grows by it and its centre of
+    mass, seen in the pose frame, moves to the mass-weighted mean of the two (a known answer)."""
+    plant = make()
+    hold(plant, (0.5, 0.8), 40)  # mid-run, turned: the placement is in the robot's frame, not the world's
+
+    def com_in_pose_frame() -> tuple[float, np.ndarray]:
+        m, d, r, s = plant.model, plant.data, plant.robot.root, plant.robot.site
+        mujoco.mj_forward(m, d)
+        R = d.site_xmat[s].reshape(3, 3)
+        return float(m.body_subtreemass[r]), R.T @ (d.subtree_com[r] - d.site_xpos[s])
+
+    M, c = com_in_pose_frame()
+    z = plant.model.body_ipos[plant.robot.root][2]
+    text = plant.apply(make_event("payload", 0.4, mass_kg=3.0, offset=0.12, lateral=-0.05))
+    mass2, c2 = com_in_pose_frame()
+    assert mass2 == pytest.approx(M + 3.0)
+    assert "0.12 m ahead" in text
+    np.testing.assert_allclose(c2[:2], (M * c[:2] + 3.0 * np.array([0.12, -0.05])) / (M + 3.0), atol=1e-9)
+    assert plant.model.body_ipos[plant.robot.root][2] == pytest.approx(z)  # at the body's own height
+    I = plant.model.body_inertia[plant.robot.root]
+    assert np.all(I > 0) and I.sum() >= 2 * I.max() - 1e-12  # a physical inertia (triangle inequality)
+    hold(plant, (0.5, 0.8), 100)
+    assert plant.diverged() is None and plant.mujoco_warnings() == {}
+
+
 def test_friction_changes_the_slip_in_a_hard_start():
     slips = {}
     for mu in (None, 0.1):
@@ -607,6 +633,10 @@ def test_model_without_velocity_servo_or_freejoint(tmp_path):
         ("payload", {"mass_scale": -2.0}, "mass_scale.*positive"),
         ("payload", {"mass_scale": 2.0, "mass_kg": 1.0}, "either"),
         ("payload", {"body": "chassis"}, "either"),
+        ("payload", {"mass_scale": 2.0, "offset": 0.1}, "offset.*mass_kg"),
+        ("payload", {"mass_kg": 2.0, "body": "chassis", "lateral": 0.1}, "lateral.*mass_kg"),
+        ("payload", {"mass_kg": 2.0, "offset": 20.0}, "offset.*<= 10"),
+        ("payload", {"mass_kg": 2.0, "offset": "ahead"}, "offset.*number"),
         ("friction", {"mu": 0.0}, "mu.*positive"),
         ("friction", {}, "needs 'mu'"),
         ("wheel_radius", {"scale": -1.5}, "scale.*positive"),
@@ -644,6 +674,7 @@ def test_the_eight_scenarios_are_shipped():
     assert names == {
         "eight-nominal",
         "eight-payload",
+        "eight-payload-offset",
         "eight-friction",
         "eight-wheel-radius",
         "eight-weak-actuator",

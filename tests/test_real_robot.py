@@ -170,7 +170,17 @@ def test_the_bound_table_has_its_known_answer(tmp_path, capsys):
     assert 0.1 < v["p_worse_than_corradini"] < 1.0
     main([str(tmp_path), "--variants", "v"])
     out = capsys.readouterr().out
-    assert "| s | 0-4 | 2.00 (oracle-kanayama) | 3.00 (3x; inf) | 4 / 5 |" in out
+    # no oracle-dynamic ran (a robot on velocity servos): the bound is the others', and says so
+    assert row["without"] == ["oracle-dynamic"]
+    assert "| s | 0-4 | 2.00 (oracle-kanayama); without oracle-dynamic | 3.00 (3x; inf) | 4 / 5 |" in out
+    for seed in runs:  # where it runs, it joins the bound: here the best law on every seed
+        path = tmp_path / "s" / "oracle-dynamic" / f"seed-{seed:04d}" / "metrics.json"
+        path.parent.mkdir(parents=True)
+        path.write_text(json.dumps(_metrics("s", "oracle-dynamic", seed, 0.5 * mm)))
+    (dyn,) = bound_rows(load([tmp_path]), ["v"])
+    assert dyn["without"] == [] and dyn["bound_law"] == "oracle-dynamic" and dyn["bound_m"] == pytest.approx(0.5 * mm)
+    for seed in runs:
+        (tmp_path / "s" / "oracle-dynamic" / f"seed-{seed:04d}" / "metrics.json").unlink()
     # the bound of the laws told the change alone: per-seed 1, 1, 3, 2, 2.5; Corradini's law, not
     # one of them, still the law the p is against
     (told,) = bound_rows(load([tmp_path]), ["v"], ("oracle", "oracle-kanayama"))

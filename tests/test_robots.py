@@ -15,7 +15,7 @@ from mlpfac.exceptions import ConfigError
 from mlpfac.plants.config import MujocoConfig
 from mlpfac.plants.mujoco import MujocoPlant
 from mlpfac.plants.wheels import skid_track
-from mlpfac.scenario.on_robot import SHARE, on_robot, with_robots
+from mlpfac.scenario.on_robot import SHARE, on_robot, robot_table, with_robots
 from mlpfac.scenario.parse import shipped_dir
 from mlpfac.scenario.reference import make_reference, sample
 from mlpfac.tables import read_toml
@@ -90,17 +90,19 @@ def test_a_skid_steer_turns_as_its_ik_asks_with_a_rotor_on_each_wheel():
     proportion to the inverse mass it moves, so a 1 kg wheel with no rotor grips along its rim far
     more softly than the robot's mass holds it across, and the skid-steer, which must scrub its
     wheels sideways to turn, turns at a few per cent of the rate asked. With the rotor inertia
-    chosen (M r^2 / 4 on each wheel) and the track it turns with (W + L^2 / W), it turns as asked
-    within a quarter (0.82 of it: sims/skid_turn.py)."""
+    chosen (M r^2 / 4 on each wheel) and the track it turns as measured as it settles (1.09 m), it
+    turns in place at 0.87 of the rate asked (with the rule W + L^2 / W, 0.98 m: 0.82)."""
     plant = MujocoPlant(MujocoConfig(model="menagerie:pal_tiago_dual"), T, (T,))
     width, base = 2 * 0.223175, 2 * 0.244
-    assert plant.ik_track == pytest.approx(width + base**2 / width, rel=1e-3)  # 0.98 m, not the wheels' 0.446 m
+    assert plant.ik_track == plant.config.turning_track == pytest.approx(1.09)  # measured
+    assert plant.ik_track > width + base**2 / width > width  # wider than the rule's 0.98 m, the wheels' 0.446 m
     assert plant.config.armature == pytest.approx(
         plant.model.body_subtreemass[plant.robot.root] * 0.0762**2 / 4, rel=5e-3
     )
-    assert abs(_turn_rate(plant, 0.5) / 0.5 - 1) < 0.25
+    assert abs(_turn_rate(plant, 0.5) / 0.5 - 1) < 0.15  # 0.87 (0.82 with the rule)
     bare = MujocoPlant(MujocoConfig(model="menagerie:pal_tiago_dual", armature=0), T, (T,))
-    assert _turn_rate(bare, 0.5) / 0.5 < 0.1
+    assert bare.config.turning_track > 5  # 7.13 m: it barely turns, and asked more its wheels reach their limit
+    assert _turn_rate(bare, 0.5) / 0.5 < 0.15
 
 
 def test_the_track_a_skid_steer_turns_with():
@@ -163,8 +165,10 @@ def test_a_test_robot_with_an_arm_four_wheels_and_torque_motors_from_its_model_a
     assert found["timestep"] == 0.0025 and plant.n_substeps == 4  # its 3 ms does not divide 10 ms
     assert set(plant.robot.locked) == {"shoulder", "elbow"} and plant.model.nu == 4
     assert "tyre" not in found  # cylinders above the floor's priority roll as they are
-    # the pose is measured in the middle of the four wheels, on the axles' height
-    assert plant.robot.site_rest[0][:2] == pytest.approx([0.0, 0.0], abs=1e-3)
+    # the pose is measured at its kinematic centre, measured as it settled: ahead of the middle of its
+    # four wheels (its arm is forward), on the axles' height
+    assert 0.05 < found["frame_offset"][0] < 0.15 and found["frame_offset"][1:] == [0.0, 0.0]
+    assert plant.robot.site_rest[0][:2] == pytest.approx([found["frame_offset"][0], 0.0], abs=1e-3)
 
 
 def test_keys_a_user_sets_still_win():
@@ -246,3 +250,73 @@ def test_list_says_what_each_menagerie_base_does_as_shipped(tmp_path, monkeypatc
     argv = ["run", "eight-nominal", "--robot", "pal_tiago_dual", "--controller", "kanayama", "--duration", "4"]
     main([*argv, "--no-log", "--no-plot", "--out", "run"])
     assert json.loads((tmp_path / "run" / "metrics.json").read_text())["outcome"] == "tracking"
+
+
+# A scenario file that names its robot and nothing of the reference's speed: the [plant] keys of
+# each base (rby1a: the shipped robot file's, rainbow_robotics_rby1 being refused as shipped).
+FILE_PLANTS = {name: {"model": f"menagerie:{name}"} for name in BASES} | {"rby1a": robot_table("rby1a")}
+
+
+def bare_file(tmp_path: Path, robot: str, reference: str = "", duration: float = 8.0) -> Path:
+    plant = {"kind": "mujoco"} | FILE_PLANTS[robot]
+    keys = "".join(f"{k} = {json.dumps(v)}\n" for k, v in plant.items())
+    path = tmp_path / f"bare-{robot}.toml"
+    path.write_text(f'name = "bare-{robot}"\nduration = {duration}\n{reference}\n[plant]\n{keys}')
+    return path
+
+
+@pytest.mark.menagerie
+@pytest.mark.parametrize("robot", sorted(FILE_PLANTS))
+def test_a_file_naming_its_robot_gets_the_reference_fitted_by_the_rule_of_robot(tmp_path, monkeypatch, capsys, robot):
+    """Before, the default eight on TIAGo from its model alone was lost at 1.61 m RMS (Stretch 3: 2.88 m)."""
+    monkeypatch.chdir(tmp_path)
+    argv = ["--controller", "kanayama", "--no-log", "--no-plot"]
+    assert main(["run", str(bare_file(tmp_path, robot)), *argv, "--out", "a"]) == 0
+    first = capsys.readouterr().out.splitlines()[0]
+    assert first.startswith("robot: ") and "; reference x" in first and "(the rule of --robot)" in first
+    config = tomllib.loads((tmp_path / "a" / "config.toml").read_text())
+    table = read_toml(shipped_dir() / "eight-nominal.toml", "scenario") | {"duration": 8.0}  # the file's
+    same = on_robot(table, robot)  # the one rule: the same reference and controller limits as --robot
+    assert config["reference"] == same["reference"] and config["reference"]["wx"] < 0.25
+    assert {k: config["controller"][k] for k in ("v_max", "omega_max")} == {
+        k: same["controller"][k] for k in ("v_max", "omega_max")
+    }
+    assert config["provenance"]["reference_fit"] in first
+    a = json.loads((tmp_path / "a" / "metrics.json").read_text())
+    assert a["phases"]["before"]["rms_position_error_m"] < TRACKS.get(robot, 0.003)
+    assert main(["run", "a/config.toml", *argv, "--out", "b"]) == 0  # config.toml runs the same, not fitted again
+    assert "reference_fit" not in tomllib.loads((tmp_path / "b" / "config.toml").read_text())["provenance"]
+    assert json.loads((tmp_path / "b" / "metrics.json").read_text())["phases"] == a["phases"]
+
+
+@pytest.mark.menagerie
+@pytest.mark.parametrize("robot", sorted(FILE_PLANTS))
+def test_a_reference_the_robot_cannot_drive_is_said_in_numbers(tmp_path, robot):
+    """Warned, not refused: a reference beyond the wheels is an experiment of its own (a --vary
+    reference.speed axis past the limit); the run goes on, told the peak asked against the limit."""
+    from mlpfac.plants.robot import read_robot
+    from mlpfac.plants.wheels import wheel_speed_limit
+    from mlpfac.scenario.on_robot import peak_wheel_speed
+    from mlpfac.scenario.parse import load
+
+    eight = '[reference]\nkind = "eight"\nspeed = {}\n'  # over a whole eight even slowed 20x (the peak's window: 4 x duration)
+    fast = load(bare_file(tmp_path, robot, eight.format(1.0), duration=200.0))
+    r = read_robot(fast.plant_config, (T,))
+    peak, w_max = peak_wheel_speed(fast.reference, fast.duration, r), wheel_speed_limit(r)
+    said = fast.table["provenance"]["reference_warning"]
+    assert peak > w_max and f"peak wheel speed of {peak:.3g} rad/s of wheels that give {w_max:.3g} rad/s" in said
+    assert fast.reference.speed == 1.0 and "reference_fit" not in fast.table["provenance"]  # run as written
+    speed = float(said.rsplit("speed = ", 1)[1].split()[0])  # what it suggests drives it at SHARE of the limit
+    slow = load(bare_file(tmp_path, robot, eight.format(speed), duration=200.0))
+    assert "reference_warning" not in slow.table["provenance"]
+    assert peak_wheel_speed(slow.reference, slow.duration, r) == pytest.approx(SHARE * w_max, rel=5e-3)
+
+
+@pytest.mark.menagerie
+def test_the_warning_is_the_first_line_of_a_run(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    path = bare_file(tmp_path, "pal_tiago", '[reference]\nkind = "eight"\nwx = 0.25\nwy = 0.5\n')
+    assert main(["run", str(path), "--controller", "kanayama", "--duration", "1", "--no-log", "--no-plot"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0].startswith("warning: the reference asks a peak wheel speed of 11.4 rad/s of wheels that give 5")
+    assert lines[1].startswith("robot: ") and "reference x" not in lines[1]

@@ -234,7 +234,7 @@ def test_a_law_breaks_where_its_speed_limit_falls_below_the_reference(tmp_path, 
     assert json.loads((out / "robustness.json").read_text())["breaking_points"] == robust["breaking_points"]
     (out / "robustness.png").unlink()
     assert main(["plot", str(out)]) == 0 and (out / "robustness.png").is_file() and not (out / "sweep.png").exists()
-    from mlpfac.results import render
+    from mlpfac.report.results import render
 
     assert (out / "robustness.md").read_text() == render(out, {"view": "robustness"})
     panels = tmp_path / "axes.png"  # the curves of several sweeps in one figure: this one's twice

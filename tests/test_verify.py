@@ -5,12 +5,16 @@ from __future__ import annotations
 
 import json
 import shutil
+import signal
+import subprocess
+import sys
+import time
 from pathlib import Path
 
 import pytest
 
 from mlpfac.cli import main
-from mlpfac.verify import RUNS_FILE, digest, verify
+from mlpfac.report.verify import RUNS_FILE, digest, verify
 
 COMMAND = "mlpfac sweep paper --controllers kanayama,corradini --seeds 0-2 --duration 1 --out runs/tiny"
 
@@ -92,7 +96,7 @@ GRID = (
 def test_a_vary_dataset_re_plans_its_grid_and_draws(tmp_path, capsys):
     """The recorded --vary of a dataset is planned again: the same grid points (the runs' keys) and
     the same draws (the same bits), so every run of a robustness dataset can be verified."""
-    from mlpfac.verify import _plan
+    from mlpfac.report.verify import _plan
 
     root = tmp_path / "repo"
     out = root / "runs" / "grid"
@@ -122,7 +126,7 @@ ROBUST = sorted(p.name for p in (DOCS / "data").glob("robust-*"))
 def test_every_documented_robustness_dataset_re_plans_to_its_runs(name):
     """Each robustness dataset keeps every run's figures, and its recorded command (its --vary)
     plans exactly those runs again, so report --verify can check any of them."""
-    from mlpfac.verify import _plan
+    from mlpfac.report.verify import _plan
 
     folder = DOCS / "data" / name
     runs = json.loads((folder / RUNS_FILE).read_text())["runs"]
@@ -141,3 +145,96 @@ def test_verify_plans_a_dataset_of_robots_from_its_command(tmp_path, capsys):
     capsys.readouterr()
     assert main(["report", str(tmp_path / "docs"), "--verify", "2"]) == 0
     assert capsys.readouterr().out == "robots: 2 of 2 runs bit-identical\n"
+
+
+# A dataset that is not what `report --collect` writes: which file is written, what it holds, and
+# what the one line must say. The dataset sorts after `tiny`: nothing may run before the error.
+RUNS_OK = {"command": COMMAND}
+ROW = {"scenario": "paper", "controller": "kanayama", "seed": 0, "digest": "0", "status": "ok", "outcome": "tracking"}
+BAD_DATASETS = {
+    "meta.json not JSON": ({"meta.json": "{not json"}, "zz/meta.json: not valid JSON"),
+    "command with an unclosed quote": (
+        {"meta.json": {"command": "mlpfac sweep 'paper"}},
+        "cannot be read as a command",
+    ),
+    "command a number": ({"meta.json": {"command": 5}}, "meta.json command: expected the command line as a string"),
+    "command a list": ({"meta.json": {"command": ["mlpfac", "sweep"]}}, "expected the command line as a string"),
+    "command with an unknown flag": (
+        {"meta.json": {"command": "mlpfac sweep paper --frobnicate 3"}, RUNS_FILE: {"runs": [ROW]}},
+        "meta.json command: not a command mlpfac reads (unrecognized arguments: --frobnicate 3)",
+    ),
+    "runs.json {}": ({"meta.json": RUNS_OK, RUNS_FILE: {}}, "zz/runs.json runs: expected a list of runs, got NoneType"),
+    "runs.json runs 5": (
+        {"meta.json": RUNS_OK, RUNS_FILE: {"runs": 5}},
+        "runs.json runs: expected a list of runs, got int",
+    ),
+    "runs.json row without fields": (
+        {"meta.json": RUNS_OK, RUNS_FILE: {"runs": [{"scenario": "paper", "seed": 0}]}},
+        "runs.json runs[0]: expected a run's row with",
+    ),
+    "runs.json row a number": ({"meta.json": RUNS_OK, RUNS_FILE: {"runs": [3]}}, "runs.json runs[0]"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD_DATASETS))
+def test_a_bad_dataset_is_one_line_before_any_run(collected, tmp_path, capsys, case):
+    files, needle = BAD_DATASETS[case]
+    docs = _copy(collected, tmp_path)
+    bad = docs / "data" / "zz"
+    bad.mkdir()
+    for name, content in files.items():
+        (bad / name).write_text(content if isinstance(content, str) else json.dumps(content))
+    capsys.readouterr()
+    assert main(["report", str(docs), "--verify", "1"]) == 2
+    out, err = capsys.readouterr()
+    assert out == "" and err.count("\n") == 1 and needle in err and "usage" not in err, err
+
+
+SKIPPED = (
+    "MENAGERIE_ROOT=/path/to/mujoco_menagerie mlpfac sweep tiago-nominal --controllers kanayama --seeds 0 --out runs/t"
+)
+OFFLINE = """import sys, mujoco_menagerie as mm
+def get(*args, **kwargs):
+    raise mm.MenagerieError("offline here")
+mm.get = get
+from mlpfac.cli import main
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+def test_a_dataset_whose_robot_is_not_here_is_skipped_and_only_strict_fails(collected, tmp_path):
+    """Offline without MuJoCo Menagerie: the TIAGo dataset is listed as skipped, with the reason,
+    exit 0 since every dataset that could run is bit-identical; --strict makes the skip an error."""
+    docs = _copy(collected, tmp_path)
+    t = docs / "data" / "t"
+    t.mkdir()
+    (t / "meta.json").write_text(json.dumps({"command": SKIPPED}))
+    row = json.loads((docs / "data" / "tiny" / RUNS_FILE).read_text())["runs"][0] | {"scenario": "tiago-nominal"}
+    (t / RUNS_FILE).write_text(json.dumps({"runs": [row]}))
+    for strict, code in (([], 0), (["--strict"], 1)):
+        cmd = [sys.executable, "-c", OFFLINE, "report", str(docs), "--verify", "1", *strict]
+        done = subprocess.run(cmd, capture_output=True, text=True, cwd=tmp_path)
+        assert done.returncode == code, done.stderr
+        lines = done.stdout.splitlines()
+        assert lines[0].startswith("t: skipped: not available here: ") and "pal_tiago" in lines[0]
+        assert "offline here" in lines[0] and lines[1] == "tiny: 1 of 1 runs bit-identical"
+        assert done.stderr.startswith("mlpfac: 1 datasets skipped, not verified here: t (--strict")
+
+
+def test_sigterm_during_verify_ends_it_as_terminated(collected, tmp_path):
+    """SIGTERM while a dataset's run is re-run: exit 143 and one line, as everywhere else (not 130)."""
+    docs = _copy(collected, tmp_path)
+    slow = docs / "data" / "slow"
+    slow.mkdir()
+    command = "mlpfac sweep paper --controllers adaptive-ukf --seeds 0 --duration 25 --out runs/slow"
+    (slow / "meta.json").write_text(json.dumps({"command": command}))
+    row = json.loads((docs / "data" / "tiny" / RUNS_FILE).read_text())["runs"][0]
+    (slow / RUNS_FILE).write_text(json.dumps({"runs": [row | {"controller": "adaptive-ukf", "seed": 0}]}))
+    mlpfac = str(Path(sys.executable).with_name("mlpfac"))
+    proc = subprocess.Popen([mlpfac, "report", str(docs), "--verify", "1"], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, cwd=tmp_path)  # fmt: skip
+    time.sleep(4.0)  # past the imports and the plans: inside the run of adaptive-ukf (seconds)
+    proc.send_signal(signal.SIGTERM)
+    out, err = proc.communicate(timeout=10)
+    assert proc.returncode == 143 and err.strip() == "mlpfac: terminated", err
+    assert out == ""

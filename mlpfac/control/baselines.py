@@ -163,6 +163,8 @@ class PluginController:
     one instance per seed, or one instance in its batch form. What the controller's own code
     raises becomes a :class:`PluginError`; a bad command ends its seed as diverged (``why``)."""
 
+    level = "velocity"  # it commands (v, omega) (mlpfac.control.torque: the wheels' torques)
+
     def __init__(self, plugin: Plugin, T: float, instance: object | None = None) -> None:
         self.plugin, self.T = plugin, float(T)
         self.name = plugin.name
@@ -221,14 +223,14 @@ class PluginController:
         return u
 
     @staticmethod
-    def _command(out, shape: tuple[int, ...]) -> np.ndarray | str:
+    def _command(out, shape: tuple[int, ...], what: str = "(v, omega)") -> np.ndarray | str:
         """The command as an array of ``shape``, or why it is not one."""
         try:
             u = np.asarray(out, dtype=float)
         except (TypeError, ValueError):
-            return f"step returned {type(out).__name__}, not (v, omega)"
+            return f"step returned {type(out).__name__}, not {what}"
         if u.shape != shape:
-            return f"step returned shape {u.shape}, expected {shape} (v, omega)"
+            return f"step returned shape {u.shape}, expected {shape} {what}"
         if not np.isfinite(u).all():
             return f"step returned a non-finite command {np.array2string(u, precision=3)}"
         return u

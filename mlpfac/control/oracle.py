@@ -39,14 +39,21 @@ the law acts on the error of the same predicted pose.
 
 from __future__ import annotations
 
+import math
 from collections import deque
 
 import numpy as np
 
 from mlpfac.control.law import Law, corradini_step, kanayama_step
 from mlpfac.jit import as_rows, seeds
-from mlpfac.model import tracking_errors
+from mlpfac.model import each, tracking_errors
 from mlpfac.plants.events import ControlPeriod, DelayLine, Event, SensorDelay, WheelRadius
+
+
+def _sinc(half: float) -> float:
+    """sin(half) / half, computed as ``np.sinc(half / pi)`` computes it, with glibc's sine."""
+    y = math.pi * (half / math.pi or 1.0e-20)
+    return math.sin(y) / y
 
 
 def told(event: Event) -> tuple[float, str, float]:
@@ -148,12 +155,12 @@ class Oracle:
     def _predict(self, E: np.ndarray, r: np.ndarray, sent: list) -> np.ndarray:
         """The error (2) to r of the pose the measured one reaches through ``sent``: exact unicycle arcs."""
         th = r[2] - E[:, 2]
-        c, s = np.cos(th), np.sin(th)
+        c, s = each(math.cos, th), each(math.sin, th)
         x, y = r[0] - (c * E[:, 0] - s * E[:, 1]), r[1] - (s * E[:, 0] + c * E[:, 1])
         for u, dt in sent:
             half = 0.5 * u[:, 1] * dt
-            ds = u[:, 0] * dt * np.sinc(half / np.pi)  # chord of the arc: v dt sin(half) / half
-            x, y, th = x + ds * np.cos(th + half), y + ds * np.sin(th + half), th + 2.0 * half
+            ds = u[:, 0] * dt * each(_sinc, half)  # chord of the arc: v dt sin(half) / half
+            x, y, th = x + ds * each(math.cos, th + half), y + ds * each(math.sin, th + half), th + 2.0 * half
         self._q[:, 0], self._q[:, 1], self._q[:, 2] = x, y, th
         tracking_errors(self._q, r, self._e)
         return self._e

@@ -23,6 +23,7 @@ from mlpfac.control.variants import CONTROLLERS
 from mlpfac.exceptions import ConfigError, ScriptStopped
 from mlpfac.tables import FOLDER_NAME
 
+LEVELS = ("velocity", "torque")  # what a controller commands: (v, omega), or the wheels' torques
 GROUP = "mlpfac.control.baselines"  # the entry-point group an installed package registers controllers in
 _LOCAL: dict[str, type] = {}  # classes handed to the Python API that no file or module names
 USER_CODE = False  # a controller of the user's was resolved in this process (see mlpfac.cli.entry)
@@ -39,6 +40,7 @@ class Plugin:
     origin: str  # "file", "module", "entry point (DIST)" or "this process"
     sha256: str | None  # of the file that defines it (None: no file)
     batched: bool  # it has the batch form
+    level: str = "velocity"  # "torque": step(obs) -> wheel torques (mlpfac.control.torque)
     params: dict = field(default_factory=dict, compare=False)
     cls: type | None = field(default=None, compare=False, repr=False)
 
@@ -119,9 +121,15 @@ def resolve(spec: str, params: dict | None, T: float, where: str, params_where: 
             where, f"{target} has no step(e, r) method (the contract: mlpfac.control.baselines.Controller)"
         )
     name = _name(cls, spec if origin.startswith("entry point") else None, where)
+    level = getattr(cls, "level", "velocity")
+    if level not in LEVELS:
+        raise ConfigError(
+            where, f"{target}.level is {level!r}; a controller's level is 'velocity' (the default) or 'torque'"
+        )
     if params is not None:
-        _check_params(cls, T, params, where, params_where)
-    return Plugin(spec, target, name, origin, sha, getattr(cls, "batched", False) is True, dict(params or {}), cls)
+        _check_params(cls, T, params, where, params_where, level == "torque")
+    batched = getattr(cls, "batched", False) is True
+    return Plugin(spec, target, name, origin, sha, batched, level, dict(params or {}), cls)
 
 
 def _choices() -> str:
@@ -221,17 +229,27 @@ def one_line(err: BaseException) -> str:
     return text + (f" ({Path(tb.filename).name}, line {tb.lineno})" if tb is not None else "")
 
 
-def _check_params(cls: type, T: float, params: dict, where: str, params_where: str) -> None:
+def _check_params(cls: type, T: float, params: dict, where: str, params_where: str, torque: bool = False) -> None:
     try:
         sig = inspect.signature(cls)
     except (TypeError, ValueError):
         return  # a class whose signature cannot be read is trusted
+    given = {"T": T, "robot": None} if torque else {"T": T}
+    for key in given:
+        if key in params:
+            raise ConfigError(f"{params_where} {key}", f"{key} is given by the testbed, not by [controller.params]")
+    takes = any(p.kind is p.VAR_KEYWORD for p in sig.parameters.values())
+    if torque and "robot" not in sig.parameters and not takes:
+        raise ConfigError(
+            where,
+            f"{cls.__name__} is a torque-level controller: it must take robot (Class(T=..., robot=..., **params))",
+        )
     try:
-        sig.bind(T=T, **params)
+        sig.bind(**given, **params)
     except TypeError as err:
         text = str(err)
         bad = re.search(r"keyword argument '(\w+)'", text)
-        if bad and bad.group(1) != "T":
+        if bad and bad.group(1) not in given:
             raise ConfigError(f"{params_where} {bad.group(1)}", f"{cls.__name__} does not take it ({text})") from None
         if "T" not in sig.parameters and not any(p.kind is p.VAR_KEYWORD for p in sig.parameters.values()):
             raise ConfigError(where, f"{cls.__name__}(T=..., **params) must take T, the control period in s") from None

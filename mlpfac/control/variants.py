@@ -55,5 +55,7 @@ VARIANTS["adaptive-real"] = VARIANTS["adaptive-input-delay"] | {
 # cost where the plant keeps changing (a friction change raises an alarm every half second).
 VARIANTS["adaptive-real-fast"] = VARIANTS["adaptive-real"] | {"input_P_alarm": 2e-2}
 
+# The shipped controllers of the torque level (mlpfac/control/dynamic.py): they command the wheels' torques.
+TORQUE_LEVEL = ("fierro-lewis", "adaptive-dynamic", "oracle-dynamic")
 # Every shipped controller (the oracles: mlpfac/control/oracle.py); any other name is a plug-in's.
-CONTROLLERS = (*VARIANTS, "corradini", "kanayama", "oracle", "oracle-kanayama")
+CONTROLLERS = (*VARIANTS, "corradini", "kanayama", "oracle", "oracle-kanayama", *TORQUE_LEVEL)

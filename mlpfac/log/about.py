@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from mlpfac.loop.metrics import RunMetrics, metrics
 from mlpfac.loop.record import RunRecord
 
 CONTROLLERS = {
@@ -16,6 +17,9 @@ CONTROLLERS = {
     "kanayama": "Kanayama's kinematic law, no learning",
     "oracle": "the law (35) given the plant's true functions",
     "oracle-kanayama": "Kanayama's law told the plant's changes (the true radius, period and delay)",
+    "fierro-lewis": "wheel torques: Kanayama's law backstepped through computed torque with the nominal dynamic model",
+    "adaptive-dynamic": "wheel torques: fierro-lewis with MLPs and an EKF learning the dynamic model's error",
+    "oracle-dynamic": "wheel torques: fierro-lewis told the plant's changes (its true dynamic model)",
 }
 COLOURS = (
     "**colours**: v, omega: commanded blue, measured orange, reference grey; wheels: left blue, right red, "
@@ -55,17 +59,18 @@ def about_text(record: RunRecord, description: str = "", ended: bool = False) ->
 
 
 def _where_to_look(record: RunRecord) -> list[str]:
-    n, T = record.n, record.T
-    w = min(int(round(record.warmup_s / T)), n)
+    n = record.n
+    w = min(int(round(record.warmup_s / record.T)), n)
     e = record.e_true[w:n]
     e = e[np.all(np.isfinite(e), axis=1)]
     out = [f"**{record.status}**" + (f" ({record.reason})" if record.reason else "")]
-    if not len(e):
+    run = RunMetrics.from_json(metrics(record))  # the figures of metrics.json, computed once
+    whole = run.figures("whole")
+    if not len(e) or whole is None:
         return out
-    pos = np.hypot(e[:, 0], e[:, 1])
     m1, m2 = float(np.mean(e[:, 0])), float(np.mean(e[:, 1]))
     out[0] += (
-        f"; after the {record.warmup_s:g} s warm-up: position RMS **{1e3 * np.sqrt(np.mean(pos**2)):.1f} mm**, "
+        f"; after the {record.warmup_s:g} s warm-up: position RMS **{1e3 * whole[0]:.1f} mm**, "
         f"mean e1 {1e3 * m1:+.1f} mm, mean e2 {1e3 * m2:+.1f} mm"
     )
     out.append("")
@@ -75,19 +80,15 @@ def _where_to_look(record: RunRecord) -> list[str]:
         if record.controller.startswith("adaptive"):
             lag += "; the networks do not learn this lag away (the finding on the robot: docs/results-dynamics.md)"
         out.append(lag)
-    if record.split_s is not None and record.split_s / T < n:
-        k = int(round(record.split_s / T))
-        before = _rms(record.e_true[w:k])
-        after = _rms(record.e_true[k:n])
-        out.append(f"- the event at {record.split_s:g} s: position RMS {before:.1f} mm before, {after:.1f} mm after")
+    before, after = run.figures("before"), run.figures("after")
+    if record.split_s is not None and before is not None and after is not None:
+        out.append(
+            f"- the event at {record.split_s:g} s: position RMS {1e3 * before[0]:.1f} mm before, "
+            f"{1e3 * after[0]:.1f} mm after"
+        )
     if record.controller != "corradini":
         out.append(
             f"- next: the same seed without learning, `mlpfac run {record.scenario} --controller corradini "
             f"--seed {record.seed}`, then `mlpfac view` both folders"
         )
     return out
-
-
-def _rms(e: np.ndarray) -> float:
-    e = e[np.all(np.isfinite(e[:, :2]), axis=1)]
-    return float(1e3 * np.sqrt(np.mean(e[:, 0] ** 2 + e[:, 1] ** 2))) if len(e) else float("nan")

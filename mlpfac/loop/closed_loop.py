@@ -5,11 +5,13 @@ kernel, to the same bits. :mod:`mlpfac.loop.runner` builds what it needs and run
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 
 import numpy as np
 
 from mlpfac.control.baselines import Controller
+from mlpfac.control.torque import Observation, reference_rates
 from mlpfac.interrupts import raise_swallowed
 from mlpfac.loop.compiled import BAD, segment
 from mlpfac.loop.kernels import bad_seeds
@@ -84,6 +86,14 @@ class PlantList:
     def diverged(self) -> list[str | None]:
         return [self.plants[i].diverged() if i in self.live else None for i in range(len(self.plants))]
 
+    def motion(self) -> np.ndarray:
+        """(B, 4) (v, omega, wheel_l, wheel_r) as each live seed's robot measures them (torque commands)."""
+        if not hasattr(self, "_w"):
+            self._w = np.zeros((len(self.plants), 4))
+        for i in self.live:
+            self._w[i] = self.plants[i].motion()
+        return self._w
+
     def sim_time(self, i: int, n: int, T: float) -> float:
         return float(getattr(self.plants[i], "sim_time", n * T))
 
@@ -122,6 +132,9 @@ class ClosedLoop:
         e = np.zeros((0, 3))
         tracking_errors(e, ref[0], e)  # load (or compile) the loop's kernels before it starts
         bad_seeds(e, np.zeros((0, 2)), e, self.no_z[:0], 1.0, self.bad[:0])
+        self.torque = getattr(ctrl, "level", "velocity") == "torque"  # step(obs) -> wheel torques
+        if self.torque:
+            self.r_dot = reference_rates(ref, self.T)
         self.compiled = compiled and self.listed and _compiled(plant, ctrl)
         if self.compiled:
             self._prepare_segments()
@@ -195,7 +208,11 @@ class ClosedLoop:
         """Step k's errors (2) and command, recorded; the seeds whose step diverged stop. False: none live."""
         q, q_meas, r, e, et = self.plant.true_pose(), self.plant.measure(), self.ref[k], self._e, self._et
         tracking_errors(q_meas, r, e)
-        u = self.ctrl.step(e, r)
+        if self.torque:
+            w = self.plant.motion()
+            u = self.ctrl.step(Observation(e, r, self.r_dot[k], q_meas, w[:, :2], w[:, 2:], k * self.T))
+        else:
+            u = self.ctrl.step(e, r)
         tracking_errors(q, r, et)
         self.pose[:, k], self.pose_meas[:, k], self.e[:, k], self.e_true[:, k], self.u[:, k] = q, q_meas, e, et, u
         z = self._record_ctrl(k)
@@ -316,7 +333,7 @@ def _clear_after(rec: RunRecord, stop: tuple[int, int] | None, plant_store: dict
 
 def _diverged(q: np.ndarray, u: np.ndarray, e_true: np.ndarray, z: np.ndarray | None, limit_m: float) -> str | None:
     """Why one seed's step diverged (the reasons of :func:`mlpfac.loop.kernels.bad_seeds`), or None."""
-    err = float(np.hypot(e_true[0], e_true[1]))
+    err = math.hypot(e_true[0], e_true[1])
     if not (np.isfinite(q).all() and np.isfinite(u).all()):
         return "non-finite pose or command"
     if z is not None and not np.isfinite(z).all():

@@ -11,18 +11,29 @@ and can apply every event.
 from __future__ import annotations
 
 import dataclasses
+import math
+
+import numpy as np
 
 from mlpfac.control.adaptive.controller import VARIANTS, Adaptive
+from mlpfac.control.adaptive.dynamic_level import AdaptiveDynamic
 from mlpfac.control.baselines import Controller, Corradini, Kanayama, PluginController
+from mlpfac.control.dynamic import OUTER_GAINS, FierroLewis, OracleDynamic
 from mlpfac.control.oracle import Oracle, told
+from mlpfac.control.torque import TorquePluginController
 from mlpfac.plants import make_plant  # noqa: F401 (the plant half of the factory, as mlpfac.loop.factory.make_plant)
 from mlpfac.scenario.parse import Scenario
+from mlpfac.scenario.reference import sample
 
 
-def make_controller(scn: Scenario, instance: object | None = None) -> Controller:
+def make_controller(scn: Scenario, instance: object | None = None, plant=None) -> Controller:
     """The scenario's controller: a named variant of the adaptive scheme, Corradini's or Kanayama's law,
-    the oracle (the law told the scenario's events, :mod:`mlpfac.control.oracle`), or a user's own
-    (:mod:`mlpfac.control.plugins`; ``instance``: an object of it, made by the caller, runs one seed)."""
+    the oracle (the law told the scenario's events, :mod:`mlpfac.control.oracle`), a controller of the
+    wheels' torques (:mod:`mlpfac.control.dynamic`, given the nominal model of ``plant``, the run's
+    MuJoCo robot, built from the scenario when not given), or a user's own (:mod:`mlpfac.control.plugins`;
+    ``instance``: an object of it, made by the caller, runs one seed)."""
+    if scn.level == "torque":
+        return _torque_level(scn, instance, plant)
     if scn.plugin is not None:
         return PluginController(scn.plugin, scn.T, instance)
     if scn.controller in VARIANTS:
@@ -41,3 +52,30 @@ def make_controller(scn: Scenario, instance: object | None = None) -> Controller
         gains = (g.Kx, g.Ky, g.Ktheta) if scn.controller == "oracle-kanayama" else None
         return Oracle(scn.law, scn.T, [told(ev) for ev in scn.events], scn.plant_kind == "kinematic", gains)
     return Kanayama(scn.law, scn.kanayama, scn.T)
+
+
+def _torque_level(scn: Scenario, instance: object | None, plant) -> Controller:
+    """A controller of the wheels' torques, given the robot's nominal model (``oracle-dynamic``: and
+    the true one after each event, read from a robot the scenario's events are applied to in turn)."""
+    ref = sample(scn.reference, np.arange(2) * scn.T)
+    plant = plant if plant is not None else make_plant(scn, ref)
+    robot = plant.dynamics()
+    if scn.plugin is not None:
+        return TorquePluginController(scn.plugin, scn.T, robot, instance)
+    g, law = scn.kanayama, scn.law
+    own = isinstance(scn.table.get("controller"), dict) and "kanayama" in scn.table["controller"]
+    gains = (g.Kx, g.Ky, g.Ktheta) if own else OUTER_GAINS  # the file's [controller.kanayama], else its own
+    limits = (math.inf if law.v_max is None else law.v_max, math.inf if law.omega_max is None else law.omega_max)
+    if scn.controller == "fierro-lewis":
+        return FierroLewis(robot, scn.T, gains, limits)
+    if scn.controller == "adaptive-dynamic":
+        return AdaptiveDynamic(robot, scn.T, gains, limits)
+    changes = []
+    if scn.events:
+        changed = make_plant(scn, ref)
+        changed.reset(np.zeros(3), np.random.default_rng(0))
+        for ev in scn.events:
+            changed.apply(ev)
+            dynamic = ev.kind in ("payload", "actuator", "wheel_radius")
+            changes.append((*told(ev), changed.true_dynamics() if dynamic else None))
+    return OracleDynamic(robot, scn.T, gains, limits, changes)

@@ -32,7 +32,8 @@ def build(scn: Scenario, instance: object | None = None) -> Built:
     missing actuator) fails here, before a run writes or sends anything. ``instance``: an object of
     the scenario's plug-in controller to run (:func:`mlpfac.loop.factory.make_controller`)."""
     ref = sample(scn.reference, np.arange(scn.steps + 1) * scn.T)  # (N + 1, 5)
-    return Built(ref, make_plant(scn, ref), make_controller(scn, instance))
+    plant = make_plant(scn, ref)
+    return Built(ref, plant, make_controller(scn, instance, plant))
 
 
 def run(
@@ -79,7 +80,8 @@ def run_batch(scns: list[Scenario], plant_list: bool = False) -> list[RunRecord]
     plant = make_plant(base, ref)
     if plant_list or not plant.batched:
         plant = [plant] + [make_plant(s, ref) for s in scns[1:]]
-    recs = _loop(scns, ref, plant, make_controller(base), None, None, full=False)
+    recs = _loop(scns, ref, plant, make_controller(base, None, plant[0] if isinstance(plant, list) else plant), None,
+                 None, full=False)  # fmt: skip
     if any(r.status == "interrupted" for r in recs):
         raise KeyboardInterrupt
     return recs

@@ -39,7 +39,16 @@ def make_plant(scn: PlantSpec, ref: np.ndarray):
             plant = MujocoPlant(scn.plant_config, scn.T, periods)
     except ConfigError as err:
         where = err.where if err.where.startswith(scn.source) else f"{scn.source} [plant] {err.where}".rstrip()
-        raise ConfigError(where, err.what) from None
+        raise type(err)(where, err.what) from None  # UnavailableError stays itself
+    if getattr(scn, "level", "velocity") == "torque":  # a controller of the wheels' torques
+        actuator = getattr(getattr(plant, "config", None), "actuator", None)
+        if actuator != "torque":
+            raise ConfigError(
+                f"{scn.source} [plant] actuator",
+                f"{scn.controller} is a torque-level controller: it commands wheel torques, which the robot's "
+                f'{actuator} servos do not take; set actuator = "torque" in [plant] (torque motors with the same limit)',
+            )
+        plant.torque_commands()
     for i, ev in enumerate(scn.events):
         plant.check_event(ev, f"{scn.source} [[events]] #{i + 1}")
     _check_size(scn, plant)

@@ -38,9 +38,11 @@ from mlpfac.plants.ik import body_velocity_vw, wheel_speeds_lr
 # ints: I_AL2, I_AR2 a second wheel's actuator on each side (skid-steer; -1: none), I_MIX 1 for two
 # motors on tendons over both wheels (a (v, omega) drive; I_AL, I_AR are those motors), I_CLAMP 1 for
 # servos whose force limit the plant keeps through their control (servo_limit = "control"), I_DL2,
-# I_DR2 the second wheels' dof addresses
+# I_DR2 the second wheels' dof addresses, I_TAU 1 when the command is the wheels' torques (a
+# torque-level controller: the torque drive without its PI loop)
 I_AL, I_AR, I_DL, I_DR, I_SITE, I_NSUB, I_TORQUE, I_NOISE, I_AL2, I_AR2, I_MIX, I_CLAMP, I_DL2, I_DR2 = range(14)
-N_INTS = 14
+I_TAU = 14
+N_INTS = 15
 # fl
 F_CL, F_CR, F_SL, F_SR, F_IK_R, F_IK_TRACK, F_WMAX, F_DT, F_KP, F_KI, F_TLMAX, F_TRMAX, F_RADIUS, F_ZREST = range(14)
 F_STD = 14  # three pose-noise standard deviations
@@ -181,7 +183,8 @@ def _physics(mp, dp, ctrl, qvel, ints, fl, st, wl, wr):
     servos are MuJoCo's (with ``I_CLAMP`` their controls kept within their force limits, :func:`_within`,
     every physics step); the torque drive is a discrete wheel-speed PI loop evaluated every physics
     step: tau = kp e + ki I, clamped to the torque limit, I integrating e only while tau is not
-    clamped (no wind-up)."""
+    clamped (no wind-up). With ``I_TAU`` (wl, wr) are the wheels' torques themselves, clamped to
+    the limit and held."""
     n, al, ar, dl, dr = ints[I_NSUB], ints[I_AL], ints[I_AR], ints[I_DL], ints[I_DR]
     cl, cr = fl[F_CL], fl[F_CR]
     al2, ar2 = ints[I_AL2], ints[I_AR2]
@@ -211,11 +214,14 @@ def _physics(mp, dp, ctrl, qvel, ints, fl, st, wl, wr):
         sl, sr, kp, ki, dt = fl[F_SL], fl[F_SR], fl[F_KP], fl[F_KI], fl[F_DT]
         tl_max, tr_max = fl[F_TLMAX], fl[F_TRMAX]
         il, ir = st[S_IL], st[S_IR]
+        direct = ints[I_TAU] != 0
         for _ in range(n):
             el = wl - sl * qvel[dl]
             er = wr - sr * qvel[dr]
             tl = kp * el + ki * (il + el * dt)
             tr = kp * er + ki * (ir + er * dt)
+            if direct:
+                tl, tr, el, er = wl, wr, 0.0, 0.0
             if ints[I_MIX]:
                 il, ir = _mix(ctrl, al, ar, fl, tl, tr, il, ir, el * dt, er * dt)
                 mj_step2(mp, dp)
@@ -314,12 +320,16 @@ def diverged(robot):
 
 @kernel(lambda: with_robot("i8(f8, f8, f8[::1], f8[::1])"), ext="mujoco")
 def plant_step(u0, u1, draw, tele, robot):
-    """One control step of the robot for the command u = (v, omega): the IK (wheel speeds the nominal
+    """One control step of the robot for the command u = (v, omega) (with ``I_TAU``: the wheels'
+    torques (tau_l, tau_r) in N m, forward positive, and ``wheel_cmd`` NaN): the IK (wheel speeds the nominal
     radius and track give, scaled together under the wheel-speed limit), the physics, the pose and
     its measurement (noise ``draw`` (3,) of standard normals), the telemetry row ``tele`` (see
     TELEMETRY). Returns why it diverged (0: it did not)."""
     ints, fl, st, qvel, vel = robot.ints, robot.fl, robot.st, robot.qvel, robot.vel
-    wl, wr = wheel_speeds_lr(u0, u1, fl[F_IK_R], fl[F_IK_TRACK], fl[F_WMAX])
+    if ints[I_TAU]:  # the wheels' torques (tau_l, tau_r): no IK, no wheel-speed command
+        wl, wr = u0, u1
+    else:
+        wl, wr = wheel_speeds_lr(u0, u1, fl[F_IK_R], fl[F_IK_TRACK], fl[F_WMAX])
     _physics(robot.mp, robot.dp, robot.ctrl, qvel, ints, fl, st, wl, wr)
     read_pose(robot.site_xpos, robot.site_xmat, st)
     measure(ints, fl, st, draw, robot.hist, robot.fill)
@@ -329,7 +339,7 @@ def plant_step(u0, u1, draw, tele, robot):
     th = st[S_THETA]
     tele[0], tele[1] = body_velocity_vw(ml, mr, fl[F_IK_R], fl[F_IK_TRACK])
     tele[2], tele[3] = vel[3] * math.cos(th) + vel[4] * math.sin(th), vel[2]
-    tele[4], tele[5] = wl, wr
+    tele[4], tele[5] = (math.nan, math.nan) if ints[I_TAU] else (wl, wr)
     tele[6], tele[7] = ml, mr
     tele[8], tele[9] = sl * robot.qfrc[dl], sr * robot.qfrc[dr]  # as applied: joint limits included
     return diverged(robot)

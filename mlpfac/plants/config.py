@@ -15,7 +15,7 @@ import numpy as np
 from mlpfac.exceptions import ConfigError
 from mlpfac.plants.model_file import is_menagerie, menagerie_name, model_path, shipped_model
 
-LIMITS = ("wheel_radius", "track", "max_wheel_speed", "timestep")
+LIMITS = ("wheel_radius", "track", "turning_track", "max_wheel_speed", "timestep")
 ARMATURE_MAX = 1e3  # kg m^2 on a wheel's hinge, at most
 NOISE_STD_MAX = 10.0  # m and rad of pose noise, at most
 TIMESTEP_MIN, TIMESTEP_MAX = 1e-5, 0.1  # physics timestep (s): finer would take hours, coarser is not physics
@@ -71,10 +71,15 @@ class MujocoConfig:
     armature: float | None = None  # rotor inertia on each driven wheel's hinge (kg m^2); None: the model's
     wheel_radius: float | None = None  # radius the IK believes (m); None: read from the model
     track: float | None = None  # wheel separation the IK believes (m); None: read from the model
+    turning_track: float | None = None  # a skid-steer's: the track it turns as (m); None: measured as it settles
     max_wheel_speed: float | None = None  # rad/s, kept by scaling (v, omega); None: the model's; inf: none
     pose_noise_std: float | tuple[float, ...] = 0.0  # std of Gaussian noise on (x, y, theta): scalar or 3
-    pi_kp: float = 0.5  # torque drive: PI proportional gain, N m per rad/s of wheel-speed error
-    pi_ki: float = 10.0  # torque drive: PI integral gain, N m per rad of integrated error
+    twist_noise_std: float | tuple[float, float] = (
+        0.0  # std of noise on the twist a torque-level controller measures: v (m/s), omega (rad/s)
+    )
+    wheel_speed_noise_std: float = 0.0  # std of noise on the wheel speeds a torque-level controller measures (rad/s)
+    pi_kp: float | None = None  # torque drive: PI proportional gain, N m per rad/s; None: scaled to the robot's inertia
+    pi_ki: float | None = None  # torque drive: PI integral gain, N m per rad; None: scaled to the robot's inertia
 
     def __post_init__(self) -> None:
         choices = {
@@ -114,11 +119,14 @@ class MujocoConfig:
             isinstance(arm, bool) or not isinstance(arm, int | float) or not 0 <= arm <= ARMATURE_MAX
         ):
             raise ConfigError("armature", f"must be a number in 0 .. {ARMATURE_MAX:g} kg m^2, got {arm!r}")
-        _positive("pi_kp", self.pi_kp)
+        _positive("pi_kp", self.pi_kp, optional=True)
         ki = self.pi_ki
-        if isinstance(ki, bool) or not isinstance(ki, int | float) or not math.isfinite(ki) or ki < 0:
+        if ki is not None and (
+            isinstance(ki, bool) or not isinstance(ki, int | float) or not math.isfinite(ki) or ki < 0
+        ):
             raise ConfigError("pi_ki", f"must be a number >= 0, got {ki!r}")
         self.noise_std()
+        self.motion_noise_std()
         if is_menagerie(self.model):  # resolved (perhaps downloaded) when the robot is read, not here
             menagerie_name(self.model)
         else:
@@ -154,3 +162,21 @@ class MujocoConfig:
                 f"standard deviations must lie in 0 .. {NOISE_STD_MAX:g} (m, m, rad), got {self.pose_noise_std!r}",
             )
         return std.copy() if np.any(std > 0) else None
+
+    def motion_noise_std(self) -> np.ndarray | None:
+        """(4,) standard deviations of the noise on (v, omega, wheel_l, wheel_r) as a torque-level
+        controller measures them, or None when there is none."""
+        try:
+            twist = np.broadcast_to(np.asarray(self.twist_noise_std, dtype=float), (2,))
+        except (TypeError, ValueError):
+            raise ConfigError(
+                "twist_noise_std", f"expected a number or 2 numbers (m/s, rad/s), got {self.twist_noise_std!r}"
+            ) from None
+        w = self.wheel_speed_noise_std
+        if isinstance(w, bool) or not isinstance(w, int | float):
+            raise ConfigError("wheel_speed_noise_std", f"expected a number (rad/s), got {w!r}")
+        std = np.array([*twist, w, w], dtype=float)
+        for key, x in (("twist_noise_std", std[:2]), ("wheel_speed_noise_std", std[2:])):
+            if not np.all(np.isfinite(x)) or np.any(x < 0) or np.any(x > NOISE_STD_MAX):
+                raise ConfigError(key, f"standard deviations must lie in 0 .. {NOISE_STD_MAX:g}, got {x.tolist()!r}")
+        return std if np.any(std > 0) else None

@@ -17,6 +17,10 @@
   kilogram grips the floor along its rim with a far softer MuJoCo contact than the robot's mass
   holds it across, and a skid-steer that must scrub sideways to turn then turns at a few per cent
   of its command; a geared motor's rotor, reflected through its gear, is what a real wheel has;
+- ``pi_kp``, ``pi_ki``: for the torque drive, the wheel-speed PI loop's gains scaled to the inertia a
+  wheel drives, J = m r^2 / 2 + I_w (half the robot's mass at the rim and the wheel's own, its
+  rotor's armature included): 0.5 N m s/rad and 10 N m/rad per J of our 5.5 kg robot (the gains
+  tuned on it, which this rule gives it back), 3 digits, so that the loop closes as fast on any robot;
 - ``servo_limit``: ``"control"`` where the servos chatter and no such timestep is left: the plant
   keeps their force within its limit through their control, every physics step, and MuJoCo
   integrates them implicitly (it does not a clamped servo).
@@ -138,6 +142,20 @@ def _whole(period: float, dt: float) -> bool:
     return round(n) >= 1 and abs(n - round(n)) <= 1e-6 * n
 
 
+PI_KP, PI_KI = 0.5, 10.0  # the wheel-speed PI loop's gains tuned on our robot (models/diffdrive.xml) ...
+PI_INERTIA = 5.5 * 0.05**2 / 2 + 0.0003125 + 0.001  # ... whose wheel drives J = m r^2 / 2 + I_w (kg m^2)
+
+
+def pi_gains(config, mass: float, radius: float, wheel_inertia: float) -> dict:
+    """``{"pi_kp": .., "pi_ki": ..}`` for the unset gains of a torque drive: our robot's, scaled by the
+    inertia J = m r^2 / 2 + I_w a wheel drives against ours (3 digits)."""
+    if config.actuator != "torque":
+        return {}
+    scale = (mass * radius**2 / 2 + wheel_inertia) / PI_INERTIA
+    out = {"pi_kp": float(f"{PI_KP * scale:.3g}")} if config.pi_kp is None else {}
+    return out | ({"pi_ki": float(f"{PI_KI * scale:.3g}")} if config.pi_ki is None else {})
+
+
 def said(chosen: dict, config) -> str:
     """What the rules chose, for the run's first line ("" when nothing)."""
     parts = []
@@ -153,6 +171,10 @@ def said(chosen: dict, config) -> str:
         parts.append(f"rotor inertia {config.armature:g} kg m^2 on each wheel")
     if "timestep" in chosen:
         parts.append(f"timestep {config.timestep:g} s")
+    if "pi_kp" in chosen or "pi_ki" in chosen:
+        parts.append(
+            f"wheel-speed PI gains kp {config.pi_kp:g} N m s/rad, ki {config.pi_ki:g} N m/rad (for its inertia)"
+        )
     return f"; chosen: {', '.join(parts)}" if parts else ""
 
 

@@ -22,6 +22,7 @@ import mujoco
 import numpy as np
 
 from mlpfac.exceptions import ConfigError
+from mlpfac.model import dot, matmul, norm
 from mlpfac.plants import edits
 from mlpfac.plants.config import MujocoConfig
 
@@ -188,15 +189,15 @@ def _wheel_pair(m: mujoco.MjModel, d: mujoco.MjData, config: MujocoConfig, found
         )
     j = [int(m.actuator_trnid[a, 0]) for a in found]
     axis, apart = d.xaxis[j[0]], d.xanchor[j[1]] - d.xanchor[j[0]]
-    off_line = float(np.linalg.norm(apart - (apart @ axis) * axis))
-    if abs(float(axis @ d.xaxis[j[1]])) < PARALLEL or off_line > ON_AXLE * float(np.linalg.norm(apart)):
+    off_line = norm(apart - dot(apart, axis) * axis)
+    if abs(dot(axis, d.xaxis[j[1]])) < PARALLEL or off_line > ON_AXLE * norm(apart):
         raise ConfigError(
             "left_actuator",
             f"the wheel servos {_listed(m, found)} are not on one axle (axes parallel and on one line; "
             f"{off_line:.3g} m off it): {PICK}",
         )
     origin, R = base_frame(m, d, config, _root(m, found[0]))
-    side = [float((d.xanchor[i] - origin) @ R[:, 1]) for i in j]
+    side = [dot(d.xanchor[i] - origin, R[:, 1]) for i in j]
     if side[0] * side[1] >= 0:
         raise ConfigError(
             "left_actuator",
@@ -243,7 +244,7 @@ def find_tendon_pair(m: mujoco.MjModel, d: mujoco.MjData) -> tuple[int, int] | N
     for joints, acts in pairs.items():
         if len(acts) == 2:
             c = np.array([[tendon_joints(m, a)[j] for j in joints] for a in acts])
-            if abs(np.linalg.det(c)) > 1e-9 * np.abs(c).max() ** 2:
+            if abs(c[0, 0] * c[1, 1] - c[0, 1] * c[1, 0]) > 1e-9 * np.abs(c).max() ** 2:  # det, 2x2
                 return acts[0], acts[1]
     return None
 
@@ -266,7 +267,7 @@ def _skid_steer(m: mujoco.MjModel, d: mujoco.MjData, config: MujocoConfig, found
     """Four wheel servos, two a side: the front pair the first wheels (the axle the pose is measured
     on), the rear pair each side's second, commanded as its first."""
     origin, R = base_frame(m, d, config, _root(m, found[0]))
-    at = {a: R.T @ (d.xanchor[int(m.actuator_trnid[a, 0])] - origin) for a in found}
+    at = {a: matmul(R.T, (d.xanchor[int(m.actuator_trnid[a, 0])] - origin)[:, None])[:, 0] for a in found}
     left = sorted((a for a in found if at[a][1] > 0), key=lambda a: -at[a][0])
     right = sorted((a for a in found if at[a][1] < 0), key=lambda a: -at[a][0])
     if len(left) != 2 or len(right) != 2:
@@ -306,7 +307,7 @@ def _pose_frame(m: mujoco.MjModel, d: mujoco.MjData, config: MujocoConfig, chang
         if a >= 0 and _on_joint(m, a):
             joints.append(int(m.actuator_trnid[a, 0]))
     mid = sum(d.xanchor[j] for j in joints) / len(joints)
-    offset = d.xmat[root].reshape(3, 3).T @ (mid - d.xpos[root])
+    offset = matmul(d.xmat[root].reshape(3, 3).T, (mid - d.xpos[root])[:, None])[:, 0]
     changes = {"body": m.body(root).name}
     if config.frame_offset is None:
         changes["frame_offset"] = tuple(round(float(x), 9) + 0.0 for x in offset)

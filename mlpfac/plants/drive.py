@@ -71,7 +71,8 @@ def mix(m: mujoco.MjModel, qpos: np.ndarray, acts: tuple[int, int], dofs, sign) 
         mujoco.mj_forward(m, d)
         torque[:, i] = [s * d.qfrc_actuator[dof] / UNIT for s, dof in zip(sign, dofs, strict=True)]
     umax = np.array([ctrl_limit(m, a) for a in acts])
-    return np.linalg.inv(torque), umax
+    (a, b), (c, d_) = torque
+    return np.array([[d_, -b], [-c, a]]) / (a * d_ - b * c), umax  # the inverse, written out (not LAPACK's)
 
 
 def ctrl_limit(m: mujoco.MjModel, a: int) -> float:

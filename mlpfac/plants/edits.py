@@ -11,6 +11,8 @@ import math
 import mujoco
 import numpy as np
 
+from mlpfac.model import matmul, norm
+
 POSE_SITE = "mlpfac_pose"  # the site added where the pose is measured (a body, or a site with an offset)
 TYRE = "mlpfac_tyre"  # the sphere tyres added to mesh wheels (tyre = "sphere")
 MESH = int(mujoco.mjtGeom.mjGEOM_MESH)
@@ -25,7 +27,11 @@ def offset_from_site(m: mujoco.MjModel, site: int, offset) -> tuple[int, np.ndar
     """Body, position and orientation of a frame ``offset`` (in the site's axes) from ``site``."""
     R = np.empty(9)
     mujoco.mju_quat2Mat(R, m.site_quat[site])
-    return int(m.site_bodyid[site]), m.site_pos[site] + R.reshape(3, 3) @ np.asarray(offset, float), m.site_quat[site]
+    return (
+        int(m.site_bodyid[site]),
+        m.site_pos[site] + matmul(R.reshape(3, 3), np.asarray(offset, float)[:, None])[:, 0],
+        m.site_quat[site],
+    )
 
 
 def lock_other_joints(spec: mujoco.MjSpec, m: mujoco.MjModel, qpos: np.ndarray, keep: tuple[int, ...]) -> list[str]:
@@ -58,7 +64,7 @@ def lock_other_joints(spec: mujoco.MjSpec, m: mujoco.MjModel, qpos: np.ndarray, 
         mujoco.mju_mulQuat(q, qp_inv, d.xquat[b])
         body = spec.bodies[b]
         body.alt.type = mujoco.mjtOrientation.mjORIENTATION_QUAT
-        body.pos, body.quat = Rp.T @ (d.xpos[b] - d.xpos[p]), q
+        body.pos, body.quat = matmul(Rp.T, (d.xpos[b] - d.xpos[p])[:, None])[:, 0], q
         for j in list(body.joints):
             locked.append(j.name or f"joint of body {b}")
     tendons = {t for t in range(m.ntendon) if gone & set(_tendon_joints(m, t))}
@@ -132,9 +138,9 @@ def mesh_radius(m: mujoco.MjModel, geom: int, joint: int) -> float:
     verts = m.mesh_vert[m.mesh_vertadr[mesh] : m.mesh_vertadr[mesh] + m.mesh_vertnum[mesh]]
     R = np.empty(9)
     mujoco.mju_quat2Mat(R, m.geom_quat[geom])
-    p = verts @ R.reshape(3, 3).T + m.geom_pos[geom] - m.jnt_pos[joint]
-    a = m.jnt_axis[joint] / np.linalg.norm(m.jnt_axis[joint])
-    return float(np.sqrt(np.max(np.sum(p * p, axis=1) - (p @ a) ** 2)))
+    p = matmul(verts, R.reshape(3, 3).T) + m.geom_pos[geom] - m.jnt_pos[joint]
+    a = m.jnt_axis[joint] / norm(m.jnt_axis[joint])
+    return float(np.sqrt(np.max(np.sum(p * p, axis=1) - matmul(p, a[:, None])[:, 0] ** 2)))
 
 
 def sphere_tyres(spec: mujoco.MjSpec, m: mujoco.MjModel, wheels, radius: float, priority: int) -> None:

@@ -23,6 +23,7 @@ from mlpfac.jit import kernel
 # these a robot is not a robot any more, MuJoCo blows up, or a delay line would not fit in memory.
 SCALE_MIN, SCALE_MAX = 1e-3, 1e3  # mass, servo gain and torque limit scaled by at most a thousand
 MASS_KG_MAX = 1e4  # a payload of at most ten tonnes
+OFFSET_MAX = 10.0  # m: a load placed at most this far from the axle midpoint
 MU_MIN, MU_MAX = 1e-4, 10.0  # sliding friction coefficient
 RADIUS_SCALE_MIN, RADIUS_SCALE_MAX = 0.1, 10.0  # a real wheel a tenth to ten times the nominal one
 PERIOD_FACTOR_MIN, PERIOD_FACTOR_MAX = 1e-3, 100.0  # the command held 0.001 T to 100 T
@@ -108,16 +109,31 @@ class Event:
 class Payload(Event):
     """Mass (and inertia) scaled by ``mass_scale``, or ``mass_kg`` added, spread like the mass it
     joins: on the robot's root body by default, on a named ``body``, or on every body of the robot
-    (``body = "*"``)."""
+    (``body = "*"``). Or a load placed off-centre: ``mass_kg`` as a point mass on the root body at
+    ``offset`` m ahead of the axle midpoint and ``lateral`` m to its left, at the height of the
+    body's centre of mass (the body's mass, centre of mass and inertia tensor become those of the
+    two together)."""
 
     kind: ClassVar[str] = "payload"
     mass_scale: float | None = _param(float, required=False, minimum=SCALE_MIN, maximum=SCALE_MAX)
     mass_kg: float | None = _param(float, required=False, positive=True, maximum=MASS_KG_MAX)
     body: str | None = _param(str, required=False)
+    offset: float | None = _param(float, required=False, minimum=-OFFSET_MAX, maximum=OFFSET_MAX)
+    lateral: float | None = _param(float, required=False, minimum=-OFFSET_MAX, maximum=OFFSET_MAX)
 
     def validate(self) -> None:
         if (self.mass_scale is None) == (self.mass_kg is None):
             raise ConfigError("", "a payload event takes either 'mass_scale' or 'mass_kg' (not both, not neither)")
+        if self.placed and (self.mass_kg is None or self.body is not None):
+            raise ConfigError(
+                "offset" if self.offset is not None else "lateral",
+                "a load placed off-centre takes 'mass_kg' (a point mass on the root body), not 'mass_scale' or 'body'",
+            )
+
+    @property
+    def placed(self) -> bool:
+        """A point mass placed off-centre (``offset`` or ``lateral`` given)."""
+        return self.offset is not None or self.lateral is not None
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -13,7 +13,7 @@ import numpy as np
 
 from mlpfac.exceptions import ConfigError
 from mlpfac.jit import as_rows
-from mlpfac.model import pose_from_error, tracking_error
+from mlpfac.model import cholesky, pose_from_error, tracking_error
 from mlpfac.plants.events import ControlPeriod, DelayLine, Event, SensorDelay
 from mlpfac.tables import covariance
 
@@ -43,8 +43,7 @@ class KinematicPlant:
         self.T = T
         self.ref = ref  # (N + 1, 5) reference samples at k T
         R = covariance(config.noise_cov, 3, "noise_cov")
-        w, V = np.linalg.eigh(R)
-        self.L = V * np.sqrt(np.maximum(w, 0.0)) if np.any(w > 0) else None  # L L' = R
+        self.L = cholesky(R) if np.any(R != 0.0) else None  # L L' = R (not LAPACK's: the same bits everywhere)
 
     def reset(self, q0: np.ndarray, rng, u0: np.ndarray | None = None) -> None:
         """``u0`` is ignored: the error model (7) has no velocity state."""
@@ -59,7 +58,7 @@ class KinematicPlant:
         self.noise = np.zeros((max(N, 1), B, 3))  # step k's noise: one contiguous (B, 3)
         if self.L is not None:
             for b, g in enumerate(rngs):  # each seed alone: L eps_k, eps_k ~ N(0, I)
-                self.noise[:, b] = g.standard_normal((N, 3)) @ self.L.T
+                self.noise[:, b] = np.einsum("nk,jk->nj", g.standard_normal((N, 3)), self.L)  # not BLAS
         self._pose = np.array([pose_from_error(e, self.ref[0]) for e in self.e])
         self.history = DelayLine(self._pose)
         self._u, self._h = np.zeros((B, 2)), np.zeros((B, 3))

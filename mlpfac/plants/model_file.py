@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from mlpfac.exceptions import ConfigError
+from mlpfac.exceptions import ConfigError, UnavailableError
 
 if TYPE_CHECKING:
     import mujoco
@@ -55,7 +55,7 @@ def model_path(model: str) -> Path:
     try:
         import mujoco_menagerie as mm
     except ImportError:
-        raise ConfigError(
+        raise UnavailableError(
             "model", f"{model} needs the mujoco-menagerie package: pip install 'mlpfac[menagerie]'"
         ) from None
     try:
@@ -67,7 +67,7 @@ def model_path(model: str) -> Path:
     except mm.UnknownEntryPointError as err:
         raise ConfigError("model", f"{model}: {err}") from None
     except mm.MenagerieError as err:
-        raise ConfigError("model", f"{model} is not available here ({err}): {FIX}") from None
+        raise UnavailableError("model", f"{model} is not available here ({err}): {FIX}") from None
 
 
 def menagerie_version() -> str | None:

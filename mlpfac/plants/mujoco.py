@@ -14,7 +14,8 @@ nominal ones), and held for one control period of ``n_substeps`` physics steps,
   driven by a discrete wheel-speed PI loop evaluated once per physics step.
 
 The pose (x, y, theta) is read at a site on the axle midpoint (``axle_mid``, or the frame
-:mod:`mlpfac.plants.detect` finds); theta is unwrapped
+:mod:`mlpfac.plants.detect` finds; a skid-steer's found frame is moved to its kinematic centre, and
+the track it turns as is measured, as it settles: :func:`mlpfac.plants.settle.turning`); theta is unwrapped
 across steps. Events (:mod:`mlpfac.plants.mujoco_events`) edit the model's
 :class:`mujoco.MjSpec` and recompile it keeping the state (``spec.recompile``).
 
@@ -25,6 +26,7 @@ derived quantity (site pose, ``cvel``, sensors) belongs to the current state.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import mujoco
@@ -38,7 +40,9 @@ from mlpfac.plants.events import EVENT_KINDS, DelayLine
 from mlpfac.plants.ik import wheel_speeds
 from mlpfac.plants.model_file import is_menagerie, menagerie_version
 from mlpfac.plants.mujoco_events import MujocoEvents
-from mlpfac.plants.robot import read_robot
+from mlpfac.plants.robot import Robot, read_robot
+from mlpfac.plants.settle import TURN_SHARE, turning
+from mlpfac.plants.wheels import wheel_speed_limit
 
 DIVERGENCE_WARNINGS = ("mjWARN_BADQPOS", "mjWARN_BADQVEL", "mjWARN_BADQACC")  # MuJoCo resets the data on these
 NOISE_CHUNK = 1024  # pose-noise draws made at once: the same stream as one draw of 3 per step
@@ -72,6 +76,36 @@ class MujocoPlant(MujocoEvents):
     _kp, _ki, _n = _Kept("fl", K.F_KP), _Kept("fl", K.F_KI), _Kept("ints", K.I_NSUB, int)
 
     def __init__(self, config: MujocoConfig, T: float, periods: tuple[float, ...] = ()) -> None:
+        self._build(config, T, periods)
+        if self.robot.seconds != (-1, -1) and config.turning_track is None:
+            self._turning(config, T, periods)
+
+    def _turning(self, config: MujocoConfig, T: float, periods: tuple[float, ...]) -> None:
+        """A skid-steer's turning measured once it has settled (:func:`mlpfac.plants.settle.turning`),
+        and the robot built again with what was measured as ``[plant]`` keys, found (written into
+        config.toml: a run of it measures nothing): the track it turns as, and a pose frame found in
+        the middle of its wheels moved to its kinematic centre, where it moves along its heading."""
+        r = self.robot
+        track, ahead, said = turning(self, TURN_SHARE * (wheel_speed_limit(r) or 1.0))
+        if not math.isfinite(track):
+            self.robot = dataclasses.replace(r, description=f"{r.description}; its turning not measured ({said})")
+            return
+        keys: dict = {"turning_track": float(f"{track:.3g}")}
+        if "frame_offset" in r.found and abs(ahead) < track / 2:
+            ox, oy, oz = r.config.offset
+            keys["frame_offset"] = (round(float(ox) + ahead, 4) + 0.0, float(oy), float(oz))
+        self._build(dataclasses.replace(r.config, **keys), T, periods)  # every part named: read once
+        way = f"{abs(ahead) * 1e3:.0f} mm {'ahead' if ahead >= 0 else 'back'}"
+        moved = f", the pose frame moved {way} to its kinematic centre" if len(keys) > 1 else ""
+        chosen = r.description[_turns_end(r.description) :]  # what the first read chose, said after the track
+        self.robot = dataclasses.replace(
+            self.robot,
+            found=(*(k for k in r.found if k not in keys), *keys),
+            description=f"{self.robot.description[: _turns_end(self.robot.description)]}{chosen}; measured as it "
+            f"settled, {said}: the track{moved}",
+        )
+
+    def _build(self, config: MujocoConfig, T: float, periods: tuple[float, ...]) -> None:
         self.T = float(T)
         self.robot = r = read_robot(config, tuple(periods) or (self.T,))
         self.config = r.config  # every part named: what the model said where ``config`` did not
@@ -94,6 +128,8 @@ class MujocoPlant(MujocoEvents):
         self._geometry = r.geometry
         self._noise = config.noise_std()
         self._changed = False
+        self._motion_std = config.motion_noise_std()
+        self._motion: DelayLine | None = None  # (v, omega, wheel_l, wheel_r) as measured: torque_commands()
         self.ints[[K.I_AL, K.I_AR, K.I_DL, K.I_DR, K.I_SITE]] = (*r.acts, *r.dofs, r.site)
         self.ints[K.I_TORQUE] = self.config.actuator == "torque"
         self.ints[[K.I_AL2, K.I_AR2, K.I_MIX]] = (*r.seconds, r.mix is not None)
@@ -149,7 +185,11 @@ class MujocoPlant(MujocoEvents):
         Rz = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
         root = slice(self._qroot, self._qroot + 7)
         pos, quat = d.qpos[root][:3].copy(), d.qpos[root][3:].copy()
-        d.qpos[self._qroot : self._qroot + 3] = Rz @ (pos - p_site) + [float(q0[0]), float(q0[1]), p_site[2]]
+        d.qpos[self._qroot : self._qroot + 3] = np.einsum("ij,j->i", Rz, pos - p_site) + [
+            float(q0[0]),
+            float(q0[1]),
+            p_site[2],
+        ]
         mujoco.mju_mulQuat(
             d.qpos[self._qroot + 3 : self._qroot + 7],
             np.array([math.cos(turn / 2), 0.0, 0.0, math.sin(turn / 2)]),
@@ -162,7 +202,7 @@ class MujocoPlant(MujocoEvents):
 
         self.rng = rng
         self._n = self.n_substeps
-        self._kp, self._ki = float(self.config.pi_kp), float(self.config.pi_ki)
+        self._kp, self._ki = float(self.config.pi_kp or 0.0), float(self.config.pi_ki or 0.0)  # None: no PI loop
         self._umax()
         self._torque_max = self._force_limits()
         self.st = np.zeros(K.N_ST)
@@ -172,6 +212,14 @@ class MujocoPlant(MujocoEvents):
         self._views()
         K.read_pose(self._site_xpos, self._site_xmat, self.st)
         K.measure(self.ints, self.fl, self.st, self.draws(1)[0], self._history.hist, self._history.fill)
+        if self.ints[K.I_TAU]:
+            self._motion_rng = rng.spawn(1)[0]  # its own stream: the pose noise's is the same with or without it
+            self._motion = DelayLine(np.zeros(4))
+            v = np.zeros(6)
+            mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_SITE, self._site, v, 0)
+            th = float(q0[2])
+            wheels = [s * d.qvel[dof] for s, dof in zip(self._sign, self._dofs, strict=True)]
+            self._measure_motion(v[3] * math.cos(th) + v[4] * math.sin(th), v[2], *wheels)
 
     def _views(self) -> None:
         """What the compiled step reads and writes: the current model and data (their addresses and
@@ -227,7 +275,9 @@ class MujocoPlant(MujocoEvents):
         omega_w = np.array([0.0, 0.0, omega])
         v_site = np.array([v * math.cos(theta), v * math.sin(theta), 0.0])
         d.qvel[self._droot : self._droot + 3] = v_site + np.cross(omega_w, d.xpos[self._root] - d.site_xpos[self._site])
-        d.qvel[self._droot + 3 : self._droot + 6] = d.xmat[self._root].reshape(3, 3).T @ omega_w  # local frame
+        d.qvel[self._droot + 3 : self._droot + 6] = np.einsum(
+            "ji,j->i", d.xmat[self._root].reshape(3, 3), omega_w
+        )  # local
         w = wheel_speeds(v, omega, self.real_radius, self._real_track)
         for dof, sign, wi in zip(self._dofs, self._sign, w, strict=True):
             d.qvel[dof] = sign * wi
@@ -243,9 +293,60 @@ class MujocoPlant(MujocoEvents):
         return self._history.read()
 
     def step(self, u: np.ndarray) -> None:
-        """One control step (:func:`mlpfac.plants.compiled.plant_step`)."""
+        """One control step (:func:`mlpfac.plants.compiled.plant_step`): u = (v, omega), or the wheels'
+        torques (tau_l, tau_r) in N m after :meth:`torque_commands`."""
         K.watch(self.st)
         K.plant_step(float(u[0]), float(u[1]), self.draws(1)[0], self.tele, self._args)
+        if self._motion is not None:
+            t = self.tele
+            self._measure_motion(t[2], t[3], t[6], t[7])
+
+    # --- a torque-level controller's robot --------------------------------------------------------
+
+    def torque_commands(self) -> None:
+        """From the next reset on, the command is the wheels' torques (tau_l, tau_r) in N m, applied
+        to the torque motors (clamped to their limit) and held for the control period, and the plant
+        measures the base's twist and the wheel speeds (:meth:`motion`). Only a torque drive takes it."""
+        if self.config.actuator != "torque":
+            raise ValueError("wheel torques are commanded to a torque drive only")
+        self.ints[K.I_TAU] = 1
+
+    def dynamics(self):
+        """The nominal dynamic model of the robot (:class:`mlpfac.dynamics.RobotModel`), read from its
+        nominal MuJoCo model at rest (:func:`mlpfac.plants.dynamics.read_model`)."""
+        from mlpfac.plants.dynamics import read_model
+
+        return read_model(self.robot.model, self.robot, self._torque_limits_of(self.robot.model))
+
+    def true_dynamics(self):
+        """The dynamic model of the robot as it is now (after events: its wheels' true radius, its
+        masses, its drive's torque limit): what an oracle is told."""
+        import dataclasses
+
+        from mlpfac.plants.dynamics import read_model
+
+        model = read_model(self.model, self.robot, self._torque_max)
+        return dataclasses.replace(model, wheel_radius_m=float(self.real_radius))
+
+    def _torque_limits_of(self, m) -> tuple[float, float]:
+        if self.robot.mix is not None:
+            return drive.wheel_torque_limits(self.robot.mix, self.robot.umax)
+        return tuple(
+            torque_limit(m, a, c, self.config.actuator == "torque", bool(self.ints[K.I_CLAMP]))
+            for a, c in zip(self._acts, self._act_per_wheel, strict=True)
+        )
+
+    def _measure_motion(self, v: float, omega: float, wl: float, wr: float) -> None:
+        x = np.array([v, omega, wl, wr])
+        std = self._motion_std
+        if std is not None:
+            x += std * self._motion_rng.standard_normal(4)
+        self._motion.push(x)
+
+    def motion(self) -> np.ndarray:
+        """(v, omega, wheel_l, wheel_r) as measured (noise and delay of the scenario's sensors): the
+        base's twist at the pose frame (m/s, rad/s) and the encoders' wheel speeds (rad/s, forward positive)."""
+        return self._motion.read()
 
     def _force_limits(self) -> tuple[float, float]:
         """Largest forward wheel torque of each drive (N m at the joint), inf when not limited."""
@@ -326,3 +427,14 @@ class MujocoPlant(MujocoEvents):
         if self.robot.locked:
             out["locked_joints"] = list(self.robot.locked)
         return out
+
+
+def _turns_end(description: str) -> int:
+    """Where a skid-steer's description says the track it turns as, its end."""
+    return description.index(")", description.index("; turning as a track of")) + 1
+
+
+def robot_of(config: MujocoConfig, periods: tuple[float, ...]) -> Robot:
+    """The robot a run of ``config`` has (control period ``periods[0]``): read, and a skid-steer's
+    turning measured."""
+    return MujocoPlant(config, periods[0], periods).robot

@@ -75,6 +75,41 @@ class MujocoEvents:
             raise ConfigError(f"{where} body", f"body {event.body!r} has no mass to scale")
         return [b]
 
+    def _place_load(self, event: Payload) -> str:
+        """A point mass ``mass_kg`` on the root body at (offset, lateral) of the pose frame, at the
+        height of the body's centre of mass: the body's inertial becomes the two's (parallel axes)."""
+        m, d, b = self.model, self.data, self._root
+        R = d.xmat[b].reshape(3, 3)  # root body -> world
+        to_body = lambda w: [sum(R[i, j] * w[i] for i in range(3)) for j in range(3)]  # noqa: E731 (R' w)
+        axes = d.site_xmat[self._site].reshape(3, 3)
+        site = to_body(d.site_xpos[self._site] - d.xpos[b])
+        fwd, left = to_body(axes[:, 0]), to_body(axes[:, 1])
+        a, lat, mp = event.offset or 0.0, event.lateral or 0.0, float(event.mass_kg)
+        c, M = [float(x) for x in m.body_ipos[b]], float(m.body_mass[b])
+        p = [site[i] + a * fwd[i] + lat * left[i] for i in range(2)] + [c[2]]
+        c_new = [(M * c[i] + mp * p[i]) / (M + mp) for i in range(3)]
+        Q = np.zeros(9)
+        mujoco.mju_quat2Mat(Q, m.body_iquat[b])  # principal axes -> body
+        Q, Ip = Q.reshape(3, 3), [float(x) for x in m.body_inertia[b]]
+        inertia = [[sum(Q[i, k] * Ip[k] * Q[j, k] for k in range(3)) for j in range(3)] for i in range(3)]
+        for mass, at in ((M, c), (mp, p)):  # parallel axes to the new centre of mass
+            r = [at[i] - c_new[i] for i in range(3)]
+            r2 = r[0] * r[0] + r[1] * r[1] + r[2] * r[2]
+            for i in range(3):
+                for j in range(3):
+                    inertia[i][j] += mass * ((r2 if i == j else 0.0) - r[i] * r[j])
+        body = self._spec.bodies[b]
+        body.explicitinertial = True
+        body.mass, body.ipos, body.inertia = M + mp, c_new, [0.0] * 3  # the full tensor instead
+        body.fullinertia = [inertia[0][0], inertia[1][1], inertia[2][2], inertia[0][1], inertia[0][2], inertia[1][2]]
+        self._recompile()
+        name = m.body(b).name or f"body {b}"
+        com = self.model.body_subtreemass[b]
+        return (
+            f"{mp:g} kg placed {a:g} m ahead, {lat:g} m left of the axle on {name} ({M:g} -> {M + mp:g} kg; "
+            f"robot {float(com):g} kg)"
+        )
+
     def apply(self, event: Event) -> str:
         self.check_event(event, event.kind)
         m = self.model
@@ -83,9 +118,13 @@ class MujocoEvents:
             return f"plant holds each command {old * self._dt:g} -> {self._n * self._dt:g} s ({self._n} physics steps; controller keeps T = {self.T:g} s)"
         if isinstance(event, SensorDelay):
             text = self._history.delay(event.steps)
+            if self._motion is not None:  # the twist and the wheel speeds a torque-level controller sees
+                self._motion.delay(event.steps)
             self._pack()
             return text
         spec = self._spec
+        if isinstance(event, Payload) and event.placed:
+            return self._place_load(event)
         if isinstance(event, Payload):
             bodies = self._payload_bodies(event, "")
             mass = float(sum(m.body_mass[b] for b in bodies))

@@ -18,6 +18,7 @@ import mujoco
 import numpy as np
 
 from mlpfac.exceptions import ConfigError
+from mlpfac.model import norm
 from mlpfac.plants import defaults, drive, edits, shapes
 from mlpfac.plants import wheels as wheel_parts
 from mlpfac.plants.compiled import yaw
@@ -251,11 +252,14 @@ def _read_robot(config: MujocoConfig, stamp: tuple[int, int], periods: tuple[flo
         except mujoco.FatalError as err:  # an arena too small for the model (<size memory>), say
             raise cannot_simulate(where, err) from None
         anchors = [d.xanchor[j].copy() for j in driven]
-        width = float(np.linalg.norm(anchors[1] - anchors[0]))
+        width = norm(anchors[1] - anchors[0])
         track, turns = width, ""
-        if len(driven) > 2:  # a skid-steer: the track it turns with (wheel_parts.skid_track)
-            track, base = wheel_parts.skid_track(anchors)
-            turns = f"; turning as a track of {track:.3g} m ({width:.3g} m across, {base:.3g} m front to rear)"
+        if len(driven) > 2:  # a skid-steer: the track it turns as (turning_track, else wheel_parts.skid_track)
+            rule, base = wheel_parts.skid_track(anchors)
+            track = rule if config.turning_track is None else float(config.turning_track)
+            turns = f"; turning as a track of {track:.3g} m ({width:.3g} m across, {base:.3g} m front to rear" + (
+                ")" if config.turning_track is None else f"; W + L^2/W would be {rule:.3g} m)"
+            )
         sign = wheel_parts.wheel_signs(config, d, site, joints, anchors[:2])
         dofs = (int(m.jnt_dofadr[joints[0]]), int(m.jnt_dofadr[joints[1]]))
         if drv.tendon:
@@ -303,7 +307,7 @@ def _read_robot(config: MujocoConfig, stamp: tuple[int, int], periods: tuple[flo
         defaults.check_drive(m, d, robot, config, where)
         chatter = probe and config.actuator == "velocity" and user.servo_limit is None and defaults.chatters(robot)
         if not chatter:
-            return robot
+            return _pi_chosen(robot)
         floor = spec_dt * defaults.SMALLEST_STEP
         step = defaults.smaller_timestep(defaults.servo_step(robot), periods or (dt,), floor)
         if step is not None and user.timestep is None:  # a timestep that integrates them, read again at it
@@ -319,6 +323,20 @@ def _read_robot(config: MujocoConfig, stamp: tuple[int, int], periods: tuple[flo
         config, chosen, probe = defaults.with_chosen(config, {"servo_limit": "control"}), chosen, False
         chosen |= {"servo_limit": "control"}
         suffix = f"; the wheel servos' force limit kept by their control (as MuJoCo clamps it they chatter at {dt:g} s)"
+
+
+def _pi_chosen(robot: Robot) -> Robot:
+    """The robot with its torque drive's unset PI gains chosen for its inertia (:func:`mlpfac.plants.defaults.pi_gains`)."""
+    from mlpfac.plants.dynamics import read_model
+
+    if robot.config.actuator != "torque" or None not in (robot.config.pi_kp, robot.config.pi_ki):
+        return robot
+    model = read_model(robot.model, robot, (1.0, 1.0))
+    chosen = defaults.pi_gains(robot.config, model.mass_kg, model.wheel_radius_m, model.wheel_inertia_kg_m2)
+    config = defaults.with_chosen(robot.config, chosen)
+    said = defaults.said(chosen, config)
+    text = robot.description + (said if "; chosen:" not in robot.description else said.replace("; chosen:", ","))
+    return dataclasses.replace(robot, config=config, found=(*robot.found, *chosen), description=text)
 
 
 def _compile(spec: mujoco.MjSpec, where: str) -> mujoco.MjModel:

@@ -3,6 +3,8 @@ errors and warnings while it settles, each on one line naming the model."""
 
 from __future__ import annotations
 
+import math
+
 import mujoco
 import numpy as np
 
@@ -52,3 +54,42 @@ def no_warning(d: mujoco.MjData, where: str) -> None:
         raise ConfigError(
             where, f"MuJoCo warned ({', '.join(warned)}) as the robot settled at rest: the model is not stable as it is"
         )
+
+
+TURN_LEAD_S = 1.5  # seconds of the turning test before it is measured (from rest)
+TURN_S = 1.0  # ... and measured
+TURN_SHARE = 0.5  # the outer wheels at this share of the wheel-speed limit, the inner ones at a third of that
+TURN_MIN = 0.1  # a robot that turns at less than this share of the rate asked is not measured
+
+
+def turning(plant, w: float) -> tuple[float, float, str]:
+    """A skid-steer's turning, measured once it has settled: from rest at the origin, its outer
+    wheels asked ``w`` and its inner ones ``w / 3`` (through its own drive and IK, on its own
+    wheels and floor) for TURN_LEAD_S, then its yaw rate omega and the mean sideways speed v_y of its
+    pose frame over TURN_S. Returns the track a differential drive turning as it does has,
+    r (w_r - w_l) / omega, and the kinematic centre's distance ahead of the pose frame, -v_y / omega
+    (the point of the base that moves along its heading: where the instantaneous centre of rotation
+    projects onto its axis; Kozlowski & Pazderski 2004, Martinez et al. 2005), and what it did in
+    words; (nan, nan, why) where it does not turn. ``plant`` is a :class:`~mlpfac.plants.mujoco.MujocoPlant`."""
+    r, track = float(plant.ik_radius), float(plant.ik_track)
+    w_l, w_r = w / 3, w
+    v, omega = r * (w_l + w_r) / 2, r * (w_r - w_l) / track  # what its IK turns into (w_l, w_r)
+    r = float(plant.real_radius)  # the wheels' own: their rims' speeds
+    plant.reset(np.zeros(3), np.random.default_rng(0))
+    dt = plant.T
+    lead, n = int(round(TURN_LEAD_S / dt)), int(round(TURN_S / dt))
+    for _ in range(lead):
+        plant.step(np.array([v, omega]))
+    start = plant.true_pose()
+    sideways, last = 0.0, start
+    for _ in range(n):
+        plant.step(np.array([v, omega]))
+        pose = plant.true_pose()
+        dx, dy = float(pose[0] - last[0]), float(pose[1] - last[1])
+        sideways += -math.sin(float(last[2])) * dx + math.cos(float(last[2])) * dy
+        last = pose
+    turned = float(last[2] - start[2]) / TURN_S
+    asked = f"wheels at {w_l:.3g} and {w_r:.3g} rad/s"
+    if not turned > TURN_MIN * omega:
+        return math.nan, math.nan, f"{asked}: it turned at {turned:.3g} of {r * (w_r - w_l) / track:.3g} rad/s"
+    return r * (w_r - w_l) / turned, -(sideways / TURN_S) / turned, asked

@@ -6,6 +6,7 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
+from mlpfac.model import matmul
 from mlpfac.plants import edits
 
 SHAPES = {
@@ -35,13 +36,13 @@ def static_geometry(m: mujoco.MjModel, d: mujoco.MjData, site: int, root: int, v
     for g in robot:
         kind = SHAPES[int(m.geom_type[g])]
         quat = np.empty(4)
-        mujoco.mju_mat2Quat(quat, (Rs.T @ d.geom_xmat[g].reshape(3, 3)).ravel())
+        mujoco.mju_mat2Quat(quat, matmul(Rs.T, d.geom_xmat[g].reshape(3, 3)).ravel())
         rgba = m.mat_rgba[m.geom_matid[g]] if m.geom_matid[g] >= 0 else m.geom_rgba[g]
         shape = {
             "name": m.geom(g).name or f"geom{g}",
             "type": kind,
             "size": [round(float(x), 9) for x in m.geom_size[g, : SIZE_LEN[kind]]],
-            "pos": [round(float(x), 9) for x in Rs.T @ (d.geom_xpos[g] - ps)],
+            "pos": [round(float(x), 9) for x in matmul(Rs.T, (d.geom_xpos[g] - ps)[:, None])[:, 0]],
             "quat": [round(float(x), 9) for x in quat],
             "rgba": [round(float(x), 6) for x in rgba],
         }

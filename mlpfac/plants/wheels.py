@@ -3,11 +3,14 @@ their limits, the floor's contact priority (read once by :func:`mlpfac.plants.ro
 
 from __future__ import annotations
 
+import math
+
 import mujoco
 import numpy as np
 
 from mlpfac.exceptions import ConfigError
-from mlpfac.plants import edits
+from mlpfac.model import dot, norm
+from mlpfac.plants import drive, edits
 from mlpfac.plants.config import MujocoConfig
 from mlpfac.plants.detect import ROUND, base_frame, is_motor, is_velocity_servo, names
 
@@ -18,15 +21,16 @@ def radius(m: mujoco.MjModel, g: int, joint: int) -> float:
 
 
 def skid_track(anchors: list[np.ndarray]) -> tuple[float, float]:
-    """A skid-steer's track as its IK turns it, and its wheelbase, from its wheels' hinge anchors
-    (left, right, then each side's second): W + L^2 / W for wheels W apart across and L along.
+    """The rule for a skid-steer's turning track, and its wheelbase, from its wheels' hinge anchors
+    (left, right, then each side's second): W + L^2 / W for wheels W apart across and L along (the
+    plant measures the track instead, :func:`mlpfac.plants.settle.turning`; the rule is said beside it).
 
     Turning, every wheel slides; where each one's friction is saturated (Coulomb's, the same on
     every wheel), the moments about the middle balance when the base turns at omega = u W/2 /
     ((W/2)^2 + (L/2)^2) for rim speeds +-u: a differential drive of that track (the instantaneous
     centres of rotation of skid-steer kinematics, with their expansion factor chi = 1 + (L/W)^2)."""
-    width = float(np.linalg.norm(anchors[1] - anchors[0]))
-    base = [float(np.linalg.norm(anchors[i] - a)) for i, a in zip((0, 1), anchors[2:], strict=False)]
+    width = norm(anchors[1] - anchors[0])
+    base = [norm(anchors[i] - a) for i, a in zip((0, 1), anchors[2:], strict=False)]
     length = sum(base) / len(base)
     return width + length**2 / width, length
 
@@ -74,10 +78,10 @@ def wheel_signs(
     R = d.site_xmat[site].reshape(3, 3)  # columns: site axes in the world
     signs = []
     for key, j, p, side in zip(("left_actuator", "right_actuator"), joints, anchors, (1.0, -1.0), strict=True):
-        roll = float(np.cross(d.xaxis[j], [0.0, 0.0, 1.0]) @ R[:, 0])  # forward speed per rad/s, / radius
+        roll = dot(np.cross(d.xaxis[j], [0.0, 0.0, 1.0]), R[:, 0])  # forward speed per rad/s, / radius
         if abs(roll) < 0.5:
             raise ConfigError(key, "the wheel's hinge axis must be across the site's x axis (forward)")
-        if side * float((p - d.site_xpos[site]) @ R[:, 1]) <= 0:
+        if side * dot(p - d.site_xpos[site], R[:, 1]) <= 0:
             raise ConfigError(
                 key,
                 f"this wheel is not on the {'left' if side > 0 else 'right'} of {' '.join(config.frame)} (y axis to the left)",
@@ -88,7 +92,7 @@ def wheel_signs(
 
 def same_way(m: mujoco.MjModel, d: mujoco.MjData, a: int, first: int) -> float:
     """+1 when the second wheel's hinge turns the same way as its side's first wheel's, else -1."""
-    return 1.0 if float(d.xaxis[int(m.actuator_trnid[a, 0])] @ d.xaxis[first]) > 0 else -1.0
+    return 1.0 if dot(d.xaxis[int(m.actuator_trnid[a, 0])], d.xaxis[first]) > 0 else -1.0
 
 
 def left_first(m: mujoco.MjModel, config: MujocoConfig, joints: list[int], qpos: np.ndarray) -> list[int]:
@@ -97,5 +101,19 @@ def left_first(m: mujoco.MjModel, config: MujocoConfig, joints: list[int], qpos:
     d.qpos[:] = qpos
     mujoco.mj_kinematics(m, d)
     origin, R = base_frame(m, d, config, int(m.body_rootid[m.jnt_bodyid[joints[0]]]))
-    side = [float((d.xanchor[j] - origin) @ R[:, 1]) for j in joints]
+    side = [dot(d.xanchor[j] - origin, R[:, 1]) for j in joints]
     return joints if side[0] > side[1] else joints[::-1]
+
+
+def wheel_speed_limit(r) -> float | None:
+    """The robot's wheel-speed limit (rad/s): its servos', else where its largest wheel torque meets
+    its wheel joints' damping; None when the model sets neither."""
+    if r.max_wheel_speed is not None:
+        return float(r.max_wheel_speed)
+    m = r.model
+    damping = min(float(m.dof_damping[dof]) for dof in r.dofs)
+    if r.mix is not None:
+        torque = min(drive.wheel_torque_limits(r.mix, r.umax)) / 2  # both wheels at once
+    else:
+        torque = min(edits.torque_limit(m, a, c, True) for a, c in zip(r.acts, r.act_per_wheel, strict=True))
+    return torque / damping if damping > 0 and math.isfinite(torque) else None

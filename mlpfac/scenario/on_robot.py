@@ -9,6 +9,9 @@ controller put on another robot, by one rule (docs/robots.md):
   servos' control range, or, for a drive without one, the speed at which the wheels' largest torque
   meets their joints' damping;
 - the controller's limits follow the robot's: ``v_max = r w_max``, ``omega_max = 2 r w_max / b``;
+- a scenario file that names its MuJoCo robot gets the same reference rule (:func:`fitted`, one
+  code) where it leaves the reference's speed unset, and a warning in numbers where it sets one
+  the wheels cannot drive (:func:`on_its_robot`);
 - events mean the same physical change: relative ones as they are (wheel radius x1.5 is x1.5 of
   this robot's wheel, mass x3 of its base), absolute ones too (a 5 kg payload, a floor of friction
   0.2, a 40 ms delay); a payload on a body of the other robot goes on this one's base.
@@ -18,7 +21,6 @@ from __future__ import annotations
 
 import copy
 import importlib.resources
-import math
 from pathlib import Path
 
 from mlpfac.exceptions import ConfigError
@@ -33,12 +35,12 @@ MENAGERIE_BASES = (
 )
 AS_SHIPPED = {  # what a Menagerie base does from its name alone (tests/test_robots.py checks each)
     "pal_tiago_dual": "a skid-steer as modelled (four plain wheels, not the mecanum wheels of its omnidirectional "
-    "base): given a rotor on each wheel, it turns as a track of 0.98 m (docs/robots.md)",
+    "base): given a rotor on each wheel, it turns as a track of 1.09 m, measured as it settles (docs/robots.md)",
     "rainbow_robotics_rby1": "refused as shipped: its wheel servos (kv 1) cannot turn the wheels against their "
     "damping; --robot rby1a drives it",
 }
 SHIPPED = {"diffdrive": "scene.xml", "cart": "cart-scene.xml", "rby1a": "rby1a.toml"}  # this package's (models/)
-SPEEDS = {"eight": ("wx", "wy"), "circle": ("rate",), "line": ("speed",), "lemniscate": ("rate",)}
+SPEEDS = {"eight": ("wx", "wy"), "circle": ("rate",), "line": ("v",), "lemniscate": ("rate",)}
 DEFAULT_SPEEDS = {"eight": (0.25, 0.5), "circle": (0.5,), "line": (0.5,), "lemniscate": (0.3,)}
 PEAK_SAMPLES = 2001
 
@@ -156,12 +158,10 @@ def robot_name(robot: str) -> str:
 
 def on_robot(table: dict, robot: str) -> dict:
     """The scenario ``table`` (as read from its file) put on ``robot`` by the module's rule."""
-    import numpy as np
-
     from mlpfac.plants.config import MujocoConfig
     from mlpfac.plants.events import ControlPeriod, parse_event
-    from mlpfac.plants.robot import read_robot
-    from mlpfac.scenario.reference import make_reference, sample
+    from mlpfac.plants.mujoco import robot_of
+    from mlpfac.scenario.reference import make_reference
 
     out = copy.deepcopy(table)
     out.pop("provenance", None)  # what another robot's run simulated
@@ -175,28 +175,19 @@ def on_robot(table: dict, robot: str) -> dict:
     events = [parse_event(ev, duration, f"[[events]] #{i + 1}") for i, ev in enumerate(raw)]
     periods = (T, *(ev.factor * T for ev in events if isinstance(ev, ControlPeriod)))
     try:
-        r = read_robot(MujocoConfig(**{k: v for k, v in plant.items() if k != "kind"}), periods)
+        r = robot_of(MujocoConfig(**{k: v for k, v in plant.items() if k != "kind"}), periods)
     except TypeError as err:
         raise ConfigError(f"--robot {robot}", f"not a [plant] key: {err}") from None
     except ConfigError as err:
-        raise ConfigError(f"--robot {robot}: {err.where}".rstrip(": "), err.what) from None
-    w_max = wheel_speed_limit(r)
+        raise type(err)(f"--robot {robot}: {err.where}".rstrip(": "), err.what) from None
     ref = dict(out.get("reference", {"kind": "eight"}))
     kind = ref.get("kind", "eight")
-    if w_max is not None and kind in SPEEDS:
-        curve = make_reference(kind, {k: v for k, v in ref.items() if k != "kind"})
-        rows = sample(curve, np.linspace(0.0, 4 * duration, PEAK_SAMPLES))
-        peak = float(np.max((np.abs(rows[:, 3]) + np.abs(rows[:, 4]) * r.real_track / 2) / r.real_radius))
-        k = min(1.0, SHARE * w_max / peak)
-        said = f"reference x{k:.3g} in speed (peak wheel speed {k * peak:.3g} of {w_max:.3g} rad/s)"
-        if k < 1.0:
-            for key, default in zip(SPEEDS[kind], DEFAULT_SPEEDS[kind], strict=True):
-                ref[key] = float(f"{k * float(ref.get(key, default)):.6g}")
-        out["reference"] = ref
-        ctrl = out.setdefault("controller", {})
-        ctrl["v_max"] = float(f"{r.real_radius * w_max:.6g}")
-        ctrl["omega_max"] = float(f"{2 * r.real_radius * w_max / r.real_track:.6g}")
-        said += f", v_max {ctrl['v_max']:g} m/s, omega_max {ctrl['omega_max']:g} rad/s"
+    curve = make_reference(kind, {k: v for k, v in ref.items() if k != "kind"}) if kind in SPEEDS else None
+    fit = fitted(ref, curve, duration, r)
+    if fit is not None:
+        out["reference"], limits, said = fit
+        out.setdefault("controller", {}).update(limits)
+        said += _limits_said(limits)
         out["description"] = f"{out.get('description', '')} On {robot}: {said}.".strip()
     out["plant"] = plant
     out["events"] = [_same_change(ev) for ev in raw]
@@ -206,22 +197,87 @@ def on_robot(table: dict, robot: str) -> dict:
     return out
 
 
-def wheel_speed_limit(r) -> float | None:
-    """The robot's wheel-speed limit (rad/s): its servos', else where its largest wheel torque meets
-    its wheel joints' damping; None when the model sets neither."""
-    if r.max_wheel_speed is not None:
-        return float(r.max_wheel_speed)
-    from mlpfac.plants.edits import torque_limit
+def peak_wheel_speed(curve, duration: float, r) -> float:
+    """The fastest a wheel of robot ``r`` turns along the reference ``curve`` (rad/s): the peak of
+    (|v_r| + |omega_r| b / 2) / r, sampled over 4 x ``duration``."""
+    import numpy as np
 
-    m = r.model
-    damping = min(float(m.dof_damping[dof]) for dof in r.dofs)
-    if r.mix is not None:
-        from mlpfac.plants.drive import wheel_torque_limits
+    from mlpfac.scenario.reference import sample
 
-        torque = min(wheel_torque_limits(r.mix, r.umax)) / 2  # both wheels at once
-    else:
-        torque = min(torque_limit(m, a, c, True) for a, c in zip(r.acts, r.act_per_wheel, strict=True))
-    return torque / damping if damping > 0 and math.isfinite(torque) else None
+    rows = sample(curve, np.linspace(0.0, 4 * duration, PEAK_SAMPLES))
+    return float(np.max((np.abs(rows[:, 3]) + np.abs(rows[:, 4]) * r.real_track / 2) / r.real_radius))
+
+
+def fitted(ref: dict, curve, duration: float, r) -> tuple[dict, dict, str] | None:
+    """The module's rule on robot ``r``: the reference table ``ref`` (its curve ``curve``) slowed in
+    time to a peak wheel speed of at most SHARE of the robot's limit, the controller's limits from the
+    robot, and what was done in words; None where the robot has no wheel-speed limit or the reference
+    no speed (``--robot`` and a scenario file that leaves the reference's speed unset both come here)."""
+    from mlpfac.plants.wheels import wheel_speed_limit
+
+    w_max = wheel_speed_limit(r)
+    kind = ref.get("kind", "eight")
+    if w_max is None or kind not in SPEEDS:
+        return None
+    peak = peak_wheel_speed(curve, duration, r)
+    k = min(1.0, SHARE * w_max / peak)
+    said = f"reference x{k:.3g} in speed (peak wheel speed {k * peak:.3g} of {w_max:.3g} rad/s)"
+    ref = dict(ref)
+    if k < 1.0:
+        for key, default in zip(SPEEDS[kind], DEFAULT_SPEEDS[kind], strict=True):
+            ref[key] = float(f"{k * float(ref.get(key, default)):.6g}")
+    limits = {
+        "v_max": float(f"{r.real_radius * w_max:.6g}"),
+        "omega_max": float(f"{2 * r.real_radius * w_max / r.real_track:.6g}"),
+    }
+    return ref, limits, said
+
+
+def _limits_said(ctrl: dict) -> str:
+    return f", v_max {ctrl['v_max']:g} m/s, omega_max {ctrl['omega_max']:g} rad/s"
+
+
+def on_its_robot(table: dict, scn) -> tuple[dict, dict]:
+    """A scenario file's reference on the MuJoCo robot it names (``scn``, the file parsed; ``table``,
+    as read): where the reference's speed is left to the defaults, the table fitted by the module's
+    rule (:func:`fitted`; the controller's limits only where the file leaves them unset); where the
+    file sets it and asks more than the robot's wheels give, the table as it is, warned. Returns the
+    table and ``[provenance]`` words for the run's first line (``reference_fit``, ``reference_warning``)."""
+    import numpy as np
+
+    from mlpfac.plants import make_plant
+    from mlpfac.scenario.reference import sample
+
+    ref = dict(table.get("reference", {"kind": "eight"}))
+    kind = ref.get("kind", "eight")
+    if kind not in SPEEDS:
+        return table, {}
+    r = make_plant(scn, sample(scn.reference, np.arange(2) * scn.T)).robot  # every check made; its read cached
+    if not any(key in ref for key in (*SPEEDS[kind], "speed")):
+        fit = fitted(ref, scn.reference, scn.duration, r)
+        if fit is None:
+            return table, {}
+        ref, limits, said = fit
+        ctrl = dict(table.get("controller", {}))
+        ctrl |= {k: v for k, v in limits.items() if k not in ctrl}
+        said += _limits_said(ctrl) + " (the rule of --robot)"
+        out = table | {"reference": ref, "controller": ctrl}
+        out["description"] = f"{table.get('description', '')} Fitted to the robot: {said}.".strip()
+        return out, {"reference_fit": said}
+    from mlpfac.plants.wheels import wheel_speed_limit
+
+    w_max = wheel_speed_limit(r)
+    if w_max is None:
+        return table, {}
+    peak = peak_wheel_speed(scn.reference, scn.duration, r)
+    if peak <= w_max:
+        return table, {}
+    speed = float(f"{SHARE * w_max / peak * scn.reference.speed:.3g}")
+    return table, {
+        "reference_warning": f"the reference asks a peak wheel speed of {peak:.3g} rad/s of wheels that give "
+        f"{w_max:.3g} rad/s (x{peak / w_max:.3g}): beyond it the IK slows both wheels (the path's curvature kept) "
+        f"and the robot falls behind; [reference] speed = {speed:g} drives it at {SHARE:g} of the limit"
+    }
 
 
 def _same_change(ev: dict) -> dict:

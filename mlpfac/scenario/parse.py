@@ -22,7 +22,7 @@ from mlpfac.control.adaptive.networks import Networks
 from mlpfac.control.baselines import KanayamaGains
 from mlpfac.control.law import Law
 from mlpfac.control.plugins import Plugin, absolute_spec, is_plugin_spec, resolve
-from mlpfac.control.variants import VARIANTS
+from mlpfac.control.variants import TORQUE_LEVEL, VARIANTS
 from mlpfac.exceptions import ConfigError
 from mlpfac.model import pose_from_error
 from mlpfac.plants.events import Event, parse_event
@@ -96,6 +96,13 @@ class Scenario:
     def drawn(self) -> dict[str, float]:
         """What was drawn for this seed in place of each distribution of the file, by key (:mod:`mlpfac.scenario.draws`)."""
         return dict(self.table.get("drawn", {}))
+
+    @property
+    def level(self) -> str:
+        """What the controller commands: "velocity" (v, omega), or "torque" (the wheels' torques)."""
+        if self.plugin is not None:
+            return self.plugin.level
+        return "torque" if self.controller in TORQUE_LEVEL else "velocity"
 
     @property
     def steps(self) -> int:
@@ -179,7 +186,9 @@ def load(
     The robot's parts the file leaves to the model (its wheels, its pose frame) are written into the
     table's ``[plant]`` as found, so that config.toml names them. ``build=False`` reads and checks
     the file alone (a listing), without building the plant. ``robot`` (``--robot``) puts the
-    scenario on another robot (:mod:`mlpfac.scenario.on_robot`). ``values`` sets numbers of the file by
+    scenario on another robot (:mod:`mlpfac.scenario.on_robot`); without it, a MuJoCo robot's file
+    whose reference leaves its speed unset gets it fitted to the robot by the same rule, and one that
+    asks more than the wheels give is warned (``[provenance] reference_fit``, ``reference_warning``). ``values`` sets numbers of the file by
     their dotted keys (:mod:`mlpfac.scenario.draws`) before it is checked, as if written in it.
     """
     if not isinstance(name_or_path, str | os.PathLike) or not str(name_or_path):
@@ -213,7 +222,15 @@ def load(
     scn = parse(table, str(path))
     if not build:  # the file's data only (a listing): no robot is read, none downloaded
         return scn
+    said = {}
+    if robot is None and scn.plant_kind == "mujoco":  # its reference fitted to its robot, or warned
+        from mlpfac.scenario.on_robot import on_its_robot
+
+        fitted, said = on_its_robot(table, scn)
+        if fitted is not table:
+            table, scn = fitted, parse(fitted, str(path), check_model=False)
     table["provenance"], found = provenance.recorded(scn)
+    table["provenance"] |= said
     if found:  # the robot's parts the file left to the model: written in, so its config.toml re-runs the same
         table["plant"] = table["plant"] | found
         return parse(table, str(path), check_model=False)
@@ -314,6 +331,9 @@ def parse(table: dict, source: str = "<scenario>", check_model: bool = True) -> 
         raise ConfigError(
             f"{where} params", f"[controller.params] is for a plug-in controller; {name_c} takes its own keys"
         )
+    level = plugin.level if plugin is not None else "torque" if name_c in TORQUE_LEVEL else "velocity"
+    if level == "torque":
+        torque_drive(name_c, plant_kind, getattr(plant_config, "actuator", None), source)
     law = build(Law, {k: ctrl[k] for k in ("lambdas", "v_max", "omega_max") if k in ctrl}, where)
     ad = subtable(ctrl, "adaptive", where)
     check_keys(ad, ADAPTIVE_KEYS, f"{where}.adaptive")
@@ -360,6 +380,23 @@ def parse(table: dict, source: str = "<scenario>", check_model: bool = True) -> 
         table=restore_draws(table, draws),
         plugin=plugin,
     )
+
+
+def torque_drive(name: str, plant_kind: str, actuator: str | None, source: str) -> None:
+    """A torque-level controller is refused, in one line, on a plant without torque motors (an
+    ``actuator`` still unset is checked when the robot is read)."""
+    if plant_kind != "mujoco":
+        raise ConfigError(
+            f"{source} [plant] kind",
+            f'{name} is a torque-level controller: it drives a MuJoCo robot\'s wheel torques; set kind = "mujoco" '
+            'and actuator = "torque" in [plant]',
+        )
+    if actuator not in (None, "torque"):
+        raise ConfigError(
+            f"{source} [plant] actuator",
+            f"{name} is a torque-level controller: it commands wheel torques, which the robot's {actuator} servos "
+            'do not take; set actuator = "torque" in [plant] (torque motors with the same limit)',
+        )
 
 
 def _plugin(ctrl: dict, T: float, where: str, source: str) -> Plugin:

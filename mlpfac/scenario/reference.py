@@ -4,15 +4,20 @@ Each reference is a smooth planar curve p(t) = (x_r(t), y_r(t)) given with its f
 derivatives in closed form, so v_r = |p'| and omega_r = (x' y'' - y' x'') / |p'|^2 are analytic.
 theta_r = atan2(y', x') (the printed ``arctan(y_r / dx_r)`` of (37) is a typo) is unwrapped
 along the sampled times, so it is continuous over a run.
+
+Every kind takes ``speed`` (default 1): the same path traversed ``speed`` times as fast,
+p_s(t) = p(speed t), so v_r and omega_r are x speed and the accelerations x speed^2.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from mlpfac.exceptions import ConfigError
+from mlpfac.model import each
 
 
 @dataclass(frozen=True)
@@ -23,10 +28,11 @@ class Eight:
     ay: float = 2.0  # m, half its height
     wx: float = 0.25  # rad/s
     wy: float = 0.5  # rad/s (2 wx: an eight)
+    speed: float = 1.0  # x, the same path traversed this many times as fast
 
     def derivatives(self, t: np.ndarray) -> tuple[np.ndarray, ...]:
-        cx, sx = np.cos(self.wx * t), np.sin(self.wx * t)
-        cy, sy = np.cos(self.wy * t), np.sin(self.wy * t)
+        cx, sx = each(math.cos, self.wx * t), each(math.sin, self.wx * t)
+        cy, sy = each(math.cos, self.wy * t), each(math.sin, self.wy * t)
         return (
             self.ax * cx,
             self.ay * sy,
@@ -45,24 +51,26 @@ class Circle:
     rate: float = 0.5  # rad/s
     cx: float = 0.0  # m, centre
     cy: float = 0.0  # m
+    speed: float = 1.0  # x, the same path traversed this many times as fast
 
     def derivatives(self, t: np.ndarray) -> tuple[np.ndarray, ...]:
-        c, s = np.cos(self.rate * t), np.sin(self.rate * t)
+        c, s = each(math.cos, self.rate * t), each(math.sin, self.rate * t)
         r, w = self.radius, self.rate
         return (self.cx + r * c, self.cy + r * s, -r * w * s, r * w * c, -r * w * w * c, -r * w * w * s)
 
 
 @dataclass(frozen=True)
 class Line:
-    """Straight line from (x0, y0) along ``heading`` at constant ``speed``."""
+    """Straight line from (x0, y0) along ``heading`` at constant speed ``v``."""
 
-    speed: float = 0.5  # m/s
+    v: float = 0.5  # m/s, at speed 1
     heading: float = 0.0  # rad, from the x axis
     x0: float = 0.0  # m, the start
     y0: float = 0.0  # m
+    speed: float = 1.0  # x, the same path traversed this many times as fast
 
     def derivatives(self, t: np.ndarray) -> tuple[np.ndarray, ...]:
-        dx, dy = self.speed * np.cos(self.heading), self.speed * np.sin(self.heading)
+        dx, dy = self.v * math.cos(self.heading), self.v * math.sin(self.heading)
         zero = np.zeros_like(t)
         return (self.x0 + dx * t, self.y0 + dy * t, dx + zero, dy + zero, zero, zero)
 
@@ -74,10 +82,11 @@ class Lemniscate:
 
     a: float = 2.0  # m
     rate: float = 0.3  # rad/s
+    speed: float = 1.0  # x, the same path traversed this many times as fast
 
     def derivatives(self, t: np.ndarray) -> tuple[np.ndarray, ...]:
         s, w, a = self.rate * t, self.rate, self.a
-        sn, cs = np.sin(s), np.cos(s)
+        sn, cs = each(math.sin, s), each(math.cos, s)
         d = 1.0 + sn**2
         x = a * cs / d
         y = a * sn * cs / d
@@ -85,8 +94,8 @@ class Lemniscate:
         s2 = sn * sn
         xs = a * sn * (s2 - 3.0) / d**2  # dx/ds
         ys = -a * (3.0 * s2 - 1.0) / d**2  # dy/ds
-        xss = -a * cs * (s2 * s2 - 12.0 * s2 + 3.0) / d**3
-        yss = -a * (14.0 * np.sin(2.0 * s) + 3.0 * np.sin(4.0 * s)) / (4.0 * d**3)
+        xss = -a * cs * (s2 * s2 - 12.0 * s2 + 3.0) / (d * d * d)  # not d**3: numpy's pow is dispatched
+        yss = -a * (14.0 * each(math.sin, 2.0 * s) + 3.0 * each(math.sin, 4.0 * s)) / (4.0 * (d * d * d))
         return x, y, w * xs, w * ys, w * w * xss, w * w * yss
 
 
@@ -99,9 +108,11 @@ def sample(curve: Eight | Circle | Line | Lemniscate, t: np.ndarray) -> np.ndarr
     theta_r is unwrapped along ``t`` (continuous as long as it turns less than pi between samples).
     """
     t = np.asarray(t, dtype=float)
-    x, y, dx, dy, ddx, ddy = curve.derivatives(t)
+    k = curve.speed  # k = 1 changes no bit: 1 * t == t
+    x, y, dx, dy, ddx, ddy = curve.derivatives(k * t)
+    dx, dy, ddx, ddy = k * dx, k * dy, k * k * ddx, k * k * ddy
     speed2 = dx * dx + dy * dy
-    theta = np.unwrap(np.arctan2(dy, dx))
+    theta = np.unwrap(each(math.atan2, dy, dx))
     v = np.sqrt(speed2)
     omega = (dx * ddy - dy * ddx) / speed2
     return np.stack([x, y, theta, v, omega], axis=-1)
@@ -109,8 +120,8 @@ def sample(curve: Eight | Circle | Line | Lemniscate, t: np.ndarray) -> np.ndarr
 
 # The physically sensible size of a reference's parameters, by key (absolute values; lengths in m,
 # rates in rad/s, speeds in m/s), and of the speeds it asks of a wheeled robot.
-RATE_KEYS, SPEED_KEYS = frozenset({"wx", "wy", "rate"}), frozenset({"speed"})
-LENGTH_MAX, RATE_MAX, SPEED_MAX, ANGLE_MAX = 1e4, 10.0, 20.0, 1e3
+RATE_KEYS, SPEED_KEYS = frozenset({"wx", "wy", "rate"}), frozenset({"v"})
+LENGTH_MAX, RATE_MAX, SPEED_MAX, ANGLE_MAX, FACTOR_MAX = 1e4, 10.0, 20.0, 1e3, 100.0
 OMEGA_MAX = 100.0  # rad/s of omega_r along the curve
 
 
@@ -121,6 +132,8 @@ def _limit(key: str) -> tuple[float, str]:
         return SPEED_MAX, "m/s"
     if key == "heading":
         return ANGLE_MAX, "rad"
+    if key == "speed":
+        return FACTOR_MAX, "x"
     return LENGTH_MAX, "m"
 
 
@@ -137,6 +150,9 @@ def make_reference(kind: str, params: dict, where: str = "[reference]"):
         most, unit = _limit(key)
         if isinstance(value, int | float) and not isinstance(value, bool) and not abs(value) <= most:
             raise ConfigError(f"{where} {key}", f"must lie within +-{most:g} {unit}, got {value!r}")
+    speed = params.get("speed", 1.0)
+    if isinstance(speed, int | float) and not isinstance(speed, bool) and not speed > 0:
+        raise ConfigError(f"{where} speed", f"must be > 0 (the path traversed speed times as fast), got {speed!r}")
     try:
         curve = cls(**{k: float(v) for k, v in params.items()})
     except (TypeError, ValueError) as err:

@@ -1,6 +1,8 @@
 """The bound beside an adaptive result: per seed, the least position RMS of the laws that learn
-nothing (by default the oracle, ``oracle-kanayama``, Corradini's and Kanayama's law), and each
-variant against it.
+nothing (by default the oracle, ``oracle-kanayama``, ``oracle-dynamic``, Corradini's and Kanayama's
+law), and each variant against it. A law with no run on a scenario (``oracle-dynamic`` on a robot
+driven by velocity servos, which a torque-level law cannot drive) is left out of that scenario's
+bound, and its row says so (``without``).
 
 Reads one or more sweep folders (``SCENARIO/CONTROLLER/seed-NNNN/metrics.json``; a later folder's
 run replaces an earlier one's) and writes, per scenario, over the seeds that every bound law and
@@ -31,7 +33,7 @@ from pathlib import Path
 from mlpfac.loop.metrics import RunMetrics
 from mlpfac.sweeps.paired import compared_rms, median
 
-BOUND_LAWS = ("oracle", "oracle-kanayama", "corradini", "kanayama")
+BOUND_LAWS = ("oracle", "oracle-kanayama", "oracle-dynamic", "corradini", "kanayama")
 
 
 def load(folders: list[Path]) -> dict[tuple[str, str, int], RunMetrics]:
@@ -65,14 +67,20 @@ def bound_rows(
     scenarios = list(dict.fromkeys(s for s, _, _ in metrics))
     rows = []
     for scn in scenarios:
-        needed = (*laws, *variants)
+        ran = {c for s, c, _ in metrics if s == scn}
+        without = [n for n in laws if n not in ran]
+        laws_here = tuple(n for n in laws if n in ran)
+        if not laws_here:
+            continue
+        needed = (*laws_here, *variants)
         seeds = sorted(set.intersection(*({k for s, c, k in metrics if s == scn and c == n} for n in needed)))
         if not seeds:
             continue
-        per_law = {n: [compared_rms(metrics[(scn, n, k)]) for k in seeds] for n in laws}
-        bound = [min(per_law[n][i] for n in laws) for i in range(len(seeds))]
-        which = Counter(min(laws, key=lambda n: per_law[n][i]) for i in range(len(seeds))).most_common(1)[0][0]
+        per_law = {n: [compared_rms(metrics[(scn, n, k)]) for k in seeds] for n in laws_here}
+        bound = [min(per_law[n][i] for n in laws_here) for i in range(len(seeds))]
+        which = Counter(min(laws_here, key=lambda n: per_law[n][i]) for i in range(len(seeds))).most_common(1)[0][0]
         row = {"scenario": scn, "seeds": seeds, "bound_m": median(bound), "bound_law": which, "variants": {}}
+        row["without"] = without
         corradini = [metrics.get((scn, "corradini", k)) for k in seeds]  # a law of the bound or not
         versus = [compared_rms(m) for m in corradini] if all(corradini) else None
         for name in variants:
@@ -109,7 +117,9 @@ def markdown(rows: list[dict], variants: list[str]) -> str:
     for r in rows:
         s = r["seeds"]
         cells = [r["scenario"], f"{s[0]}-{s[-1]}" if s == list(range(s[0], s[-1] + 1)) else ",".join(map(str, s))]
-        cells.append(f"{_mm(r['bound_m'])} ({r['bound_law']})")
+        cells.append(
+            f"{_mm(r['bound_m'])} ({r['bound_law']})" + (f"; without {', '.join(r['without'])}" if r["without"] else "")
+        )
         for name in variants:
             v = r["variants"][name]
             p = v["p_worse_than_corradini"]

@@ -32,7 +32,8 @@ from mlpfac.loop.metrics import RunMetrics
 from mlpfac.sweeps.paired import compared_rms, median
 from mlpfac.sweeps.plan import Job
 
-TOLD = ("oracle", "oracle-kanayama")  # the laws told the change: the bound
+# the laws told the change: the bound (oracle-dynamic where it runs: a robot with torque motors)
+TOLD = ("oracle", "oracle-kanayama", "oracle-dynamic")
 UNCHANGED = {"scale": 1.0, "factor": 1.0, "mass_scale": 1.0, "kv_scale": 1.0, "force_scale": 1.0, "steps": 0}
 SIDES = ("below", "above")
 FROM = re.compile(r"friction (\S+) -> ")  # the robot's own friction, in a friction event's record

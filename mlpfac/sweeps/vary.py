@@ -266,4 +266,4 @@ def _checked(src: str, values: dict, where: str, build: bool = True, robot: str 
     except ConfigError as err:
         if not where:
             raise
-        raise ConfigError(where, f"{err.what} ({err.where})") from None
+        raise type(err)(where, f"{err.what} ({err.where})") from None

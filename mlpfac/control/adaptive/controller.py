@@ -24,7 +24,7 @@ class NominalPrior:
 
     @staticmethod
     def predict(e: np.ndarray, r: np.ndarray, u: np.ndarray, T: float) -> np.ndarray:
-        return f_true(e, r[3], r[4], T) + G_true(e, T) @ u
+        return f_true(e, r[3], r[4], T) + np.einsum("jn,n->j", G_true(e, T), u)  # not BLAS
 
     @staticmethod
     def measurement(e: np.ndarray, e_nom: np.ndarray) -> np.ndarray:

@@ -17,6 +17,7 @@ from collections.abc import Callable
 import numpy as np
 
 from mlpfac.exceptions import ConfigError
+from mlpfac.model import cholesky, eigh, matmul, solve_lower, solve_spd
 
 Jacobian = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]  # z -> (h (..., 3), H (..., 3, alpha))
 
@@ -107,7 +108,7 @@ class EKF(_WeightFilter):
 
     def project(self, J: np.ndarray) -> np.ndarray:
         """J P J' (..., m, m) for J (..., m, alpha): the covariance of J z (first order)."""
-        return J @ self.P @ np.swapaxes(J, -1, -2)
+        return matmul(matmul(J, self.P), np.swapaxes(J, -1, -2))
 
 
 class UKF(_WeightFilter):
@@ -154,7 +155,7 @@ class UKF(_WeightFilter):
         super().__init__(z0, R, Q, forgetting, P_max)
         n = self.z.shape[-1]
         P0 = np.array(np.broadcast_to(P0, (*self.z.shape, n)), dtype=float)
-        self.S = np.linalg.cholesky(P0)  # (..., n, n), P = S S'
+        self.S = cholesky(P0)  # (..., n, n), P = S S'
         lam = alpha**2 * (n + kappa) - n
         if not n + lam > 0:
             raise ConfigError("ukf_alpha", f"need alpha^2 (n + kappa) > 0, got alpha = {alpha}, kappa = {kappa}")
@@ -166,14 +167,14 @@ class UKF(_WeightFilter):
     @property
     def P(self) -> np.ndarray:
         """P = S S' (..., n, n); O(n^3), for inspection and tests, not for the loop."""
-        return self.S @ np.swapaxes(self.S, -1, -2)
+        return matmul(self.S, np.swapaxes(self.S, -1, -2))
 
     def diag_P(self) -> np.ndarray:
         return np.einsum("...ij,...ij->...i", self.S, self.S)
 
     def project(self, J: np.ndarray) -> np.ndarray:
-        A = J @ self.S  # (..., m, n)
-        return A @ np.swapaxes(A, -1, -2)
+        A = matmul(J, self.S)  # (..., m, n)
+        return matmul(A, np.swapaxes(A, -1, -2))
 
     def sigma_points(self) -> np.ndarray:
         """Z (..., 2 n + 1, n): z, then z + gamma s_i, then z - gamma s_i."""
@@ -195,15 +196,17 @@ class UKF(_WeightFilter):
         D = self.gamma * self.Wm * np.swapaxes(Yp - Ym, -1, -2)  # (..., 3, n), P_zy = S D'
         c = Y0 - y_bar
         M = 0.5 * (Yp + Ym) - y_bar[..., None, :]  # (..., n, 3)
-        extra = self.W0c * c[..., :, None] * c[..., None, :] + 2.0 * self.Wm * np.swapaxes(M, -1, -2) @ M
-        w, V = np.linalg.eigh(extra)  # 3x3: keep R' >= R (clips only when W0c < 0)
-        Rp = self.R + (V * np.maximum(w, 0.0)[..., None, :]) @ np.swapaxes(V, -1, -2)
-        Pyy = D @ np.swapaxes(D, -1, -2) + Rp  # (..., 3, 3)
+        extra = self.W0c * c[..., :, None] * c[..., None, :] + 2.0 * self.Wm * matmul(np.swapaxes(M, -1, -2), M)
+        if self.W0c < 0.0:  # 3x3: keep R' >= R (a sum of semi-definite terms when W0c >= 0)
+            w, V = eigh(extra)
+            extra = matmul(V * np.maximum(w, 0.0)[..., None, :], np.swapaxes(V, -1, -2))
+        Rp = self.R + extra
+        Pyy = matmul(D, np.swapaxes(D, -1, -2)) + Rp  # (..., 3, 3)
         i = y - y_bar
-        SDt = self.S @ np.swapaxes(D, -1, -2)  # P_zy (..., n, 3)
-        self.z = self.z + np.einsum("...ak,...k->...a", SDt, np.linalg.solve(Pyy, i[..., None])[..., 0])  # K i (30)
-        L = np.linalg.cholesky(Rp)
-        A = np.swapaxes(np.linalg.solve(L, D), -1, -2)  # (..., n, 3): whitened (H S)', noise I
+        SDt = matmul(self.S, np.swapaxes(D, -1, -2))  # P_zy (..., n, 3)
+        self.z = self.z + np.einsum("...ak,...k->...a", SDt, solve_spd(Pyy, i[..., None])[..., 0])  # K i (30)
+        L = cholesky(Rp)
+        A = np.swapaxes(solve_lower(L, D), -1, -2)  # (..., n, 3): whitened (H S)', noise I
         S = self.S
         for j in range(A.shape[-1]):  # Potter's square-root update, one whitened row at a time
             a = A[..., :, j]  # (..., n)
@@ -218,7 +221,7 @@ class UKF(_WeightFilter):
         if self.forgetting < 1.0:
             S = S / np.sqrt(self.forgetting)
         if self.Q is not None:
-            S = np.linalg.cholesky(S @ np.swapaxes(S, -1, -2) + self.Q)
+            S = cholesky(matmul(S, np.swapaxes(S, -1, -2)) + self.Q)
         if self.P_max is not None:
             peak = np.max(np.einsum("...ij,...ij->...i", S, S), axis=-1)
             S = S * np.sqrt(np.minimum(1.0, self.P_max / peak))[..., None, None]

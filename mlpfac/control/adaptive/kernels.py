@@ -29,6 +29,13 @@ def _sigmoid(a):
     return 0.5 * (1.0 + math.tanh(0.5 * a))
 
 
+@kernel("void(f8[::1], f8[::1])")
+def sigmoids(a, out):
+    """Eqs. (10)-(11) on every element of ``a``: the numpy forms' sigmoid, to the kernels' bits."""
+    for i in range(a.shape[0]):
+        out[i] = _sigmoid(a[i])
+
+
 @kernel()
 def _hidden(z, Lf, LG, xf, xG, phif, phiG):
     """(10)-(11): phi_f (L_f,), phi_G (L_G,) at weights z (alpha,) and inputs x_f (n_f,), x_G (3,)."""

@@ -9,7 +9,7 @@ A table in a Markdown page sits between two markers, and everything between them
 The path is a data folder relative to the page's own folder. It holds what a documented command
 wrote (``sweep.json`` or ``compare.json``, ``paired.json``; or ``table.md``, the Markdown table a
 script printed) and ``meta.json``: the command, the code version that ran it and the date; a sweep's data also
-keeps every run's figures (``runs.json``, :mod:`mlpfac.verify`: ``mlpfac report --verify N``). Views,
+keeps every run's figures (``runs.json``, :mod:`mlpfac.report.verify`: ``mlpfac report --verify N``). Views,
 each drawn by the table code the sweep itself uses (:mod:`mlpfac.sweeps.tables`,
 :mod:`mlpfac.sweeps.paired`):
 
@@ -41,8 +41,8 @@ from pathlib import Path
 
 from mlpfac.exceptions import ConfigError
 from mlpfac.files import write_atomic
+from mlpfac.report.verify import read_data, read_json
 from mlpfac.targets import cli_path
-from mlpfac.verify import read_data, read_json
 
 MARKER = re.compile(r"^<!-- table: (?P<spec>.+?) -->\n(?P<body>.*?)^<!-- /table -->$", re.M | re.S)
 VIEWS = ("sweep", "compare", "paired", "summary", "robustness", "text")
@@ -230,7 +230,7 @@ def collect(folder: Path, results: Path, command: str | None = None, version: st
         sources = {n: results / n for n in DATA_FILES if (results / n).is_file()}
         if "paired.json" not in sources:
             raise ConfigError(str(results), "not a finished results folder of `mlpfac sweep` or `mlpfac compare`")
-        from mlpfac.verify import RUNS_FILE, per_seed
+        from mlpfac.report.verify import RUNS_FILE, per_seed
 
         runs = per_seed(results)
     try:
@@ -268,7 +268,7 @@ def _collect_item(item: str) -> tuple[str, str]:
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.description = "Write every marked table of DOCS/*.md from the data folder it names (mlpfac/results.py)."
+    p.description = "Write every marked table of DOCS/*.md from the data folder it names (mlpfac/report/results.py)."
     p.add_argument("docs", nargs="?", type=cli_path, default=Path("docs"), help="the folder of pages (default docs)")
     p.add_argument("--check", action="store_true", help="write nothing; exit 1 if a table differs from its data")
     p.add_argument(
@@ -293,6 +293,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         metavar="N",
         help="run N (default 3) sampled runs of every dataset again from its recorded command; exit 1 if one differs",
     )
+    p.add_argument(
+        "--strict", action="store_true", help="with --verify: a dataset that cannot run here (its robot) is an error"
+    )
 
 
 def run_cli(args: argparse.Namespace) -> int:
@@ -301,13 +304,9 @@ def run_cli(args: argparse.Namespace) -> int:
     for name, results in collects:
         print(f"{results} -> {collect(args.docs / 'data' / name, Path(results), args.made_by, args.code_version)}")
     if args.verify is not None:
-        from mlpfac.verify import verify
+        from mlpfac.report.verify import run_cli as verify
 
-        differs = False
-        for v in verify(args.docs, args.verify):  # a line per dataset as it is done
-            print(v.line(), flush=True)
-            differs |= v.differs
-        return 1 if differs else 0
+        return verify(args.docs, args.verify, args.strict)  # a line per dataset as it is done
     if args.check:
         old = stale(args.docs)
         for page in old:

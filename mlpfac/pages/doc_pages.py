@@ -1,9 +1,9 @@
 """The reference pages of docs/ that are written from the code, so that they cannot go stale:
 ``docs/api.md`` (the public API's signatures and docstrings) and ``docs/scenario-file.md`` (every
-key of a scenario file, from the dataclasses and validators that read it; :mod:`mlpfac.scenario_doc`).
+key of a scenario file, from the dataclasses and validators that read it; :mod:`mlpfac.pages.scenario_doc`).
 
-    python -m mlpfac.doc_pages docs            # write them
-    python -m mlpfac.doc_pages docs --check    # exit 1 when one differs from what the code gives
+    python -m mlpfac.pages docs            # write them
+    python -m mlpfac.pages docs --check    # exit 1 when one differs from what the code gives
 
 ``tests/test_docs.py`` runs the check.
 """
@@ -16,7 +16,7 @@ import json
 import sys
 from pathlib import Path
 
-from mlpfac.scenario_doc import HEAD, scenario_page
+from mlpfac.pages.scenario_doc import HEAD, scenario_page
 
 
 def _doc(obj) -> str:
@@ -143,13 +143,13 @@ def main(argv: list[str] | None = None) -> int:
     check = "--check" in args
     rest = [a for a in args if a != "--check"]
     if len(rest) != 1 or not Path(rest[0]).is_dir():
-        print("usage: python -m mlpfac.doc_pages DOCS_FOLDER [--check]", file=sys.stderr)
+        print("usage: python -m mlpfac.pages DOCS_FOLDER [--check]", file=sys.stderr)
         return 2
     docs = Path(rest[0])
     old = stale(docs)
     if check:
         for name in old:
-            print(f"{docs / name}: differs from what the code gives; run: python -m mlpfac.doc_pages {docs}")
+            print(f"{docs / name}: differs from what the code gives; run: python -m mlpfac.pages {docs}")
         return 1 if old else 0
     from mlpfac.files import write_atomic
 
@@ -157,13 +157,9 @@ def main(argv: list[str] | None = None) -> int:
     for name in texts:  # only our own pages are replaced: a regular file that says it is written here
         path = docs / name
         if path.exists() and (not path.is_file() or path.is_symlink() or HEAD not in path.read_text(errors="replace")):
-            print(f"mlpfac: error: {path}: not a page written by mlpfac.doc_pages; left as it is", file=sys.stderr)
+            print(f"mlpfac: error: {path}: not a page written by mlpfac.pages; left as it is", file=sys.stderr)
             return 2
     for name, text in texts.items():
         write_atomic(docs / name, text)
     print(f"{len(texts)} pages written, {len(old)} changed")
     return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

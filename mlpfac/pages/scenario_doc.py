@@ -2,7 +2,7 @@
 type, default and range as the validators give them (probed with values around 0 and 1, so a new
 check shows here by itself), its meaning from the comment beside the dataclass field. Keys the
 validators accept but this module does not describe are an error, so the page cannot lag behind
-(``python -m mlpfac.doc_pages docs --check``, run by tests/test_docs.py)."""
+(``python -m mlpfac.pages docs --check``, run by tests/test_docs.py)."""
 
 from __future__ import annotations
 
@@ -20,7 +20,7 @@ import typing
 from mlpfac.exceptions import ConfigError
 from mlpfac.tables import build
 
-HEAD = "<!-- Written by `python -m mlpfac.doc_pages docs` from the code; edit the code, not this page. -->\n"
+HEAD = "<!-- Written by `python -m mlpfac.pages docs` from the code; edit the code, not this page. -->\n"
 
 # The scenario-level keys and the tables without a dataclass of their own: key -> (unit, meaning)
 TOP = {
