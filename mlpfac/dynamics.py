@@ -10,7 +10,7 @@ v = (v, omega) of the axle midpoint, the wheels rolling without slip (docs/equat
 ``m`` is the robot's mass (wheels included), ``I`` its yaw inertia about the vertical through the
 axle midpoint, ``I_w`` a wheel's inertia about its axle (its rotor's armature included), ``tau``
 the wheels' torques (forward positive). On the ground floor beside :mod:`mlpfac.model`: the MuJoCo
-plants read a robot's :class:`RobotModel` (:mod:`mlpfac.plants.dynamics`), the torque-level
+plants read a robot's :class:`RobotModel` (:mod:`mlpfac.plants.mjcf.dynamics`), the torque-level
 controllers are given it. The compiled, batch-first forms (:func:`accelerations`, :func:`torques`)
 are what the controllers step; :meth:`RobotModel.accelerations` and :meth:`RobotModel.torques`
 call them.

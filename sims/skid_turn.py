@@ -21,8 +21,8 @@ import sys
 import numpy as np
 
 from mlpfac.plants.config import MujocoConfig
+from mlpfac.plants.mjcf.wheels import skid_track
 from mlpfac.plants.mujoco import MujocoPlant
-from mlpfac.plants.wheels import skid_track
 
 T = 0.01
 MODEL = "menagerie:pal_tiago_dual"

@@ -421,7 +421,7 @@ def test_one_wheel_named_takes_the_other_or_says_which_to_name(tmp_path, capsys)
 
     from mlpfac.exceptions import ConfigError
     from mlpfac.plants.config import MujocoConfig
-    from mlpfac.plants.detect import resolve
+    from mlpfac.plants.mjcf.detect import resolve
 
     m = mujoco.MjModel.from_xml_string(wheeled("a 0 0.2, b 0 -0.2, c -0.2 0.2"))
     for named, found in ((dict(right_actuator="b"), "left_actuator"), (dict(left_actuator="b"), "right_actuator")):

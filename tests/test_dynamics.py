@@ -1,4 +1,4 @@
-"""The dynamic model (mlpfac.dynamics) read from MuJoCo robots (mlpfac.plants.dynamics): its
+"""The dynamic model (mlpfac.dynamics) read from MuJoCo robots (mlpfac.plants.mjcf.dynamics): its
 parameters where the MJCF gives them by hand, its accelerations against MuJoCo's, its inverse."""
 
 from __future__ import annotations

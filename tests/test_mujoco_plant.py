@@ -713,7 +713,7 @@ def test_a_scenario_robot_is_read_once_by_its_load_and_its_run(monkeypatch):
     """``load`` writes the parts it found into the scenario ([plant] left_actuator, ...): the run's
     configuration then names them, and is the same robot, not read (and compiled) a second time."""
     from mlpfac.loop.runner import run
-    from mlpfac.plants import robot
+    from mlpfac.plants.mjcf import robot
     from mlpfac.scenario.parse import load
 
     reads = []

@@ -303,7 +303,7 @@ def test_a_skid_steers_turning_is_measured_as_it_settles():
     """The track it turns as and its kinematic centre, measured by a turn on its own wheels and floor:
     the same bits each time; measured again on the robot as measured, the pose frame no longer
     slides sideways and the track is the same; a configuration that carries them measures nothing."""
-    from mlpfac.plants.settle import TURN_SHARE, turning
+    from mlpfac.plants.mjcf.settle import TURN_SHARE, turning
 
     plant = MujocoPlant(MujocoConfig(model=str(SKID_SHORT)), 0.01, (0.01,))
     found = plant.found()
@@ -337,7 +337,7 @@ def test_kanayama_tracks_a_short_skid_steer_within_10_mm(tmp_path, monkeypatch):
 
 
 def test_a_skid_steer_that_does_not_turn_keeps_the_rule(monkeypatch):
-    from mlpfac.plants import settle
+    from mlpfac.plants.mjcf import settle
 
     monkeypatch.setattr(settle, "TURN_MIN", 2.0)  # as if it turned at less than the share asked
     plant = MujocoPlant(MujocoConfig(model=str(SKID_SHORT)), 0.01, (0.01,))

@@ -13,8 +13,8 @@ import pytest
 from mlpfac.cli import main
 from mlpfac.exceptions import ConfigError
 from mlpfac.plants.config import MujocoConfig
+from mlpfac.plants.mjcf.wheels import skid_track
 from mlpfac.plants.mujoco import MujocoPlant
-from mlpfac.plants.wheels import skid_track
 from mlpfac.scenario.on_robot import SHARE, on_robot, robot_table, with_robots
 from mlpfac.scenario.parse import shipped_dir
 from mlpfac.scenario.reference import make_reference, sample
@@ -294,8 +294,8 @@ def test_a_file_naming_its_robot_gets_the_reference_fitted_by_the_rule_of_robot(
 def test_a_reference_the_robot_cannot_drive_is_said_in_numbers(tmp_path, robot):
     """Warned, not refused: a reference beyond the wheels is an experiment of its own (a --vary
     reference.speed axis past the limit); the run goes on, told the peak asked against the limit."""
-    from mlpfac.plants.robot import read_robot
-    from mlpfac.plants.wheels import wheel_speed_limit
+    from mlpfac.plants.mjcf.robot import read_robot
+    from mlpfac.plants.mjcf.wheels import wheel_speed_limit
     from mlpfac.scenario.on_robot import peak_wheel_speed
     from mlpfac.scenario.parse import load
 

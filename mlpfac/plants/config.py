@@ -1,6 +1,6 @@
 """The ``[plant]`` table of a MuJoCo scenario: which robot, which of its parts, what the plant adds.
 
-Plain, validated data (:class:`MujocoConfig`); :func:`mlpfac.plants.robot.read_robot` reads the
+Plain, validated data (:class:`MujocoConfig`); :func:`mlpfac.plants.mjcf.robot.read_robot` reads the
 robot it names.
 """
 
@@ -47,9 +47,9 @@ class MujocoConfig:
     model: str = field(
         default_factory=shipped_model
     )  # MJCF file (from the scenario's folder) or "menagerie:ROBOT/ENTRY"
-    # None below: chosen from the model (mlpfac.plants.defaults, docs/robots.md), written into config.toml
+    # None below: chosen from the model (mlpfac.plants.mjcf.defaults, docs/robots.md), written into config.toml
     actuator: str | None = None  # "velocity": the model's velocity servos; "torque": torque motors + PI here
-    # None below: found in the model (mlpfac.plants.detect); frame_offset None is 0 for a frame that is named
+    # None below: found in the model (mlpfac.plants.mjcf.detect); frame_offset None is 0 for a frame that is named
     left_actuator: str | None = None  # velocity servo (<velocity kv forcerange>) on the left wheel's hinge
     right_actuator: str | None = None
     left_actuator_2: str | None = None  # a second driven wheel on the left (skid-steer), commanded as the first
@@ -140,7 +140,7 @@ class MujocoConfig:
 
     @property
     def frame(self) -> tuple[str, str]:
-        """("site" or "body", name) of the pose frame (once found: see mlpfac.plants.detect)."""
+        """("site" or "body", name) of the pose frame (once found: see mlpfac.plants.mjcf.detect)."""
         return ("body", self.body) if self.body is not None else ("site", self.site or "axle_mid")
 
     @property

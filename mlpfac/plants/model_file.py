@@ -4,7 +4,7 @@
 ``mujoco-menagerie`` package (the optional extra ``mlpfac[menagerie]``) resolves it, from the local
 Menagerie checkout named by the environment variable ``MENAGERIE_ROOT`` when it is set, else from
 its download cache (downloading the model on first use). The files are used as shipped: what the
-plant needs beyond them is the scenario's ``[plant]`` keys and :mod:`mlpfac.plants.edits`.
+plant needs beyond them is the scenario's ``[plant]`` keys and :mod:`mlpfac.plants.mjcf.edits`.
 """
 
 from __future__ import annotations

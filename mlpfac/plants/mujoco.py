@@ -1,7 +1,7 @@
 """A differential-drive robot simulated by MuJoCo, as a plant (see :mod:`mlpfac.plants.base`).
 
 What the robot is (actuators, wheels, site, radius, track, rest pose) is read once from its model
-by :func:`mlpfac.plants.robot.read_robot`; this module resets it, applies events and reads what it
+by :func:`mlpfac.plants.mjcf.robot.read_robot`; this module resets it, applies events and reads what it
 did; its control step is compiled (:func:`mlpfac.plants.compiled.plant_step`, one call a step).
 The controller's u = (v, omega) is turned into wheel speeds by the inverse kinematics
 (:func:`mlpfac.plants.ik.wheel_speeds`) with the wheel radius and track the IK *believes* (the
@@ -14,8 +14,8 @@ nominal ones), and held for one control period of ``n_substeps`` physics steps,
   driven by a discrete wheel-speed PI loop evaluated once per physics step.
 
 The pose (x, y, theta) is read at a site on the axle midpoint (``axle_mid``, or the frame
-:mod:`mlpfac.plants.detect` finds; a skid-steer's found frame is moved to its kinematic centre, and
-the track it turns as is measured, as it settles: :func:`mlpfac.plants.settle.turning`); theta is unwrapped
+:mod:`mlpfac.plants.mjcf.detect` finds; a skid-steer's found frame is moved to its kinematic centre, and
+the track it turns as is measured, as it settles: :func:`mlpfac.plants.mjcf.settle.turning`); theta is unwrapped
 across steps. Events (:mod:`mlpfac.plants.mujoco_events`) edit the model's
 :class:`mujoco.MjSpec` and recompile it keeping the state (``spec.recompile``).
 
@@ -33,16 +33,16 @@ import mujoco
 import numpy as np
 
 from mlpfac.plants import compiled as K  # noqa: N812 - the kernel's layout constants, K.F_DT ...
-from mlpfac.plants import drive
 from mlpfac.plants.config import MujocoConfig
-from mlpfac.plants.edits import servo_band, torque_limit
 from mlpfac.plants.events import EVENT_KINDS, DelayLine
 from mlpfac.plants.ik import wheel_speeds
+from mlpfac.plants.mjcf import drive
+from mlpfac.plants.mjcf.edits import servo_band, torque_limit
+from mlpfac.plants.mjcf.robot import Robot, read_robot
+from mlpfac.plants.mjcf.settle import TURN_SHARE, turning
+from mlpfac.plants.mjcf.wheels import wheel_speed_limit
 from mlpfac.plants.model_file import is_menagerie, menagerie_version
 from mlpfac.plants.mujoco_events import MujocoEvents
-from mlpfac.plants.robot import Robot, read_robot
-from mlpfac.plants.settle import TURN_SHARE, turning
-from mlpfac.plants.wheels import wheel_speed_limit
 
 DIVERGENCE_WARNINGS = ("mjWARN_BADQPOS", "mjWARN_BADQVEL", "mjWARN_BADQACC")  # MuJoCo resets the data on these
 NOISE_CHUNK = 1024  # pose-noise draws made at once: the same stream as one draw of 3 per step
@@ -81,7 +81,7 @@ class MujocoPlant(MujocoEvents):
             self._turning(config, T, periods)
 
     def _turning(self, config: MujocoConfig, T: float, periods: tuple[float, ...]) -> None:
-        """A skid-steer's turning measured once it has settled (:func:`mlpfac.plants.settle.turning`),
+        """A skid-steer's turning measured once it has settled (:func:`mlpfac.plants.mjcf.settle.turning`),
         and the robot built again with what was measured as ``[plant]`` keys, found (written into
         config.toml: a run of it measures nothing): the track it turns as, and a pose frame found in
         the middle of its wheels moved to its kinematic centre, where it moves along its heading."""
@@ -150,7 +150,7 @@ class MujocoPlant(MujocoEvents):
     def _umax(self) -> None:
         """The drive's limits of the current model into fl: the tendon drive's inverse and its motors'
         control limits; servos whose force limit the plant keeps (``servo_limit = "control"``): each
-        one's gear and force limit / kv (:func:`mlpfac.plants.edits.servo_band`)."""
+        one's gear and force limit / kv (:func:`mlpfac.plants.mjcf.edits.servo_band`)."""
         for i, a in self._servos:  # left, right, left second, right second
             self.fl[K.F_GEAR + i], self.fl[K.F_BAND + i] = self.model.actuator_gear[a, 0], servo_band(self.model, a)
         if self.robot.mix is not None:
@@ -313,8 +313,8 @@ class MujocoPlant(MujocoEvents):
 
     def dynamics(self):
         """The nominal dynamic model of the robot (:class:`mlpfac.dynamics.RobotModel`), read from its
-        nominal MuJoCo model at rest (:func:`mlpfac.plants.dynamics.read_model`)."""
-        from mlpfac.plants.dynamics import read_model
+        nominal MuJoCo model at rest (:func:`mlpfac.plants.mjcf.dynamics.read_model`)."""
+        from mlpfac.plants.mjcf.dynamics import read_model
 
         return read_model(self.robot.model, self.robot, self._torque_limits_of(self.robot.model))
 
@@ -323,7 +323,7 @@ class MujocoPlant(MujocoEvents):
         masses, its drive's torque limit): what an oracle is told."""
         import dataclasses
 
-        from mlpfac.plants.dynamics import read_model
+        from mlpfac.plants.mjcf.dynamics import read_model
 
         model = read_model(self.model, self.robot, self._torque_max)
         return dataclasses.replace(model, wheel_radius_m=float(self.real_radius))

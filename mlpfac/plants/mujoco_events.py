@@ -13,8 +13,8 @@ import mujoco
 import numpy as np
 
 from mlpfac.exceptions import ConfigError
-from mlpfac.plants.detect import ROUND
 from mlpfac.plants.events import Actuator, ControlPeriod, Event, Friction, Payload, SensorDelay, WheelRadius
+from mlpfac.plants.mjcf.detect import ROUND
 
 
 class MujocoEvents:

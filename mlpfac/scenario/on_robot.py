@@ -3,7 +3,7 @@ controller put on another robot, by one rule (docs/robots.md):
 
 - the robot is its model alone (``[plant] kind = "mujoco"``, ``model``), or a robot file's
   ``[plant]`` table: every other part is found or chosen in the model
-  (:mod:`mlpfac.plants.defaults`); the scenario's pose noise is kept;
+  (:mod:`mlpfac.plants.mjcf.defaults`); the scenario's pose noise is kept;
 - the reference is slowed in time (the same path, v and omega x k, k <= 1) until its peak wheel
   speed (|v| + |omega| b / 2) / r is at most ``SHARE`` of the robot's wheel-speed limit: the
   servos' control range, or, for a drive without one, the speed at which the wheels' largest torque
@@ -213,7 +213,7 @@ def fitted(ref: dict, curve, duration: float, r) -> tuple[dict, dict, str] | Non
     time to a peak wheel speed of at most SHARE of the robot's limit, the controller's limits from the
     robot, and what was done in words; None where the robot has no wheel-speed limit or the reference
     no speed (``--robot`` and a scenario file that leaves the reference's speed unset both come here)."""
-    from mlpfac.plants.wheels import wheel_speed_limit
+    from mlpfac.plants.mjcf.wheels import wheel_speed_limit
 
     w_max = wheel_speed_limit(r)
     kind = ref.get("kind", "eight")
@@ -264,7 +264,7 @@ def on_its_robot(table: dict, scn) -> tuple[dict, dict]:
         out = table | {"reference": ref, "controller": ctrl}
         out["description"] = f"{table.get('description', '')} Fitted to the robot: {said}.".strip()
         return out, {"reference_fit": said}
-    from mlpfac.plants.wheels import wheel_speed_limit
+    from mlpfac.plants.mjcf.wheels import wheel_speed_limit
 
     w_max = wheel_speed_limit(r)
     if w_max is None:

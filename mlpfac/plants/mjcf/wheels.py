@@ -1,5 +1,5 @@
 """The wheels of a robot's model: their radius, which way each rolls forward, their actuators and
-their limits, the floor's contact priority (read once by :func:`mlpfac.plants.robot.read_robot`)."""
+their limits, the floor's contact priority (read once by :func:`mlpfac.plants.mjcf.robot.read_robot`)."""
 
 from __future__ import annotations
 
@@ -10,9 +10,9 @@ import numpy as np
 
 from mlpfac.exceptions import ConfigError
 from mlpfac.model import dot, norm
-from mlpfac.plants import drive, edits
 from mlpfac.plants.config import MujocoConfig
-from mlpfac.plants.detect import ROUND, base_frame, is_motor, is_velocity_servo, names
+from mlpfac.plants.mjcf import drive, edits
+from mlpfac.plants.mjcf.detect import ROUND, base_frame, is_motor, is_velocity_servo, names
 
 
 def radius(m: mujoco.MjModel, g: int, joint: int) -> float:
@@ -23,7 +23,7 @@ def radius(m: mujoco.MjModel, g: int, joint: int) -> float:
 def skid_track(anchors: list[np.ndarray]) -> tuple[float, float]:
     """The rule for a skid-steer's turning track, and its wheelbase, from its wheels' hinge anchors
     (left, right, then each side's second): W + L^2 / W for wheels W apart across and L along (the
-    plant measures the track instead, :func:`mlpfac.plants.settle.turning`; the rule is said beside it).
+    plant measures the track instead, :func:`mlpfac.plants.mjcf.settle.turning`; the rule is said beside it).
 
     Turning, every wheel slides; where each one's friction is saturated (Coulomb's, the same on
     every wheel), the moments about the middle balance when the base turns at omega = u W/2 /

@@ -17,7 +17,7 @@ import mujoco
 import numpy as np
 
 from mlpfac.exceptions import ConfigError
-from mlpfac.plants.detect import is_motor, names, tendon_joints, tendon_wheels
+from mlpfac.plants.mjcf.detect import is_motor, names, tendon_joints, tendon_wheels
 
 TENDON_KEY = "tendon_actuators"
 UNIT = 1e-3  # the control a motor's torque on the wheels is measured with (within any force limit)

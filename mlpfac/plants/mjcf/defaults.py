@@ -38,7 +38,7 @@ import mujoco
 import numpy as np
 
 from mlpfac.exceptions import ConfigError
-from mlpfac.plants.detect import ROUND
+from mlpfac.plants.mjcf.detect import ROUND
 
 HOME = "home"
 CHATTER_S = 0.3  # seconds of a steady wheel command the servos are tried with

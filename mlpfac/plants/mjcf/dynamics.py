@@ -1,5 +1,5 @@
 """The dynamic model's nominal parameters (:class:`mlpfac.dynamics.RobotModel`) read from a MuJoCo
-robot at rest, as :func:`mlpfac.plants.robot.read_robot` made it (its other joints locked where
+robot at rest, as :func:`mlpfac.plants.mjcf.robot.read_robot` made it (its other joints locked where
 ``other_actuators = "lock"``): what a torque-level controller is told of the robot.
 
 - ``mass_kg``: the robot's subtree mass (wheels included);
@@ -28,7 +28,7 @@ from mlpfac.model import dot
 
 
 def read_model(m: mujoco.MjModel, robot, torque_limits: tuple[float, float]) -> RobotModel:
-    """The nominal model of ``robot`` (:class:`mlpfac.plants.robot.Robot`) in its compiled model ``m``
+    """The nominal model of ``robot`` (:class:`mlpfac.plants.mjcf.robot.Robot`) in its compiled model ``m``
     (the nominal one, or one an event changed), at its rest pose; ``torque_limits`` each drive's."""
     d = mujoco.MjData(m)
     d.qpos[:] = robot.qpos_rest

@@ -1,5 +1,5 @@
 """The robot as the viewer draws it: its visual geoms posed in the pose frame (meshes with their
-vertices and triangles), read once by :func:`mlpfac.plants.robot.read_robot`."""
+vertices and triangles), read once by :func:`mlpfac.plants.mjcf.robot.read_robot`."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import mujoco
 import numpy as np
 
 from mlpfac.model import matmul
-from mlpfac.plants import edits
+from mlpfac.plants.mjcf import edits
 
 SHAPES = {
     int(mujoco.mjtGeom.mjGEOM_BOX): "box",

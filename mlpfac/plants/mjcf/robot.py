@@ -2,9 +2,9 @@
 where the pose is measured, the wheel radius and track, the drive's limits and the rest pose.
 
 :func:`read_robot` reads (and checks) all of it once from a :class:`MujocoConfig` (the parts it leaves
-unset found first by :mod:`mlpfac.plants.detect`), making what the
+unset found first by :mod:`mlpfac.plants.mjcf.detect`), making what the
 model does not say itself (a pose frame on a body, sphere tyres on mesh wheels, locked arms, a
-timestep) as :class:`mujoco.MjSpec` edits (:mod:`mlpfac.plants.edits`); the stepping plant
+timestep) as :class:`mujoco.MjSpec` edits (:mod:`mlpfac.plants.mjcf.edits`); the stepping plant
 (:class:`mlpfac.plants.mujoco.MujocoPlant`) drives the robot it describes. Nothing here steps a run.
 """
 
@@ -19,11 +19,11 @@ import numpy as np
 
 from mlpfac.exceptions import ConfigError
 from mlpfac.model import norm
-from mlpfac.plants import defaults, drive, edits, shapes
-from mlpfac.plants import wheels as wheel_parts
 from mlpfac.plants.compiled import yaw
 from mlpfac.plants.config import MujocoConfig, check_timestep
-from mlpfac.plants.detect import (
+from mlpfac.plants.mjcf import defaults, drive, edits, shapes
+from mlpfac.plants.mjcf import wheels as wheel_parts
+from mlpfac.plants.mjcf.detect import (
     WHEEL_SHAPES,
     collision_geoms,
     describe,
@@ -31,8 +31,8 @@ from mlpfac.plants.detect import (
     names,
     resolve,
 )
+from mlpfac.plants.mjcf.settle import SETTLE_S, cannot_simulate, settle
 from mlpfac.plants.model_file import fingerprint, is_menagerie, load_spec
-from mlpfac.plants.settle import SETTLE_S, cannot_simulate, settle
 
 MAX_SUBSTEPS = 10_000  # physics steps in one control period, at most
 
@@ -48,7 +48,7 @@ class Robot:
     """
 
     where: str  # the model file, for messages
-    config: MujocoConfig  # the configuration with every part named (mlpfac.plants.detect found what was not)
+    config: MujocoConfig  # the configuration with every part named (mlpfac.plants.mjcf.detect found what was not)
     found: tuple[str, ...]  # the [plant] keys found in the model, not named by the configuration
     description: str  # the wheels' joints and servos and the pose frame, in one line
     sha256: str  # the file as compiled (before any change for the torque drive): model_fingerprint
@@ -133,8 +133,8 @@ def read_robot(config: MujocoConfig, periods: tuple[float, ...] = ()) -> Robot:
 
 def _read_robot(config: MujocoConfig, stamp: tuple[int, int], periods: tuple[float, ...] = ()) -> Robot:
     """The robot of ``config`` (:func:`read_robot`). Its wheel servos are tried, and where they chatter
-    (:func:`mlpfac.plants.defaults.chatters`) with ``servo_limit`` unset, their force limits are kept
-    through their control instead (``servo_limit = "control"``, :func:`mlpfac.plants.edits.unclamp`):
+    (:func:`mlpfac.plants.mjcf.defaults.chatters`) with ``servo_limit`` unset, their force limits are kept
+    through their control instead (``servo_limit = "control"``, :func:`mlpfac.plants.mjcf.edits.unclamp`):
     the model compiled again, the robot settled again (the same robot as read with that key set)."""
     user, probe = config, True
     spec, path = load_spec(config.model)
@@ -326,8 +326,8 @@ def _read_robot(config: MujocoConfig, stamp: tuple[int, int], periods: tuple[flo
 
 
 def _pi_chosen(robot: Robot) -> Robot:
-    """The robot with its torque drive's unset PI gains chosen for its inertia (:func:`mlpfac.plants.defaults.pi_gains`)."""
-    from mlpfac.plants.dynamics import read_model
+    """The robot with its torque drive's unset PI gains chosen for its inertia (:func:`mlpfac.plants.mjcf.defaults.pi_gains`)."""
+    from mlpfac.plants.mjcf.dynamics import read_model
 
     if robot.config.actuator != "torque" or None not in (robot.config.pi_kp, robot.config.pi_ki):
         return robot

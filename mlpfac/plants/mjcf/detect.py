@@ -23,8 +23,8 @@ import numpy as np
 
 from mlpfac.exceptions import ConfigError
 from mlpfac.model import dot, matmul, norm
-from mlpfac.plants import edits
 from mlpfac.plants.config import MujocoConfig
+from mlpfac.plants.mjcf import edits
 
 ROUND = (int(mujoco.mjtGeom.mjGEOM_SPHERE), int(mujoco.mjtGeom.mjGEOM_CYLINDER))  # wheel shapes: size[0] is the radius
 WHEEL_SHAPES = (*ROUND, edits.MESH)
