@@ -1,16 +1,18 @@
 """SIGINT and SIGTERM as a run and a sweep meet them: SIGTERM raised like Ctrl-C (exit code 143
-instead of 130), and both held back while a file or folder is being written.
+instead of 130), and both held back while a file or folder is being written; a child process forked
+to work beside the run (:class:`ForkedChild`), which this process ends.
 
 Only the standard library: the sweep's parent process imports this module too.
 """
 
 from __future__ import annotations
 
+import os
 import signal
 import sys
 import threading
-from collections.abc import Iterator
-from contextlib import contextmanager
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager, suppress
 
 
 class Terminated(KeyboardInterrupt):
@@ -70,3 +72,44 @@ def sigint_deferred() -> Iterator[None]:
                 handler(s, None)  # the default SIGINT handler raises KeyboardInterrupt here
             elif handler == signal.SIG_DFL:
                 signal.raise_signal(s)
+
+
+class ForkedChild:
+    """A child process forked now, which runs ``child(read_fd, write_fd)`` (it never returns) and talks
+    to this process through two pipes, ``_send`` and ``_receive``; ``pid`` None: no child (a platform
+    where fork is not the default), the work is done here. The child closes this process's ends and
+    the ``inherited`` descriptors (the pipes of this process's other children)."""
+
+    def __init__(self, child: Callable[[int, int], None], inherited: Sequence[int] = ()) -> None:
+        self.pid: int | None = None
+        if sys.platform != "linux":  # fork is safe to use here only where it is the default
+            return
+        sys.stdout.flush()
+        sys.stderr.flush()
+        child_in, parent_out = os.pipe()  # (read end, write end)
+        parent_in, child_out = os.pipe()
+        pid = os.fork()
+        if pid == 0:  # the child: never returns
+            for fd in (parent_out, parent_in, *inherited):
+                with suppress(OSError):
+                    os.close(fd)
+            child(child_in, child_out)
+        os.close(child_in)
+        os.close(child_out)
+        self.pid, self._send, self._receive = pid, os.fdopen(parent_out, "wb"), os.fdopen(parent_in, "rb")
+
+    def fds(self) -> list[int]:
+        """This process's ends of the pipes to the child (for a process forked after it to close)."""
+        return [] if self.pid is None else [self._send.fileno(), self._receive.fileno()]
+
+    def close(self) -> None:
+        """End the child (if it still runs) and reap it."""
+        if self.pid is None:
+            return
+        pid, self.pid = self.pid, None
+        for f in (self._send, self._receive):
+            with suppress(OSError):
+                f.close()
+        with suppress(ProcessLookupError):
+            os.kill(pid, signal.SIGKILL)
+        os.waitpid(pid, 0)

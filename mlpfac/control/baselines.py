@@ -205,17 +205,26 @@ class PluginController:
         return cls(T=self.T, **self.plugin.params)
 
     def step(self, e: np.ndarray, r: np.ndarray) -> np.ndarray:
+        E = e if self.B > 1 or self._given is None else e[0]
+        return self._commands(
+            lambda: self._call("step", self.objs[0].step, E, r),
+            (self.B, 2) if E.ndim == 2 else (2,),
+            lambda b: self._call("step", self.objs[b].step, e[b].copy(), r.copy()),
+        )
+
+    def _commands(self, whole, shape: tuple[int, ...], seed, what: str = "(v, omega)") -> np.ndarray:
+        """(B, 2) commands: ``whole()`` of shape ``shape`` for a batched class, else ``seed(b)`` for each
+        live seed; a seed whose command is none (``_command``) is stopped with the reason, NaN in its row."""
         u = np.full((self.B, 2), np.nan)
         if self.plugin.batched:
-            E = e if self.B > 1 or self._given is None else e[0]
-            out = self._command(self._call("step", self.objs[0].step, E, r), (self.B, 2) if E.ndim == 2 else (2,))
+            out = self._command(whole(), shape, what)
             if isinstance(out, str):
                 self.why.update(dict.fromkeys(self.live, out))
             else:
                 u[:] = out
             return u
         for b in self.live:
-            out = self._command(self._call("step", self.objs[b].step, e[b].copy(), r.copy()), (2,))
+            out = self._command(seed(b), (2,), what)
             if isinstance(out, str):
                 self.why[b] = out
             else:

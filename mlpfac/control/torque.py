@@ -84,20 +84,10 @@ class TorquePluginController(PluginController):
         return cls(T=self.T, robot=self.robot, **self.plugin.params)
 
     def step(self, obs: Observation) -> np.ndarray:
-        u = np.full((self.B, 2), np.nan)
-        if self.plugin.batched:
-            one = self.B == 1 and self._given is not None
-            out = self._call("step", self.objs[0].step, obs.single() if one else obs)
-            out = self._command(out, (2,) if one else (self.B, 2), WHAT)
-            if isinstance(out, str):
-                self.why.update(dict.fromkeys(self.live, out))
-            else:
-                u[:] = out
-            return u
-        for b in self.live:
-            out = self._command(self._call("step", self.objs[b].step, obs.seed(b)), (2,), WHAT)
-            if isinstance(out, str):
-                self.why[b] = out
-            else:
-                u[b] = out
-        return u
+        one = self.B == 1 and self._given is not None
+        return self._commands(
+            lambda: self._call("step", self.objs[0].step, obs.single() if one else obs),
+            (2,) if one else (self.B, 2),
+            lambda b: self._call("step", self.objs[b].step, obs.seed(b)),
+            WHAT,
+        )

@@ -12,39 +12,22 @@ from __future__ import annotations
 import os
 import pickle
 import signal
-import sys
 from collections.abc import Callable, Iterator
-from contextlib import contextmanager, suppress
+from contextlib import contextmanager
 from pathlib import Path
 
+from mlpfac.interrupts import ForkedChild
 
-class Painter:
+
+class Painter(ForkedChild):
     """``figure1`` of :mod:`mlpfac.plots.figure1`, drawn by a child process started now."""
 
     def __init__(self) -> None:
         from mlpfac.plots.mplconfig import quiet_config
 
         quiet_config()  # before the child starts: it inherits the environment
-        self.pid: int | None = None
         self.meanwhile: list[Callable[[], None]] = []  # done here while the child draws
-        if sys.platform != "linux":  # fork is safe to use here only where it is the default
-            return
-        sys.stdout.flush()
-        sys.stderr.flush()
-        child_in, parent_out = os.pipe()  # (read end, write end)
-        parent_in, child_out = os.pipe()
-        pid = os.fork()
-        if pid == 0:  # the child: never returns
-            os.close(parent_out)
-            os.close(parent_in)
-            _child(child_in, child_out)
-        os.close(child_in)
-        os.close(child_out)
-        self.pid, self._send, self._receive = pid, os.fdopen(parent_out, "wb"), os.fdopen(parent_in, "rb")
-
-    def fds(self) -> list[int]:
-        """This process's ends of the pipes to the child (for a process forked after it to close)."""
-        return [] if self.pid is None else [self._send.fileno(), self._receive.fileno()]
+        super().__init__(_child)
 
     def figure1(self, rec, baseline, path: Path) -> list[str]:
         """Write Figure 1 to ``path``; the panels drawn (as :func:`mlpfac.plots.figure1.figure1`)."""
@@ -72,18 +55,6 @@ class Painter:
         jobs, self.meanwhile = self.meanwhile, []
         for job in jobs:
             job()
-
-    def close(self) -> None:
-        """End the child (if it still runs) and reap it."""
-        if self.pid is None:
-            return
-        pid, self.pid = self.pid, None
-        for f in (self._send, self._receive):
-            with suppress(OSError):
-                f.close()
-        with suppress(ProcessLookupError):
-            os.kill(pid, signal.SIGKILL)
-        os.waitpid(pid, 0)
 
 
 @contextmanager

@@ -16,32 +16,18 @@ from __future__ import annotations
 import os
 import pickle
 import signal
-import sys
 import threading
 from collections.abc import Iterator, Sequence
-from contextlib import contextmanager, suppress
+from contextlib import contextmanager
+
+from mlpfac.interrupts import ForkedChild
 
 
-class Writer:
+class Writer(ForkedChild):
     """The child process that writes the recording (``pid`` None: none, write it here)."""
 
     def __init__(self, inherited: Sequence[int] = ()) -> None:
-        self.pid: int | None = None
-        if sys.platform != "linux":  # fork is safe to use here only where it is the default
-            return
-        sys.stdout.flush()
-        sys.stderr.flush()
-        child_in, parent_out = os.pipe()  # (read end, write end)
-        parent_in, child_out = os.pipe()
-        pid = os.fork()
-        if pid == 0:  # the child: never returns
-            for fd in (parent_out, parent_in, *inherited):  # the pipes of this process's other children
-                with suppress(OSError):
-                    os.close(fd)
-            _child(child_in, child_out)
-        os.close(child_in)
-        os.close(child_out)
-        self.pid, self._send, self._receive = pid, os.fdopen(parent_out, "wb"), os.fdopen(parent_in, "rb")
+        super().__init__(_child, inherited)
 
     def send(self, job: tuple) -> bool:
         """Hand the child ``(calls, recording, names, save)``; False when there is no child (any more)."""
@@ -64,18 +50,6 @@ class Writer:
             answer = None
         self.close()
         return None if answer is None or answer[0] == "error" else answer
-
-    def close(self) -> None:
-        """End the child (if it still runs) and reap it."""
-        if self.pid is None:
-            return
-        pid, self.pid = self.pid, None
-        for f in (self._send, self._receive):
-            with suppress(OSError):
-                f.close()
-        with suppress(ProcessLookupError):
-            os.kill(pid, signal.SIGKILL)
-        os.waitpid(pid, 0)
 
 
 @contextmanager
