@@ -8,6 +8,7 @@ Only the standard library: the sweep's parent process imports this module too.
 from __future__ import annotations
 
 import os
+import pickle
 import signal
 import sys
 import threading
@@ -75,12 +76,14 @@ def sigint_deferred() -> Iterator[None]:
 
 
 class ForkedChild:
-    """A child process forked now, which runs ``child(read_fd, write_fd)`` (it never returns) and talks
-    to this process through two pipes, ``_send`` and ``_receive``; ``pid`` None: no child (a platform
-    where fork is not the default), the work is done here. The child closes this process's ends and
-    the ``inherited`` descriptors (the pipes of this process's other children)."""
+    """A child process forked now, which runs ``work(read_fd)`` and sends back the answer it returns
+    (pickled; None: nothing to answer), talking to this process through two pipes, ``_send`` and
+    ``_receive``; ``pid`` None: no child (a platform where fork is not the default), the work is done
+    here. The child takes no part in Ctrl-C (this process ends it), closes this process's ends and
+    the ``inherited`` descriptors (the pipes of this process's other children), and exits without
+    running this process's exit handlers."""
 
-    def __init__(self, child: Callable[[int, int], None], inherited: Sequence[int] = ()) -> None:
+    def __init__(self, work: Callable[[int], tuple | None], inherited: Sequence[int] = ()) -> None:
         self.pid: int | None = None
         if sys.platform != "linux":  # fork is safe to use here only where it is the default
             return
@@ -93,7 +96,7 @@ class ForkedChild:
             for fd in (parent_out, parent_in, *inherited):
                 with suppress(OSError):
                     os.close(fd)
-            child(child_in, child_out)
+            _serve(work, child_in, child_out)
         os.close(child_in)
         os.close(child_out)
         self.pid, self._send, self._receive = pid, os.fdopen(parent_out, "wb"), os.fdopen(parent_in, "rb")
@@ -113,3 +116,19 @@ class ForkedChild:
         with suppress(ProcessLookupError):
             os.kill(pid, signal.SIGKILL)
         os.waitpid(pid, 0)
+
+
+def _serve(work: Callable[[int], tuple | None], receive_fd: int, send_fd: int) -> None:
+    """The forked child: ``work``, its answer sent back, then exit (never returns)."""
+    code = 0
+    try:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+        answer = work(receive_fd)
+        if answer is not None:
+            with os.fdopen(send_fd, "wb") as f:
+                pickle.dump(answer, f)
+    except BaseException:
+        code = 1
+    finally:
+        os._exit(code)

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import os
 import pickle
-import signal
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -68,32 +67,21 @@ def painting(wanted: bool) -> Iterator[Painter | None]:
             painter.close()
 
 
-def _child(receive_fd: int, send_fd: int) -> None:
-    """Import matplotlib and warm it up, draw what arrives, answer ("ok", panels), ("oserror",
-    errno, strerror, filename) or ("error", text), and exit without running the parent's exit
-    handlers."""
-    code = 0
-    try:
-        signal.signal(signal.SIGINT, signal.SIG_IGN)
-        signal.signal(signal.SIGTERM, signal.SIG_DFL)
-        from mlpfac.plots.figure1 import figure1, warm_up
+def _child(receive_fd: int) -> tuple | None:
+    """Import matplotlib and warm it up, draw what arrives; the answer ("ok", panels), ("oserror",
+    errno, strerror, filename) or ("error", text), None when nothing arrives."""
+    from mlpfac.plots.figure1 import figure1, warm_up
 
-        warm_up()  # matplotlib's first-figure work, done before the records arrive
+    warm_up()  # matplotlib's first-figure work, done before the records arrive
 
-        with os.fdopen(receive_fd, "rb") as f:
-            try:
-                rec, baseline, path = pickle.load(f)
-            except EOFError:  # nothing to draw (no run, or it failed)
-                os._exit(0)
+    with os.fdopen(receive_fd, "rb") as f:
         try:
-            answer: tuple = ("ok", figure1(rec, baseline, path))
-        except OSError as err:
-            answer = ("oserror", err.errno, err.strerror, err.filename)
-        except Exception as err:  # drawn again in the parent, which reports it as it would have
-            answer = ("error", repr(err))
-        with os.fdopen(send_fd, "wb") as f:
-            pickle.dump(answer, f)
-    except BaseException:
-        code = 1
-    finally:
-        os._exit(code)
+            rec, baseline, path = pickle.load(f)
+        except EOFError:  # nothing to draw (no run, or it failed)
+            return None
+    try:
+        return ("ok", figure1(rec, baseline, path))
+    except OSError as err:
+        return ("oserror", err.errno, err.strerror, err.filename)
+    except Exception as err:  # drawn again in the parent, which reports it as it would have
+        return ("error", repr(err))

@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import os
 import pickle
-import signal
 import threading
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
@@ -63,47 +62,37 @@ def writing(wanted: bool, inherited: Sequence[int] = ()) -> Iterator[Writer | No
             writer.close()
 
 
-def _child(receive_fd: int, send_fd: int) -> None:
+def _child(receive_fd: int) -> tuple | None:
     """Import rerun while the job is read (a thread: the job may be larger than a pipe holds), write
-    the recording, answer, and exit without running the parent's exit handlers."""
-    code = 0
+    the recording; the answer (None: nothing to write)."""
+    got: list = []
+
+    def read() -> None:
+        with os.fdopen(receive_fd, "rb") as f:
+            try:
+                got.append(pickle.load(f))
+            except EOFError:  # nothing to write (no run, or it failed)
+                got.append(None)
+
+    reader = threading.Thread(target=read, daemon=True)
+    reader.start()
+    from mlpfac.exceptions import ConfigError
+    from mlpfac.log.sinks import check_recording
+    from mlpfac.runs.folder import open_sink
+
+    reader.join()
+    if not got or got[0] is None:
+        return None
+    calls, recording, names, save = got[0]
     try:
-        signal.signal(signal.SIGINT, signal.SIG_IGN)
-        signal.signal(signal.SIGTERM, signal.SIG_DFL)
-        got: list = []
-
-        def read() -> None:
-            with os.fdopen(receive_fd, "rb") as f:
-                try:
-                    got.append(pickle.load(f))
-                except EOFError:  # nothing to write (no run, or it failed)
-                    got.append(None)
-
-        reader = threading.Thread(target=read, daemon=True)
-        reader.start()
-        from mlpfac.exceptions import ConfigError
-        from mlpfac.log.sinks import check_recording
-        from mlpfac.runs.folder import open_sink
-
-        reader.join()
-        if not got or got[0] is None:
-            os._exit(0)
-        calls, recording, names, save = got[0]
-        try:
-            sink = open_sink(recording, names, save)
-            for name, args in calls:
-                getattr(sink, name)(*args)  # the sink closes at "end"
-            check_recording(*save)
-            answer: tuple = ("ok",)
-        except ConfigError as err:
-            answer = ("config", err.where, err.what)
-        except OSError as err:
-            answer = ("oserror", err.errno, err.strerror, err.filename)
-        except Exception as err:  # written again in the parent, which reports it as it would have
-            answer = ("error", repr(err))
-        with os.fdopen(send_fd, "wb") as f:
-            pickle.dump(answer, f)
-    except BaseException:
-        code = 1
-    finally:
-        os._exit(code)
+        sink = open_sink(recording, names, save)
+        for name, args in calls:
+            getattr(sink, name)(*args)  # the sink closes at "end"
+        check_recording(*save)
+        return ("ok",)
+    except ConfigError as err:
+        return ("config", err.where, err.what)
+    except OSError as err:
+        return ("oserror", err.errno, err.strerror, err.filename)
+    except Exception as err:  # written again in the parent, which reports it as it would have
+        return ("error", repr(err))
