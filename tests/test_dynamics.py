@@ -15,7 +15,7 @@ from mlpfac.plants.config import MujocoConfig
 from mlpfac.plants.mujoco import MujocoPlant
 
 ROOT = Path(__file__).resolve().parents[1]
-TUG = ROOT / "tests" / "data" / "tug.xml"
+TUG = ROOT / "models" / "tug.xml"
 ROBOTS = {"ours": ROOT / "models" / "scene.xml", "cart": ROOT / "models" / "cart-scene.xml", "tug": TUG}
 # MuJoCo's tyres are soft contacts that slip a little sideways in a turn (about 4 % of v omega on
 # our 5.5 kg robot): the rigid rolling model matches its accelerations to within this share of the

@@ -21,7 +21,7 @@ from mlpfac.scenario.parse import load
 
 REPO = Path(__file__).resolve().parents[1]
 EXAMPLE = REPO / "examples" / "torque_law.py"
-TUG = REPO / "tests" / "data" / "tug.xml"
+TUG = REPO / "models" / "tug.xml"
 SCENE = REPO / "models" / "scene.xml"
 
 PROBE = '''

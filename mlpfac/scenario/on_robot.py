@@ -39,7 +39,15 @@ AS_SHIPPED = {  # what a Menagerie base does from its name alone (tests/test_rob
     "rainbow_robotics_rby1": "refused as shipped: its wheel servos (kv 1) cannot turn the wheels against their "
     "damping; --robot rby1a drives it",
 }
-SHIPPED = {"diffdrive": "scene.xml", "cart": "cart-scene.xml", "rby1a": "rby1a.toml"}  # this package's (models/)
+SHIPPED = {  # this package's robots (models/): the file, and what it is beside its model
+    "diffdrive": ("scene.xml", ""),
+    "diffdrive-torque": ("diffdrive-torque.toml", "diffdrive with torque motors under the wheel-speed PI loop"),
+    "cart": ("cart-scene.xml", ""),
+    "cart-torque": ("cart-torque.toml", "cart with torque motors under the wheel-speed PI loop"),
+    "tug": ("tug.xml", "24 kg, its 8 kg load 0.2 m ahead of the axle, 4 N m torque motors"),
+    "rby1a": ("rby1a.toml", "rainbow_robotics_rby1 with the keys that make it drive"),
+    "tiago-torque": ("tiago-torque.toml", "pal_tiago with torque motors under the wheel-speed PI loop"),
+}
 SPEEDS = {"eight": ("wx", "wy"), "circle": ("rate",), "line": ("v",), "lemniscate": ("rate",)}
 DEFAULT_SPEEDS = {"eight": (0.25, 0.5), "circle": (0.5,), "line": (0.5,), "lemniscate": (0.3,)}
 PEAK_SAMPLES = 2001
@@ -102,7 +110,7 @@ def model_of(robot: str) -> str:
 
 
 def _shipped(robot: str) -> str:
-    return str(importlib.resources.files("mlpfac.models") / SHIPPED[robot])
+    return str(importlib.resources.files("mlpfac.models") / SHIPPED[robot][0])
 
 
 def robot_table(robot: str) -> dict:
@@ -129,8 +137,7 @@ def robot_table(robot: str) -> dict:
 
 def robots_here() -> list[tuple[str, str]]:
     """(name, where it is, or why it cannot run here) of each robot ``--robot`` knows by name."""
-    out = [(name, f"shipped (models/{file})") for name, file in SHIPPED.items()]
-    out[-1] = (out[-1][0], f"{out[-1][1]}: rainbow_robotics_rby1 with the keys that make it drive")
+    out = [(name, f"shipped (models/{file}){': ' + note if note else ''}") for name, (file, note) in SHIPPED.items()]
     try:
         import mujoco_menagerie as mm
     except ImportError:
