@@ -327,10 +327,11 @@ def cmd_run(args: argparse.Namespace) -> int:
 
     scn = load(args.scenario, robot=args.robot).with_overrides(args.controller, args.seed, args.duration)
     found = scn.table.get("provenance", {})
-    if found.get("reference_warning"):  # a reference the robot's wheels cannot drive: said first
-        print(f"warning: {found['reference_warning']}")
-    if found.get("found") or found.get("reference_fit"):  # what the model answered and what was chosen
-        print(f"robot: {'; '.join(found[k] for k in ('robot', 'reference_fit') if found.get(k))}")
+    for key in ("reference_warning", "torque_warning"):  # a reference its wheels or motors cannot drive: said first
+        if found.get(key):
+            print(f"warning: {found[key]}")
+    if found.get("found") or found.get("reference_fit") or found.get("reference_torque"):  # the model's answers
+        print(f"robot: {'; '.join(found[k] for k in ('robot', 'reference_fit', 'reference_torque') if found.get(k))}")
     if scn.dropped_events:
         times = ", ".join(f"{t:g} s" for t in scn.dropped_events)
         print(f"note: --duration {scn.duration:g} s ends before the event at {times}: this run has no such event")

@@ -334,3 +334,46 @@ def test_the_dynamic_oracle_told_the_period_and_the_delay(tmp_path, event):
         rec = mlpfac.run(str(tmp_path / "e.toml"), controller=name, seed=0)
         after[name] = mlpfac.metrics(rec)["phases"]["after"]["rms_position_error_m"]
     assert after["fierro-lewis"] > 0.01 and after["oracle-dynamic"] < 0.003, after
+
+
+def test_what_the_reference_asks_of_the_motors(tmp_path):
+    """The largest wheel torque the nominal model needs along the reference, against the motors' limit,
+    said on the robot's line: on a circle (v, omega constant: the offset mass's coupling and the joints'
+    damping alone, in closed form), and on the eight at the speed it names as the motors' last, where
+    the need is the limit; beyond it a warning."""
+    import re
+
+    from mlpfac.plants import make_plant
+
+    circle = TORQUE + '[reference]\nkind = "circle"\nradius = 1.0\nrate = 0.8\n'
+    (tmp_path / "circle.toml").write_text(circle)
+    scn = load(str(tmp_path / "circle.toml"))
+    model = make_plant(scn, np.zeros((2, 5))).dynamics()
+    m, d, c, r, b = model.mass_kg, model.com_offset_m, model.wheel_damping_Nm_s, model.wheel_radius_m, model.b
+
+    def need(k: float) -> float:  # v = omega = 0.8 k on a circle of 1 m
+        v = w = 0.8 * k
+        total = r * (-m * d * w * w + 2 * c * v / r**2)  # tau_l + tau_r
+        diff = r / b * (m * d * w * v + 2 * c * b * b * w / r**2)  # tau_r - tau_l
+        return max(abs(total - diff), abs(total + diff)) / 2
+
+    from scipy.optimize import brentq
+
+    said = scn.table["provenance"]["reference_torque"]
+    assert f"needs up to {need(1.0):.3g} N m a wheel of the motors' 0.6 N m" in said, said
+    k = float(re.search(r"speed = ([0-9.]+)", said)[1])
+    assert k == pytest.approx(brentq(lambda k: need(k) - 0.6, 0.1, 100.0), rel=2e-3)
+
+    full = TORQUE.replace("duration = 0.5", "duration = 25.0")  # the whole eight: the need is over the run
+    (tmp_path / "eight.toml").write_text(full + '[reference]\nkind = "eight"\n')
+    said = load(str(tmp_path / "eight.toml")).table["provenance"]["reference_torque"]
+    top = float(re.search(r"speed = ([0-9.]+)", said)[1])
+    assert 2.0 < top < 3.0, said  # the prototype's motors saturated by 2.75
+    (tmp_path / "top.toml").write_text(full + f'[reference]\nkind = "eight"\nspeed = {top}\n')
+    share = load(str(tmp_path / "top.toml")).table["provenance"]["reference_torque"]
+    assert re.search(r"\((99|100|101)%", share), share
+    (tmp_path / "over.toml").write_text(full + f'[reference]\nkind = "eight"\nspeed = {1.1 * top:.3g}\n')
+    warned = load(str(tmp_path / "over.toml")).table["provenance"]
+    assert "the motors saturate" in warned["torque_warning"]
+    servos = load("eight-nominal").table["provenance"]
+    assert "reference_torque" not in servos and "torque_warning" not in servos

@@ -287,6 +287,57 @@ def on_its_robot(table: dict, scn) -> tuple[dict, dict]:
     }
 
 
+def torque_need(scn) -> dict:
+    """What the reference asks of a torque-driven robot's motors (``scn``, the scenario parsed): the
+    largest wheel torque the nominal dynamic model (:class:`mlpfac.dynamics.RobotModel`) needs to follow
+    it without error, against the motors' limit, and the reference's ``speed`` at which the two meet
+    (the torque of a speed k is a k^2 + c k per sample: inertia and the offset mass's coupling x k^2,
+    the joints' damping x k). ``[provenance]`` words for the run's first line: ``reference_torque``,
+    and ``torque_warning`` where the motors cannot give it. Empty for a robot on velocity servos or
+    a reference of no speed."""
+    import dataclasses
+
+    import numpy as np
+
+    from mlpfac.plants import make_plant
+    from mlpfac.scenario.reference import sample
+
+    if not hasattr(scn.reference, "speed"):
+        return {}
+    plant = make_plant(scn, sample(scn.reference, np.arange(2) * scn.T))  # its read cached
+    if plant.config.actuator != "torque":  # the file's, or the model's answer (motors in the MJCF)
+        return {}
+    model = plant.dynamics()
+    k0 = float(scn.reference.speed)
+    unit = dataclasses.replace(scn.reference, speed=1.0)
+    dt = scn.T / 4
+    t = np.arange(int(round(scn.duration * k0 / dt)) + 1) * dt  # the path once traversed at speed k0, at speed 1
+    rows = sample(unit, t)
+    twist = rows[:, 3:5]
+    accel = np.gradient(twist, dt, axis=0)
+
+    def peak(k: float) -> float:
+        return float(np.max(np.abs(model.torques(k * twist, k * k * accel))))
+
+    need, limit = peak(k0), model.torque_limit_Nm
+    if not np.isfinite(limit):
+        return {"reference_torque": f"the reference needs up to {need:.3g} N m a wheel (the motors have no limit)"}
+    lo, hi = 0.0, max(k0, 1.0)
+    while peak(hi) < limit and hi < 1e3:
+        lo, hi = hi, 2.0 * hi
+    for _ in range(40):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if peak(mid) < limit else (lo, mid)
+    said = (
+        f"the reference needs up to {need:.3g} N m a wheel of the motors' {limit:.3g} N m ({need / limit:.0%}, "
+        f"the nominal model); they can drive it up to [reference] speed = {lo:.3g}"
+    )
+    out = {"reference_torque": said}
+    if need > limit:
+        out["torque_warning"] = f"{said}: beyond it no law follows the reference; the motors saturate"
+    return out
+
+
 def _same_change(ev: dict) -> dict:
     """An event of the scenario as the same physical change on robot ``r``."""
     if not isinstance(ev, dict) or ev.get("kind") != "payload":

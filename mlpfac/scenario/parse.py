@@ -188,7 +188,9 @@ def load(
     the file alone (a listing), without building the plant. ``robot`` (``--robot``) puts the
     scenario on another robot (:mod:`mlpfac.scenario.on_robot`); without it, a MuJoCo robot's file
     whose reference leaves its speed unset gets it fitted to the robot by the same rule, and one that
-    asks more than the wheels give is warned (``[provenance] reference_fit``, ``reference_warning``). ``values`` sets numbers of the file by
+    asks more than the wheels give is warned (``[provenance] reference_fit``, ``reference_warning``);
+    on torque motors, what the reference asks of them is said, and warned beyond their limit
+    (``reference_torque``, ``torque_warning``: :func:`mlpfac.scenario.on_robot.torque_need`). ``values`` sets numbers of the file by
     their dotted keys (:mod:`mlpfac.scenario.draws`) before it is checked, as if written in it.
     """
     if not isinstance(name_or_path, str | os.PathLike) or not str(name_or_path):
@@ -229,6 +231,10 @@ def load(
         fitted, said = on_its_robot(table, scn)
         if fitted is not table:
             table, scn = fitted, parse(fitted, str(path), check_model=False)
+    if scn.plant_kind == "mujoco":  # what the reference asks of torque motors, against their limit
+        from mlpfac.scenario.on_robot import torque_need
+
+        said = said | torque_need(scn)
     table["provenance"], found = provenance.recorded(scn)
     table["provenance"] |= said
     if found:  # the robot's parts the file left to the model: written in, so its config.toml re-runs the same
