@@ -253,6 +253,9 @@ class MujocoPlant(MujocoEvents):
     def sim_time(self) -> float:
         return float(self.st[K.S_TIME])
 
+    def elapsed(self, n: int) -> float:
+        return self.sim_time
+
     def draws(self, n: int) -> np.ndarray:
         """The next n pose-noise draws (n, 3) of the plant's stream (zeros without noise)."""
         if self._noise is None:

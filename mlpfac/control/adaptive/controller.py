@@ -11,6 +11,7 @@ import numpy as np
 
 from mlpfac.control.adaptive.config import AdaptiveConfig  # noqa: F401 -- exported here too
 from mlpfac.control.adaptive.estimators import EKF, UKF
+from mlpfac.control.baselines import Stepped
 from mlpfac.control.law import GAIN_RANGE, Law
 from mlpfac.control.variants import VARIANTS  # noqa: F401 -- exported here too (factory, scenario, controllers)
 from mlpfac.jit import as_rows
@@ -37,7 +38,7 @@ class NominalPrior:
         return f + f_true(e, r[3], r[4], T), G + G_true(e, T)
 
 
-class Adaptive:
+class Adaptive(Stepped):
     """The paper's scheme: NN_f, NN_G tuned by the EKF (29)-(32), used in (35) through (34).
 
     Composed of parts, chosen by :class:`AdaptiveConfig`: the estimator (the EKF, compiled, or the
