@@ -68,12 +68,12 @@ class Law:
         omega is computed first since v uses it; the v law uses the omega actually sent (after the
         limit), so that e1 still decays as lambda_1 when only omega saturates.
         """
-        e, h = np.asarray(e, dtype=float), np.asarray(h, dtype=float)
-        v_r = np.broadcast_to(np.asarray(v_r, dtype=float), e.shape[:-1])
-        v_max, omega_max = (math.inf if x is None else float(x) for x in (self.v_max, self.omega_max))
-        u = np.empty((*e.shape[:-1], 2))
-        for i in np.ndindex(e.shape[:-1]):  # the compiled law, the one the batch kernels run, row by row
-            _law(*map(float, e[i][:3]), *map(float, h[i][:3]), float(v_r[i]), T, *self.lambdas, v_max, omega_max, u[i])
+        if np.ndim(e) > 1:  # a batch, row by row
+            v_r = np.broadcast_to(v_r, np.shape(e)[:-1])
+            return np.stack([self.control(e[i], h[i], v_r[i], T) for i in range(len(e))])
+        u = np.empty(2)  # one run: the compiled law, the one the batch kernels run
+        v_max, omega_max = (math.inf if x is None else x for x in (self.v_max, self.omega_max))
+        _law(*map(float, e[:3]), *map(float, h[:3]), float(v_r), T, *self.lambdas, v_max, omega_max, u)
         return u
 
     def cautious_control(
