@@ -7,8 +7,10 @@ r_k = (x_r, y_r, theta_r, v_r, omega_r) and returns u_k = (v, omega).
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Protocol
+from types import MappingProxyType
+from typing import ClassVar, Protocol, runtime_checkable
 
 import numpy as np
 
@@ -59,7 +61,42 @@ class Controller(Protocol):
     def telemetry(self) -> dict[str, np.ndarray | float]: ...
 
 
-class Corradini:
+class Stepped(Protocol):
+    """What the closed loop (:mod:`mlpfac.loop`) steps: every controller
+    :func:`mlpfac.loop.factory.make_controller` builds, a shipped one or a user's through
+    :class:`PluginController` (or :class:`~mlpfac.control.torque.TorquePluginController`). Batch-first:
+    ``reset`` is given one generator or a list of B, and then ``step`` takes (B, ...) arrays and
+    returns (B, 2). The members with a value are the defaults a controller takes by naming this class
+    as its base; the loop reads them without asking whether they are there."""
+
+    name: str
+    labels: dict[str, list[str]]
+    level: ClassVar[str] = "velocity"
+    """``"velocity"``: ``step(e, r) -> (v, omega)``; ``"torque"``: ``step(obs) -> wheel torques``
+    (:mod:`mlpfac.control.torque`)."""
+    why: Mapping[int, str] = MappingProxyType({})
+    """The seeds the controller stopped itself (a user's command that is none), and why."""
+
+    def reset(self, rng) -> None: ...
+
+    def step(self, *args) -> np.ndarray: ...
+
+    def telemetry(self) -> dict[str, np.ndarray | float]: ...
+
+    def drop(self, b: int) -> None:
+        """Seed b stopped (it diverged): a batched controller steps it no more. Nothing by default."""
+
+
+@runtime_checkable
+class LawKernel(Protocol):
+    """A controller whose law the compiled closed loop runs (:mod:`mlpfac.loop.compiled`)."""
+
+    def law_kernel(self) -> tuple[int, np.ndarray]:
+        """(the law's number, its constants) for :func:`mlpfac.control.law.law_step`."""
+        ...
+
+
+class Corradini(Stepped):
     """The non-adaptive law (35) given the nominal functions h1 = T e2, h2 = T v_r cos e3, h5 = T omega_r."""
 
     name = "corradini"
@@ -115,7 +152,7 @@ class KanayamaGains:
                 raise ConfigError(name, f"Kanayama gains must be positive, got {getattr(self, name)}")
 
 
-class Kanayama:
+class Kanayama(Stepped):
     """Kanayama et al.'s law: v = v_r cos e3 + Kx e1, omega = omega_r + v_r (Ky e2 + Ktheta sin e3)."""
 
     name = "kanayama"
@@ -158,7 +195,7 @@ class Kanayama:
         return KANAYAMA, np.array(self._consts, dtype=float)
 
 
-class PluginController:
+class PluginController(Stepped):
     """A plug-in stepped as the runner steps every controller (a batch of B seeds, arrays (B, ...)):
     one instance per seed, or one instance in its batch form. What the controller's own code
     raises becomes a :class:`PluginError`; a bad command ends its seed as diverged (``why``)."""
@@ -189,17 +226,23 @@ class PluginController:
         make = self.plugin.cls
         if self.plugin.batched:
             self.objs = [self._given if self._given is not None else self._call("__init__", self._new, make)]
-            if hasattr(self.objs[0], "reset"):
-                self._call("reset", self.objs[0].reset, rngs if self.B > 1 or self._given is None else rngs[0])
-            return
-        if self._given is not None and self.B > 1:
+        elif self._given is not None and self.B > 1:
             raise ValueError("a controller object runs one seed; pass its class to run a batch")
-        self.objs = (
-            [self._given] if self._given is not None else [self._call("__init__", self._new, make) for _ in rngs]
-        )
+        else:
+            self.objs = (
+                [self._given] if self._given is not None else [self._call("__init__", self._new, make) for _ in rngs]
+            )
+        # the contract's optional members, looked up once: reset, telemetry, a batch form's drop
+        one = self.objs[0]
+        self._telemetry = hasattr(one, "telemetry")
+        self._drop = getattr(one, "drop", None) if self.plugin.batched else None
+        if not hasattr(one, "reset"):
+            return
+        if self.plugin.batched:
+            self._call("reset", one.reset, rngs if self.B > 1 or self._given is None else rngs[0])
+            return
         for obj, rng in zip(self.objs, rngs, strict=True):
-            if hasattr(obj, "reset"):
-                self._call("reset", obj.reset, rng)
+            self._call("reset", obj.reset, rng)
 
     def _new(self, cls: type):
         return cls(T=self.T, **self.plugin.params)
@@ -246,7 +289,7 @@ class PluginController:
 
     def telemetry(self) -> dict[str, np.ndarray]:
         objs = self.objs
-        if not hasattr(objs[0], "telemetry"):
+        if not self._telemetry:
             return {}
         if self.plugin.batched:
             rows = [self._call("telemetry", objs[0].telemetry)]
@@ -282,6 +325,5 @@ class PluginController:
     def drop(self, b: int) -> None:
         if b in self.live:
             self.live.remove(b)
-        drop = getattr(self.objs[0], "drop", None)
-        if self.plugin.batched and drop is not None:
-            self._call("drop", drop, b)
+        if self._drop is not None:
+            self._call("drop", self._drop, b)

@@ -34,6 +34,7 @@ from collections import deque
 
 import numpy as np
 
+from mlpfac.control.baselines import Stepped
 from mlpfac.control.oracle import Oracle
 from mlpfac.dynamics import P_TMAX, torque_of
 from mlpfac.jit import kernel, seeds
@@ -77,7 +78,7 @@ def fierro_lewis_step(e, r, r_dot, twist, p, g, tau, vc):
         vc[i, 0], vc[i, 1] = v_c, w_c
 
 
-class FierroLewis:
+class FierroLewis(Stepped):
     """``fierro-lewis``: Kanayama's law backstepped through computed torque with the nominal model."""
 
     name = "fierro-lewis"

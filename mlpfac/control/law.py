@@ -12,11 +12,10 @@ so eigenvalues lambda_2, lambda_3 need
 :meth:`Law.cautious_control` generalises (35) to uncertain estimates (a cautious law, Fabri and
 Kadirkamanathan 2001) and to learned input gains; certainty equivalence is its zero-variance case.
 
-The law (35) is written once, compiled (:func:`_law`, :mod:`mlpfac.jit`): one run's
-:meth:`Law.control` calls it, as do the batch-first kernels of Corradini's law (:func:`corradini_step`,
-(35) with the nominal h of (34)), the adaptive step and the compiled closed loop (:func:`law_step`,
-with Kanayama's law :func:`kanayama_step`); the batch form of :meth:`Law.control` is its numpy twin,
-which the tests compare it with.
+The law (35) is written once, compiled (:func:`_law`, :mod:`mlpfac.jit`): :meth:`Law.control` calls
+it (one run, or a batch row by row), as do the batch-first kernels of Corradini's law
+(:func:`corradini_step`, (35) with the nominal h of (34)), the adaptive step and the compiled closed
+loop (:func:`law_step`, with Kanayama's law :func:`kanayama_step`).
 """
 
 from __future__ import annotations
@@ -69,19 +68,13 @@ class Law:
         omega is computed first since v uses it; the v law uses the omega actually sent (after the
         limit), so that e1 still decays as lambda_1 when only omega saturates.
         """
-        if np.ndim(e) == 1:  # one run: the compiled law, the one the batch kernels run
-            u = np.empty(2)
-            v_max, omega_max = (math.inf if x is None else x for x in (self.v_max, self.omega_max))
-            _law(*map(float, e[:3]), *map(float, h[:3]), float(v_r), T, *self.lambdas, v_max, omega_max, u)
-            return u
-        k1, k2, k3 = self.gains(T, v_r)
-        omega = (h[..., 2] + k2 * e[..., 1] + k3 * e[..., 2]) / T
-        if self.omega_max is not None:
-            omega = np.clip(omega, -self.omega_max, self.omega_max)
-        v = (k1 * e[..., 0] + h[..., 0] * omega + h[..., 1]) / T
-        if self.v_max is not None:
-            v = np.clip(v, -self.v_max, self.v_max)
-        return np.stack([v, omega], axis=-1)
+        if np.ndim(e) > 1:  # a batch, row by row
+            v_r = np.broadcast_to(v_r, np.shape(e)[:-1])
+            return np.stack([self.control(e[i], h[i], v_r[i], T) for i in range(len(e))])
+        u = np.empty(2)  # one run: the compiled law, the one the batch kernels run
+        v_max, omega_max = (math.inf if x is None else x for x in (self.v_max, self.omega_max))
+        _law(*map(float, e[:3]), *map(float, h[:3]), float(v_r), T, *self.lambdas, v_max, omega_max, u)
+        return u
 
     def cautious_control(
         self,

@@ -44,6 +44,7 @@ from collections import deque
 
 import numpy as np
 
+from mlpfac.control.baselines import Stepped
 from mlpfac.control.law import Law, corradini_step, kanayama_step
 from mlpfac.jit import as_rows, seeds
 from mlpfac.model import each, tracking_errors
@@ -69,7 +70,7 @@ def told(event: Event) -> tuple[float, str, float]:
     return float(event.time), event.kind, float(number)
 
 
-class Oracle:
+class Oracle(Stepped):
     """The law (35) with the nominal functions, told the changes ``changes`` = [:func:`told` (event)].
 
     One interface with the other controllers: one run (``reset`` with one Generator) or B seeds.

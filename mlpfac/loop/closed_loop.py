@@ -10,14 +10,14 @@ from collections.abc import Callable
 
 import numpy as np
 
-from mlpfac.control.baselines import Controller
+from mlpfac.control.baselines import LawKernel, Stepped
 from mlpfac.control.torque import Observation, reference_rates
 from mlpfac.interrupts import raise_swallowed
 from mlpfac.loop.compiled import BAD, segment
 from mlpfac.loop.kernels import bad_seeds
 from mlpfac.loop.record import RunRecord
 from mlpfac.model import tracking_errors
-from mlpfac.plants.base import Plant
+from mlpfac.plants.base import CompiledPlant, Plant
 from mlpfac.scenario.parse import Scenario
 
 FLUSH_EVERY = 250  # steps between sends to a log sink
@@ -43,7 +43,7 @@ class PlantList:
         for p, rng in zip(self.plants, rngs, strict=True):
             p.reset(q0, rng, u0)
         self.live = list(range(len(self.plants)))
-        self._q, self._m = np.zeros((len(self.plants), 3)), np.zeros((len(self.plants), 3))
+        self._q, self._m, self._w = (np.zeros((len(self.plants), d)) for d in (3, 3, 4))
         self._read()
 
     def _read(self) -> None:
@@ -88,14 +88,9 @@ class PlantList:
 
     def motion(self) -> np.ndarray:
         """(B, 4) (v, omega, wheel_l, wheel_r) as each live seed's robot measures them (torque commands)."""
-        if not hasattr(self, "_w"):
-            self._w = np.zeros((len(self.plants), 4))
         for i in self.live:
             self._w[i] = self.plants[i].motion()
         return self._w
-
-    def sim_time(self, i: int, n: int, T: float) -> float:
-        return float(getattr(self.plants[i], "sim_time", n * T))
 
     def drop(self, i: int) -> None:
         self.live.remove(i)
@@ -106,7 +101,7 @@ class ClosedLoop:
     still live, where each stopped; stepped in Python (:meth:`run_steps`) or compiled between
     events and flushes (:meth:`run_segments`, a MuJoCo plant with a law kernel)."""
 
-    def __init__(self, scns: list[Scenario], ref: np.ndarray, plant, ctrl: Controller, full: bool, compiled: bool):
+    def __init__(self, scns: list[Scenario], ref: np.ndarray, plant, ctrl: Stepped, full: bool, compiled: bool):
         base = scns[0]
         self.base, self.ref, self.ctrl, self.full = base, ref, ctrl, full
         B, N = len(scns), base.steps
@@ -132,7 +127,7 @@ class ClosedLoop:
         e = np.zeros((0, 3))
         tracking_errors(e, ref[0], e)  # load (or compile) the loop's kernels before it starts
         bad_seeds(e, np.zeros((0, 2)), e, self.no_z[:0], 1.0, self.bad[:0])
-        self.torque = getattr(ctrl, "level", "velocity") == "torque"  # step(obs) -> wheel torques
+        self.torque = ctrl.level == "torque"  # step(obs) -> wheel torques
         if self.torque:
             self.r_dot = reference_rates(ref, self.T)
         self.compiled = compiled and self.listed and _compiled(plant, ctrl)
@@ -223,7 +218,7 @@ class ClosedLoop:
         )  # a plug-in's: any shape
         if bad_seeds(q, u, et, zk, self.base.divergence_m, self.bad):
             for b in [b for b in self.live if self.bad[b]]:
-                why = getattr(self.ctrl, "why", {}).get(b)  # a controller's own reason for a seed it stopped
+                why = self.ctrl.why.get(b)  # a controller's own reason for a seed it stopped
                 zb = None if z is None else z[b]
                 self.stop(b, why or _diverged(q[b], u[b], et[b], zb, self.base.divergence_m), k, k)
         self._u = u
@@ -270,9 +265,7 @@ class ClosedLoop:
         self.live.remove(b)
         if self.listed:
             self.plant.drop(b)
-        drop = getattr(self.ctrl, "drop", None)  # a batched controller stops stepping the seed
-        if drop is not None:
-            drop(b)
+        self.ctrl.drop(b)  # a batched controller stops stepping the seed
         self.stopped[b] = (rec.n, plant_rows)
 
     def interrupted(self, how: str) -> None:
@@ -284,12 +277,12 @@ class ClosedLoop:
         for b, rec in enumerate(self.recs):
             _clear_after(rec, self.stopped.get(b), self.plant_store)
             rec.wall_time_s = wall
-            rec.sim_time_s = self.plant.sim_time(b, rec.n, self.T) if self.listed else rec.n * self.T
+            rec.sim_time_s = (self.plant.plants[b] if self.listed else self.plant).elapsed(rec.n)
 
 
-def _compiled(plant: PlantList, ctrl) -> bool:
+def _compiled(plant: PlantList, ctrl: Stepped) -> bool:
     """Whether the closed loop can run compiled: every plant has a compiled step, the law is a kernel."""
-    return hasattr(ctrl, "law_kernel") and all(hasattr(p, "kernel_args") for p in plant.plants)
+    return isinstance(ctrl, LawKernel) and all(isinstance(p, CompiledPlant) for p in plant.plants)
 
 
 def _apply_due(pending: list, k: int, T: float, plant, recs: list[RunRecord], live: list[int]) -> None:

@@ -17,7 +17,7 @@ import numpy as np
 
 from mlpfac.control.adaptive.controller import VARIANTS, Adaptive
 from mlpfac.control.adaptive.dynamic_level import AdaptiveDynamic
-from mlpfac.control.baselines import Controller, Corradini, Kanayama, PluginController
+from mlpfac.control.baselines import Corradini, Kanayama, PluginController, Stepped
 from mlpfac.control.dynamic import OUTER_GAINS, FierroLewis, OracleDynamic
 from mlpfac.control.oracle import Oracle, told
 from mlpfac.control.torque import TorquePluginController
@@ -26,7 +26,7 @@ from mlpfac.scenario.parse import Scenario
 from mlpfac.scenario.reference import sample
 
 
-def make_controller(scn: Scenario, instance: object | None = None, plant=None) -> Controller:
+def make_controller(scn: Scenario, instance: object | None = None, plant=None) -> Stepped:
     """The scenario's controller: a named variant of the adaptive scheme, Corradini's or Kanayama's law,
     the oracle (the law told the scenario's events, :mod:`mlpfac.control.oracle`), a controller of the
     wheels' torques (:mod:`mlpfac.control.dynamic`, given the nominal model of ``plant``, the run's
@@ -54,7 +54,7 @@ def make_controller(scn: Scenario, instance: object | None = None, plant=None) -
     return Kanayama(scn.law, scn.kanayama, scn.T)
 
 
-def _torque_level(scn: Scenario, instance: object | None, plant) -> Controller:
+def _torque_level(scn: Scenario, instance: object | None, plant) -> Stepped:
     """A controller of the wheels' torques, given the robot's nominal model (``oracle-dynamic``: and
     the true one after each event, read from a robot the scenario's events are applied to in turn)."""
     ref = sample(scn.reference, np.arange(2) * scn.T)

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from mlpfac.control.baselines import Controller
+from mlpfac.control.baselines import Stepped
 from mlpfac.interrupts import Terminated
 from mlpfac.loop.closed_loop import ClosedLoop
 from mlpfac.loop.factory import make_controller, make_plant
@@ -24,7 +24,7 @@ class Built:
 
     ref: np.ndarray
     plant: Plant
-    ctrl: Controller
+    ctrl: Stepped
 
 
 def build(scn: Scenario, instance: object | None = None) -> Built:
@@ -87,7 +87,7 @@ def run_batch(scns: list[Scenario], plant_list: bool = False) -> list[RunRecord]
     return recs
 
 
-def _loop(scns, ref, plant, ctrl: Controller, sink, on_step, full: bool) -> list[RunRecord]:
+def _loop(scns, ref, plant, ctrl: Stepped, sink, on_step, full: bool) -> list[RunRecord]:
     """The closed loop for B = len(scns) seeds of one scenario. ``full``: record every weight (else
     max |z| per step). A list of plants, or a plant without a batch form, steps one per seed."""
     loop = ClosedLoop(scns, ref, plant, ctrl, full, compiled=on_step is None)

@@ -21,6 +21,9 @@ class PlantSpec(Protocol):
     T: float
     source: str
     events: tuple
+    controller: str
+    level: str  # "torque": the controller commands the wheels' torques
+    steps: int  # control steps of a run
 
 
 def make_plant(scn: PlantSpec, ref: np.ndarray):
@@ -30,28 +33,29 @@ def make_plant(scn: PlantSpec, ref: np.ndarray):
         if scn.plant_kind == "kinematic":
             from mlpfac.plants.kinematic import KinematicPlant
 
-            plant = KinematicPlant(scn.plant_config, scn.T, ref)
+            plant, robot = KinematicPlant(scn.plant_config, scn.T, ref), None
         else:
             from mlpfac.plants.events import ControlPeriod
             from mlpfac.plants.mujoco import MujocoPlant
 
             periods = (scn.T, *(ev.factor * scn.T for ev in scn.events if isinstance(ev, ControlPeriod)))
-            plant = MujocoPlant(scn.plant_config, scn.T, periods)
+            plant = robot = MujocoPlant(scn.plant_config, scn.T, periods)
     except ConfigError as err:
         where = err.where if err.where.startswith(scn.source) else f"{scn.source} [plant] {err.where}".rstrip()
         raise type(err)(where, err.what) from None  # UnavailableError stays itself
-    if getattr(scn, "level", "velocity") == "torque":  # a controller of the wheels' torques
-        actuator = getattr(getattr(plant, "config", None), "actuator", None)
-        if actuator != "torque":
+    if scn.level == "torque":  # a controller of the wheels' torques
+        actuator = None if robot is None else robot.config.actuator
+        if robot is None or actuator != "torque":
             raise ConfigError(
                 f"{scn.source} [plant] actuator",
                 f"{scn.controller} is a torque-level controller: it commands wheel torques, which the robot's "
                 f'{actuator} servos do not take; set actuator = "torque" in [plant] (torque motors with the same limit)',
             )
-        plant.torque_commands()
+        robot.torque_commands()
     for i, ev in enumerate(scn.events):
         plant.check_event(ev, f"{scn.source} [[events]] #{i + 1}")
-    _check_size(scn, plant)
+    if robot is not None:
+        _check_size(scn, robot)
     return plant
 
 
@@ -59,12 +63,9 @@ MAX_PHYSICS_STEPS = 10**9  # physics steps of one run, at most (hours of simulat
 
 
 def _check_size(scn: PlantSpec, plant) -> None:
-    """A run of more than MAX_PHYSICS_STEPS physics steps is refused before it starts, naming the
-    key that made it so (``[plant] timestep``, or ``duration``)."""
-    n = getattr(plant, "n_substeps", None)
-    steps = getattr(scn, "steps", None)
-    if n is None or steps is None:
-        return
+    """A MuJoCo run of more than MAX_PHYSICS_STEPS physics steps is refused before it starts, naming
+    the key that made it so (``[plant] timestep``, or ``duration``)."""
+    n, steps = plant.n_substeps, scn.steps
     most = max([n] + [plant._substeps(ev.factor * scn.T, "factor") for ev in scn.events if ev.kind == "control_period"])
     if steps * most > MAX_PHYSICS_STEPS:
         raise ConfigError(

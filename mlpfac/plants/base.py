@@ -11,7 +11,7 @@ Events change the plant mid-run without telling the controller.
 
 from __future__ import annotations
 
-from typing import Protocol
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 
@@ -59,6 +59,10 @@ class Plant(Protocol):
     def diverged(self) -> str | None:
         """A reason string if the simulation left its valid range (flipped, airborne, non-finite)."""
 
+    def elapsed(self, n: int) -> float:
+        """Simulated seconds after the run's ``n`` control steps: n T for the kinematic model, whose
+        steps are its time; a robot's physics clock (the periods it was held for)."""
+
     def provenance(self) -> dict:
         """What it simulates, recorded in a scenario's ``[provenance]`` and checked when a
         config.toml runs again ({} for the kinematic model, which is all in the scenario)."""
@@ -72,3 +76,24 @@ class Plant(Protocol):
         Each: {"name", "type" ("box"|"cylinder"|"sphere"), "size" (MuJoCo convention),
         "pos" (3,), "quat" (w, x, y, z), "rgba" (4,)}.
         """
+
+
+@runtime_checkable
+class CompiledPlant(Protocol):
+    """A plant whose control step is compiled (:mod:`mlpfac.plants.compiled`): the closed loop runs
+    it, with a law kernel, from one event or log flush to the next (:mod:`mlpfac.loop.compiled`)."""
+
+    _n: int
+    """Physics steps in the control step now (an event can change it)."""
+
+    def kernel_args(self) -> tuple:
+        """The compiled step's robot (its arrays), as the segment kernel takes it."""
+        ...
+
+    def draws(self, n: int) -> np.ndarray:
+        """The next n pose-noise draws (n, 3) of the plant's stream."""
+        ...
+
+    def why(self, code: int) -> str | None:
+        """The words for a divergence code of the compiled step."""
+        ...

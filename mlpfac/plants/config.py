@@ -150,33 +150,32 @@ class MujocoConfig:
 
     def noise_std(self) -> np.ndarray | None:
         """(3,) standard deviations of the pose noise, or None when there is none."""
-        try:
-            std = np.broadcast_to(np.asarray(self.pose_noise_std, dtype=float), (3,))
-        except (TypeError, ValueError):
-            raise ConfigError(
-                "pose_noise_std", f"expected a number or 3 numbers, got {self.pose_noise_std!r}"
-            ) from None
-        if not np.all(np.isfinite(std)) or np.any(std < 0) or np.any(std > NOISE_STD_MAX):
-            raise ConfigError(
-                "pose_noise_std",
-                f"standard deviations must lie in 0 .. {NOISE_STD_MAX:g} (m, m, rad), got {self.pose_noise_std!r}",
-            )
+        std = _stds("pose_noise_std", self.pose_noise_std, 3, "")
+        _in_range("pose_noise_std", std, " (m, m, rad)", self.pose_noise_std)
         return std.copy() if np.any(std > 0) else None
 
     def motion_noise_std(self) -> np.ndarray | None:
         """(4,) standard deviations of the noise on (v, omega, wheel_l, wheel_r) as a torque-level
         controller measures them, or None when there is none."""
-        try:
-            twist = np.broadcast_to(np.asarray(self.twist_noise_std, dtype=float), (2,))
-        except (TypeError, ValueError):
-            raise ConfigError(
-                "twist_noise_std", f"expected a number or 2 numbers (m/s, rad/s), got {self.twist_noise_std!r}"
-            ) from None
+        twist = _stds("twist_noise_std", self.twist_noise_std, 2, " (m/s, rad/s)")
         w = self.wheel_speed_noise_std
         if isinstance(w, bool) or not isinstance(w, int | float):
             raise ConfigError("wheel_speed_noise_std", f"expected a number (rad/s), got {w!r}")
         std = np.array([*twist, w, w], dtype=float)
         for key, x in (("twist_noise_std", std[:2]), ("wheel_speed_noise_std", std[2:])):
-            if not np.all(np.isfinite(x)) or np.any(x < 0) or np.any(x > NOISE_STD_MAX):
-                raise ConfigError(key, f"standard deviations must lie in 0 .. {NOISE_STD_MAX:g}, got {x.tolist()!r}")
+            _in_range(key, x, "", x.tolist())
         return std if np.any(std > 0) else None
+
+
+def _stds(key: str, value, n: int, units: str) -> np.ndarray:
+    """(n,) standard deviations from a number or n numbers; else a ConfigError naming ``key``."""
+    try:
+        return np.broadcast_to(np.asarray(value, dtype=float), (n,))
+    except (TypeError, ValueError):
+        raise ConfigError(key, f"expected a number or {n} numbers{units}, got {value!r}") from None
+
+
+def _in_range(key: str, std: np.ndarray, units: str, given) -> None:
+    """Each standard deviation finite, in 0 .. NOISE_STD_MAX; else a ConfigError naming ``key`` and ``given``."""
+    if not np.all(np.isfinite(std)) or np.any(std < 0) or np.any(std > NOISE_STD_MAX):
+        raise ConfigError(key, f"standard deviations must lie in 0 .. {NOISE_STD_MAX:g}{units}, got {given!r}")

@@ -109,6 +109,9 @@ class KinematicPlant:
         out = [None if x else "non-finite tracking error" for x in ok]
         return out[0] if self.single else out
 
+    def elapsed(self, n: int) -> float:
+        return n * self.T
+
     def provenance(self) -> dict:
         return {}  # the model is all in the scenario
 

@@ -17,7 +17,10 @@ The pose (x, y, theta) is read at a site on the axle midpoint (``axle_mid``, or 
 :mod:`mlpfac.plants.mjcf.detect` finds; a skid-steer's found frame is moved to its kinematic centre, and
 the track it turns as is measured, as it settles: :func:`mlpfac.plants.mjcf.settle.turning`); theta is unwrapped
 across steps. Events (:mod:`mlpfac.plants.mujoco_events`) edit the model's
-:class:`mujoco.MjSpec` and recompile it keeping the state (``spec.recompile``).
+:class:`mujoco.MjSpec` and recompile it keeping the state (``spec.recompile``). The torque level's
+part (torques in, twist and wheel speeds measured, the dynamic model read) is
+:mod:`mlpfac.plants.mujoco_torque`; what the robot says of itself (a divergence in words, the keys it
+found, its provenance), :mod:`mlpfac.plants.mujoco_report`.
 
 Data stay in step: each physics step is ``mj_step2`` (actuation, acceleration, integration) then
 ``mj_step1`` (positions, velocities and sensors of the new state), so between control steps every
@@ -37,14 +40,14 @@ from mlpfac.plants.config import MujocoConfig
 from mlpfac.plants.events import EVENT_KINDS, DelayLine
 from mlpfac.plants.ik import wheel_speeds
 from mlpfac.plants.mjcf import drive
-from mlpfac.plants.mjcf.edits import servo_band, torque_limit
+from mlpfac.plants.mjcf.edits import servo_band
 from mlpfac.plants.mjcf.robot import Robot, read_robot
 from mlpfac.plants.mjcf.settle import TURN_SHARE, turning
 from mlpfac.plants.mjcf.wheels import wheel_speed_limit
-from mlpfac.plants.model_file import is_menagerie, menagerie_version
 from mlpfac.plants.mujoco_events import MujocoEvents
+from mlpfac.plants.mujoco_report import MujocoReport
+from mlpfac.plants.mujoco_torque import TorqueDrive
 
-DIVERGENCE_WARNINGS = ("mjWARN_BADQPOS", "mjWARN_BADQVEL", "mjWARN_BADQACC")  # MuJoCo resets the data on these
 NOISE_CHUNK = 1024  # pose-noise draws made at once: the same stream as one draw of 3 per step
 
 
@@ -61,7 +64,7 @@ class _Kept:
         getattr(plant, self.array)[self.index] = value
 
 
-class MujocoPlant(MujocoEvents):
+class MujocoPlant(MujocoEvents, TorqueDrive, MujocoReport):
     """The MuJoCo robot behind the :class:`~mlpfac.plants.base.Plant` interface.
 
     ``model`` and ``data`` are the current :class:`mujoco.MjModel` / :class:`mujoco.MjData` (an
@@ -253,6 +256,9 @@ class MujocoPlant(MujocoEvents):
     def sim_time(self) -> float:
         return float(self.st[K.S_TIME])
 
+    def elapsed(self, n: int) -> float:
+        return self.sim_time
+
     def draws(self, n: int) -> np.ndarray:
         """The next n pose-noise draws (n, 3) of the plant's stream (zeros without noise)."""
         if self._noise is None:
@@ -301,63 +307,6 @@ class MujocoPlant(MujocoEvents):
             t = self.tele
             self._measure_motion(t[2], t[3], t[6], t[7])
 
-    # --- a torque-level controller's robot --------------------------------------------------------
-
-    def torque_commands(self) -> None:
-        """From the next reset on, the command is the wheels' torques (tau_l, tau_r) in N m, applied
-        to the torque motors (clamped to their limit) and held for the control period, and the plant
-        measures the base's twist and the wheel speeds (:meth:`motion`). Only a torque drive takes it."""
-        if self.config.actuator != "torque":
-            raise ValueError("wheel torques are commanded to a torque drive only")
-        self.ints[K.I_TAU] = 1
-
-    def dynamics(self):
-        """The nominal dynamic model of the robot (:class:`mlpfac.dynamics.RobotModel`), read from its
-        nominal MuJoCo model at rest (:func:`mlpfac.plants.mjcf.dynamics.read_model`)."""
-        from mlpfac.plants.mjcf.dynamics import read_model
-
-        return read_model(self.robot.model, self.robot, self._torque_limits_of(self.robot.model))
-
-    def true_dynamics(self):
-        """The dynamic model of the robot as it is now (after events: its wheels' true radius, its
-        masses, its drive's torque limit): what an oracle is told."""
-        import dataclasses
-
-        from mlpfac.plants.mjcf.dynamics import read_model
-
-        model = read_model(self.model, self.robot, self._torque_max)
-        return dataclasses.replace(model, wheel_radius_m=float(self.real_radius))
-
-    def _torque_limits_of(self, m) -> tuple[float, float]:
-        if self.robot.mix is not None:
-            return drive.wheel_torque_limits(self.robot.mix, self.robot.umax)
-        return tuple(
-            torque_limit(m, a, c, self.config.actuator == "torque", bool(self.ints[K.I_CLAMP]))
-            for a, c in zip(self._acts, self._act_per_wheel, strict=True)
-        )
-
-    def _measure_motion(self, v: float, omega: float, wl: float, wr: float) -> None:
-        x = np.array([v, omega, wl, wr])
-        std = self._motion_std
-        if std is not None:
-            x += std * self._motion_rng.standard_normal(4)
-        self._motion.push(x)
-
-    def motion(self) -> np.ndarray:
-        """(v, omega, wheel_l, wheel_r) as measured (noise and delay of the scenario's sensors): the
-        base's twist at the pose frame (m/s, rad/s) and the encoders' wheel speeds (rad/s, forward positive)."""
-        return self._motion.read()
-
-    def _force_limits(self) -> tuple[float, float]:
-        """Largest forward wheel torque of each drive (N m at the joint), inf when not limited."""
-        if self.robot.mix is not None:
-            return drive.wheel_torque_limits(self.robot.mix, self.fl[K.F_UMAX : K.F_UMAX + 2])
-        torque, kept = self.config.actuator == "torque", bool(self.ints[K.I_CLAMP])
-        tl, tr = (
-            torque_limit(self.model, a, c, torque, kept) for a, c in zip(self._acts, self._act_per_wheel, strict=True)
-        )
-        return tl, tr
-
     def telemetry(self) -> dict[str, np.ndarray | float]:
         """``u_meas`` (2,) (v, omega) from the measured wheel speeds through the nominal FK;
         ``u_true`` (2,) (v, omega) of the axle midpoint (differs from u_meas by slip and radius);
@@ -366,67 +315,8 @@ class MujocoPlant(MujocoEvents):
         overwritten by the next step: copy what you keep."""
         return self._tele
 
-    def mujoco_warnings(self) -> dict[str, int]:
-        """MuJoCo's warning counters that are not zero, by name (``{}`` when all is well)."""
-        return {mujoco.mjtWarning(i).name: int(w.number) for i, w in enumerate(self.data.warning) if w.number}
-
-    def diverged(self) -> str | None:
-        """Why the robot's state is not one to go on from (:func:`mlpfac.plants.compiled.diverged`), or None."""
-        return self.why(K.diverged(self._args))
-
-    def why(self, code: int) -> str | None:
-        """The words for a divergence code of the compiled step, with the current state's numbers."""
-        if code == K.WARNED:
-            said = K.WARNINGS[-1].rstrip(".") if K.WARNINGS else "a warning"
-            return f"MuJoCo warned: {said}; the simulation is not to be trusted from here"
-        if code == K.RESET:
-            bad = [w for w in DIVERGENCE_WARNINGS if self.data.warning[getattr(mujoco.mjtWarning, w)].number]
-            return f"MuJoCo {' '.join(bad) or 'reset'}: the simulation became unstable and was reset"
-        if code == K.NOT_FINITE:
-            return "non-finite MuJoCo state"
-        if code == K.LIFTED:
-            lift = float(self._site_xpos[2]) - self._z_rest
-            return f"the robot left the floor (axle {lift * 1e3:.0f} mm above its rest height)"
-        if code == K.TIPPED:
-            up = float(self.data.xmat[self._root][8])  # world z component of the chassis z axis
-            return f"the robot tipped over (chassis up axis {math.degrees(math.acos(max(-1.0, up))):.0f} deg from vertical)"
-        return None
-
     def geometry(self) -> list[dict]:
         return self._geometry
-
-    def found(self) -> dict:
-        """The ``[plant]`` keys the scenario left unset and the model answered, with their values:
-        written into the scenario's table, so that its config.toml re-runs the same robot."""
-        values = {k: getattr(self.config, k) for k in self.robot.found}
-        return {k: list(v) if isinstance(v, tuple) else v for k, v in values.items()}
-
-    def provenance(self) -> dict:
-        """What is simulated, for config.toml: the model file and the hash of the compiled model, and
-        the geometry, limits and timing read from it."""
-        m, (tl, tr) = self.model, self._torque_max
-        out = {
-            "model": self.config.model if is_menagerie(self.config.model) else str(self.config.path),
-            "model_sha256": self.robot.sha256,
-            "mujoco": mujoco.__version__,
-            "timestep_s": float(m.opt.timestep),
-            "substeps": self.n_substeps,
-            "wheel_radius_m": self.real_radius,
-            "track_m": self._real_track,
-            "ik_wheel_radius_m": float(self.ik_radius),
-            "ik_track_m": float(self.ik_track),
-            "max_wheel_speed_rad_s": self.max_wheel_speed if self.max_wheel_speed is not None else "none",
-            "torque_limit_Nm": [float(tl), float(tr)] if math.isfinite(tl + tr) else "none",
-            "mass_kg": float(m.body_subtreemass[self._root]),
-            "robot": self.robot.description,
-        }
-        if self.robot.found:
-            out["found"] = list(self.robot.found)
-        if is_menagerie(self.config.model):
-            out |= {"model_file": str(self.config.path), "mujoco_menagerie": menagerie_version()}
-        if self.robot.locked:
-            out["locked_joints"] = list(self.robot.locked)
-        return out
 
 
 def _turns_end(description: str) -> int:

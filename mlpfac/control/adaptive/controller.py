@@ -11,6 +11,7 @@ import numpy as np
 
 from mlpfac.control.adaptive.config import AdaptiveConfig  # noqa: F401 -- exported here too
 from mlpfac.control.adaptive.estimators import EKF, UKF
+from mlpfac.control.baselines import Stepped
 from mlpfac.control.law import GAIN_RANGE, Law
 from mlpfac.control.variants import VARIANTS  # noqa: F401 -- exported here too (factory, scenario, controllers)
 from mlpfac.jit import as_rows
@@ -37,7 +38,7 @@ class NominalPrior:
         return f + f_true(e, r[3], r[4], T), G + G_true(e, T)
 
 
-class Adaptive:
+class Adaptive(Stepped):
     """The paper's scheme: NN_f, NN_G tuned by the EKF (29)-(32), used in (35) through (34).
 
     Composed of parts, chosen by :class:`AdaptiveConfig`: the estimator (the EKF, compiled, or the
@@ -131,13 +132,13 @@ class Adaptive:
         self._H = np.zeros((B, 3, a))
         est, lim = self.est, self.law
         ints, params = settings(
-            Lf, LG, c.networks.residual, self.prior is not None, est.Q is not None, nf, c.law_form == "kanayama",
-            c.networks.error_scale, T, lim.lambdas,
-            np.inf if lim.v_max is None else lim.v_max,
-            np.inf if lim.omega_max is None else lim.omega_max,
-            est.forgetting,
-            np.inf if est.P_max is None else est.P_max,
-            self.kanayama,
+            L_f=Lf, L_G=LG, residual=c.networks.residual, prior=self.prior is not None, has_Q=est.Q is not None,
+            n_f=nf, kanayama=c.law_form == "kanayama", c=c.networks.error_scale, T=T, lambdas=lim.lambdas,
+            v_max=np.inf if lim.v_max is None else lim.v_max,
+            omega_max=np.inf if lim.omega_max is None else lim.omega_max,
+            forgetting=est.forgetting,
+            P_max=np.inf if est.P_max is None else est.P_max,
+            kanayama_gains=self.kanayama,
         )  # fmt: skip
         Q = est.Q if est.Q is not None else np.zeros((1, 1))
         self._args = (est.z, est.P, self._S, self._H, self._u, self._innovation, self._h_hat, self._trace)

@@ -25,6 +25,7 @@ from __future__ import annotations
 import numpy as np
 
 from mlpfac.control.adaptive.kernels import _ekf, _f_G, _hidden, _jacobian
+from mlpfac.control.baselines import Stepped
 from mlpfac.control.dynamic import fierro_lewis_step
 from mlpfac.dynamics import P_B, P_M11, P_M22, P_R, P_TMAX, accel_of
 from mlpfac.jit import kernel, seeds
@@ -90,7 +91,7 @@ def adaptive_dynamic_step(e, r, r_dot, twist, p, g, T, z, P, S, H, tau, vc, inno
         Sb[o], Sb[o + 1], Sb[o + 2], Sb[o + 3], Sb[o + 4] = tau[b, 0], tau[b, 1], v, w, 1.0
 
 
-class AdaptiveDynamic:
+class AdaptiveDynamic(Stepped):
     """``adaptive-dynamic``: ``fierro-lewis`` on a dynamic model whose error NN_f, NN_G learn on-line."""
 
     name = "adaptive-dynamic"
