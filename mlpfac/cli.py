@@ -390,8 +390,13 @@ def _print_summary(m: dict, out: Path) -> None:
         print(
             f"  {name:>6} [{ph['start_s']:g}, {ph['end_s']:g}) s: position RMS {_fmt(ph['rms_position_error_m'], 1e3, ' mm')}, heading RMS {_fmt(ph['rms_heading_error_rad'], 1e3, ' mrad')}"
         )
-    if m["max_abs_weight"] is not None:
-        print(f"  max |weight| {m['max_abs_weight']:.3g}, final mean diag P {m['mean_diag_P_final']:.3g}")
+    learned = [
+        f"{k} {m[key]:.3g}"
+        for k, key in (("max |weight|", "max_abs_weight"), ("final mean diag P", "mean_diag_P_final"))
+        if m[key] is not None
+    ]  # fmt: skip  (a run that diverged before its first EKF update has weights, no P)
+    if learned:
+        print(f"  {', '.join(learned)}")
     print(f"  {m['sim_time_s']:.1f} s simulated in {m['wall_time_s']:.2f} s wall -> {out}")
 
 

@@ -35,6 +35,7 @@ ALPHA = 3 * LF + NF * LF + 6 * LG + 3 * LG
 INPUT_SCALE = 1.0  # x = (c v, c omega, 1)
 HIDDEN_STD = 0.3  # initial hidden weights N(0, 0.3^2); the output weights start at 0
 P0, R, FORGETTING, P_MAX = 1e-4, 1e-6, 0.999, 1e-4  # EKF: initial P, measurement noise ((m/s)^2), lambda, cap
+GAIN_SHARE = 0.5  # the learned input gain NN_G within +-50 % of the nominal T Bm, entry by entry (the law)
 N_S = NF + 3 + LF + LG + 6  # per seed: x_f, x_G, phi_f, phi_G, tau_{k-1}, v_{k-1}, 1 once stepped
 
 
@@ -79,8 +80,13 @@ def adaptive_dynamic_step(e, r, r_dot, twist, p, g, T, z, P, S, H, tau, vc, inno
         rhs0, rhs1 = T * (vdot - c0) - f[0], T * (wdot - c1) - f[1]
         r_, b_ = p[P_R], p[P_B]
         k11, k22 = T / (r_ * p[P_M11]), T * b_ / (r_ * p[P_M22])
-        m00, m01 = k11 + G[0, 0], k11 + G[0, 1]  # (T Bm + NN_G), tau = (tau_l, tau_r)
-        m10, m11 = -k22 + G[1, 0], k22 + G[1, 1]
+        # (T Bm + NN_G), tau = (tau_l, tau_r), each learned gain projected within GAIN_SHARE of its
+        # nominal one: its signs kept, the inverse bounded (det >= 2 (1 - GAIN_SHARE)^2 k11 k22)
+        g00, g01 = GAIN_SHARE * k11, GAIN_SHARE * k22
+        m00 = k11 + min(max(G[0, 0], -g00), g00)
+        m01 = k11 + min(max(G[0, 1], -g00), g00)
+        m10 = -k22 + min(max(G[1, 0], -g01), g01)
+        m11 = k22 + min(max(G[1, 1], -g01), g01)
         det = m00 * m11 - m01 * m10
         if abs(det) > 1e-3 * abs(k11 * k22):
             tl = (m11 * rhs0 - m01 * rhs1) / det
