@@ -263,6 +263,21 @@ def _check(d: Path, text: str, *flags: str) -> int:
     return main(["check", str(d / "budget.toml"), "--out", str(d / "runs"), "--workers", "1", *flags])
 
 
+def test_an_axis_of_one_value_is_a_setting(tmp_path):
+    """``--vary controller.v_max=1e9`` beside a real axis (the limits off while the speed varies): the
+    breaking points and the curves are the speed's alone, the setting said in the curves' heading."""
+    out = tmp_path / "out"
+    argv = ["sweep", "paper", "--controllers", "kanayama", "--seeds", "0", "--duration", "3", "--workers", "1",
+            "--vary", "reference.speed=1,1.5", "--vary", "controller.v_max=1e9", "--out", str(out)]  # fmt: skip
+    assert main(argv) == 0
+    robust = json.loads((out / "robustness.json").read_text())
+    assert [b["axis"] for b in robust["breaking_points"]] == ["reference.speed"]
+    assert all(
+        r["point"].keys() == {"reference.speed"} and r["set"] == {"controller.v_max": 1e9} for r in robust["curves"]
+    )
+    assert "| paper: `reference.speed`, controller.v_max = 1e+09 | 1 | 1.5 |" in (out / "robustness.md").read_text()
+
+
 def test_check_holds_a_controller_to_its_breaking_point(budget_dir, capsys):
     from mlpfac.scenario.reference import sample
 

@@ -271,6 +271,9 @@ def read_robustness(path: Path) -> dict:
         where = f"{path} curves[{i}]"
         _typed(r, CURVE_FIELDS, where)
         _numbers(r["point"], f"{where}.point")
+        if not isinstance(r.get("set", {}), dict):
+            raise ConfigError(f"{where}.set", f"expected a table of settings, got {r['set']!r}")
+        _numbers(r.get("set", {}), f"{where}.set")
         if r["finished"]:
             r["median_m"] = math.inf if r["median_m"] is None else r["median_m"]
         if r["finished"] >= MIN_INTERVAL_RUNS:

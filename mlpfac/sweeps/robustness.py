@@ -11,6 +11,9 @@ the position RMS after the change, i.e. the last phase; a diverged run counts as
 - whether the point **holds**: every seed tracks and the median is within the threshold (default:
   the runs' own tracking limit, 5 % of the path's size: 0.2 m on the 4 m figure of eight).
 
+An axis of one value (``--vary controller.v_max=1e9``) is a setting, not an axis: each row keeps it
+in ``set``, and the curves' heading says it.
+
 The **breaking point** along an axis (the other axes held at each of their values) is, on each
 side of the nominal value, the last value going away from it at which the point holds, before
 the first at which it does not; "whole axis" when it holds to the axis' end. The nominal value is
@@ -101,6 +104,10 @@ def curves(jobs: list[Job], metrics: dict[tuple, RunMetrics], threshold: float |
             for j in js:
                 if j.key in metrics:
                     best[j.seed] = min(best.get(j.seed, math.inf), compared_rms(metrics[j.key]))
+    values: dict[tuple[str, str], set] = {}  # (family, key) -> the axis's values
+    for fam, _, point in cells:
+        for key, v in point:
+            values.setdefault((fam, key), set()).add(v)
     rows = []
     for (fam, ctrl, point), js in cells.items():
         ms = [metrics[j.key] for j in js if j.key in metrics]
@@ -110,8 +117,10 @@ def curves(jobs: list[Job], metrics: dict[tuple, RunMetrics], threshold: float |
         tracking = sum(m.outcome == "tracking" for m in ms)
         med = median(xs)
         bound = told.get((fam, point), {})
+        axes = {k: v for k, v in point if len(values[(fam, k)]) > 1}  # an axis of one value is a setting
         rows.append({
-            "scenario": fam, "controller": ctrl, "point": dict(point), "runs": len(js), "finished": len(ms),
+            "scenario": fam, "controller": ctrl, "point": axes or dict(point),
+            "set": {k: v for k, v in point if k not in axes} if axes else {}, "runs": len(js), "finished": len(ms),
             "tracking": tracking, "tracking_share": tracking / len(ms) if ms else None,
             "median_m": med, "ci_lo_m": lo, "ci_hi_m": hi, "threshold_m": limit,
             "bound_m": median(list(bound.values())) if bound else None,
@@ -175,7 +184,9 @@ def curves_markdown(rows: list[dict]) -> str:
         (key,) = rs[0]["point"]
         values = sorted({r["point"][key] for r in rs})
         cell = {(r["controller"], r["point"][key]): r for r in rs}
-        lines = [f"| {fam}: `{key}` | " + " | ".join(f"{v:g}" for v in values) + " |", "|---" * (len(values) + 1) + "|"]
+        settings = "".join(f", {k} = {v:g}" for k, v in rs[0].get("set", {}).items())
+        head = f"| {fam}: `{key}`{settings} | "
+        lines = [head + " | ".join(f"{v:g}" for v in values) + " |", "|---" * (len(values) + 1) + "|"]
         for ctrl in dict.fromkeys(r["controller"] for r in rs):
             lines.append(f"| {ctrl} | " + " | ".join(_cell(cell.get((ctrl, v))) for v in values) + " |")
         bound = [
