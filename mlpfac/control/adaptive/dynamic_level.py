@@ -17,7 +17,9 @@ change (adaptive-best's, :mod:`mlpfac.control.variants`).
 
 The law is ``fierro-lewis``'s backstepping (:mod:`mlpfac.control.dynamic`), certainty equivalent in the
 learned model: with (a, alpha) the accelerations Kanayama's velocities and the velocity loop ask,
-(T Bm + NN_G) tau = T (a, alpha) - T A0 - NN_f, solved for tau (2 x 2), clamped to the torque limit.
+(T Bm + NN_G) tau = T (a, alpha) - T A0 - NN_f, solved for tau (2 x 2), clamped to the torque limit;
+each entry of the learned NN_G is projected within ``GAIN_SHARE`` of the nominal T Bm's (the input
+gain's signs kept, its inverse bounded: the projection of adaptive control's input gains).
 """
 
 from __future__ import annotations
