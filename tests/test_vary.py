@@ -363,3 +363,15 @@ def test_a_friction_axis_is_measured_from_the_robots_own_friction(tmp_path):
     (b,) = json.loads((out / "robustness.json").read_text())["breaking_points"]
     assert b["nominal"] == 1.0 and b["below"] == {"holds_to": 0.5, "fails_at": None, "whole_axis": True}
     assert "above" not in b
+
+
+@pytest.mark.menagerie
+def test_on_a_robot_the_speed_axis_runs_the_fitted_path_faster_and_a_limit_asked_for_wins():
+    """``--robot pal_tiago --vary reference.speed=...``: the path is fitted to TIAGo once (the same wx,
+    wy at every speed) and run ``speed`` times as fast; a controller limit the axis sets is not replaced
+    by the robot's."""
+    one = load("eight-nominal", robot="pal_tiago", values={"reference.speed": 1.0})
+    two = load("eight-nominal", robot="pal_tiago", values={"reference.speed": 2.0, "controller.v_max": 1e9})
+    assert one.reference.wx < 0.1 and "reference x0.22" in one.table["description"]  # its 5 rad/s wheels slow it
+    assert (two.reference.wx, two.reference.wy, two.reference.speed) == (one.reference.wx, one.reference.wy, 2.0)
+    assert one.table["controller"]["v_max"] < 2.0 and two.table["controller"]["v_max"] == 1e9

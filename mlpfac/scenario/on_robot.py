@@ -226,9 +226,14 @@ def fitted(ref: dict, curve, duration: float, r) -> tuple[dict, dict, str] | Non
     kind = ref.get("kind", "eight")
     if w_max is None or kind not in SPEEDS:
         return None
-    peak = peak_wheel_speed(curve, duration, r)
+    import dataclasses
+
+    speed = float(getattr(curve, "speed", 1.0))  # the path fitted at speed 1, then run as fast as the file asks
+    peak = peak_wheel_speed(dataclasses.replace(curve, speed=1.0) if speed != 1.0 else curve, duration, r)
     k = min(1.0, SHARE * w_max / peak)
     said = f"reference x{k:.3g} in speed (peak wheel speed {k * peak:.3g} of {w_max:.3g} rad/s)"
+    if speed != 1.0:
+        said += f", then x{speed:g} as [reference] speed asks"
     ref = dict(ref)
     if k < 1.0:
         for key, default in zip(SPEEDS[kind], DEFAULT_SPEEDS[kind], strict=True):

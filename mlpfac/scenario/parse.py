@@ -221,6 +221,9 @@ def load(
 
         parse(table, str(path), check_model=False)  # the file's own errors first, named as its own
         table = on_robot(table, robot)
+        for key, value in (values or {}).items():  # a limit asked for wins over the robot's (--vary controller.v_max)
+            if key.startswith("controller."):
+                put_value(table, key, value)
     scn = parse(table, str(path))
     if not build:  # the file's data only (a listing): no robot is read, none downloaded
         return scn
