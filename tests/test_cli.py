@@ -187,3 +187,19 @@ def test_a_reader_that_closes_early_is_no_traceback(tmp_path):
     assert proc.wait(timeout=120) in (0, 141)  # 0 if everything fitted in the pipe before it closed
     assert proc.stderr.read() == b""
     assert json.loads((tmp_path / "run" / "metrics.json").read_text())["status"] == "ok"
+
+
+def test_the_summary_prints_the_learning_figures_it_has(tmp_path, capsys, monkeypatch):
+    """A run that diverged before its first EKF update has weights but no P (null in metrics.json):
+    the summary prints what there is, no traceback."""
+    from mlpfac.cli import _print_summary
+
+    monkeypatch.chdir(tmp_path)
+    assert main(["run", "paper", "--duration", "0.5", "--no-log", "--no-plot", "--out", "a"]) == 0
+    m = json.loads((tmp_path / "a" / "metrics.json").read_text())
+    capsys.readouterr()
+    _print_summary(m | {"mean_diag_P_final": None}, tmp_path / "a")
+    out = capsys.readouterr().out
+    assert f"max |weight| {m['max_abs_weight']:.3g}\n" in out and "diag P" not in out
+    _print_summary(m | {"max_abs_weight": None, "mean_diag_P_final": None}, tmp_path / "a")
+    assert "weight" not in capsys.readouterr().out
