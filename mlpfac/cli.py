@@ -331,7 +331,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         if found.get(key):
             print(f"warning: {found[key]}")
     if found.get("found") or found.get("reference_fit") or found.get("reference_torque"):  # the model's answers
-        print(f"robot: {'; '.join(found[k] for k in ('robot', 'reference_fit', 'reference_torque') if found.get(k))}")
+        said = ("robot", "reference_fit") + (() if found.get("torque_warning") else ("reference_torque",))  # said once
+        print(f"robot: {'; '.join(found[k] for k in said if found.get(k))}")
     if scn.dropped_events:
         times = ", ".join(f"{t:g} s" for t in scn.dropped_events)
         print(f"note: --duration {scn.duration:g} s ends before the event at {times}: this run has no such event")

@@ -309,6 +309,10 @@ BAD_BUDGETS = {
     "vary not a list": ('scenarios = ["paper"]\nvary = "T=1"\n[[budget]]\nlost = 0\n', "budget.toml vary"),
     "a bad value": ('scenarios = ["paper"]\nvary = ["T=0.01,-1"]\n[[budget]]\nlost = 0\n', "vary: --vary T=-1"),
     "threshold": (CHECKED + "threshold_m = 0\n[[budget]]\nholds_down_to = 0.3\n", "threshold_m"),
+    "a setting as its axis": (
+        CHECKED.rstrip("]\n") + ', "T=0.01"]\n[[budget]]\naxis = "T"\nholds_down_to = 0.3\n',
+        "budget #1 axis: 'T' is not an axis of vary of more than one value (controller.v_max)",
+    ),
 }
 
 

@@ -74,12 +74,16 @@ def breaking_limit(b: dict, limit: Limit, where: str) -> Limit:
 
 
 def check_axis(limit: Limit, vary: Vary, where: str) -> None:
-    """The limit's axis is one of ``vary`` (the only one when it names none) and reaches its values."""
-    keys = [a.key for a in vary.axes]
+    """The limit's axis is one of ``vary`` of more than one value (the only one when it names none; an
+    axis of one value is a setting, :mod:`mlpfac.sweeps.robustness`) and reaches its values."""
+    keys = [a.key for a in vary.axes if len(a.values) > 1]
     if limit.axis is None and len(keys) != 1:
-        raise ConfigError(f"{where} axis", f"name the axis of the breaking point: one of {', '.join(keys)}")
+        raise ConfigError(f"{where} axis", f"name the axis of the breaking point: one of {', '.join(keys) or '(none)'}")
     if limit.axis is not None and limit.axis not in keys:
-        raise ConfigError(f"{where} axis", f"{limit.axis!r} is not an axis of vary ({', '.join(keys)})")
+        raise ConfigError(
+            f"{where} axis",
+            f"{limit.axis!r} is not an axis of vary of more than one value ({', '.join(keys) or 'none'})",
+        )
     limit.axis = limit.axis or keys[0]
     values = next(a.values for a in vary.axes if a.key == limit.axis)
     for fig, lim in limit.figures.items():

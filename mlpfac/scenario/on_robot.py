@@ -5,7 +5,8 @@ controller put on another robot, by one rule (docs/robots.md):
   ``[plant]`` table: every other part is found or chosen in the model
   (:mod:`mlpfac.plants.mjcf.defaults`); the scenario's pose noise is kept;
 - the reference is slowed in time (the same path, v and omega x k, k <= 1) until its peak wheel
-  speed (|v| + |omega| b / 2) / r is at most ``SHARE`` of the robot's wheel-speed limit: the
+  speed (|v| + |omega| b / 2) / r at ``[reference] speed = 1`` is at most ``SHARE`` of the robot's
+  wheel-speed limit (a ``speed`` the file or ``--vary`` sets then runs that path as many times as fast): the
   servos' control range, or, for a drive without one, the speed at which the wheels' largest torque
   meets their joints' damping;
 - the controller's limits follow the robot's: ``v_max = r w_max``, ``omega_max = 2 r w_max / b``;
@@ -217,7 +218,8 @@ def peak_wheel_speed(curve, duration: float, r) -> float:
 
 def fitted(ref: dict, curve, duration: float, r) -> tuple[dict, dict, str] | None:
     """The module's rule on robot ``r``: the reference table ``ref`` (its curve ``curve``) slowed in
-    time to a peak wheel speed of at most SHARE of the robot's limit, the controller's limits from the
+    time to a peak wheel speed of at most SHARE of the robot's limit at speed 1 (its ``speed`` kept,
+    applied on top), the controller's limits from the
     robot, and what was done in words; None where the robot has no wheel-speed limit or the reference
     no speed (``--robot`` and a scenario file that leaves the reference's speed unset both come here)."""
     from mlpfac.plants.mjcf.wheels import wheel_speed_limit
@@ -295,48 +297,46 @@ def on_its_robot(table: dict, scn) -> tuple[dict, dict]:
 def torque_need(scn) -> dict:
     """What the reference asks of a torque-driven robot's motors (``scn``, the scenario parsed): the
     largest wheel torque the nominal dynamic model (:class:`mlpfac.dynamics.RobotModel`) needs to follow
-    it without error, against the motors' limit, and the reference's ``speed`` at which the two meet
-    (the torque of a speed k is a k^2 + c k per sample: inertia and the offset mass's coupling x k^2,
-    the joints' damping x k). ``[provenance]`` words for the run's first line: ``reference_torque``,
-    and ``torque_warning`` where the motors cannot give it. Empty for a robot on velocity servos or
-    a reference of no speed."""
+    it without error, against the motors' limit, and the reference's ``speed`` at which the two meet:
+    at speed k the torque of each sample is k^2 A + k C (inertia and the offset mass's coupling x k^2,
+    the joints' damping x k), A and C from the model at speed 1 and -1. ``[provenance]`` words for
+    the run's first line: ``reference_torque``, and ``torque_warning`` where the motors cannot give
+    it. Empty for a robot on velocity servos."""
     import dataclasses
 
     import numpy as np
 
     from mlpfac.plants import make_plant
-    from mlpfac.scenario.reference import sample
+    from mlpfac.scenario.reference import FACTOR_MAX, sample
 
-    if not hasattr(scn.reference, "speed"):
+    if getattr(scn.plant_config, "actuator", None) == "velocity":  # the file says so: no plant built
         return {}
     plant = make_plant(scn, sample(scn.reference, np.arange(2) * scn.T))  # its read cached
     if plant.config.actuator != "torque":  # the file's, or the model's answer (motors in the MJCF)
         return {}
     model = plant.dynamics()
     k0 = float(scn.reference.speed)
-    unit = dataclasses.replace(scn.reference, speed=1.0)
-    dt = scn.T / 4
-    t = np.arange(int(round(scn.duration * k0 / dt)) + 1) * dt  # the path once traversed at speed k0, at speed 1
-    rows = sample(unit, t)
+    n = max(int(round(scn.duration * k0 / scn.T)), 2)  # the path once traversed at speed k0, at speed 1
+    rows = sample(dataclasses.replace(scn.reference, speed=1.0), np.arange(n + 1) * scn.T)
     twist = rows[:, 3:5]
-    accel = np.gradient(twist, dt, axis=0)
+    accel = np.gradient(twist, scn.T, axis=0)
+    ahead, back = model.torques(twist, accel), model.torques(-twist, accel)  # speed 1 and -1
+    A, C = 0.5 * (ahead + back), 0.5 * (ahead - back)
 
     def peak(k: float) -> float:
-        return float(np.max(np.abs(model.torques(k * twist, k * k * accel))))
+        return float(np.max(np.abs(k * k * A + k * C)))
 
     need, limit = peak(k0), model.torque_limit_Nm
     if not np.isfinite(limit):
         return {"reference_torque": f"the reference needs up to {need:.3g} N m a wheel (the motors have no limit)"}
-    lo, hi = 0.0, max(k0, 1.0)
-    while peak(hi) < limit and hi < 1e3:
-        lo, hi = hi, 2.0 * hi
-    for _ in range(40):
+    said = f"the reference needs up to {need:.3g} N m a wheel of the motors' {limit:.3g} N m ({need / limit:.0%}, the nominal model)"
+    if peak(FACTOR_MAX) < limit:
+        return {"reference_torque": f"{said}; they can drive it at every [reference] speed up to {FACTOR_MAX:g}"}
+    lo, hi = 0.0, FACTOR_MAX
+    for _ in range(60):
         mid = 0.5 * (lo + hi)
         lo, hi = (mid, hi) if peak(mid) < limit else (lo, mid)
-    said = (
-        f"the reference needs up to {need:.3g} N m a wheel of the motors' {limit:.3g} N m ({need / limit:.0%}, "
-        f"the nominal model); they can drive it up to [reference] speed = {lo:.3g}"
-    )
+    said += f"; they can drive it up to [reference] speed = {lo:.3g}"
     out = {"reference_torque": said}
     if need > limit:
         out["torque_warning"] = f"{said}: beyond it no law follows the reference; the motors saturate"
