@@ -55,7 +55,8 @@ PEAK_SAMPLES = 2001
 
 
 ROBOT_HELP = (
-    "run the scenario on this robot: diffdrive, cart, a MuJoCo Menagerie base (pal_tiago, hello_robot_stretch_3, "
+    "run the scenario on this robot: diffdrive, cart, tug, rby1a, diffdrive-torque, cart-torque, tiago-torque, "
+    "a MuJoCo Menagerie base (pal_tiago, hello_robot_stretch_3, "
     "menagerie:NAME/ENTRY, ...), an MJCF file, or a TOML file of one [plant] table; the reference is slowed to "
     "what it can drive (docs/robots.md)"
 )
