@@ -587,3 +587,32 @@ def test_a_half_sent_result_does_not_hold_the_pools_thread():
                                      timeout=60).stdout.strip()  # fmt: skip
     assert run("end") == "ended"
     assert run("keep") == "stuck"  # the mechanism: without the write end closed the read never ends
+
+
+def test_the_workers_run_the_installed_mlpfac_not_a_folder_of_that_name_here(tmp_path):
+    """A sweep started in a folder that holds another ``mlpfac`` (a checkout of another version)
+    runs, in its workers, the package its own process runs: the fork server does not take the
+    current folder, which the workers would otherwise import in its place (here a stub without the
+    worker's module: every run failed)."""
+    other = tmp_path / "mlpfac" / "sweeps"
+    other.mkdir(parents=True)
+    for f in ("mlpfac/__init__.py", "mlpfac/sweeps/__init__.py", "mlpfac/sweeps/warm.py"):
+        (tmp_path / f).write_text("")
+    cmd = [
+        str(Path(sys.executable).parent / "mlpfac"),
+        "compare",
+        "paper",
+        "--controllers",
+        "kanayama",
+        "--seeds",
+        "0-1",
+        "--duration",
+        "1",
+        "--workers",
+        "2",
+        "--out",
+        "out",
+    ]  # fmt: skip  (the command: no folder on its path)
+    subprocess.run(cmd, cwd=tmp_path, check=True, capture_output=True, timeout=300)
+    for seed in (0, 1):
+        assert json.loads((tmp_path / f"out/paper/kanayama/seed-000{seed}/metrics.json").read_text())["status"] == "ok"

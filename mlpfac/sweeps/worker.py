@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import json
 import os
 import sys
 import tempfile
@@ -196,14 +197,22 @@ class _SpawnContext(mp_context.SpawnContext):
     Process = _SpawnProcess
 
 
+SYS_PATH = "MLPFAC_SYS_PATH"  # this process's sys.path, which a fork server's workers take (mlpfac.sweeps.warm)
+
+
 @contextlib.contextmanager
 def one_blas_thread() -> Iterator[None]:
     """Worker processes started in this block run BLAS on one thread each (unless the user set the
-    variables): N workers on N cores with multi-threaded BLAS are several times slower than their sum."""
-    added = [v for v in BLAS_THREAD_VARIABLES if v not in os.environ]
+    variables): N workers on N cores with multi-threaded BLAS are several times slower than their sum.
+    They import mlpfac as this process did: the fork server starts without the current folder on its
+    path (``PYTHONSAFEPATH``: a folder named ``mlpfac`` there, such as another checkout, would be
+    imported in place of the installed package, which this process runs), and its workers take this
+    process's ``sys.path`` (multiprocessing's fork server does not pass it) for the user's modules."""
+    values = dict.fromkeys(BLAS_THREAD_VARIABLES, "1") | {"PYTHONSAFEPATH": "1", SYS_PATH: json.dumps(sys.path)}
+    added = [v for v in values if v not in os.environ]
     try:
         for v in added:
-            os.environ[v] = "1"
+            os.environ[v] = values[v]
         yield
     finally:
         for v in added:
