@@ -202,7 +202,8 @@ def panels_plot(folders: list[Path]) -> bytes | None:
         Line2D([], [], color="0.5", marker="o", mfc="white", ls="", label="not every seed tracks"),
         Line2D([], [], color="0.5", marker="x", ls="", label="median diverged"),
     ]
-    fig.legend(handles=handles, loc="outside lower center", ncol=min(len(handles), 5), fontsize=7.5, frameon=False)
+    ncol = min(len(handles), 5 if cols >= 3 else max(2, 2 * cols - 1))  # within the width: 3.4 in a panel
+    fig.legend(handles=handles, loc="outside lower center", ncol=ncol, fontsize=7.5, frameon=False)
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=90)
     plt.close(fig)
