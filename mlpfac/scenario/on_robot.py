@@ -295,8 +295,9 @@ def on_its_robot(table: dict, scn) -> tuple[dict, dict]:
     }
 
 
-def torque_need(scn) -> dict:
-    """What the reference asks of a torque-driven robot's motors (``scn``, the scenario parsed): the
+def torque_need(scn, plant) -> dict:
+    """What the reference asks of a torque-driven robot's motors (``scn``, the scenario parsed;
+    ``plant``, built from it by :func:`mlpfac.scenario.provenance.recorded`): the
     largest wheel torque the nominal dynamic model (:class:`mlpfac.dynamics.RobotModel`) needs to follow
     it without error, against the motors' limit, and the reference's ``speed`` at which the two meet:
     at speed k the torque of each sample is k^2 A + k C (inertia and the offset mass's coupling x k^2,
@@ -307,13 +308,9 @@ def torque_need(scn) -> dict:
 
     import numpy as np
 
-    from mlpfac.plants import make_plant
     from mlpfac.scenario.reference import FACTOR_MAX, sample
 
-    if getattr(scn.plant_config, "actuator", None) == "velocity":  # the file says so: no plant built
-        return {}
-    plant = make_plant(scn, sample(scn.reference, np.arange(2) * scn.T))  # its read cached
-    if plant.config.actuator != "torque":  # the file's, or the model's answer (motors in the MJCF)
+    if scn.plant_kind != "mujoco" or plant.config.actuator != "torque":  # the file's, or the model's answer
         return {}
     model = plant.dynamics()
     k0 = float(scn.reference.speed)

@@ -234,10 +234,6 @@ def load(
         fitted, said = on_its_robot(table, scn)
         if fitted is not table:
             table, scn = fitted, parse(fitted, str(path), check_model=False)
-    if scn.plant_kind == "mujoco":  # what the reference asks of torque motors, against their limit
-        from mlpfac.scenario.on_robot import torque_need
-
-        said = said | torque_need(scn)
     table["provenance"], found = provenance.recorded(scn)
     table["provenance"] |= said
     if found:  # the robot's parts the file left to the model: written in, so its config.toml re-runs the same

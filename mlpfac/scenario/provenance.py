@@ -23,6 +23,7 @@ class Recorded(PlantSpec, Protocol):
 
     reference: object
     plugin: Plugin | None
+    duration: float
 
 
 def recorded(scn: Recorded) -> tuple[dict, dict]:
@@ -36,6 +37,9 @@ def recorded(scn: Recorded) -> tuple[dict, dict]:
     out |= plant.provenance()
     if scn.plugin is not None:
         out["controller"] = scn.plugin.provenance()
+    from mlpfac.scenario.on_robot import torque_need
+
+    out |= torque_need(scn, plant)  # what the reference asks of torque motors, for the run's first line
     return out, plant.found()
 
 
