@@ -162,22 +162,29 @@ def main(argv: list[str] | None = None) -> int:
 
     try:
         if args.command == "run":
+            import numpy  # noqa: F401 (imported once for the three processes: before the children are forked)
+
             from mlpfac.plots.painter import painting
             from mlpfac.runs.replay import DEFER_MAX_S
             from mlpfac.runs.writer import writing
             from mlpfac.scenario.parse import load
 
-            scn = load(args.scenario, build=False)  # a bad name or file fails here, before the figure's process starts
-            if args.robot is not None:
-                from mlpfac.scenario.on_robot import model_of
-
-                model_of(args.robot)
             to_file = not (args.no_log or args.spawn or args.connect or args.serve)
-            deferred = to_file and (args.duration if args.duration is not None else scn.duration) <= DEFER_MAX_S
-            with (
+            with (  # started first, so that they import matplotlib and rerun while the input is checked
                 painting(args.baseline != "none" and not args.no_plot) as args.painter,  # figure1 drawn beside
-                writing(deferred, args.painter.fds() if args.painter else ()) as args.writer,  # run.rrd too
+                writing(to_file, args.painter.fds() if args.painter else ()) as args.writer,  # run.rrd too
             ):
+                scn = load(args.scenario, build=False)  # a bad name or file fails here (the children are ended)
+                if args.robot is not None:
+                    from mlpfac.scenario.on_robot import model_of
+
+                    model_of(args.robot)
+                if (
+                    args.writer is not None
+                    and (args.duration if args.duration is not None else scn.duration) > DEFER_MAX_S
+                ):
+                    args.writer.close()  # a long run streams its recording from this process
+                _without_gl(args.controller or scn.controller, args.baseline)
                 return cmd_run(args)
         if args.command == "list":
             return cmd_list()
@@ -205,6 +212,16 @@ def main(argv: list[str] | None = None) -> int:
         return code
     except OSError as err:  # a write no check could foresee (stdout on a full disk, a name too long): one line
         return exits.failed_write(err)
+
+
+def _without_gl(*controllers: str) -> None:
+    """MuJoCo's import sets up an OpenGL context unless MUJOCO_GL says otherwise (glfw's import and
+    a subprocess of its own, about 0.1 s): none is set up when MUJOCO_GL is not set and only the
+    shipped controllers run, which never render. A user's controller gets MuJoCo as it comes."""
+    from mlpfac.control.variants import CONTROLLERS
+
+    if "MUJOCO_GL" not in os.environ and all(c in CONTROLLERS or c == "none" for c in controllers):
+        os.environ["MUJOCO_GL"] = "disable"
 
 
 def cmd_list() -> int:

@@ -34,6 +34,18 @@ def _unraisable(unraisable) -> None:
         sys.__unraisablehook__(unraisable)
 
 
+def die_with_parent(sig: int = signal.SIGKILL, parent: int | None = None) -> None:
+    """Linux: this process gets ``sig`` from the kernel when its parent ends (prctl
+    PR_SET_PDEATHSIG); with ``parent``, it exits at once if that parent has already ended."""
+    if sys.platform.startswith("linux"):
+        with suppress(OSError, AttributeError):
+            import ctypes
+
+            ctypes.CDLL(None, use_errno=True).prctl(1, int(sig), 0, 0, 0)  # 1 = PR_SET_PDEATHSIG
+    if parent is not None and os.getppid() != parent:  # it ended before the line above
+        os._exit(1)
+
+
 def handle_sigterm() -> None:
     """Make SIGTERM raise :class:`Terminated` (a KeyboardInterrupt) in the main thread, as SIGINT
     does, and keep an interrupt that lands in a ``__del__`` (rerun's recording streams flush in

@@ -1,6 +1,7 @@
 """The command line: outputs of a run, and one clear line with exit code 2 for bad input."""
 
 import json
+import os
 import subprocess
 import sys
 
@@ -203,3 +204,24 @@ def test_the_summary_prints_the_learning_figures_it_has(tmp_path, capsys, monkey
     assert f"max |weight| {m['max_abs_weight']:.3g}\n" in out and "diag P" not in out
     _print_summary(m | {"max_abs_weight": None, "mean_diag_P_final": None}, tmp_path / "a")
     assert "weight" not in capsys.readouterr().out
+
+
+def test_mujoco_sets_up_no_gl_context_when_only_shipped_code_runs(tmp_path, monkeypatch):
+    """glfw's import (and its subprocess) is skipped where nothing can render: MUJOCO_GL unset and
+    only shipped controllers; a user's controller, or MUJOCO_GL set, gets MuJoCo as it comes."""
+    from mlpfac.cli import _without_gl
+
+    monkeypatch.delenv("MUJOCO_GL", raising=False)
+    _without_gl("my_controller.py:Mine", "corradini")
+    assert "MUJOCO_GL" not in os.environ
+    monkeypatch.setenv("MUJOCO_GL", "egl")
+    _without_gl("adaptive", "none")
+    assert os.environ["MUJOCO_GL"] == "egl"
+    env = {k: v for k, v in os.environ.items() if k != "MUJOCO_GL"}
+    script = (
+        "import sys; from mlpfac.cli import main; "
+        f"code = main(['run', 'eight-nominal', '--duration', '0.5', '--no-log', '--no-plot', '--out', {str(tmp_path / 'r')!r}]); "
+        "print(code, 'mujoco' in sys.modules, 'glfw' in sys.modules)"
+    )
+    proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, env=env, timeout=300)
+    assert proc.stdout.splitlines()[-1] == "0 True False", proc.stdout + proc.stderr

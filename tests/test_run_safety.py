@@ -337,9 +337,14 @@ def test_a_recording_that_cannot_be_closed_is_a_failed_write(tmp_path):
     assert not out.exists()
 
 
-def test_a_ctrl_c_that_lands_in_a_del_still_stops_the_run(tmp_path):
+@pytest.mark.parametrize(
+    "controller, k, stopped",
+    [("adaptive-real", 100, "1.01 s"), ("adaptive", 250, "5.00 s")],  # step by step; compiled from 250 to 500
+)
+def test_a_ctrl_c_that_lands_in_a_del_still_stops_the_run(tmp_path, controller, k, stopped):
     """Python reports an exception raised in a ``__del__`` (rerun's streams flush in theirs) as
-    ignored and goes on: a Ctrl-C delivered there stops the run at its next step all the same."""
+    ignored and goes on: a Ctrl-C delivered there stops the run at its next step (or compiled
+    segment) all the same."""
     out = tmp_path / "run"
     script = textwrap.dedent(
         f"""
@@ -353,14 +358,15 @@ def test_a_ctrl_c_that_lands_in_a_del_still_stops_the_run(tmp_path):
         apply_due = runner._apply_due
 
         def step(pending, k, *args):
-            if k == 100:
+            if k == {k}:
                 Dropped()
             return apply_due(pending, k, *args)
 
         runner._apply_due = step
         from mlpfac.cli import entry
 
-        sys.argv = ["mlpfac", "run", "eight-nominal", "--no-plot", "--duration", "5", "--out", {str(out)!r}]
+        sys.argv = ["mlpfac", "run", "eight-nominal", "--no-plot", "--duration", "10", "--controller", {controller!r},
+                    "--out", {str(out)!r}]
         entry()
         """
     )
@@ -368,4 +374,4 @@ def test_a_ctrl_c_that_lands_in_a_del_still_stops_the_run(tmp_path):
     assert proc.returncode == 130, proc.stderr
     assert "ignored" not in proc.stderr and "Traceback" not in proc.stderr, proc.stderr
     m = json.loads((out / "metrics.json").read_text())
-    assert m["status"] == "interrupted" and m["reason"] == "interrupted at t = 1.01 s", m["reason"]  # after step 100
+    assert m["status"] == "interrupted" and m["reason"] == f"interrupted at t = {stopped}", m["reason"]

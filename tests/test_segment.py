@@ -45,7 +45,7 @@ def _short(name: str, controller: str, duration: float = 4.0):
 @pytest.mark.parametrize(
     "name", ["eight-payload", "eight-torque", "eight-sensor-delay", "eight-control-period", "eight-wheel-radius"]
 )
-@pytest.mark.parametrize("controller", ["kanayama", "corradini"])
+@pytest.mark.parametrize("controller", ["kanayama", "corradini", "adaptive", "adaptive-velocity", "adaptive-best"])
 def test_compiled_loop_is_the_step_by_step_loop(name, controller):
     scn = _short(name, controller)
     compiled_rec = run(scn)
@@ -61,6 +61,45 @@ def test_a_seed_stopped_by_the_runner_stops_at_the_same_step():
     assert a.status == "diverged" and "position error" in a.reason
     _same(a, b)
     assert np.isnan(a.pose[a.n :]).all() and np.isnan(a.plant["torque"][a.n - 1 :]).all()
+
+
+def test_which_controllers_run_compiled():
+    """Known answer: the laws and the adaptive scheme's one-kernel forms; not the numpy parts, the
+    input model, a torque-level law or a user's controller."""
+    from mlpfac.control.variants import CONTROLLERS
+    from mlpfac.loop.closed_loop import ClosedLoop
+    from mlpfac.loop.runner import build
+
+    compiled = set()
+    for name in CONTROLLERS:
+        torque = name in ("fierro-lewis", "adaptive-dynamic", "oracle-dynamic")
+        s = _short("eight-torque" if torque else "eight-nominal", name, 0.1)
+        b = build(s)
+        if ClosedLoop([s], b.ref, b.plant, b.ctrl, True, compiled=True).compiled:
+            compiled.add(name)
+    one_kernel = {"adaptive", "adaptive-forget", "adaptive-q", "adaptive-prior", "adaptive-best", "adaptive-velocity"}
+    assert compiled == {"kanayama", "corradini"} | one_kernel
+
+
+def test_adaptive_batch_compiled_records_max_weight_as_the_step_by_step_loop():
+    """A batch records max |z| per step (full=False), computed in the kernel as np.max does; a seed
+    stopped by the runner stops at the same step."""
+    from mlpfac.loop.factory import make_controller
+    from mlpfac.loop.runner import _loop
+
+    scn = _short("eight-payload", "adaptive", 2.0)
+    scns = [dataclasses.replace(scn.with_overrides(seed=s), divergence_m=0.112) for s in range(4)]  # stops 0 and 2
+    ref = sample(scn.reference, np.arange(scn.steps + 1) * scn.T)
+
+    def batch(on_step):
+        plants = [make_plant(s, ref) for s in scns]
+        return _loop(scns, ref, plants, make_controller(scn, None, plants[0]), None, on_step, full=False)
+
+    compiled_recs, stepwise = batch(None), batch(lambda k: None)
+    assert {r.status for r in compiled_recs} == {"ok", "diverged"}
+    for a, b in zip(compiled_recs, stepwise, strict=True):
+        _same(a, b)
+        assert a.ctrl["z"].shape[1] == 1
 
 
 def test_batch_with_a_stopped_seed_equals_each_seed_alone():

@@ -96,6 +96,16 @@ class LawKernel(Protocol):
         ...
 
 
+@runtime_checkable
+class StateKernel(Protocol):
+    """A controller whose whole step the compiled closed loop may run: the adaptive scheme."""
+
+    def kernel_state(self, b: int):
+        """Seed b's :class:`~mlpfac.control.adaptive.kernels.AdaptiveState` after ``reset`` (views of
+        the controller's own arrays), or None when this controller's step is not one kernel."""
+        ...
+
+
 class Corradini(Stepped):
     """The non-adaptive law (35) given the nominal functions h1 = T e2, h2 = T v_r cos e3, h5 = T omega_r."""
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 import os
 import re
 import shutil
+import signal
 import socket
 import subprocess
 import sys
@@ -18,12 +19,14 @@ import tempfile
 import time
 import warnings
 from collections.abc import Sequence
+from functools import partial
 from pathlib import Path
 from urllib.parse import quote, urlsplit
 
 import rerun as rr
 
 from mlpfac.exceptions import ConfigError
+from mlpfac.interrupts import die_with_parent
 from mlpfac.log.recorder import APPLICATION_ID, RerunSink
 
 SPAWN_PORT = 9876  # the native viewer's gRPC port, rerun's default
@@ -262,7 +265,9 @@ def _start_viewer(
                 stdin=subprocess.DEVNULL,
                 stdout=log,
                 stderr=log,
-                preexec_fn=None if outlive or not sys.platform.startswith("linux") else _die_with_parent,
+                preexec_fn=None
+                if outlive or not sys.platform.startswith("linux")
+                else partial(die_with_parent, signal.SIGTERM),
             )
         except OSError as err:
             raise ConfigError(where, f"cannot start the rerun viewer ({err.strerror or err})") from None
@@ -283,13 +288,6 @@ def _start_viewer(
             time.sleep(0.1)
     _stop(proc)
     raise ConfigError(where, f"the rerun viewer did not listen on port {ports[0]} within {START_TIMEOUT_S:g} s")
-
-
-def _die_with_parent() -> None:
-    import ctypes
-    import signal
-
-    ctypes.CDLL(None).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
 
 
 def _stop(proc: subprocess.Popen | None) -> None:

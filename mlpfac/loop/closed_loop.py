@@ -10,10 +10,10 @@ from collections.abc import Callable
 
 import numpy as np
 
-from mlpfac.control.baselines import LawKernel, Stepped
+from mlpfac.control.baselines import LawKernel, StateKernel, Stepped
 from mlpfac.control.torque import Observation, reference_rates
 from mlpfac.interrupts import raise_swallowed
-from mlpfac.loop.compiled import BAD, segment
+from mlpfac.loop.compiled import ADAPTIVE, BAD, no_state, segment
 from mlpfac.loop.kernels import bad_seeds
 from mlpfac.loop.record import RunRecord
 from mlpfac.model import tracking_errors
@@ -154,10 +154,13 @@ class ClosedLoop:
         self.ctele = _allocate(self.ctrl_store, self.ctrl.telemetry(), self.recs, "ctrl", self.B, self.N, self.full)
         tele = {k: v[None] for k, v in plants[0].telemetry().items()}
         self.ptele = _allocate(self.plant_store, tele, self.recs, "plant", self.B, self.N, True)
-        self.law = self.ctrl.law_kernel()
+        if isinstance(self.ctrl, LawKernel):
+            self.law, self.states = self.ctrl.law_kernel(), [no_state()] * self.B
+        else:
+            self.law, self.states = (ADAPTIVE, np.zeros(0)), [self.ctrl.kernel_state(b) for b in range(self.B)]
         pose = self.pose[0]
         segment(0, 0, self.ref, *self.law, 1.0, pose, pose, pose, pose, self.u[0], self.ctele[0], self.ptele[0],
-                np.zeros((0, 3)), plants[0].kernel_args())  # fmt: skip
+                np.zeros((0, 3)), self.states[0], plants[0].kernel_args())  # fmt: skip
 
     def run_segments(self, sink) -> None:
         k, N, T = 0, self.N, self.T
@@ -179,7 +182,7 @@ class ClosedLoop:
         p, limit = self.plant.plants[b], self.base.divergence_m
         end, why = segment(k, k1, self.ref, *self.law, limit, self.pose[b], self.pose_meas[b], self.e[b],
                            self.e_true[b], self.u[b], self.ctele[b], self.ptele[b], p.draws(k1 - k),
-                           p.kernel_args())  # fmt: skip
+                           self.states[b], p.kernel_args())  # fmt: skip
         self.recs[b].n = min(end + 1, k1)
         if why == BAD:
             self.stop(b, _diverged(self.pose[b, end], self.u[b, end], self.e_true[b, end], None, limit), end, end)
@@ -281,8 +284,11 @@ class ClosedLoop:
 
 
 def _compiled(plant: PlantList, ctrl: Stepped) -> bool:
-    """Whether the closed loop can run compiled: every plant has a compiled step, the law is a kernel."""
-    return isinstance(ctrl, LawKernel) and all(isinstance(p, CompiledPlant) for p in plant.plants)
+    """Whether the closed loop can run compiled: every plant has a compiled step, the controller's
+    step is a kernel."""
+    kernel = isinstance(ctrl, LawKernel) or (isinstance(ctrl, StateKernel) and ctrl.kernel_state(0) is not None)
+    kernel = kernel and ctrl.level == "velocity"  # the segment's plant step takes (v, omega)
+    return kernel and all(isinstance(p, CompiledPlant) for p in plant.plants)
 
 
 def _apply_due(pending: list, k: int, T: float, plant, recs: list[RunRecord], live: list[int]) -> None:

@@ -1,18 +1,20 @@
 """The closed loop compiled between events: many control steps of one seed in one kernel call.
 
 For a plant with a compiled control step (the MuJoCo robot, :mod:`mlpfac.plants.compiled`) and a
-controller whose law is a kernel (Kanayama, Corradini: :func:`mlpfac.control.law.law_step`), the
+controller whose step is a kernel (Kanayama, Corradini: :func:`mlpfac.control.law.law_step`; the
+adaptive scheme's compiled form: :func:`mlpfac.control.adaptive.kernels.adaptive_row`), the
 runner steps each seed from one event (or sink flush) to the next with :func:`segment`. Every
 step is the runner's step, made of the same kernels the step-by-step loop calls with B = 1:
-error (2) of the measured pose, the law, error of the true pose, the record's rows, the runner's
-divergence test, the plant's step; so a seed's record is bit for bit the one the step-by-step loop
-gives (tests/test_segment.py).
+error (2) of the measured pose, the controller, error of the true pose, the record's rows, the
+runner's divergence test, the plant's step; so a seed's record is bit for bit the one the
+step-by-step loop gives (tests/test_segment.py).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from mlpfac.control.adaptive.kernels import AdaptiveState, adaptive_row, state_type
 from mlpfac.control.law import law_step
 from mlpfac.jit import kernel
 from mlpfac.loop.kernels import bad_seeds
@@ -20,16 +22,27 @@ from mlpfac.model import tracking_errors
 from mlpfac.plants.compiled import S_POSE, plant_step, with_robot
 
 BAD = -1  # the runner's test stopped the seed (a plant's own reasons are its codes, > 0)
+ADAPTIVE = 0  # the controller's number for the adaptive scheme (the laws': mlpfac.control.law.KANAYAMA, ...)
+
+
+def no_state() -> AdaptiveState:
+    """The adaptive state a law's segment is given: no seed."""
+    f = np.zeros((0, 0))
+    return AdaptiveState(f, np.zeros((0, 0, 0)), f, np.zeros((0, 0, 0)), f, f, f, np.zeros(0), np.zeros(0, np.int64),
+                         np.zeros(0), f, f)  # fmt: skip
 
 
 @kernel(
-    lambda: with_robot(f"UniTuple(i8, 2)(i8, i8, f8[:, ::1], i8, f8[::1], f8, {', '.join(['f8[:, ::1]'] * 8)})"),
+    lambda: with_robot(
+        f"UniTuple(i8, 2)(i8, i8, f8[:, ::1], i8, f8[::1], f8, {', '.join(['f8[:, ::1]'] * 8)})", state_type()
+    ),
     ext="mujoco",
 )
-def segment(k0, k1, ref, law, c, limit, pose, pose_meas, e, e_true, u, ctele, ptele, draws, robot):
-    """Steps k0 .. k1 - 1 of one seed. Records (N, ...) are written at row k; ``ctele``, ``ptele``
-    (N, W) the controller's and the plant's telemetry rows; ``draws`` (k1 - k0, 3) the plant's
-    noise; ``robot`` :meth:`~mlpfac.plants.mujoco.MujocoPlant.kernel_args`.
+def segment(k0, k1, ref, law, c, limit, pose, pose_meas, e, e_true, u, ctele, ptele, draws, state, robot):
+    """Steps k0 .. k1 - 1 of one seed. The controller: ``law`` (a law's number, with constants ``c``,
+    or ADAPTIVE, with the seed's ``state``, step 0 its first step). Records (N, ...) are written at
+    row k; ``ctele``, ``ptele`` (N, W) the controller's and the plant's telemetry rows; ``draws``
+    (k1 - k0, 3) the plant's noise; ``robot`` :meth:`~mlpfac.plants.mujoco.MujocoPlant.kernel_args`.
 
     Returns (k, why): (k1, 0) when every step ran, else the step k at which the seed stopped and
     why (BAD: the runner's test, after the law; > 0: the plant's code, after the plant's step)."""
@@ -41,12 +54,17 @@ def segment(k0, k1, ref, law, c, limit, pose, pose_meas, e, e_true, u, ctele, pt
         for j in range(3):
             q[0, j], qm[0, j] = st[S_POSE + j], hist[0, j]
         tracking_errors(qm, r, ek)
-        law_step(law, c, ek, r[3], r[4], uk, ctele[k : k + 1])
+        z = no_z
+        if law == ADAPTIVE:
+            adaptive_row(state, k == 0, ek, r[3], r[4], ctele[k])
+            uk[0, 0], uk[0, 1], z = state.u[0, 0], state.u[0, 1], state.z
+        else:
+            law_step(law, c, ek, r[3], r[4], uk, ctele[k : k + 1])
         tracking_errors(q, r, etk)
         for j in range(3):  # number by number: a row assignment compiles numba's shape-mismatch message
             pose[k, j], pose_meas[k, j], e[k, j], e_true[k, j] = q[0, j], qm[0, j], ek[0, j], etk[0, j]
         u[k, 0], u[k, 1] = uk[0, 0], uk[0, 1]
-        if bad_seeds(q, uk, etk, no_z, limit, bad):
+        if bad_seeds(q, uk, etk, z, limit, bad):
             return k, BAD
         why = plant_step(uk[0, 0], uk[0, 1], draws[k - k0], ptele[k], robot)
         if why:

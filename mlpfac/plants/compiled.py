@@ -124,8 +124,9 @@ if built("mujoco") is None:
     _remainder = types.ExternalFunction("remainder", types.float64(types.float64, types.float64))  # IEEE, exact
 
 
-def with_robot(signature: str):
-    """numba's ``signature`` with a last argument of :class:`Robot`, for :func:`~mlpfac.jit.kernel`."""
+def with_robot(signature: str, *more):
+    """numba's ``signature`` with the types ``more`` and a last argument of :class:`Robot`, for
+    :func:`~mlpfac.jit.kernel`."""
     from numba import types
     from numba.core.sigutils import normalize_signature
 
@@ -133,7 +134,7 @@ def with_robot(signature: str):
     f1, i1 = types.float64[::1], types.int64[::1]
     fields = (types.int64, types.int64, *[f1] * 7, i1, f1, f1, types.float64[:, ::1], i1, f1)
     assert len(fields) == len(Robot._fields), "with_robot names a type for each field of Robot, in order"
-    return ret(*args, types.NamedTuple(fields, Robot))
+    return ret(*args, *more, types.NamedTuple(fields, Robot))
 
 
 @ctypes.CFUNCTYPE(None, ctypes.c_char_p)

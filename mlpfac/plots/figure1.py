@@ -7,76 +7,176 @@ baseline being the run itself) are left out; the others keep the paper's letters
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
 
+from mlpfac.interrupts import die_with_parent
 from mlpfac.loop.record import RunRecord
 
 EVENT_COLOR = "firebrick"
 RUN_COLOR = "tab:blue"
 
 
-def figure1(rec: RunRecord, baseline: RunRecord | None, path: Path) -> list[str]:
+def figure1(rec: RunRecord, baseline: RunRecord | None, path: Path, halves: bool = False) -> list[str]:
     """Write Figure 1 for ``rec`` (and ``baseline`` for panel h) to ``path`` (PNG); the letters of
-    the panels drawn."""
-    from mlpfac.plots.mplconfig import quiet_config
+    the panels drawn. ``halves``: rendered by two processes (:func:`render`)."""
+    return Draft(rec, shows_h(rec, baseline)).finish(baseline, path, halves)
 
-    quiet_config()
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-    from matplotlib.ticker import LogFormatter
 
-    n = rec.n
-    z, P = rec.ctrl.get("z"), rec.ctrl.get("mean_diag_P")
-    adaptive = z is not None and z.ndim == 2 and z.shape[1] > 1
-    show_h = baseline is not None and baseline.controller != rec.controller and baseline.n > 0
-    time_panels = ["a", "b", "c"] + (["d"] if adaptive else []) + (["g"] if P is not None else [])
-    time_panels += ["h"] if show_h else []
-    rows = -(-len(time_panels) // 2) + 1
-    height = 2.9 * rows + 0.6
-    fig = Figure(figsize=(12, height))  # no pyplot: nothing global, nothing to close
-    FigureCanvasAgg(fig)
-    grid = fig.add_gridspec(rows, 2, **_layout(height))
-    title = f"{rec.scenario} / {rec.controller} / seed {rec.seed}: {rec.status}"
-    fig.suptitle(title + (f" ({rec.reason})" if rec.reason else ""), fontsize=12, y=1 - 0.06 / height, va="top")
-    t = rec.t[:n]
-    warm = min(rec.warmup_s, t[-1] if n else 0.0)
-    axes = {}
-    for i, tag in enumerate(time_panels):
-        axes[tag] = fig.add_subplot(grid[i // 2 + (i >= 4), i % 2])  # the paths' row follows (c), (d)
-    for i, (name, scale, unit, what) in enumerate(
-        [("e1", 1e3, "mm", "along the path"), ("e2", 1e3, "mm", "across the path"), ("e3", 1e3, "mrad", "heading")]
-    ):
-        ax = axes["abc"[i]]
-        _signal(ax, t, rec.e_true[:n, i] * scale, warm)
-        ax.set(title=f"({'abc'[i]}) {name}: {what}", ylabel=f"{name} [{unit}]")
-    if adaptive:
-        _weights(axes["d"], rec, t)
-    if P is not None:
-        ax = axes["g"]
-        ax.semilogy(t, P[:n], color=RUN_COLOR, lw=1.0)
-        for minor in (False, True):  # plain "9e-02" labels: the same ticks, no mathtext to lay out
-            (ax.yaxis.set_minor_formatter if minor else ax.yaxis.set_major_formatter)(LogFormatter())
-        ax.set(title="(g) mean of diag(P_k): the EKF's uncertainty", ylabel="mean diag(P_k) [-]")
-    if show_h:
-        nb = baseline.n
-        ax = axes["h"]
-        _signal(ax, baseline.t[:nb], baseline.e_true[:nb, 1] * 1e3, min(baseline.warmup_s, baseline.t[nb - 1]))
-        ax.set(title=f"(h) e2 under the {baseline.controller} law, same seed ({baseline.status})", ylabel="e2 [mm]")
-    for tag, ax in axes.items():
-        ax.set_xlabel("t [s]")
-        ax.grid(alpha=0.3, which="both")
-        ax.set_xlim(0, rec.t[-1] + rec.T)
-        for j, ev in enumerate(rec.events):
-            label = f"event: {str(ev.get('text') or ev.get('kind')).split(' (')[0]}" if j == 0 else None
-            ax.axvline(float(ev["time"]), color=EVENT_COLOR, lw=0.9, ls="--", label=label if tag == "a" else None)
-    if rec.events:
-        axes["a"].legend(loc="upper right", fontsize=8, framealpha=0.9)
-    prow = min(2, rows - 1)
-    _paths(fig.add_subplot(grid[prow, 0]), fig.add_subplot(grid[prow, 1]), rec, warm)
-    fig.savefig(path, dpi=90)
-    return sorted([*axes, "e", "f"])
+def shows_h(rec: RunRecord, baseline: RunRecord | None) -> bool:
+    """Whether panel (h) is drawn: a baseline that is not the run's own law and ran."""
+    return baseline is not None and baseline.controller != rec.controller and baseline.n > 0
+
+
+class Draft:
+    """Figure 1 with every panel but (h)'s line, made before the baseline has run (the painter's
+    process makes it while the run's process runs the baseline); :meth:`finish` draws and writes it.
+    ``h``: whether it has a panel (h)."""
+
+    def __init__(self, rec: RunRecord, h: bool) -> None:
+        from mlpfac.plots.mplconfig import quiet_config
+
+        quiet_config()
+        from matplotlib import rc_context
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+        from matplotlib.figure import Figure
+        from matplotlib.ticker import LogFormatter
+
+        self.rec, self.h = rec, h
+        n = rec.n
+        z, P = rec.ctrl.get("z"), rec.ctrl.get("mean_diag_P")
+        adaptive = z is not None and z.ndim == 2 and z.shape[1] > 1
+        time_panels = ["a", "b", "c"] + (["d"] if adaptive else []) + (["g"] if P is not None else [])
+        time_panels += ["h"] if h else []
+        rows = -(-len(time_panels) // 2) + 1
+        height = 2.9 * rows + 0.6
+        self.fig = fig = Figure(figsize=(12, height), dpi=DPI)  # no pyplot: nothing global, nothing to close
+        FigureCanvasAgg(fig)
+        grid = fig.add_gridspec(rows, 2, **_layout(height))
+        title = f"{rec.scenario} / {rec.controller} / seed {rec.seed}: {rec.status}"
+        self.title = fig.suptitle(
+            title + (f" ({rec.reason})" if rec.reason else ""), fontsize=12, y=1 - 0.06 / height, va="top"
+        )
+        t = rec.t[:n]
+        warm = min(rec.warmup_s, t[-1] if n else 0.0)
+        self.axes = axes = {}
+        with rc_context({"axes.titley": 1.0}):  # titles at a fixed height: no search for the room above the axes
+            for i, tag in enumerate(time_panels):
+                axes[tag] = fig.add_subplot(grid[i // 2 + (i >= 4), i % 2])  # the paths' row follows (c), (d)
+            prow = min(2, rows - 1)
+            paths = fig.add_subplot(grid[prow, 0]), fig.add_subplot(grid[prow, 1])
+        for i, (name, scale, unit, what) in enumerate(
+            [("e1", 1e3, "mm", "along the path"), ("e2", 1e3, "mm", "across the path"), ("e3", 1e3, "mrad", "heading")]
+        ):
+            ax = axes["abc"[i]]
+            _signal(ax, t, rec.e_true[:n, i] * scale, warm)
+            ax.set(title=f"({'abc'[i]}) {name}: {what}", ylabel=f"{name} [{unit}]")
+        if adaptive:
+            _weights(axes["d"], rec, t)
+        if P is not None:
+            ax = axes["g"]
+            ax.semilogy(t, P[:n], color=RUN_COLOR, lw=1.0)
+            for minor in (False, True):  # plain "9e-02" labels: the same ticks, no mathtext to lay out
+                (ax.yaxis.set_minor_formatter if minor else ax.yaxis.set_major_formatter)(LogFormatter())
+            ax.set(title="(g) mean of diag(P_k): the EKF's uncertainty", ylabel="mean diag(P_k) [-]")
+        for tag, ax in axes.items():
+            ax.set_xlabel("t [s]")
+            ax.grid(alpha=0.3, which="both")
+            ax.set_xlim(0, rec.t[-1] + rec.T)
+            for j, ev in enumerate(rec.events):
+                label = f"event: {str(ev.get('text') or ev.get('kind')).split(' (')[0]}" if j == 0 else None
+                ax.axvline(float(ev["time"]), color=EVENT_COLOR, lw=0.9, ls="--", label=label if tag == "a" else None)
+        if rec.events:
+            axes["a"].legend(loc="upper right", fontsize=8, framealpha=0.9)
+        _paths(*paths, rec, warm)
+
+    def finish(self, baseline: RunRecord | None, path: Path, halves: bool = False) -> list[str]:
+        """The figure completed with ``baseline`` (:meth:`complete`), rendered (:func:`render`) and
+        written to ``path``; the letters of the panels drawn."""
+        done = self.complete(baseline)
+        write_png(render(done.fig, done.title, halves), path)
+        return sorted([*done.axes, "e", "f"])
+
+    def complete(self, baseline: RunRecord | None) -> Draft:
+        """This draft with panel (h) drawn from ``baseline``; a draft made for the other answer of
+        :func:`shows_h` is made again (and returned)."""
+        if self.h != shows_h(self.rec, baseline):
+            return Draft(self.rec, not self.h).complete(baseline)
+        if self.h:
+            nb = baseline.n
+            ax = self.axes["h"]
+            _signal(ax, baseline.t[:nb], baseline.e_true[:nb, 1] * 1e3, min(baseline.warmup_s, baseline.t[nb - 1]))
+            ax.set(title=f"(h) e2 under the {baseline.controller} law, same seed ({baseline.status})", ylabel="e2 [mm]")
+        return self
+
+
+DPI = 90
+
+
+def render(fig, title, halves: bool = False) -> np.ndarray:
+    """The figure's pixels, (height, width, 4) RGBA. ``halves``: drawn by two processes
+    (:func:`_render_halves`); where that cannot be done, by this one."""
+    pixels = _render_halves(fig, title) if halves else None
+    if pixels is None:
+        fig.canvas.draw()
+        pixels = np.asarray(fig.canvas.buffer_rgba())
+    return pixels
+
+
+def _render_halves(fig, title) -> np.ndarray | None:
+    """The figure drawn by two processes: a child forked here draws the background, the ``title``
+    and every other axes into shared memory while this one draws the other axes on a clear
+    background; these are laid over the child's ("over" compositing). The axes do not overlap, so
+    the picture is the one a single process draws but for the rounding of edges drawn on the clear
+    background. None when the child could not be forked or failed."""
+    import mmap
+
+    w, h = fig.canvas.get_width_height()
+    shared, parent = mmap.mmap(-1, w * h * 4), os.getpid()
+    theirs, mine = fig.axes[0::2], fig.axes[1::2]
+    try:
+        pid = os.fork()
+    except OSError:
+        return None
+    if pid == 0:  # the child; it never returns
+        code = 1
+        try:
+            die_with_parent(parent=parent)
+            for ax in mine:
+                ax.set_visible(False)
+            fig.canvas.draw()
+            shared[:] = memoryview(fig.canvas.buffer_rgba()).cast("B")
+            code = 0
+        finally:
+            os._exit(code)
+    hidden = [*theirs, title, fig.patch]
+    for artist in hidden:
+        artist.set_visible(False)
+    try:
+        fig.canvas.draw()
+        over = np.asarray(fig.canvas.buffer_rgba())
+    finally:
+        for artist in hidden:
+            artist.set_visible(True)
+        failed = os.waitpid(pid, 0)[1] != 0
+    if failed:
+        return None
+    under = np.frombuffer(shared, dtype=np.uint8).reshape(h, w, 4)
+    a = over[..., 3]
+    np.copyto(under, over, where=(a == 255)[..., None])
+    edge = (a > 0) & (a < 255)  # the rims of what was drawn outside the axes: blended, on an opaque picture
+    o, u, k = over[edge, :3].astype(np.uint16), under[edge, :3].astype(np.uint16), a[edge, None].astype(np.uint16)
+    under[edge, :3] = ((o * k + u * (255 - k) + 127) // 255).astype(np.uint8)
+    return under
+
+
+def write_png(pixels: np.ndarray, path: Path) -> None:
+    """``pixels`` (height, width, 4) as a PNG at ``path``, compressed for speed (a few % larger)."""
+    from PIL import Image
+
+    Image.fromarray(pixels, "RGBA").save(path, format="png", compress_level=1, dpi=(DPI, DPI))
 
 
 def warm_up() -> None:

@@ -1,7 +1,8 @@
 """Figure 1 drawn beside the run: a child process, forked before the run's own imports, imports
-matplotlib and does its first-figure work while this process imports MuJoCo and simulates, then
-draws the records it is sent. On a platform without ``fork`` (or if the child is gone) the figure
-is drawn here.
+matplotlib and does its first-figure work while this process imports MuJoCo and simulates, makes
+the figure from the run's record while this process runs the baseline, and draws it, in two
+processes, when the baseline's record arrives. On a platform without ``fork`` (or if the child is
+gone) the figure is drawn here.
 
 The child takes no part in Ctrl-C (this process handles it and closes the pipe, which ends the
 child); an error writing the figure comes back as the same OSError, naming the same file.
@@ -11,6 +12,8 @@ from __future__ import annotations
 
 import os
 import pickle
+import queue
+import threading
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -19,20 +22,36 @@ from mlpfac.interrupts import ForkedChild
 
 
 class Painter(ForkedChild):
-    """``figure1`` of :mod:`mlpfac.plots.figure1`, drawn by a child process started now."""
+    """``figure1`` of :mod:`mlpfac.plots.figure1`, drawn by a child process started now: the run's
+    record is sent as soon as the run ends (:meth:`begin`), so that the child makes the figure while
+    this process runs the baseline, whose record completes it (:meth:`finish`)."""
 
     def __init__(self) -> None:
         from mlpfac.plots.mplconfig import quiet_config
 
         quiet_config()  # before the child starts: it inherits the environment
         self.meanwhile: list[Callable[[], None]] = []  # done here while the child draws
+        self._begun: tuple | None = None
         super().__init__(_child)
 
-    def figure1(self, rec, baseline, path: Path) -> list[str]:
-        """Write Figure 1 to ``path``; the panels drawn (as :func:`mlpfac.plots.figure1.figure1`)."""
+    def begin(self, rec, path: Path, h: bool) -> None:
+        """The run's record, to be drawn to ``path``; ``h``: a panel (h) is expected (the baseline is
+        another law)."""
+        self._begun = (rec, path)
         if self.pid is not None:
             try:
-                pickle.dump((rec, baseline, path), self._send, protocol=pickle.HIGHEST_PROTOCOL)
+                pickle.dump((rec, path, h), self._send, protocol=pickle.HIGHEST_PROTOCOL)
+                self._send.flush()
+            except OSError:
+                self.close()  # the child is gone: drawn here
+
+    def finish(self, baseline) -> list[str]:
+        """Write the figure begun with ``baseline`` for panel (h); the panels drawn (as
+        :func:`mlpfac.plots.figure1.figure1`)."""
+        rec, path = self._begun
+        if self.pid is not None:
+            try:
+                pickle.dump(baseline, self._send, protocol=pickle.HIGHEST_PROTOCOL)
                 self._send.close()
                 self._do_meanwhile()
                 answer = pickle.load(self._receive)
@@ -68,19 +87,33 @@ def painting(wanted: bool) -> Iterator[Painter | None]:
 
 
 def _child(receive_fd: int) -> tuple | None:
-    """Import matplotlib and warm it up, draw what arrives; the answer ("ok", panels), ("oserror",
-    errno, strerror, filename) or ("error", text), None when nothing arrives."""
-    from mlpfac.plots.figure1 import figure1, warm_up
+    """Import matplotlib and warm it up; make the figure from the run's record, complete it with the
+    baseline's and draw it in two processes; the answer ("ok", panels), ("oserror", errno, strerror,
+    filename) or ("error", text), None when nothing (or not all) arrives."""
+    got: queue.Queue = queue.Queue()
+
+    def read() -> None:  # meanwhile: the records may be larger than a pipe holds
+        with os.fdopen(receive_fd, "rb") as f:
+            try:
+                for _ in range(2):
+                    got.put(pickle.load(f))
+            except (EOFError, pickle.UnpicklingError):  # nothing (more) to draw: no run, or it failed
+                got.put(None)
+
+    threading.Thread(target=read, daemon=True).start()
+    from mlpfac.plots.figure1 import Draft, warm_up
 
     warm_up()  # matplotlib's first-figure work, done before the records arrive
-
-    with os.fdopen(receive_fd, "rb") as f:
-        try:
-            rec, baseline, path = pickle.load(f)
-        except EOFError:  # nothing to draw (no run, or it failed)
-            return None
+    begun = got.get()
+    if begun is None:
+        return None
+    rec, path, h = begun
+    draft = Draft(rec, h)
+    baseline = got.get()
+    if baseline is None:
+        return None
     try:
-        return ("ok", figure1(rec, baseline, path))
+        return ("ok", draft.finish(baseline, path, halves=True))
     except OSError as err:
         return ("oserror", err.errno, err.strerror, err.filename)
     except Exception as err:  # drawn again in the parent, which reports it as it would have

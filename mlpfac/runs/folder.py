@@ -217,16 +217,18 @@ def _run_into(folder: Stage, out: Path, scn, built, sink, baseline, painter) -> 
     try:
         m = write_run(folder.path, scn, rec)
         if baseline is not None and rec.status != "interrupted":
+            writing = folder.path / "figure1.png"
+            if painter is not None:  # the figure made from the run's record while the baseline runs
+                painter.begin(rec, writing, baseline.controller != scn.controller)
             base = run(baseline)
             if base.status == "interrupted":  # Ctrl-C while the figure's baseline ran
                 raise Terminated() if base.reason.startswith("terminated") else KeyboardInterrupt()
-            writing = folder.path / "figure1.png"
             if painter is None:
                 from mlpfac.plots import figure1
 
                 figure1(rec, base, writing)
             else:
-                painter.figure1(rec, base, writing)
+                painter.finish(base)
     except OSError as err:
         raise _unwritten(folder.shown(err.filename or writing), err, out) from None
     return rec, m

@@ -1,5 +1,6 @@
 """The command line of sweeps: ``mlpfac sweep`` and ``mlpfac compare``, a shell over
-:func:`mlpfac.sweeps.engine.sweep_folder` (one engine, two tables)."""
+:func:`mlpfac.sweeps.engine.sweep_folder` (one engine, two tables). Its arguments are defined
+without importing the engine, which every other command's parser would pay for."""
 
 from __future__ import annotations
 
@@ -8,7 +9,6 @@ import shlex
 import sys
 from pathlib import Path
 
-from mlpfac.sweeps.engine import COMPARE_COLUMNS, SWEEP_COLUMNS, markdown, report, summary, sweep_folder
 from mlpfac.targets import cli_path
 
 COMPARE_CONTROLLERS = ("adaptive", "corradini", "kanayama")
@@ -84,11 +84,11 @@ def add_compare_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run_sweep_cli(args: argparse.Namespace) -> int:
-    return _run_cli(args, "sweep", SWEEP_COLUMNS)
+    return _run_cli(args, "sweep")
 
 
 def run_compare_cli(args: argparse.Namespace) -> int:
-    return _run_cli(args, "compare", COMPARE_COLUMNS)
+    return _run_cli(args, "compare")
 
 
 def scenarios_of(args: argparse.Namespace) -> list[str]:
@@ -108,9 +108,12 @@ def scenarios_of(args: argparse.Namespace) -> list[str]:
         raise ConfigError("--robots" + err.where.removeprefix("--robot"), err.what) from None
 
 
-def _run_cli(args: argparse.Namespace, stem: str, columns) -> int:
+def _run_cli(args: argparse.Namespace, stem: str) -> int:
     """Validate everything, then run; 0 done, 1 some run failed or a worker was lost, 2 bad input
     or a failed write (one line naming the path), 130 interrupted (Ctrl-C), 143 terminated (SIGTERM)."""
+    from mlpfac.sweeps.engine import COMPARE_COLUMNS, SWEEP_COLUMNS, markdown, report, summary, sweep_folder
+
+    columns = SWEEP_COLUMNS if stem == "sweep" else COMPARE_COLUMNS
     cmd = shlex.join(["mlpfac", *sys.argv[1:]]) if sys.argv[1:] else f"mlpfac {stem} ..."
     done = sweep_folder(
         scenarios_of(args), args.controllers, args.seeds, args.out, duration=args.duration, workers=args.workers,

@@ -304,17 +304,11 @@ def _alive(pid: int) -> bool:
 def _die_with_parent(parent: int) -> None:
     """Linux: the kernel sends SIGKILL when the parent dies (prctl PR_SET_PDEATHSIG). Everywhere: a
     daemon thread exits the process once it has another parent (the parent died, it was reparented)."""
-    import signal
     import threading
 
-    if sys.platform.startswith("linux"):
-        with contextlib.suppress(OSError, AttributeError):
-            import ctypes
+    from mlpfac.interrupts import die_with_parent
 
-            libc = ctypes.CDLL(None, use_errno=True)
-            libc.prctl(1, int(signal.SIGKILL), 0, 0, 0)  # 1 = PR_SET_PDEATHSIG
-    if os.getppid() != parent:  # the parent died before the line above
-        os._exit(1)
+    die_with_parent(parent=parent)
 
     def watch() -> None:
         while os.getppid() == parent:

@@ -148,6 +148,17 @@ class Adaptive(Stepped):
         self._kernel = adaptive_step
         adaptive_step(np.zeros((0, 3)), 1.0, 0.0, True, *(x[:0] for x in self._args), *self._consts)
 
+    def kernel_state(self, b: int):
+        """Seed b's state for the compiled closed loop (:mod:`mlpfac.loop.compiled`), views of this
+        controller's arrays, which it steps as :meth:`step` would from step 0; None unless the step
+        is the one kernel (no input model) and the seeds are a batch."""
+        from mlpfac.control.adaptive.kernels import AdaptiveState
+
+        if not self.compiled or self.input is not None or self.single:
+            return None
+        assert list(self._tele) == ["z", "trace_P", "mean_diag_P", "innovation", "h_hat"]  # adaptive_row's order
+        return AdaptiveState(*(x[b : b + 1] for x in self._args), *self._consts)
+
     def step(self, e: np.ndarray, r: np.ndarray) -> np.ndarray:
         E = as_rows(e, 3)
         if self.input is not None:  # the input model's update; the error of the pose predicted over the delay

@@ -17,6 +17,7 @@ S_G (L_G, 3)], row-major blocks.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
@@ -330,6 +331,57 @@ def adaptive_step(e, v_r, omega_r, first, z, P, S, H, u, innov, h_hat, trace, in
             e_nom[2] = (eb[2] + T * omega_r) + (-T) * u1
         u_prev[0], u_prev[1] = u[b, 0], u[b, 1]
         e_prev[0], e_prev[1], e_prev[2] = eb[0], eb[1], eb[2]
+
+
+class AdaptiveState(NamedTuple):
+    """The arguments of :func:`adaptive_step` but the error and the reference, for the seeds the
+    arrays hold (one seed's rows for the compiled closed loop, :mod:`mlpfac.loop.compiled`)."""
+
+    z: np.ndarray
+    P: np.ndarray
+    S: np.ndarray
+    H: np.ndarray
+    u: np.ndarray
+    innov: np.ndarray
+    h_hat: np.ndarray
+    trace: np.ndarray
+    ints: np.ndarray
+    params: np.ndarray
+    R: np.ndarray
+    Q: np.ndarray
+
+
+def state_type():
+    """numba's type of :class:`AdaptiveState`, as :func:`adaptive_step`'s signature types its fields."""
+    from numba import types
+
+    f1, f2, f3 = types.float64[::1], types.float64[:, ::1], types.float64[:, :, ::1]
+    return types.NamedTuple((f2, f3, f2, f3, f2, f2, f2, f1, types.int64[::1], f1, f2, f2), AdaptiveState)
+
+
+@kernel()
+def adaptive_row(s, first, e, v_r, omega_r, tele):
+    """:func:`adaptive_step` for the one seed of ``s`` (an :class:`AdaptiveState`), its telemetry in
+    the row ``tele``, packed as the runner records it: z (alpha, all of them; or max |z| when the
+    row has room for one), trace P, mean diag P, the innovation (3), h_hat (3)."""
+    adaptive_step(
+        e, v_r, omega_r, first, s.z, s.P, s.S, s.H, s.u, s.innov, s.h_hat, s.trace, s.ints, s.params, s.R, s.Q
+    )
+    a = s.z.shape[1]
+    o = tele.shape[0] - 8
+    if o == a:
+        for i in range(a):
+            tele[i] = s.z[0, i]
+    else:
+        m = abs(s.z[0, 0])
+        for i in range(1, a):
+            x = abs(s.z[0, i])
+            if x > m or x != x:  # a NaN wins, as in np.max
+                m = x
+        tele[0] = m
+    tele[o], tele[o + 1] = s.trace[0], s.trace[0] / a
+    for j in range(3):
+        tele[o + 2 + j], tele[o + 5 + j] = s.innov[0, j], s.h_hat[0, j]
 
 
 @kernel("void(f8[:, ::1], f8[:, ::1], f8[:, ::1], f8[:, ::1], f8[:, ::1], i8, i8, b1, f8[:, ::1], f8[:, :, ::1])")
