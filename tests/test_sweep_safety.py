@@ -505,10 +505,10 @@ def test_planning_100000_runs_is_quick():
 # 7. BLAS threads
 
 
-def test_one_blas_thread_leaves_the_users_choice(monkeypatch):
+def test_worker_environment_leaves_the_users_choice(monkeypatch):
     monkeypatch.setenv("OMP_NUM_THREADS", "3")
     monkeypatch.delenv("OPENBLAS_NUM_THREADS", raising=False)
-    with sweep.one_blas_thread():
+    with sweep.worker_environment():
         assert os.environ["OPENBLAS_NUM_THREADS"] == "1" and os.environ["OMP_NUM_THREADS"] == "3"
     assert "OPENBLAS_NUM_THREADS" not in os.environ and os.environ["OMP_NUM_THREADS"] == "3"
 

@@ -85,7 +85,7 @@ from mlpfac.sweeps.tables import (  # noqa: F401
     write_paired,
     write_tables,
 )
-from mlpfac.sweeps.worker import BLAS_THREAD_VARIABLES, one_blas_thread, rrd_is_whole, run_task  # noqa: F401  # noqa: F401
+from mlpfac.sweeps.worker import BLAS_THREAD_VARIABLES, rrd_is_whole, run_task, worker_environment  # noqa: F401
 from mlpfac.targets import check_results_folder
 
 EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_TERMINATED = 0, 1, 2, 130, 143

@@ -16,7 +16,7 @@ from mlpfac.interrupts import Terminated, raise_swallowed, sigint_deferred
 from mlpfac.loop.metrics import RunMetrics
 from mlpfac.sweeps.folders import _oserror, check_done, write_result
 from mlpfac.sweeps.plan import Job
-from mlpfac.sweeps.worker import _worker_init, one_blas_thread, pool_context, run_task
+from mlpfac.sweeps.worker import _worker_init, pool_context, run_task, worker_environment
 
 TMP_DIR = ".tmp"  # OUT/.tmp: recordings being made; removed when the sweep ends and when the next one starts
 EXIT_GRACE_S = 15.0  # how long a finished worker may take to exit before it is killed
@@ -207,7 +207,7 @@ def _pool_results(
     from concurrent.futures.process import BrokenProcessPool
 
     before = set(mp.active_children())
-    with one_blas_thread():
+    with worker_environment():
         pool = cf.ProcessPoolExecutor(
             max_workers=min(workers, len(tasks)),
             mp_context=pool_context(),
@@ -218,7 +218,7 @@ def _pool_results(
     queue = iter(tasks)
 
     def submit(t: list[Job]) -> None:
-        with one_blas_thread(), sigint_deferred():  # the pool starts its workers as tasks are submitted
+        with worker_environment(), sigint_deferred():  # the pool starts its workers as tasks are submitted
             pending.add(pool.submit(run_task, t, batched, save_rrd, tmp_dir))
 
     try:

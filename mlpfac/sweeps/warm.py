@@ -17,7 +17,7 @@ _owner, _, _folder = os.environ.get("MLPFAC_POOL_TMP", "").partition(":")
 if _folder and _owner == str(os.getppid()):
     atexit.register(shutil.rmtree, _folder, True)
 
-# The user's modules as the sweep's own process finds them (mlpfac.sweeps.worker.one_blas_thread):
+# The user's modules as the sweep's own process finds them (mlpfac.sweeps.worker.worker_environment):
 # after the installed mlpfac, which the fork server imported without the current folder on its path.
 if os.environ.get("MLPFAC_SYS_PATH"):
     import json

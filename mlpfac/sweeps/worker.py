@@ -201,7 +201,7 @@ SYS_PATH = "MLPFAC_SYS_PATH"  # this process's sys.path, which a fork server's w
 
 
 @contextlib.contextmanager
-def one_blas_thread() -> Iterator[None]:
+def worker_environment() -> Iterator[None]:
     """Worker processes started in this block run BLAS on one thread each (unless the user set the
     variables): N workers on N cores with multi-threaded BLAS are several times slower than their sum.
     They import mlpfac as this process did: the fork server starts without the current folder on its
@@ -225,7 +225,7 @@ def start_pool_server() -> None:
     if pool_context().get_start_method() == "forkserver":
         from multiprocessing import forkserver
 
-        with one_blas_thread():
+        with worker_environment():
             forkserver.ensure_running()
 
 
