@@ -32,24 +32,32 @@ class Painter(ForkedChild):
         quiet_config()  # before the child starts: it inherits the environment
         self.meanwhile: list[Callable[[], None]] = []  # done here while the child draws
         self._begun: tuple | None = None
+        self._sender: threading.Thread | None = None
+        self._sent_ok = True
         super().__init__(_child)
 
     def begin(self, rec, path: Path, h: bool) -> None:
         """The run's record, to be drawn to ``path``; ``h``: a panel (h) is expected (the baseline is
         another law)."""
         self._begun = (rec, path)
-        if self.pid is not None:
-            try:
-                pickle.dump((rec, path, h), self._send, protocol=pickle.HIGHEST_PROTOCOL)
-                self._send.flush()
-            except OSError:
-                self.close()  # the child is gone: drawn here
+        if self.pid is not None:  # sent by a thread: the child reads it while it imports
+            self._sender = threading.Thread(target=self._dump, args=((rec, path, h),), daemon=True)
+            self._sender.start()
+
+    def _dump(self, message) -> None:
+        try:
+            pickle.dump(message, self._send, protocol=pickle.HIGHEST_PROTOCOL)
+            self._send.flush()
+        except (OSError, ValueError):  # the child is gone (or the pipe closed): finish draws here
+            self._sent_ok = False
 
     def finish(self, baseline) -> list[str]:
         """Write the figure begun with ``baseline`` for panel (h); the panels drawn (as
         :func:`mlpfac.plots.figure1.figure1`)."""
         rec, path = self._begun
-        if self.pid is not None:
+        if self._sender is not None:
+            self._sender.join()
+        if self.pid is not None and self._sent_ok:
             try:
                 pickle.dump(baseline, self._send, protocol=pickle.HIGHEST_PROTOCOL)
                 self._send.close()
