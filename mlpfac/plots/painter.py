@@ -108,7 +108,8 @@ def _child(receive_fd: int) -> tuple | None:
             except (EOFError, pickle.UnpicklingError):  # nothing (more) to draw: no run, or it failed
                 got.put(None)
 
-    threading.Thread(target=read, daemon=True).start()
+    reader = threading.Thread(target=read, daemon=True)
+    reader.start()
     from mlpfac.plots.figure1 import Draft, warm_up
 
     warm_up()  # matplotlib's first-figure work, done before the records arrive
@@ -118,6 +119,7 @@ def _child(receive_fd: int) -> tuple | None:
     rec, path, h = begun
     draft = Draft(rec, h)
     baseline = got.get()
+    reader.join()  # no other thread when the figure is drawn by two processes (forked)
     if baseline is None:
         return None
     try:
