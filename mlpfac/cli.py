@@ -147,9 +147,9 @@ def build_parser() -> argparse.ArgumentParser:
         "robustness.json: each controller's median against the value, the bound, the tracking limit",
     )
 
-    from mlpfac.report import results as report
+    from mlpfac.report import add_arguments
 
-    report.add_arguments(sub.add_parser("report", help="write the results tables of the docs from their data"))
+    add_arguments(sub.add_parser("report", help="write the results tables of the docs from their data"))
     return parser
 
 
@@ -167,13 +167,14 @@ def main(argv: list[str] | None = None) -> int:
             from mlpfac.plots.painter import painting
             from mlpfac.runs.replay import DEFER_MAX_S
             from mlpfac.runs.writer import writing
-            from mlpfac.scenario.parse import load
 
             to_file = not (args.no_log or args.spawn or args.connect or args.serve)
             with (  # started first, so that they import matplotlib and rerun while the input is checked
                 painting(args.baseline != "none" and not args.no_plot) as args.painter,  # figure1 drawn beside
                 writing(to_file, args.painter.fds() if args.painter else ()) as args.writer,  # run.rrd too
             ):
+                from mlpfac.scenario.parse import load
+
                 scn = load(args.scenario, build=False)  # a bad name or file fails here (the children are ended)
                 if args.robot is not None:
                     from mlpfac.scenario.on_robot import model_of

@@ -42,7 +42,6 @@ from pathlib import Path
 from mlpfac.exceptions import ConfigError
 from mlpfac.files import write_atomic
 from mlpfac.report.verify import read_data, read_json
-from mlpfac.targets import cli_path
 
 MARKER = re.compile(r"^<!-- table: (?P<spec>.+?) -->\n(?P<body>.*?)^<!-- /table -->$", re.M | re.S)
 VIEWS = ("sweep", "compare", "paired", "summary", "robustness", "text")
@@ -265,37 +264,6 @@ def _collect_item(item: str) -> tuple[str, str]:
     if not DATA_NAME.fullmatch(name):  # not a path: ../x, a/b, . or /abs would write outside DOCS/data
         raise ConfigError(f"--collect {item}", f"NAME is one data folder's name (letters, digits, - _ .), got {name!r}")
     return name, results
-
-
-def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.description = "Write every marked table of DOCS/*.md from the data folder it names (mlpfac/report/results.py)."
-    p.add_argument("docs", nargs="?", type=cli_path, default=Path("docs"), help="the folder of pages (default docs)")
-    p.add_argument("--check", action="store_true", help="write nothing; exit 1 if a table differs from its data")
-    p.add_argument(
-        "--collect",
-        action="append",
-        default=[],
-        metavar="NAME=RESULTS",
-        help="first copy a finished results folder (or a script's printed table) into DOCS/data/NAME",
-    )
-    p.add_argument(
-        "--command",
-        dest="made_by",
-        metavar="COMMAND",
-        help="with one --collect: the command that made it (default: the one on record)",
-    )
-    p.add_argument("--code-version", metavar="SHA", help="with --collect: the code that ran it (default: HEAD)")
-    p.add_argument(
-        "--verify",
-        type=int,
-        nargs="?",
-        const=3,
-        metavar="N",
-        help="run N (default 3) sampled runs of every dataset again from its recorded command; exit 1 if one differs",
-    )
-    p.add_argument(
-        "--strict", action="store_true", help="with --verify: a dataset that cannot run here (its robot) is an error"
-    )
 
 
 def run_cli(args: argparse.Namespace) -> int:
