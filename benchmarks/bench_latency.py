@@ -1,13 +1,16 @@
 """Time to result of whole commands, as a user waits for them. Not a test.
 
-    python benchmarks/bench_latency.py [--repeats 5] [--cold N] [--before MLPFAC] [--only run|quick|workers]
+    python benchmarks/bench_latency.py [--repeats 5] [--cold N] [--this MLPFAC] [--before MLPFAC]
+                                       [--only run|quick|workers]
 
 1. ``mlpfac run eight-nominal`` with every output written (metrics.json, config.toml, figure1.png,
    run.rrd) against the floor process of ``benchmarks/latency_floor.py`` (start Python, import
    numpy and MuJoCo, load the robot, 2500 x (4 mj_step + one reference EKF update)), interleaved
    repeats, median wall time and the CPU time of each process and its children; the same with a
-   fresh, empty ``NUMBA_CACHE_DIR`` for every run of the command (all from this checkout's
-   install; with ``--before MLPFAC``, another install's command in the same rounds); with
+   fresh, empty ``NUMBA_CACHE_DIR`` for every run of the command (all from this checkout, or
+   ``--this MLPFAC``, an install's ``mlpfac`` command: a regular install runs from the bytecode
+   compiled when it was installed, where a checkout may be compiled again on every run under
+   ``PYTHONDONTWRITEBYTECODE``; with ``--before MLPFAC``, another install's command in the same rounds); with
    ``--cold N``, N regular installs (``pip install .`` into a new venv), each timed
    on its first run and then warm. Targets: <= 2x the floor warm, <= 5x on the first run after an
    install.
@@ -68,10 +71,10 @@ def line(name: str, samples: list[tuple[float, float]], ref: float | None = None
     return wall
 
 
-def bench_run(repeats: int, cold: int, before: str | None, warm_only: bool = False) -> None:
+def bench_run(repeats: int, cold: int, before: str | None, warm_only: bool = False, this: str | None = None) -> None:
     floor = [sys.executable, str(floor_script()), str(MODEL), "--child"]
     out = Path(tempfile.mkdtemp(prefix="bench-latency-"))
-    runs = {"": [*MLPFAC, "run", "eight-nominal", "--out", str(out / "run")]}
+    runs = {"": [*([this] if this else MLPFAC), "run", "eight-nominal", "--out", str(out / "run")]}
     if before:  # another install's command, timed in the same rounds
         runs["before: "] = [before, "run", "eight-nominal", "--out", str(out / "before")]
     for cmd in runs.values():
@@ -185,12 +188,13 @@ def main() -> int:
         metavar="N",
         help="also the first run after N fresh installs (needs the package index)",
     )
+    ap.add_argument("--this", metavar="MLPFAC", help="the run: an install's mlpfac command instead of this checkout's")
     ap.add_argument("--before", metavar="MLPFAC", help="another install's mlpfac command, timed beside this one")
     ap.add_argument("--only", choices=("run", "quick", "workers"))
     ap.add_argument("--warm-only", action="store_true", help="the run: warm only, no fresh NUMBA_CACHE_DIR")
     a = ap.parse_args()
     if a.only in (None, "run"):
-        bench_run(a.repeats, a.cold, a.before, a.warm_only)
+        bench_run(a.repeats, a.cold, a.before, a.warm_only, a.this)
     if a.only in (None, "quick"):
         bench_quick(a.repeats)
     if a.only in (None, "workers"):

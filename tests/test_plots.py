@@ -37,26 +37,6 @@ def test_figure1_leaves_out_the_panels_that_do_not_apply(tmp_path, short_runs):
     assert all((tmp_path / f).stat().st_size > 20_000 for f in ("a.png", "k.png", "c.png", "n.png"))
 
 
-def test_figure1_drawn_in_two_processes_is_the_figure_drawn_in_one(short_runs):
-    """The painter draws every other panel in a forked child and lays its own over them: the same
-    picture but for the rounding of rims drawn on the clear background (a level or two, a few
-    hundred pixels of a million)."""
-    import numpy as np
-
-    from mlpfac.plots.figure1 import Draft, render
-
-    adaptive, corradini = short_runs["adaptive"], short_runs["corradini"]
-    pictures = []
-    for halves in (False, True):
-        done = Draft(adaptive, True).complete(corradini)
-        pictures.append(np.array(render(done.fig, done.title, halves)))
-    one, two = pictures
-    assert one.shape == two.shape and (two[..., 3] == 255).all()
-    diff = np.abs(one.astype(int) - two.astype(int)).max(axis=2)
-    assert diff.max() <= 2 and (diff > 0).mean() < 1e-3, (diff.max(), (diff > 0).sum())
-    assert (one != 255).any(axis=2).mean() > 0.05  # a picture, not a blank page
-
-
 def test_a_draft_made_for_the_other_panel_h_is_made_again(tmp_path, short_runs):
     """The painter makes the figure before the baseline has run, expecting a panel (h); a baseline
     that turns out to be the run's own law (or ran no step) gets the figure without it."""
@@ -64,7 +44,7 @@ def test_a_draft_made_for_the_other_panel_h_is_made_again(tmp_path, short_runs):
 
     adaptive, corradini = short_runs["adaptive"], short_runs["corradini"]
     assert Draft(adaptive, True).finish(adaptive, tmp_path / "a.png") == list("abcdefg")
-    assert Draft(adaptive, False).finish(corradini, tmp_path / "b.png", halves=True) == list("abcdefgh")
+    assert Draft(adaptive, False).finish(corradini, tmp_path / "b.png") == list("abcdefgh")
 
 
 def outcome(m: dict) -> str:

@@ -7,22 +7,20 @@ baseline being the run itself) are left out; the others keep the paper's letters
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import numpy as np
 
-from mlpfac.interrupts import die_with_parent
 from mlpfac.loop.record import RunRecord
 
 EVENT_COLOR = "firebrick"
 RUN_COLOR = "tab:blue"
 
 
-def figure1(rec: RunRecord, baseline: RunRecord | None, path: Path, halves: bool = False) -> list[str]:
+def figure1(rec: RunRecord, baseline: RunRecord | None, path: Path) -> list[str]:
     """Write Figure 1 for ``rec`` (and ``baseline`` for panel h) to ``path`` (PNG); the letters of
-    the panels drawn. ``halves``: rendered by two processes (:func:`render`)."""
-    return Draft(rec, shows_h(rec, baseline)).finish(baseline, path, halves)
+    the panels drawn."""
+    return Draft(rec, shows_h(rec, baseline)).finish(baseline, path)
 
 
 def shows_h(rec: RunRecord, baseline: RunRecord | None) -> bool:
@@ -56,9 +54,7 @@ class Draft:
         FigureCanvasAgg(fig)
         grid = fig.add_gridspec(rows, 2, **_layout(height))
         title = f"{rec.scenario} / {rec.controller} / seed {rec.seed}: {rec.status}"
-        self.title = fig.suptitle(
-            title + (f" ({rec.reason})" if rec.reason else ""), fontsize=12, y=1 - 0.06 / height, va="top"
-        )
+        fig.suptitle(title + (f" ({rec.reason})" if rec.reason else ""), fontsize=12, y=1 - 0.06 / height, va="top")
         t = rec.t[:n]
         warm = min(rec.warmup_s, t[-1] if n else 0.0)
         self.axes = axes = {}
@@ -92,11 +88,12 @@ class Draft:
             axes["a"].legend(loc="upper right", fontsize=8, framealpha=0.9)
         _paths(*paths, rec, warm)
 
-    def finish(self, baseline: RunRecord | None, path: Path, halves: bool = False) -> list[str]:
-        """The figure completed with ``baseline`` (:meth:`complete`), rendered (:func:`render`) and
-        written to ``path``; the letters of the panels drawn."""
+    def finish(self, baseline: RunRecord | None, path: Path) -> list[str]:
+        """The figure completed with ``baseline`` (:meth:`complete`), rendered and written to
+        ``path``; the letters of the panels drawn."""
         done = self.complete(baseline)
-        write_png(render(done.fig, done.title, halves), path)
+        done.fig.canvas.draw()
+        write_png(np.asarray(done.fig.canvas.buffer_rgba()), path)
         return sorted([*done.axes, "e", "f"])
 
     def complete(self, baseline: RunRecord | None) -> Draft:
@@ -113,63 +110,6 @@ class Draft:
 
 
 DPI = 90
-
-
-def render(fig, title, halves: bool = False) -> np.ndarray:
-    """The figure's pixels, (height, width, 4) RGBA. ``halves``: drawn by two processes
-    (:func:`_render_halves`); where that cannot be done, by this one."""
-    pixels = _render_halves(fig, title) if halves else None
-    if pixels is None:
-        fig.canvas.draw()
-        pixels = np.asarray(fig.canvas.buffer_rgba())
-    return pixels
-
-
-def _render_halves(fig, title) -> np.ndarray | None:
-    """The figure drawn by two processes: a child forked here draws the background, the ``title``
-    and every other axes into shared memory while this one draws the other axes on a clear
-    background; these are laid over the child's ("over" compositing). The axes do not overlap, so
-    the picture is the one a single process draws but for the rounding of edges drawn on the clear
-    background. None when the child could not be forked or failed."""
-    import mmap
-
-    w, h = fig.canvas.get_width_height()
-    shared, parent = mmap.mmap(-1, w * h * 4), os.getpid()
-    theirs, mine = fig.axes[0::2], fig.axes[1::2]
-    try:
-        pid = os.fork()
-    except OSError:
-        return None
-    if pid == 0:  # the child; it never returns
-        code = 1
-        try:
-            die_with_parent(parent=parent)
-            for ax in mine:
-                ax.set_visible(False)
-            fig.canvas.draw()
-            shared[:] = memoryview(fig.canvas.buffer_rgba()).cast("B")
-            code = 0
-        finally:
-            os._exit(code)
-    hidden = [*theirs, title, fig.patch]
-    for artist in hidden:
-        artist.set_visible(False)
-    try:
-        fig.canvas.draw()
-        over = np.asarray(fig.canvas.buffer_rgba())
-    finally:
-        for artist in hidden:
-            artist.set_visible(True)
-        failed = os.waitpid(pid, 0)[1] != 0
-    if failed:
-        return None
-    under = np.frombuffer(shared, dtype=np.uint8).reshape(h, w, 4)
-    a = over[..., 3]
-    np.copyto(under, over, where=(a == 255)[..., None])
-    edge = (a > 0) & (a < 255)  # the rims of what was drawn outside the axes: blended, on an opaque picture
-    o, u, k = over[edge, :3].astype(np.uint16), under[edge, :3].astype(np.uint16), a[edge, None].astype(np.uint16)
-    under[edge, :3] = ((o * k + u * (255 - k) + 127) // 255).astype(np.uint8)
-    return under
 
 
 def write_png(pixels: np.ndarray, path: Path) -> None:

@@ -1,7 +1,7 @@
 """Figure 1 drawn beside the run: a child process, forked before the run's own imports, imports
 matplotlib and does its first-figure work while this process imports MuJoCo and simulates, makes
-the figure from the run's record while this process runs the baseline, and draws it, in two
-processes, when the baseline's record arrives. On a platform without ``fork`` (or if the child is
+the figure from the run's record while this process runs the baseline, and draws it when the
+baseline's record arrives. On a platform without ``fork`` (or if the child is
 gone) the figure is drawn here.
 
 The child takes no part in Ctrl-C (this process handles it and closes the pipe, which ends the
@@ -96,7 +96,7 @@ def painting(wanted: bool) -> Iterator[Painter | None]:
 
 def _child(receive_fd: int) -> tuple | None:
     """Import matplotlib and warm it up; make the figure from the run's record, complete it with the
-    baseline's and draw it in two processes; the answer ("ok", panels), ("oserror", errno, strerror,
+    baseline's and draw it; the answer ("ok", panels), ("oserror", errno, strerror,
     filename) or ("error", text), None when nothing (or not all) arrives."""
     got: queue.Queue = queue.Queue()
 
@@ -108,8 +108,7 @@ def _child(receive_fd: int) -> tuple | None:
             except (EOFError, pickle.UnpicklingError):  # nothing (more) to draw: no run, or it failed
                 got.put(None)
 
-    reader = threading.Thread(target=read, daemon=True)
-    reader.start()
+    threading.Thread(target=read, daemon=True).start()
     from mlpfac.plots.figure1 import Draft, warm_up
 
     warm_up()  # matplotlib's first-figure work, done before the records arrive
@@ -119,11 +118,10 @@ def _child(receive_fd: int) -> tuple | None:
     rec, path, h = begun
     draft = Draft(rec, h)
     baseline = got.get()
-    reader.join()  # no other thread when the figure is drawn by two processes (forked)
     if baseline is None:
         return None
     try:
-        return ("ok", draft.finish(baseline, path, halves=True))
+        return ("ok", draft.finish(baseline, path))
     except OSError as err:
         return ("oserror", err.errno, err.strerror, err.filename)
     except Exception as err:  # drawn again in the parent, which reports it as it would have
