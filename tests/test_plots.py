@@ -37,6 +37,29 @@ def test_figure1_leaves_out_the_panels_that_do_not_apply(tmp_path, short_runs):
     assert all((tmp_path / f).stat().st_size > 20_000 for f in ("a.png", "k.png", "c.png", "n.png"))
 
 
+def test_figure1_drawn_before_its_panel_h_is_the_figure_drawn_whole(tmp_path, short_runs):
+    """The painter draws every panel but (h) while the baseline runs, then (h) over its blank
+    place: the same pixels as the figure drawn at once."""
+    import numpy as np
+    from PIL import Image
+
+    from mlpfac.plots.figure1 import Draft
+
+    adaptive, corradini = short_runs["adaptive"], short_runs["corradini"]
+    draft = Draft(adaptive, True)
+    draft.draw()
+    assert draft.finish(corradini, tmp_path / "two.png") == list("abcdefgh")
+    whole = Draft(adaptive, True).complete(corradini)
+    whole.axes["h"].set_visible(True)
+    whole.fig.canvas.draw()
+    pixels = np.asarray(whole.fig.canvas.buffer_rgba())
+    two = np.asarray(Image.open(tmp_path / "two.png"))
+    assert two.shape == pixels.shape and np.array_equal(two, pixels)
+    h = whole.axes["h"].get_window_extent()  # and panel (h) is on it, not blank
+    rows = slice(int(pixels.shape[0] - h.y1), int(pixels.shape[0] - h.y0))
+    assert (pixels[rows, int(h.x0) : int(h.x1), :3] < 200).any(axis=2).mean() > 0.01
+
+
 def test_a_draft_made_for_the_other_panel_h_is_made_again(tmp_path, short_runs):
     """The painter makes the figure before the baseline has run, expecting a panel (h); a baseline
     that turns out to be the run's own law (or ran no step) gets the figure without it."""

@@ -29,9 +29,10 @@ def shows_h(rec: RunRecord, baseline: RunRecord | None) -> bool:
 
 
 class Draft:
-    """Figure 1 with every panel but (h)'s line, made before the baseline has run (the painter's
-    process makes it while the run's process runs the baseline); :meth:`finish` draws and writes it.
-    ``h``: whether it has a panel (h)."""
+    """Figure 1 but panel (h), made and drawn (:meth:`draw`) before the baseline has run (the
+    painter's process does it while the run's process runs the baseline); :meth:`finish` draws
+    (h) over its place, left blank, and writes the figure: the same pixels as a figure drawn
+    whole, since no panel overlaps another. ``h``: whether it has a panel (h)."""
 
     def __init__(self, rec: RunRecord, h: bool) -> None:
         from mlpfac.plots.mplconfig import quiet_config
@@ -87,12 +88,25 @@ class Draft:
         if rec.events:
             axes["a"].legend(loc="upper right", fontsize=8, framealpha=0.9)
         _paths(*paths, rec, warm)
+        if h:
+            axes["h"].set_visible(False)  # drawn by finish, over its blank place
+        self.drawn = False
+
+    def draw(self) -> None:
+        """Draw every panel but (h) (once)."""
+        if not self.drawn:
+            self.fig.canvas.draw()
+            self.drawn = True
 
     def finish(self, baseline: RunRecord | None, path: Path) -> list[str]:
-        """The figure completed with ``baseline`` (:meth:`complete`), rendered and written to
+        """The figure completed with ``baseline`` (:meth:`complete`), drawn and written to
         ``path``; the letters of the panels drawn."""
         done = self.complete(baseline)
-        done.fig.canvas.draw()
+        done.draw()
+        if done.h:
+            ax = done.axes["h"]
+            ax.set_visible(True)
+            ax.draw(done.fig.canvas.get_renderer())
         write_png(np.asarray(done.fig.canvas.buffer_rgba()), path)
         return sorted([*done.axes, "e", "f"])
 

@@ -1,7 +1,7 @@
 """Figure 1 drawn beside the run: a child process, forked before the run's own imports, imports
 matplotlib and does its first-figure work while this process imports MuJoCo and simulates, makes
-the figure from the run's record while this process runs the baseline, and draws it when the
-baseline's record arrives. On a platform without ``fork`` (or if the child is
+and draws the figure from the run's record while this process runs the baseline, and adds the
+baseline's panel when its record arrives. On a platform without ``fork`` (or if the child is
 gone) the figure is drawn here.
 
 The child takes no part in Ctrl-C (this process handles it and closes the pipe, which ends the
@@ -95,8 +95,8 @@ def painting(wanted: bool) -> Iterator[Painter | None]:
 
 
 def _child(receive_fd: int) -> tuple | None:
-    """Import matplotlib and warm it up; make the figure from the run's record, complete it with the
-    baseline's and draw it; the answer ("ok", panels), ("oserror", errno, strerror,
+    """Import matplotlib and warm it up; make and draw the figure from the run's record, complete it
+    with the baseline's panel; the answer ("ok", panels), ("oserror", errno, strerror,
     filename) or ("error", text), None when nothing (or not all) arrives."""
     got: queue.Queue = queue.Queue()
 
@@ -117,6 +117,7 @@ def _child(receive_fd: int) -> tuple | None:
         return None
     rec, path, h = begun
     draft = Draft(rec, h)
+    draft.draw()  # every panel but (h), while the baseline runs
     baseline = got.get()
     if baseline is None:
         return None
