@@ -81,7 +81,8 @@ def main() -> None:
         out = f"/tmp/mlpfac-marks-{os.getpid()}-{k}"
         env = os.environ | {"MARKS_T0": repr(time.time())}
         print(f"round {k + 1}: mlpfac run {' '.join(args)}", file=sys.stderr)
-        subprocess.run([sys.executable, "-c", MARKED, *args, "--out", out], env=env, stdout=subprocess.DEVNULL)
+        cmd = [sys.executable, "-P", "-c", MARKED, *args, "--out", out]  # -P: the mlpfac installed, not a folder here
+        subprocess.run(cmd, env=env, stdout=subprocess.DEVNULL)
         subprocess.run(["rm", "-rf", out])
 
 
