@@ -2,7 +2,7 @@
 
 For a plant with a compiled control step (the MuJoCo robot, :mod:`mlpfac.plants.compiled`) and a
 controller whose step is a kernel (Kanayama, Corradini: :func:`mlpfac.control.law.law_step`; the
-adaptive scheme's compiled form: :func:`mlpfac.control.adaptive.kernels.adaptive_row`), the
+adaptive scheme's compiled form: :func:`adaptive_row`), the
 runner steps each seed from one event (or sink flush) to the next with :func:`segment`. Every
 step is the runner's step, made of the same kernels the step-by-step loop calls with B = 1:
 error (2) of the measured pose, the controller, error of the true pose, the record's rows, the
@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from mlpfac.control.adaptive.kernels import AdaptiveState, adaptive_row, state_type
+from mlpfac.control.adaptive.kernels import AdaptiveState, adaptive_step, state_type
 from mlpfac.control.law import law_step
 from mlpfac.jit import kernel
 from mlpfac.loop.kernels import bad_seeds
@@ -30,6 +30,31 @@ def no_state() -> AdaptiveState:
     f = np.zeros((0, 0))
     return AdaptiveState(f, np.zeros((0, 0, 0)), f, np.zeros((0, 0, 0)), f, f, f, np.zeros(0), np.zeros(0, np.int64),
                          np.zeros(0), f, f)  # fmt: skip
+
+
+@kernel()
+def adaptive_row(s, first, e, v_r, omega_r, tele):
+    """:func:`adaptive_step` for the one seed of ``s`` (an :class:`AdaptiveState`), its telemetry in
+    the row ``tele``, packed as the runner records it: z (alpha, all of them; or max |z| when the
+    row has room for one), trace P, mean diag P, the innovation (3), h_hat (3)."""
+    adaptive_step(
+        e, v_r, omega_r, first, s.z, s.P, s.S, s.H, s.u, s.innov, s.h_hat, s.trace, s.ints, s.params, s.R, s.Q
+    )
+    a = s.z.shape[1]
+    o = tele.shape[0] - 8
+    if o == a:
+        for i in range(a):
+            tele[i] = s.z[0, i]
+    else:
+        m = abs(s.z[0, 0])
+        for i in range(1, a):
+            x = abs(s.z[0, i])
+            if x > m or x != x:  # a NaN wins, as in np.max
+                m = x
+        tele[0] = m
+    tele[o], tele[o + 1] = s.trace[0], s.trace[0] / a
+    for j in range(3):
+        tele[o + 2 + j], tele[o + 5 + j] = s.innov[0, j], s.h_hat[0, j]
 
 
 @kernel(

@@ -156,7 +156,8 @@ class Adaptive(Stepped):
 
         if not self.compiled or self.input is not None or self.single:
             return None
-        assert list(self._tele) == ["z", "trace_P", "mean_diag_P", "innovation", "h_hat"]  # adaptive_row's order
+        # the order in which mlpfac.loop.compiled.adaptive_row packs them in a row
+        assert list(self._tele) == ["z", "trace_P", "mean_diag_P", "innovation", "h_hat"]
         return AdaptiveState(*(x[b : b + 1] for x in self._args), *self._consts)
 
     def step(self, e: np.ndarray, r: np.ndarray) -> np.ndarray:

@@ -359,31 +359,6 @@ def state_type():
     return types.NamedTuple((f2, f3, f2, f3, f2, f2, f2, f1, types.int64[::1], f1, f2, f2), AdaptiveState)
 
 
-@kernel()
-def adaptive_row(s, first, e, v_r, omega_r, tele):
-    """:func:`adaptive_step` for the one seed of ``s`` (an :class:`AdaptiveState`), its telemetry in
-    the row ``tele``, packed as the runner records it: z (alpha, all of them; or max |z| when the
-    row has room for one), trace P, mean diag P, the innovation (3), h_hat (3)."""
-    adaptive_step(
-        e, v_r, omega_r, first, s.z, s.P, s.S, s.H, s.u, s.innov, s.h_hat, s.trace, s.ints, s.params, s.R, s.Q
-    )
-    a = s.z.shape[1]
-    o = tele.shape[0] - 8
-    if o == a:
-        for i in range(a):
-            tele[i] = s.z[0, i]
-    else:
-        m = abs(s.z[0, 0])
-        for i in range(1, a):
-            x = abs(s.z[0, i])
-            if x > m or x != x:  # a NaN wins, as in np.max
-                m = x
-        tele[0] = m
-    tele[o], tele[o + 1] = s.trace[0], s.trace[0] / a
-    for j in range(3):
-        tele[o + 2 + j], tele[o + 5 + j] = s.innov[0, j], s.h_hat[0, j]
-
-
 @kernel("void(f8[:, ::1], f8[:, ::1], f8[:, ::1], f8[:, ::1], f8[:, ::1], i8, i8, b1, f8[:, ::1], f8[:, :, ::1])")
 def networks_h_jacobian(z, xf, xG, e, u, Lf, LG, residual, h, H):
     """h (B, 3) and nabla_h (B, 3, alpha) of (26), (19)-(24): for tests against :mod:`mlpfac.control.adaptive.networks`."""
