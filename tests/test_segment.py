@@ -102,6 +102,21 @@ def test_adaptive_batch_compiled_records_max_weight_as_the_step_by_step_loop():
         assert a.ctrl["z"].shape[1] == 1
 
 
+def test_an_adaptive_run_that_blows_up_stops_compiled_where_and_why_the_step_by_step_loop_stops():
+    """An EKF that overflows (P_0 = 1e300) stops the compiled run at the step, and for the reason,
+    the step-by-step loop gives (the weights are handed to the reason's test, as there)."""
+    import copy
+
+    from mlpfac.scenario.parse import parse
+
+    t = copy.deepcopy(_short("eight-nominal", "adaptive", 1.0).table)
+    t["controller"]["adaptive"] = {**t["controller"].get("adaptive", {}), "P0": 1e300}  # P H' overflows
+    scn = parse(t, "nan")
+    a, b = run(scn), run(scn, on_step=lambda k: None)
+    assert a.status == "diverged" and a.reason.startswith("non-finite"), a.reason
+    _same(a, b)
+
+
 def test_batch_with_a_stopped_seed_equals_each_seed_alone():
     scn = _short("eight-payload", "corradini")
     scns = [dataclasses.replace(scn.with_overrides(seed=s), divergence_m=0.0022) for s in range(4)]

@@ -185,7 +185,8 @@ class ClosedLoop:
                            self.states[b], p.kernel_args())  # fmt: skip
         self.recs[b].n = min(end + 1, k1)
         if why == BAD:
-            self.stop(b, _diverged(self.pose[b, end], self.u[b, end], self.e_true[b, end], None, limit), end, end)
+            z = self.states[b].z[0] if self.law[0] == ADAPTIVE else None  # the weights after step ``end``
+            self.stop(b, _diverged(self.pose[b, end], self.u[b, end], self.e_true[b, end], z, limit), end, end)
         elif why:
             self.stop(b, p.why(why), end, end + 1)
 
