@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import os
 import pickle
+import queue
 import signal
 import sys
 import threading
@@ -128,6 +129,25 @@ class ForkedChild:
         with suppress(ProcessLookupError):
             os.kill(pid, signal.SIGKILL)
         os.waitpid(pid, 0)
+
+
+def read_in_background(receive_fd: int, count: int) -> queue.Queue:
+    """The messages a :class:`ForkedChild`'s work is sent, read by a thread while the work goes on
+    (imports; a message may be larger than a pipe holds): a queue that gets up to ``count`` of
+    them, then None if the pipe closed (or a message could not be read) before the last: the work
+    waiting for one is never left waiting."""
+    got: queue.Queue = queue.Queue()
+
+    def read() -> None:
+        try:
+            with os.fdopen(receive_fd, "rb") as f:
+                for _ in range(count):
+                    got.put(pickle.load(f))
+        except Exception:  # noqa: BLE001 - nothing (more) to read: no run, it failed, the pipe broke
+            got.put(None)
+
+    threading.Thread(target=read, name="mlpfac-child-read", daemon=True).start()
+    return got
 
 
 def _serve(work: Callable[[int], tuple | None], receive_fd: int, send_fd: int) -> None:

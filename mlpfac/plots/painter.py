@@ -10,15 +10,13 @@ child); an error writing the figure comes back as the same OSError, naming the s
 
 from __future__ import annotations
 
-import os
 import pickle
-import queue
 import threading
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
-from mlpfac.interrupts import ForkedChild
+from mlpfac.interrupts import ForkedChild, read_in_background
 
 
 class Painter(ForkedChild):
@@ -98,17 +96,7 @@ def _child(receive_fd: int) -> tuple | None:
     """Import matplotlib and warm it up; make and draw the figure from the run's record, complete it
     with the baseline's panel; the answer ("ok", panels), ("oserror", errno, strerror,
     filename) or ("error", text), None when nothing (or not all) arrives."""
-    got: queue.Queue = queue.Queue()
-
-    def read() -> None:  # meanwhile: the records may be larger than a pipe holds
-        with os.fdopen(receive_fd, "rb") as f:
-            try:
-                for _ in range(2):
-                    got.put(pickle.load(f))
-            except (EOFError, pickle.UnpicklingError):  # nothing (more) to draw: no run, or it failed
-                got.put(None)
-
-    threading.Thread(target=read, daemon=True).start()
+    got = read_in_background(receive_fd, 2)  # the run's record, then the baseline's
     from mlpfac.plots.figure1 import Draft, warm_up
 
     warm_up()  # matplotlib's first-figure work, done before the records arrive

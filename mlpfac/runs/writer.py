@@ -13,13 +13,11 @@ the recording is written here. On a platform without ``fork`` it is written here
 
 from __future__ import annotations
 
-import os
 import pickle
-import threading
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 
-from mlpfac.interrupts import ForkedChild
+from mlpfac.interrupts import ForkedChild, read_in_background
 
 
 class Writer(ForkedChild):
@@ -65,25 +63,15 @@ def writing(wanted: bool, inherited: Sequence[int] = ()) -> Iterator[Writer | No
 def _child(receive_fd: int) -> tuple | None:
     """Import rerun while the job is read (a thread: the job may be larger than a pipe holds), write
     the recording; the answer (None: nothing to write)."""
-    got: list = []
-
-    def read() -> None:
-        with os.fdopen(receive_fd, "rb") as f:
-            try:
-                got.append(pickle.load(f))
-            except EOFError:  # nothing to write (no run, or it failed)
-                got.append(None)
-
-    reader = threading.Thread(target=read, daemon=True)
-    reader.start()
+    got = read_in_background(receive_fd, 1)
     from mlpfac.exceptions import ConfigError
     from mlpfac.log.sinks import check_recording
     from mlpfac.runs.folder import open_sink
 
-    reader.join()
-    if not got or got[0] is None:
+    job = got.get()
+    if job is None:  # nothing to write (no run, or it failed)
         return None
-    calls, recording, names, save = got[0]
+    calls, recording, names, save = job
     try:
         sink = open_sink(recording, names, save)
         for name, args in calls:
