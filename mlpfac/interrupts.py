@@ -118,6 +118,16 @@ class ForkedChild:
         """This process's ends of the pipes to the child (for a process forked after it to close)."""
         return [] if self.pid is None else [self._send.fileno(), self._receive.fileno()]
 
+    def answer(self):
+        """The child's answer (what its work returned), None when there is none (it failed, or is
+        gone); the child is reaped."""
+        try:
+            answer = pickle.load(self._receive)
+        except (OSError, EOFError, pickle.UnpicklingError):
+            answer = None
+        self.close()
+        return answer
+
     def close(self) -> None:
         """End the child (if it still runs) and reap it."""
         if self.pid is None:

@@ -70,6 +70,82 @@ def test_a_draft_made_for_the_other_panel_h_is_made_again(tmp_path, short_runs):
     assert Draft(adaptive, False).finish(corradini, tmp_path / "b.png") == list("abcdefgh")
 
 
+def _pixels(path):
+    import numpy as np
+    from PIL import Image
+
+    return np.asarray(Image.open(path))
+
+
+@pytest.mark.parametrize("case", ["h on the right", "h on the left", "no h", "no weights"])
+def test_figure1_drawn_in_two_columns_is_the_figure_drawn_whole(tmp_path, short_runs, case):
+    """The painter draws the column of panel (h), a process forked from it the other with the
+    title; put together, the pixels of the figure drawn whole, wherever (h) falls."""
+    import dataclasses
+
+    from mlpfac.plots.figure1 import Draft, h_column
+
+    rec, baseline = short_runs["adaptive"], short_runs["corradini"]
+    if case == "h on the left":  # a, b, c, d, h: (h) fifth, in the left column
+        rec = dataclasses.replace(rec, ctrl={k: v for k, v in rec.ctrl.items() if k != "mean_diag_P"})
+    elif case == "no h":
+        baseline = rec
+    elif case == "no weights":
+        rec = short_runs["kanayama"]
+    h = baseline.controller != rec.controller
+    column = h_column(rec, h)
+    assert column == (0 if case == "h on the left" else 1)
+    letters = Draft(rec, h).finish(baseline, tmp_path / "whole.png")
+    mine, rest = Draft(rec, h, column, title=False), Draft(rec, h, 1 - column)
+    mine.draw()
+    rest.draw()
+    assert mine.finish(baseline, tmp_path / "two.png", rest.pixels) == letters
+    assert "h" in letters if h else "h" not in letters
+    whole, two = _pixels(tmp_path / "whole.png"), _pixels(tmp_path / "two.png")
+    assert two.shape == whole.shape and (two == whole).all()
+    assert Draft(rec, h, column, title=False).finish(baseline, tmp_path / "alone.png") == letters  # no pixels given
+    assert (_pixels(tmp_path / "alone.png") == whole).all()
+
+
+def test_columns_whose_ink_meets_are_not_put_together():
+    import numpy as np
+
+    from mlpfac.plots.figure1 import together
+
+    white = np.full((40, 60, 4), 255, np.uint8)
+    left, right = white.copy(), white.copy()
+    left[5:10, 5:30] = 0  # title and left column
+    right[20:30, 35:55] = 0
+    out = together(left, True, right)
+    assert (out[5:10, 5:30] == 0).all() and (out[20:30, 35:55] == 0).all() and (out == 0).sum() == 4 * (125 + 200)
+    left[25, 40] = 7  # the left column's ink on the right's side, below the right's top
+    assert together(left, True, right) is None
+    assert together(white, True, white) is None  # nothing drawn in the other column
+
+
+def test_the_painter_draws_figure1_as_figure1_does(tmp_path, short_runs):
+    """Through the painter's processes (the figure's child and the process it forks for a column)."""
+    from mlpfac.plots.painter import painting
+
+    adaptive, corradini = short_runs["adaptive"], short_runs["corradini"]
+    letters = figure1(adaptive, corradini, tmp_path / "here.png")
+    with painting(True) as painter:
+        assert painter.pid is not None
+        painter.begin(adaptive, tmp_path / "there.png", True)
+        assert painter.finish(corradini) == letters
+    assert (_pixels(tmp_path / "there.png") == _pixels(tmp_path / "here.png")).all()
+    from functools import partial
+
+    from mlpfac.interrupts import ForkedChild
+    from mlpfac.plots.figure1 import Draft
+    from mlpfac.plots.painter import _column
+
+    pixels = ForkedChild(partial(_column, adaptive, True, 0)).answer()  # the other column, as the painter gets it
+    here = Draft(adaptive, True, 0)
+    here.draw()
+    assert pixels is not None and (pixels == here.pixels()).all()
+
+
 def outcome(m: dict) -> str:
     """The outcome RunMetrics reads from a metrics.json with the keys ``m`` adds to a minimal one."""
     least = {"scenario": "paper", "controller": "corradini", "seed": 0, "T": 0.01, "steps": 10, "phases": {}}

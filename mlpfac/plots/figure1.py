@@ -7,6 +7,7 @@ baseline being the run itself) are left out; the others keep the paper's letters
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -34,7 +35,7 @@ class Draft:
     (h) over its place, left blank, and writes the figure: the same pixels as a figure drawn
     whole, since no panel overlaps another. ``h``: whether it has a panel (h)."""
 
-    def __init__(self, rec: RunRecord, h: bool) -> None:
+    def __init__(self, rec: RunRecord, h: bool, column: int | None = None, title: bool = True) -> None:
         from mlpfac.plots.mplconfig import quiet_config
 
         quiet_config()
@@ -43,37 +44,40 @@ class Draft:
         from matplotlib.figure import Figure
         from matplotlib.ticker import LogFormatter
 
-        self.rec, self.h = rec, h
+        self.rec, self.h, self.column = rec, h, column
         n = rec.n
-        z, P = rec.ctrl.get("z"), rec.ctrl.get("mean_diag_P")
-        adaptive = z is not None and z.ndim == 2 and z.shape[1] > 1
-        time_panels = ["a", "b", "c"] + (["d"] if adaptive else []) + (["g"] if P is not None else [])
-        time_panels += ["h"] if h else []
+        P = rec.ctrl.get("mean_diag_P")
+        time_panels = _time_panels(rec, h)
         rows = -(-len(time_panels) // 2) + 1
         height = 2.9 * rows + 0.6
         self.fig = fig = Figure(figsize=(12, height), dpi=DPI)  # no pyplot: nothing global, nothing to close
         FigureCanvasAgg(fig)
         grid = fig.add_gridspec(rows, 2, **_layout(height))
-        title = f"{rec.scenario} / {rec.controller} / seed {rec.seed}: {rec.status}"
-        fig.suptitle(title + (f" ({rec.reason})" if rec.reason else ""), fontsize=12, y=1 - 0.06 / height, va="top")
+        if title:
+            title = f"{rec.scenario} / {rec.controller} / seed {rec.seed}: {rec.status}"
+            fig.suptitle(title + (f" ({rec.reason})" if rec.reason else ""), fontsize=12, y=1 - 0.06 / height, va="top")
         t = rec.t[:n]
         warm = min(rec.warmup_s, t[-1] if n else 0.0)
         self.axes = axes = {}
+        self.paths = paths = {}
+        drawn = (0, 1) if column is None else (column,)
         with rc_context({"axes.titley": 1.0}):  # titles at a fixed height: no search for the room above the axes
             for i, tag in enumerate(time_panels):
-                axes[tag] = fig.add_subplot(grid[i // 2 + (i >= 4), i % 2])  # the paths' row follows (c), (d)
+                if i % 2 in drawn:
+                    axes[tag] = fig.add_subplot(grid[i // 2 + (i >= 4), i % 2])  # the paths' row follows (c), (d)
             prow = min(2, rows - 1)
-            paths = fig.add_subplot(grid[prow, 0]), fig.add_subplot(grid[prow, 1])
+            for j, tag in enumerate("ef"):
+                if j in drawn:
+                    paths[tag] = fig.add_subplot(grid[prow, j])
         for i, (name, scale, unit, what) in enumerate(
             [("e1", 1e3, "mm", "along the path"), ("e2", 1e3, "mm", "across the path"), ("e3", 1e3, "mrad", "heading")]
         ):
-            ax = axes["abc"[i]]
-            _signal(ax, t, rec.e_true[:n, i] * scale, warm)
-            ax.set(title=f"({'abc'[i]}) {name}: {what}", ylabel=f"{name} [{unit}]")
-        if adaptive:
+            if (ax := axes.get("abc"[i])) is not None:
+                _signal(ax, t, rec.e_true[:n, i] * scale, warm)
+                ax.set(title=f"({'abc'[i]}) {name}: {what}", ylabel=f"{name} [{unit}]")
+        if "d" in axes:
             _weights(axes["d"], rec, t)
-        if P is not None:
-            ax = axes["g"]
+        if (ax := axes.get("g")) is not None:
             ax.semilogy(t, P[:n], color=RUN_COLOR, lw=1.0)
             for minor in (False, True):  # plain "9e-02" labels: the same ticks, no mathtext to lay out
                 (ax.yaxis.set_minor_formatter if minor else ax.yaxis.set_major_formatter)(LogFormatter())
@@ -85,10 +89,10 @@ class Draft:
             for j, ev in enumerate(rec.events):
                 label = f"event: {str(ev.get('text') or ev.get('kind')).split(' (')[0]}" if j == 0 else None
                 ax.axvline(float(ev["time"]), color=EVENT_COLOR, lw=0.9, ls="--", label=label if tag == "a" else None)
-        if rec.events:
+        if rec.events and "a" in axes:
             axes["a"].legend(loc="upper right", fontsize=8, framealpha=0.9)
-        _paths(*paths, rec, warm)
-        if h:
+        _paths(paths, rec, warm)
+        if "h" in axes:
             axes["h"].set_visible(False)  # drawn by finish, over its blank place
         self.drawn = False
 
@@ -98,29 +102,85 @@ class Draft:
             self.fig.canvas.draw()
             self.drawn = True
 
-    def finish(self, baseline: RunRecord | None, path: Path) -> list[str]:
+    def pixels(self) -> np.ndarray:
+        """The drawn figure, (height, width, 4) RGBA."""
+        return np.asarray(self.fig.canvas.buffer_rgba())
+
+    def finish(
+        self, baseline: RunRecord | None, path: Path, other: Callable[[], np.ndarray | None] | None = None
+    ) -> list[str]:
         """The figure completed with ``baseline`` (:meth:`complete`), drawn and written to
-        ``path``; the letters of the panels drawn."""
+        ``path``; the letters of the panels drawn. A draft of one column gets the other's pixels
+        from ``other`` (a :meth:`pixels` of the draft of the other column, with the title; None, or
+        no ``other``: drawn here) and puts the two together (:func:`together`)."""
         done = self.complete(baseline)
         done.draw()
-        if done.h:
+        if "h" in done.axes:
             ax = done.axes["h"]
             ax.set_visible(True)
             ax.draw(done.fig.canvas.get_renderer())
-        write_png(np.asarray(done.fig.canvas.buffer_rgba()), path)
-        return sorted([*done.axes, "e", "f"])
+        pixels = done.pixels()
+        letters = [*done.axes, *done.paths]
+        if done.column is not None:
+            theirs = other() if other is not None else None
+            if theirs is None or theirs.shape != pixels.shape:
+                rest = Draft(done.rec, done.h, 1 - done.column)
+                rest.draw()
+                theirs = rest.pixels()
+            pixels = together(theirs, done.column == 1, pixels)
+            if pixels is None:  # the columns' ink not apart: the figure drawn whole
+                return Draft(done.rec, done.h).finish(baseline, path)
+            letters = [*_time_panels(done.rec, done.h), "e", "f"]
+        write_png(pixels, path)
+        return sorted(letters)
 
     def complete(self, baseline: RunRecord | None) -> Draft:
         """This draft with panel (h) drawn from ``baseline``; a draft made for the other answer of
-        :func:`shows_h` is made again (and returned)."""
+        :func:`shows_h` is made again, whole (and returned)."""
         if self.h != shows_h(self.rec, baseline):
             return Draft(self.rec, not self.h).complete(baseline)
-        if self.h:
+        if "h" in self.axes:
             nb = baseline.n
             ax = self.axes["h"]
             _signal(ax, baseline.t[:nb], baseline.e_true[:nb, 1] * 1e3, min(baseline.warmup_s, baseline.t[nb - 1]))
             ax.set(title=f"(h) e2 under the {baseline.controller} law, same seed ({baseline.status})", ylabel="e2 [mm]")
         return self
+
+
+def h_column(rec: RunRecord, h: bool) -> int:
+    """The column of panel (h) (1 when there is none): the painter draws it, and a process forked
+    from the painter the other column with the title."""
+    panels = _time_panels(rec, h)
+    return (len(panels) - 1) % 2 if h else 1
+
+
+def together(titled: np.ndarray, left: bool, other: np.ndarray) -> np.ndarray | None:
+    """Figure 1 from the pixels of its two columns drawn apart, each on the figure's white: the
+    column with the title (``titled``, the left one if ``left``) above the other's topmost ink and
+    on its side of a line between the columns, the ``other`` on the other side. The same pixels as
+    the figure drawn whole when each column's ink stays on its side (every white an artist draws is
+    framed by ink: axes, legends); None when it does not."""
+    ink_t, ink_o = (np.ascontiguousarray(x).view(np.uint32)[..., 0] != 0xFFFFFFFF for x in (titled, other))
+    rows, cols = np.flatnonzero(ink_o.any(axis=1)), np.flatnonzero(ink_o.any(axis=0))
+    if not len(rows):
+        return None
+    top = rows[0]
+    cols_t = np.flatnonzero(ink_t[top:].any(axis=0))
+    split = cols[0] if left else cols[-1] + 1
+    if len(cols_t) and (cols_t[-1] >= split if left else cols_t[0] < split):
+        return None
+    out = titled.copy()
+    side = np.s_[top:, split:] if left else np.s_[top:, :split]
+    out[side] = other[side]
+    return out
+
+
+def _time_panels(rec: RunRecord, h: bool) -> list[str]:
+    """The panels against time, in the order they are laid out two by two."""
+    z = rec.ctrl.get("z")
+    adaptive = z is not None and z.ndim == 2 and z.shape[1] > 1
+    panels = ["a", "b", "c"] + (["d"] if adaptive else []) + (["g"] if rec.ctrl.get("mean_diag_P") is not None else [])
+    return panels + (["h"] if h else [])
 
 
 DPI = 90
@@ -208,8 +268,9 @@ def _weights(ax, rec: RunRecord, t: np.ndarray) -> None:
     ax.set(title=f"(d) the 6 of {z.shape[1]} weights that moved most", ylabel="weight z_i [-]")
 
 
-def _paths(full, close, rec: RunRecord, warm: float) -> None:
-    """(e) the whole reference and driven paths; (f) a close-up around the largest error after the warm-up."""
+def _paths(axes: dict, rec: RunRecord, warm: float) -> None:
+    """(e) the whole reference and driven paths; (f) a close-up around the largest error after the
+    warm-up (each if in ``axes``)."""
     n = rec.n
     ref, pose = rec.ref[:n, :2], rec.pose[:n, :2]
     ok = np.all(np.isfinite(pose), axis=1)
@@ -217,17 +278,22 @@ def _paths(full, close, rec: RunRecord, warm: float) -> None:
     w = min(int(round(warm / rec.T)), max(n - 1, 0))
     k = w + int(np.argmax(err[w:])) if n else 0
     half = float(np.clip(3.0 * err[k], 0.03, 0.5)) if n else 0.5
-    for ax in (full, close):
+    for ax in axes.values():
         ax.plot(rec.ref[: len(rec.t), 0], rec.ref[: len(rec.t), 1], color="black", lw=1.0, label="reference")
         ax.plot(pose[ok, 0], pose[ok, 1], color=RUN_COLOR, lw=1.0, label="robot")
         ax.set(xlabel="x [m]", ylabel="y [m]", aspect="equal")
         ax.grid(alpha=0.3)
-    full.set_title("(e) reference and driven paths")
-    full.legend(loc="upper right", fontsize=8)
+    full, close = axes.get("e"), axes.get("f")
+    if full is not None:
+        full.set_title("(e) reference and driven paths")
+        full.legend(loc="upper right", fontsize=8)
     if not n:
         return
     c = ref[k]
-    full.add_patch(_box(c, half))
+    if full is not None:
+        full.add_patch(_box(c, half))
+    if close is None:
+        return
     stride = max(1, int(round(0.1 / rec.T)))
     near = np.arange(max(k - 60 * stride, 0), min(k + 60 * stride, n), stride)
     near = near[ok[near] & (np.abs(ref[near] - c).max(axis=1) < half)]

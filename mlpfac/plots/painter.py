@@ -10,13 +10,15 @@ child); an error writing the figure comes back as the same OSError, naming the s
 
 from __future__ import annotations
 
+import gc
 import pickle
 import threading
 from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
+from functools import partial
 from pathlib import Path
 
-from mlpfac.interrupts import ForkedChild, read_in_background
+from mlpfac.interrupts import ForkedChild, die_with_parent, read_in_background
 
 
 class Painter(ForkedChild):
@@ -56,14 +58,11 @@ class Painter(ForkedChild):
         if self._sender is not None:
             self._sender.join()
         if self.pid is not None and self._sent_ok:
-            try:
+            with suppress(OSError):  # the child is gone: no answer, the figure is drawn here
                 pickle.dump(baseline, self._send, protocol=pickle.HIGHEST_PROTOCOL)
                 self._send.close()
-                self._do_meanwhile()
-                answer = pickle.load(self._receive)
-            except (OSError, EOFError, pickle.UnpicklingError):
-                answer = None  # the child is gone: draw here
-            self.close()
+            self._do_meanwhile()
+            answer = self.answer()
             if answer is not None:
                 kind, *details = answer
                 if kind == "oserror":
@@ -93,25 +92,41 @@ def painting(wanted: bool) -> Iterator[Painter | None]:
 
 
 def _child(receive_fd: int) -> tuple | None:
-    """Import matplotlib and warm it up; make and draw the figure from the run's record, complete it
-    with the baseline's panel; the answer ("ok", panels), ("oserror", errno, strerror,
-    filename) or ("error", text), None when nothing (or not all) arrives."""
+    """Import matplotlib and warm it up; make and draw the figure from the run's record (one column
+    here, the other in a process forked from this one), complete it with the baseline's panel; the
+    answer ("ok", panels), ("oserror", errno, strerror, filename) or ("error", text), None when
+    nothing (or not all) arrives."""
     got = read_in_background(receive_fd, 2)  # the run's record, then the baseline's
-    from mlpfac.plots.figure1 import Draft, warm_up
+    from mlpfac.plots.figure1 import Draft, h_column, warm_up
 
+    gc.disable()  # a process that ends with the figure: its garbage goes with it (the collector took a fifth of the figure's time)
     warm_up()  # matplotlib's first-figure work, done before the records arrive
     begun = got.get()
     if begun is None:
         return None
     rec, path, h = begun
-    draft = Draft(rec, h)
-    draft.draw()  # every panel but (h), while the baseline runs
-    baseline = got.get()
-    if baseline is None:
-        return None
+    column = h_column(rec, h)
+    rest = ForkedChild(partial(_column, rec, h, 1 - column), (receive_fd,))  # warm, as this one
     try:
-        return ("ok", draft.finish(baseline, path))
+        draft = Draft(rec, h, column, title=False)
+        draft.draw()  # this column but (h), while the baseline runs
+        baseline = got.get()
+        if baseline is None:
+            return None
+        return ("ok", draft.finish(baseline, path, rest.answer))
     except OSError as err:
         return ("oserror", err.errno, err.strerror, err.filename)
     except Exception as err:  # drawn again in the parent, which reports it as it would have
         return ("error", repr(err))
+    finally:
+        rest.close()
+
+
+def _column(rec, h: bool, column: int, _receive_fd: int):
+    """The pixels of Figure 1's ``column`` with the title (a process forked from the painter's)."""
+    from mlpfac.plots.figure1 import Draft
+
+    die_with_parent()
+    draft = Draft(rec, h, column)
+    draft.draw()
+    return draft.pixels()

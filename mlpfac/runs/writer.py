@@ -41,11 +41,7 @@ class Writer(ForkedChild):
     def answer(self) -> tuple | None:
         """The child's answer (``("ok",)``, ``("config", where, what)``, ``("oserror", errno,
         strerror, filename)``), None when it could not write (then write here); the child is reaped."""
-        try:
-            answer = pickle.load(self._receive)
-        except (OSError, EOFError, pickle.UnpicklingError):
-            answer = None
-        self.close()
+        answer = super().answer()
         return None if answer is None or answer[0] == "error" else answer
 
 
