@@ -91,8 +91,13 @@ def bench_run(repeats: int, cold: int, before: str | None, warm_only: bool = Fal
             shutil.rmtree(cache, ignore_errors=True)
     print(f"mlpfac run eight-nominal, all outputs, {repeats} interleaved repeats (median):")
     ref = line("floor process", fl)
+    cores = len(os.sched_getaffinity(0))
     for k in runs:
         line(f"{k}warm", warm[k], ref, "target <= 2x")
+        cpu = statistics.median(c for _, c in warm[k])  # no schedule of its processes ends before its CPU time / cores
+        print(
+            f"  {k}its CPU time / {cores} cores:{'':<10} {cpu / cores:5.2f} s, {cpu / cores / ref:5.2f}x floor (a bound)"
+        )
     if before:  # paired by round: what load on a shared machine does to both cancels
         ratios = sorted(a[0] / b[0] for a, b in zip(warm[""], warm["before: "], strict=True))
         print(

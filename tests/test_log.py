@@ -175,10 +175,15 @@ def test_diverged_record_logs_only_its_rows(make_record, tmp_path, save_rrd, rrd
 def test_same_record_gives_the_same_contents(record, tmp_path, save_rrd, rrd_contents):
     """Decoded contents are identical, whatever the flush pattern. The bytes are not: rerun stamps
     chunk and row ids from the clock, and there is no switch for that in 0.41."""
-    a, b = tmp_path / "a.rrd", tmp_path / "b.rrd"
+    a = tmp_path / "a.rrd"
     save_rrd(record, a, flush_every=250)
-    save_rrd(record, b, flush_every=1000)
-    ea, eb = rrd_contents(a), rrd_contents(b)
+    for flush_every in (1000, record.n + 1):  # the last: only the end's flush, as a recording written after its run
+        b = tmp_path / f"b{flush_every}.rrd"
+        save_rrd(record, b, flush_every=flush_every)
+        _same_contents(rrd_contents(a), rrd_contents(b))
+
+
+def _same_contents(ea: dict, eb: dict) -> None:
     assert ea.keys() == eb.keys()
     for path in ea:
         assert ea[path].static.keys() == eb[path].static.keys(), path

@@ -375,5 +375,11 @@ def test_what_the_reference_asks_of_the_motors(tmp_path):
     (tmp_path / "over.toml").write_text(full + f'[reference]\nkind = "eight"\nspeed = {1.1 * top:.3g}\n')
     warned = load(str(tmp_path / "over.toml")).table["provenance"]
     assert "the motors saturate" in warned["torque_warning"]
+    short = load(str(tmp_path / "eight.toml")).with_overrides(duration=3.0).table["provenance"]  # --duration 3
+    (tmp_path / "short.toml").write_text(
+        TORQUE.replace("duration = 0.5", "duration = 3.0") + '[reference]\nkind = "eight"\n'
+    )
+    assert short["reference_torque"] == load(str(tmp_path / "short.toml")).table["provenance"]["reference_torque"]
+    assert short["reference_torque"] != said  # over the path the run drives, not the file's
     servos = load("eight-nominal").table["provenance"]
     assert "reference_torque" not in servos and "torque_warning" not in servos

@@ -152,6 +152,8 @@ class Scenario:
             if err.where.endswith(" duration"):
                 raise ConfigError(f"--duration {duration:g}", err.what) from None
             raise
+        if duration != self.duration:  # what the reference asks of torque motors, over the run it is now
+            scn = dataclasses.replace(scn, table=provenance.with_torque_need(scn.table, scn))
         return dataclasses.replace(scn, dropped_events=self.dropped_events + dropped) if dropped else scn
 
     def initial_state(self, ref: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:

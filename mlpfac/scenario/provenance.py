@@ -28,19 +28,39 @@ class Recorded(PlantSpec, Protocol):
 
 def recorded(scn: Recorded) -> tuple[dict, dict]:
     """Build the plant once (every check made): what it simulates, and the [plant] keys it found."""
-    from mlpfac.plants import make_plant
-    from mlpfac.scenario.reference import sample
+    from mlpfac.scenario.on_robot import torque_need
     from mlpfac.version import __version__
 
-    plant = make_plant(scn, sample(scn.reference, np.arange(2) * scn.T))
+    plant = _plant(scn)
     out = {"mlpfac": __version__, "numpy": np.__version__}
     out |= plant.provenance()
     if scn.plugin is not None:
         out["controller"] = scn.plugin.provenance()
-    from mlpfac.scenario.on_robot import torque_need
-
     out |= torque_need(scn, plant)  # what the reference asks of torque motors, for the run's first line
     return out, plant.found()
+
+
+TORQUE_KEYS = ("reference_torque", "torque_warning")
+
+
+def with_torque_need(table: dict, scn: Recorded) -> dict:
+    """``table`` whose [provenance] says what the reference asks of torque motors (made for another
+    duration) with it said again for ``scn``: the need is over the path the run drives."""
+    prov = table.get("provenance")
+    if not isinstance(prov, dict) or not any(k in prov for k in TORQUE_KEYS):
+        return table
+    from mlpfac.scenario.on_robot import torque_need
+
+    kept = {k: v for k, v in prov.items() if k not in TORQUE_KEYS}
+    return table | {"provenance": kept | torque_need(scn, _plant(scn))}
+
+
+def _plant(scn: Recorded):
+    """The plant of ``scn``, built (every check made) from the reference's first two samples."""
+    from mlpfac.plants import make_plant
+    from mlpfac.scenario.reference import sample
+
+    return make_plant(scn, sample(scn.reference, np.arange(2) * scn.T))
 
 
 def check_model(recorded, config, where: str) -> None:
