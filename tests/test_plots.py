@@ -68,6 +68,8 @@ def test_a_draft_made_for_the_other_panel_h_is_made_again(tmp_path, short_runs):
     adaptive, corradini = short_runs["adaptive"], short_runs["corradini"]
     assert Draft(adaptive, True).finish(adaptive, tmp_path / "a.png") == list("abcdefg")
     assert Draft(adaptive, False).finish(corradini, tmp_path / "b.png") == list("abcdefgh")
+    assert Draft(adaptive, True, 1, title=False).finish(adaptive, tmp_path / "c.png", lambda: None) == list("abcdefg")
+    assert (_pixels(tmp_path / "c.png") == _pixels(tmp_path / "a.png")).all()  # drawn whole: no column's pixels asked
 
 
 def _pixels(path):

@@ -33,7 +33,9 @@ class Draft:
     """Figure 1 but panel (h), made and drawn (:meth:`draw`) before the baseline has run (the
     painter's process does it while the run's process runs the baseline); :meth:`finish` draws
     (h) over its place, left blank, and writes the figure: the same pixels as a figure drawn
-    whole, since no panel overlaps another. ``h``: whether it has a panel (h)."""
+    whole, since no panel overlaps another. ``h``: whether the figure has a panel (h);
+    ``column``: only the panels of that column (0 the left, 1 the right; None both), laid out as in
+    the whole figure; ``title``: with the figure's title."""
 
     def __init__(self, rec: RunRecord, h: bool, column: int | None = None, title: bool = True) -> None:
         from mlpfac.plots.mplconfig import quiet_config
