@@ -123,6 +123,17 @@ def test_sweep_layout_tables_and_resume(tmp_path):
     assert paths[0].read_text().count("\n") == 1 + len(rows)
 
 
+def test_a_sweeps_duration_says_what_its_reference_asks_of_torque_motors_over_that_duration():
+    """--duration on torque motors: each run's [provenance] says the need over the run it is (once
+    a scenario, for every controller and seed), as `mlpfac run --duration` and a file of that
+    duration do."""
+    said = load("eight-torque").with_overrides(duration=2.0).table["provenance"]["reference_torque"]
+    assert said != load("eight-torque").table["provenance"]["reference_torque"]
+    jobs = sweep.plan(["eight-torque"], ["kanayama", "adaptive"], [0, 1], 2.0)
+    assert len(jobs) == 4 and all(j.table["provenance"]["reference_torque"] == said for j in jobs)
+    assert all(f"reference_torque = {json.dumps(said)}" in j.config for j in jobs)
+
+
 def test_interrupted_sweep_resumes_to_the_same_table(tmp_path):
     jobs = plan(seeds="0-2")
     full = sweep.execute(jobs, tmp_path / "full")

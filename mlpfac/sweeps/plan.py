@@ -123,11 +123,13 @@ def plan(
                 )
             names[base.name] = src
             family = base.name.replace(label("", point), "", 1) if point else base.name  # the scenario (on its robot)
+            if duration is not None:  # once a scenario: what its reference asks of torque motors is said again here
+                base = base.with_overrides(duration=duration)
             for ctrl in controllers:
                 # parsed once; only the seed varies, so each seed's table is this one with its seed
                 # (what with_overrides(seed=...) gives: parse checks a seed >= 0, which parse_seeds did);
                 # a scenario that draws per seed is parsed per seed
-                scn = base.with_overrides(controller=ctrl, duration=duration, flag="--controllers")
+                scn = base.with_overrides(controller=ctrl, flag="--controllers")
                 configs = _seed_configs(scn.table, seeds, to_toml)
                 for seed in seeds:
                     table = {**scn.table, "seed": seed}
