@@ -37,11 +37,17 @@ def test_figure1_leaves_out_the_panels_that_do_not_apply(tmp_path, short_runs):
     assert all((tmp_path / f).stat().st_size > 20_000 for f in ("a.png", "k.png", "c.png", "n.png"))
 
 
+def _pixels(path):
+    import numpy as np
+    from PIL import Image
+
+    return np.asarray(Image.open(path))
+
+
 def test_figure1_drawn_before_its_panel_h_is_the_figure_drawn_whole(tmp_path, short_runs):
     """The painter draws every panel but (h) while the baseline runs, then (h) over its blank
     place: the same pixels as the figure drawn at once."""
     import numpy as np
-    from PIL import Image
 
     from mlpfac.plots.figure1 import Draft
 
@@ -53,7 +59,7 @@ def test_figure1_drawn_before_its_panel_h_is_the_figure_drawn_whole(tmp_path, sh
     whole.axes["h"].set_visible(True)
     whole.fig.canvas.draw()
     pixels = np.asarray(whole.fig.canvas.buffer_rgba())
-    two = np.asarray(Image.open(tmp_path / "two.png"))
+    two = _pixels(tmp_path / "two.png")
     assert two.shape == pixels.shape and np.array_equal(two, pixels)
     h = whole.axes["h"].get_window_extent()  # and panel (h) is on it, not blank
     rows = slice(int(pixels.shape[0] - h.y1), int(pixels.shape[0] - h.y0))
@@ -70,13 +76,6 @@ def test_a_draft_made_for_the_other_panel_h_is_made_again(tmp_path, short_runs):
     assert Draft(adaptive, False).finish(corradini, tmp_path / "b.png") == list("abcdefgh")
     assert Draft(adaptive, True, 1, title=False).finish(adaptive, tmp_path / "c.png", lambda: None) == list("abcdefg")
     assert (_pixels(tmp_path / "c.png") == _pixels(tmp_path / "a.png")).all()  # drawn whole: no column's pixels asked
-
-
-def _pixels(path):
-    import numpy as np
-    from PIL import Image
-
-    return np.asarray(Image.open(path))
 
 
 @pytest.mark.parametrize("case", ["h on the right", "h on the left", "no h", "no weights"])
