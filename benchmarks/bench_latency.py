@@ -53,6 +53,8 @@ def floor_script() -> Path:
 
 def timed(cmd: list[str], env: dict | None = None, ok: tuple[int, ...] = (0,)) -> tuple[float, float]:
     """Wall and CPU (user + system, the process and its children) seconds of one command."""
+    if COLD_DISK:
+        drop_page_cache()
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
     r = subprocess.run(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, env=env, cwd=ROOT)
@@ -61,6 +63,16 @@ def timed(cmd: list[str], env: dict | None = None, ok: tuple[int, ...] = (0,)) -
     if r.returncode not in ok:
         sys.exit(f"failed (rc {r.returncode}): {shlex.join(cmd)}: {r.stderr.strip()[-300:]}")
     return wall, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+
+
+COLD_DISK = False  # --cold-disk: every timed process reads its files from the disk
+
+
+def drop_page_cache() -> None:
+    """Write back and drop the kernel's page cache (clean pages, dentries, inodes): the next process
+    reads everything from the disk."""
+    os.sync()
+    Path("/proc/sys/vm/drop_caches").write_text("3\n")
 
 
 def line(name: str, samples: list[tuple[float, float]], ref: float | None = None, target: str = "") -> float:
@@ -89,7 +101,8 @@ def bench_run(repeats: int, cold: int, before: str | None, warm_only: bool = Fal
             cache = out / f"numba-{i}"
             fresh[k].append(timed(cmd, env=dict(os.environ, NUMBA_CACHE_DIR=str(cache))))
             shutil.rmtree(cache, ignore_errors=True)
-    print(f"mlpfac run eight-nominal, all outputs, {repeats} interleaved repeats (median):")
+    disk = ", the page cache dropped before each process" if COLD_DISK else ""
+    print(f"mlpfac run eight-nominal, all outputs, {repeats} interleaved repeats{disk} (median):")
     ref = line("floor process", fl)
     cores = len(os.sched_getaffinity(0))
     for k in runs:
@@ -98,16 +111,13 @@ def bench_run(repeats: int, cold: int, before: str | None, warm_only: bool = Fal
         print(
             f"  {k}its CPU time / {cores} cores:{'':<10} {cpu / cores:5.2f} s, {cpu / cores / ref:5.2f}x floor (a bound)"
         )
-    if before:  # paired by round: what load on a shared machine does to both cancels
-        ratios = sorted(a[0] / b[0] for a, b in zip(warm[""], warm["before: "], strict=True))
-        print(
-            f"  this / before, per round: median {statistics.median(ratios):.2f} (range {ratios[0]:.2f}-{ratios[-1]:.2f})"
-        )
-        ratios = sorted(a[0] / f[0] for a, f in zip(warm[""], fl, strict=True))
-        print(
-            f"  this / floor, per round: median {statistics.median(ratios):.2f} (range {ratios[0]:.2f}-{ratios[-1]:.2f})"
-        )
-        if not warm_only:
+    # paired by round: what load on a shared machine does to both cancels
+    pairs = {"this / floor": (warm[""], fl)} | ({"this / before": (warm[""], warm["before: "])} if before else {})
+    for name, (a, b) in pairs.items():
+        ratios = sorted(x[0] / y[0] for x, y in zip(a, b, strict=True))
+        print(f"  {name}, per round: median {statistics.median(ratios):.2f} (range {ratios[0]:.2f}-{ratios[-1]:.2f})")
+    if not warm_only:
+        for k in runs:
             line(f"{k}fresh NUMBA_CACHE_DIR", fresh[k], ref, "target <= 5x")
     if cold:
         first, again, fl = [], [], []
@@ -197,7 +207,19 @@ def main() -> int:
     ap.add_argument("--before", metavar="MLPFAC", help="another install's mlpfac command, timed beside this one")
     ap.add_argument("--only", choices=("run", "quick", "workers"))
     ap.add_argument("--warm-only", action="store_true", help="the run: warm only, no fresh NUMBA_CACHE_DIR")
+    ap.add_argument(
+        "--cold-disk",
+        action="store_true",
+        help="drop the page cache before every timed process (root, Linux): imports read from the disk",
+    )
     a = ap.parse_args()
+    if a.cold_disk:
+        global COLD_DISK
+        try:
+            drop_page_cache()
+        except OSError as err:
+            ap.error(f"--cold-disk: cannot drop the page cache ({err.strerror}): needs root on Linux")
+        COLD_DISK = True
     if a.only in (None, "run"):
         bench_run(a.repeats, a.cold, a.before, a.warm_only, a.this)
     if a.only in (None, "quick"):
