@@ -11,18 +11,28 @@ reaches over the last 2 s, against those asked:
   its kinematic centre (what ``menagerie:pal_tiago_dual`` runs with from its name).
 The rows other than ``chosen`` set ``turning_track`` (nothing measured) and keep the pose frame in
 the middle of the wheels.
+
+A second table measures the turning of the robot as chosen again, as it is measured while it
+settles, after each shipped event that edits the model (a payload, a floor, a weak actuator,
+applied at the start): the track it then turns as and where its kinematic centre then lies
+against its pose frame. The oracles are told none of these (a law of (v, omega) has no mass or
+friction in it), so where they move, the bound beside a result of that event is what a law told
+nothing of the turning achieves.
 Usage: MENAGERIE_ROOT=... python sims/skid_turn.py [MODEL] (another skid-steer: tests/data/skid_short.xml)
 """
 
 from __future__ import annotations
 
+import dataclasses
 import sys
 
 import numpy as np
 
 from mlpfac.plants.config import MujocoConfig
-from mlpfac.plants.mjcf.wheels import skid_track
+from mlpfac.plants.mjcf.settle import TURN_SHARE, turning
+from mlpfac.plants.mjcf.wheels import skid_track, wheel_speed_limit
 from mlpfac.plants.mujoco import MujocoPlant
+from mlpfac.scenario.parse import load
 
 T = 0.01
 MODEL = "menagerie:pal_tiago_dual"
@@ -67,6 +77,18 @@ def main(model: str = MODEL) -> None:
         for v, omega in ASKED:
             rv, rw = reached(plant, v, omega)
             print(f"| {name} | {v:g} m/s, {omega:g} rad/s | {rv:.3f} m/s, {rw:.3f} rad/s | {rw / omega:.2f} |")
+    print()
+    print("| event (of the scenario, at the start) | track turned as | kinematic centre from the pose frame |")
+    print("| --- | --- | --- |")
+    w = TURN_SHARE * (wheel_speed_limit(chosen.robot) or 1.0)
+    for scenario in (None, "eight-payload", "eight-friction", "eight-weak-actuator"):
+        events = [None] if scenario is None else load(scenario, robot=model).events
+        for ev in events:
+            ev = ev if ev is None else dataclasses.replace(ev, time=0.0)
+            track, ahead, said = turning(chosen, w, ev)
+            where = f"{abs(ahead) * 1e3:.1f} mm {'ahead' if ahead >= 0 else 'back'}"
+            name = "none (as it settled)" if ev is None else f"{scenario}: {ev.kind} {ev.params}"
+            print(f"| {name} | {track:.3f} m | {where} |")
 
 
 if __name__ == "__main__":

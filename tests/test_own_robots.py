@@ -319,6 +319,24 @@ def test_a_skid_steers_turning_is_measured_as_it_settles():
     assert "measured" not in kept.robot.description and kept.ik_track == 0.879 and not kept.robot.found
 
 
+def test_what_an_event_does_to_a_skid_steers_turning():
+    """A payload (mass x3) and a slippery floor, applied at the start of the turning test, change the
+    track the short skid-steer turns as and move its kinematic centre (sims/skid_turn.py); the next
+    reset undoes the event: measured again without it, the same bits as before."""
+    from mlpfac.plants.events import make_event
+    from mlpfac.plants.mjcf.settle import TURN_SHARE, turning
+
+    plant = MujocoPlant(MujocoConfig(model=str(SKID_SHORT)), 0.01, (0.01,))
+    w = TURN_SHARE * 8.0
+    nominal = turning(plant, w)
+    heavy = turning(plant, w, make_event("payload", 0.0, mass_scale=3.0))
+    slippery = turning(plant, w, make_event("friction", 0.0, mu=0.2))
+    assert nominal[0] == pytest.approx(0.879, rel=0.02) and abs(nominal[1]) < 0.005
+    assert heavy[0] == pytest.approx(1.355, rel=0.02) and heavy[1] == pytest.approx(-0.0489, abs=0.003)
+    assert slippery[0] == pytest.approx(0.617, rel=0.02) and slippery[1] == pytest.approx(0.0611, abs=0.003)
+    assert turning(plant, w) == nominal
+
+
 def test_kanayama_tracks_a_short_skid_steer_within_10_mm(tmp_path, monkeypatch):
     """With the rule's track (W + L^2/W, 0.689 m) and the pose in the middle of its wheels, kanayama
     tracked at 29.8 mm and corradini was lost (203 mm); measured, 4.2 mm and 3.9 mm. Its config.toml,
