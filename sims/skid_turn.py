@@ -85,7 +85,7 @@ def main(model: str = MODEL) -> None:
         events = [None] if scenario is None else load(scenario, robot=model).events
         for ev in events:
             ev = ev if ev is None else dataclasses.replace(ev, time=0.0)
-            track, ahead, said = turning(chosen, w, ev)
+            track, ahead, said = turning(chosen, w, [] if ev is None else [ev])
             where = f"{abs(ahead) * 1e3:.1f} mm {'ahead' if ahead >= 0 else 'back'}"
             name = "none (as it settled)" if ev is None else f"{scenario}: {ev.kind} {ev.params}"
             print(f"| {name} | {track:.3f} m | {where} |")

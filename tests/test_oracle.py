@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -143,6 +144,33 @@ def test_oracle_kanayama_sends_kanayamas_command_divided_by_what_it_is_told(chan
     c = dict((kind, v) for _, kind, v in changes).get("control_period", 1.0) if not kinematic else 1.0
     limits = (2.0 * c, 5.0 * c)
     np.testing.assert_allclose(o.step(E, R), kanayama_u(E, R, limits) / gain, rtol=1e-14)
+
+
+@pytest.mark.parametrize("kanayama", [True, False])
+def test_a_skid_steers_oracle_told_its_turning_leads_the_heading_and_scales_omega(kanayama):
+    """Known answer: told the track ratio t and the kinematic centre a ahead, the law acts on e3 +
+    phi, sin phi = a omega_r / v_r, and sends omega x t; told (1, 0), the law as it was, to the bit."""
+    gains = GAINS if kanayama else None
+    t, a = 1.25, 0.02
+    told_ = Oracle(LAW, T, [(0.0, "turning_track", t), (0.0, "kinematic_centre", a)], False, gains)
+    plain = Oracle(LAW, T, [(0.0, "turning_track", 1.0), (0.0, "kinematic_centre", 0.0)], False, gains)
+    for o in (told_, plain):
+        o.reset(np.random.default_rng(0))
+    led = E + [0.0, 0.0, math.asin(a * R[4] / R[3])]
+    want = kanayama_u(led, R) if kanayama else corradini_u(led, R)
+    np.testing.assert_allclose(told_.step(E, R), want * [1.0, t], rtol=1e-14)
+    np.testing.assert_array_equal(plain.step(E, R), kanayama_u(E, R) if kanayama else corradini_u(E, R))
+
+
+def test_the_factory_tells_a_skid_steers_oracle_what_the_payload_does_to_its_turning():
+    """Measured on a robot of the scenario's with the payload (tests/data/skid_short.xml: the track
+    0.879 -> 1.355 m, the centre 48.9 mm back, docs/robots.md); a differential drive is told nothing."""
+    skid = str(Path(__file__).parent / "data" / "skid_short.xml")
+    ctrl = make_controller(load("eight-payload", robot=skid).with_overrides(controller="oracle-kanayama"))
+    (_, _, ratio), (_, _, ahead) = [c for c in ctrl.changes if c[1] in ("turning_track", "kinematic_centre")]
+    assert ratio == pytest.approx(1.355 / 0.879, rel=0.03) and ahead == pytest.approx(-0.0489, abs=0.003)
+    plain = make_controller(load("eight-payload").with_overrides(controller="oracle-kanayama"))
+    assert plain.changes == [(12.5, "payload", 1.0)]
 
 
 def test_oracle_kanayama_is_kanayama_to_the_last_bit_before_the_event():

@@ -329,8 +329,8 @@ def test_what_an_event_does_to_a_skid_steers_turning():
     plant = MujocoPlant(MujocoConfig(model=str(SKID_SHORT)), 0.01, (0.01,))
     w = TURN_SHARE * 8.0
     nominal = turning(plant, w)
-    heavy = turning(plant, w, make_event("payload", 0.0, mass_scale=3.0))
-    slippery = turning(plant, w, make_event("friction", 0.0, mu=0.2))
+    heavy = turning(plant, w, [make_event("payload", 0.0, mass_scale=3.0)])
+    slippery = turning(plant, w, [make_event("friction", 0.0, mu=0.2)])
     assert nominal[0] == pytest.approx(0.879, rel=0.02) and abs(nominal[1]) < 0.005
     assert heavy[0] == pytest.approx(1.355, rel=0.02) and heavy[1] == pytest.approx(-0.0489, abs=0.003)
     assert slippery[0] == pytest.approx(0.617, rel=0.02) and slippery[1] == pytest.approx(0.0611, abs=0.003)

@@ -30,6 +30,15 @@ only what the nominal design would need to be redone for the changed robot:
   post-event error in the same run is the bound (the same law on the robot changed from t = 0
   measures the same over that window within noise: ``sims/oracle_from_start.py``,
   docs/results-beyond.md).
+- **payload, friction on a skid-steer** (``TURNING``): how it turns. A skid-steer's wheels slide
+  as it turns, so its load and grip set the track it turns as and where its kinematic centre lies
+  (the point that moves along its heading), measured by the factory on a robot with the event, as
+  the plant measures them while it settles (:meth:`~mlpfac.plants.mujoco.MujocoPlant.turning_change`):
+  the track's ratio t and the centre's move a ahead of the pose frame. omega is sent x t, so the
+  robot turns at the rate the law meant. With the centre a ahead, the pose frame slides sideways
+  at -a omega as the robot turns, and it follows the path only with the heading led by the angle
+  phi, sin phi = a omega_r / v_r (the quasi-static answer of the frame's velocity v h(theta) - a
+  omega n(theta) = v_r h(theta_r)): the law acts on e3 + phi.
 
 Kanayama's law is a velocity law, so the same telling is simpler: its command divided by the
 radius scale, and on the robot (not the Euler map (7), where f and G scale alike and the law needs
@@ -55,6 +64,9 @@ def _sinc(half: float) -> float:
     """sin(half) / half, computed as ``np.sinc(half / pi)`` computes it, with glibc's sine."""
     y = math.pi * (half / math.pi or 1.0e-20)
     return math.sin(y) / y
+
+
+TURNING = ("payload", "friction")  # the events whose turning a skid-steer's oracle is told
 
 
 def told(event: Event) -> tuple[float, str, float]:
@@ -107,6 +119,7 @@ class Oracle(Stepped):
         B = len(rngs)
         self.k, self.pending = 0, list(self.changes)
         self.radius, self.hold = 1.0, 1.0  # the robot drives radius x the command, held hold x T
+        self.turn, self.ahead = 1.0, 0.0  # a skid-steer's track ratio, its kinematic centre's move [m]
         self.pose_step = DelayLine(0)  # which step's pose the plant's measurement is
         self.sent: deque = deque(maxlen=max(self._depth, 1))  # (velocity driven (B, 2), seconds) per step
         self._h, self._u = np.zeros((B, 3)), np.zeros((B, 2))
@@ -122,6 +135,10 @@ class Oracle(Stepped):
             self.hold = value
         elif kind == "sensor_delay":
             self.pose_step.delay(int(value))
+        elif kind == "turning_track":
+            self.turn = value
+        elif kind == "kinematic_centre":
+            self.ahead = value
 
     def step(self, e: np.ndarray, r: np.ndarray) -> np.ndarray:
         E = as_rows(e, 3)
@@ -138,6 +155,9 @@ class Oracle(Stepped):
             T_law, c = self.hold * T, 1.0
         else:
             T_law, c = T, self.hold
+        if self.ahead and r[3] > 0.0:  # the heading led by phi: the sliding pose frame follows the path
+            E = E.copy()
+            E[:, 2] += math.asin(min(max(self.ahead * float(r[4]) / float(r[3]), -1.0), 1.0))
         v_max, omega_max = self._limits
         if self.kanayama is not None:  # a velocity law: the robot's c T per step is c times the motion meant
             kanayama_step(E, float(r[3]), float(r[4]), *self.kanayama, c * v_max, c * omega_max, self._u)
@@ -148,8 +168,10 @@ class Oracle(Stepped):
         gain = c * self.radius
         if gain != 1.0:
             self._u /= gain
+        if self.turn != 1.0:
+            self._u[:, 1] *= self.turn
         if self._depth:
-            self.sent.append((self._u * self.radius, self.hold * T))
+            self.sent.append((self._u * [self.radius, self.radius / self.turn], self.hold * T))
         self.k += 1
         return self._u[0].copy() if self.single else self._u
 

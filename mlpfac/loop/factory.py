@@ -19,7 +19,7 @@ from mlpfac.control.adaptive.controller import VARIANTS, Adaptive
 from mlpfac.control.adaptive.dynamic_level import AdaptiveDynamic
 from mlpfac.control.baselines import Corradini, Kanayama, PluginController, Stepped
 from mlpfac.control.dynamic import OUTER_GAINS, FierroLewis, OracleDynamic
-from mlpfac.control.oracle import Oracle, told
+from mlpfac.control.oracle import TURNING, Oracle, told
 from mlpfac.control.torque import TorquePluginController
 from mlpfac.plants import make_plant  # noqa: F401 (the plant half of the factory, as mlpfac.loop.factory.make_plant)
 from mlpfac.scenario.parse import Scenario
@@ -50,8 +50,24 @@ def make_controller(scn: Scenario, instance: object | None = None, plant=None) -
     if scn.controller in ("oracle", "oracle-kanayama"):  # the controllers told the scenario's events
         g = scn.kanayama
         gains = (g.Kx, g.Ky, g.Ktheta) if scn.controller == "oracle-kanayama" else None
-        return Oracle(scn.law, scn.T, [told(ev) for ev in scn.events], scn.plant_kind == "kinematic", gains)
+        changes = [told(ev) for ev in scn.events] + _turning_told(scn, plant)
+        return Oracle(scn.law, scn.T, changes, scn.plant_kind == "kinematic", gains)
     return Kanayama(scn.law, scn.kanayama, scn.T)
+
+
+def _turning_told(scn: Scenario, plant) -> list[tuple[float, str, float]]:
+    """What each payload or floor event does to a skid-steer's turning (:mod:`mlpfac.control.oracle`),
+    measured on a robot of the scenario's (not ``plant``, the run's own); none on another robot."""
+    if scn.plant_kind != "mujoco" or not any(ev.kind in TURNING for ev in scn.events):
+        return []
+    if plant is not None and plant.robot.seconds == (-1, -1):  # not a skid-steer: nothing to measure
+        return []
+    probe = make_plant(scn, sample(scn.reference, np.arange(2) * scn.T))
+    out = []
+    for i, ev in enumerate(scn.events):
+        if ev.kind in TURNING and (change := probe.turning_change(scn.events[: i + 1])) is not None:
+            out += [(float(ev.time), "turning_track", change[0]), (float(ev.time), "kinematic_centre", change[1])]
+    return out
 
 
 def _torque_level(scn: Scenario, instance: object | None, plant) -> Stepped:

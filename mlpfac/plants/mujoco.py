@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Sequence
 
 import mujoco
 import numpy as np
@@ -317,6 +318,20 @@ class MujocoPlant(MujocoEvents, TorqueDrive, MujocoReport):
 
     def geometry(self) -> list[dict]:
         return self._geometry
+
+    def turning_change(self, events: Sequence) -> tuple[float, float] | None:
+        """What ``events``, applied in turn from the start, do to a skid-steer's turning, measured as
+        it is while the robot settles (:func:`~mlpfac.plants.mjcf.settle.turning`) with them and
+        without: the track it turns as with them over the one without, and how far its kinematic
+        centre moved ahead of the pose frame [m]. None where the turning is not measured (a robot
+        that is not a skid-steer, or does not turn). The plant is reset first, each time."""
+        if self.robot.seconds == (-1, -1):
+            return None
+        w = TURN_SHARE * (wheel_speed_limit(self.robot) or 1.0)
+        (track0, ahead0, _), (track1, ahead1, _) = turning(self, w), turning(self, w, events)
+        if not (math.isfinite(track0) and math.isfinite(track1)):
+            return None
+        return track1 / track0, ahead1 - ahead0
 
 
 def _turns_end(description: str) -> int:

@@ -4,6 +4,7 @@ errors and warnings while it settles, each on one line naming the model."""
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import mujoco
 import numpy as np
@@ -62,7 +63,7 @@ TURN_SHARE = 0.5  # the outer wheels at this share of the wheel-speed limit, the
 TURN_MIN = 0.1  # a robot that turns at less than this share of the rate asked is not measured
 
 
-def turning(plant, w: float, event=None) -> tuple[float, float, str]:
+def turning(plant, w: float, events: Sequence = ()) -> tuple[float, float, str]:
     """A skid-steer's turning, measured once it has settled: from rest at the origin, its outer
     wheels asked ``w`` and its inner ones ``w / 3`` (through its own drive and IK, on its own
     wheels and floor) for TURN_LEAD_S, then its yaw rate omega and the mean sideways speed v_y of its
@@ -71,13 +72,13 @@ def turning(plant, w: float, event=None) -> tuple[float, float, str]:
     (the point of the base that moves along its heading: where the instantaneous centre of rotation
     projects onto its axis; Kozlowski & Pazderski 2004, Martinez et al. 2005), and what it did in
     words; (nan, nan, why) where it does not turn. ``plant`` is a :class:`~mlpfac.plants.mujoco.MujocoPlant`;
-    ``event``: a plant event applied at the start (a payload, a floor: what it does to the turning;
-    the next reset undoes it)."""
+    ``events``: plant events applied in turn at the start (a payload, a floor: what they do to the
+    turning; the next reset undoes them)."""
     r, track = float(plant.ik_radius), float(plant.ik_track)
     w_l, w_r = w / 3, w
     v, omega = r * (w_l + w_r) / 2, r * (w_r - w_l) / track  # what its IK turns into (w_l, w_r)
     plant.reset(np.zeros(3), np.random.default_rng(0))
-    if event is not None:
+    for event in events:
         plant.apply(event)
     r = float(plant.real_radius)  # the wheels' own: their rims' speeds
     dt = plant.T
