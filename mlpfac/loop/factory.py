@@ -56,7 +56,7 @@ def make_controller(scn: Scenario, instance: object | None = None, plant=None) -
 
 
 def _turning_told(scn: Scenario, plant) -> list[tuple[float, str, float]]:
-    """What each payload or floor event does to a skid-steer's turning (:mod:`mlpfac.control.oracle`),
+    """What each payload does to a skid-steer's turning (:mod:`mlpfac.control.oracle`),
     measured on a robot of the scenario's (not ``plant``, the run's own); none on another robot."""
     if scn.plant_kind != "mujoco" or not any(ev.kind in TURNING for ev in scn.events):
         return []
