@@ -164,13 +164,16 @@ def test_a_skid_steers_oracle_told_its_turning_leads_the_heading_and_scales_omeg
 
 def test_the_factory_tells_a_skid_steers_oracle_what_the_payload_does_to_its_turning():
     """Measured on a robot of the scenario's with the payload (tests/data/skid_short.xml: the track
-    0.879 -> 1.355 m, the centre 48.9 mm back, docs/robots.md); a differential drive is told nothing."""
+    0.879 -> 1.355 m, the centre 48.9 mm back, docs/robots.md); a differential drive is told nothing,
+    and so is a skid-steer of a floor."""
     skid = str(Path(__file__).parent / "data" / "skid_short.xml")
     ctrl = make_controller(load("eight-payload", robot=skid).with_overrides(controller="oracle-kanayama"))
     (_, _, ratio), (_, _, ahead) = [c for c in ctrl.changes if c[1] in ("turning_track", "kinematic_centre")]
     assert ratio == pytest.approx(1.355 / 0.879, rel=0.03) and ahead == pytest.approx(-0.0489, abs=0.003)
     plain = make_controller(load("eight-payload").with_overrides(controller="oracle-kanayama"))
     assert plain.changes == [(12.5, "payload", 1.0)]
+    floor = make_controller(load("eight-friction", robot=skid).with_overrides(controller="oracle"))
+    assert floor.changes == [(12.5, "friction", 1.0)]  # a floor's turning is not told (docs/robots.md)
 
 
 def test_oracle_kanayama_is_kanayama_to_the_last_bit_before_the_event():
