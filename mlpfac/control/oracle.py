@@ -34,14 +34,14 @@ only what the nominal design would need to be redone for the changed robot:
   turns, so its load sets the track it turns as and where its kinematic centre lies (the point
   that moves along its heading), measured by the factory on a robot with the event, as the plant
   measures them while it settles (:meth:`~mlpfac.plants.mujoco.MujocoPlant.turning_change`): the
-  track's ratio t and the centre's move a ahead of the pose frame. (Not a floor or a weak
-  actuator: on a floor of 0.2 the wheels slide with the path's accelerations, and a weak actuator
-  saturates in the turning test, so one steady turn does not say how the robot then turns; told
-  it, Kanayama's law did no better on TIAGo++'s floor, docs/robots.md.) omega is sent x t, so the
+  track's ratio t and the centre's move a ahead of the pose frame. omega is sent x t, so the
   robot turns at the rate the law meant. With the centre a ahead, the pose frame slides sideways
   at -a omega as the robot turns, and it follows the path only with the heading led by the angle
   phi, sin phi = a omega_r / v_r (the quasi-static answer of the frame's velocity v h(theta) - a
-  omega n(theta) = v_r h(theta_r)): the law acts on e3 + phi.
+  omega n(theta) = v_r h(theta_r)): the law acts on e3 + phi. Not told after a floor or a weak
+  actuator: on a floor of 0.2 the wheels slide with the path's accelerations, and a weak actuator
+  saturates in the turning test, so one steady turn does not say how the robot then turns (told
+  it, Kanayama's law did no better on TIAGo++'s floor: docs/robots.md).
 
 Kanayama's law is a velocity law, so the same telling is simpler: its command divided by the
 radius scale, and on the robot (not the Euler map (7), where f and G scale alike and the law needs
