@@ -15,9 +15,8 @@ the middle of the wheels.
 A second table measures the turning of the robot as chosen again, as it is measured while it
 settles, after each shipped event that edits the model (a payload, a floor, a weak actuator,
 applied at the start): the track it then turns as and where its kinematic centre then lies
-against its pose frame. The oracles are told none of these (a law of (v, omega) has no mass or
-friction in it), so where they move, the bound beside a result of that event is what a law told
-nothing of the turning achieves.
+against its pose frame. The oracles are told the payload's (the factory measures it the same way,
+``MujocoPlant.turning_change``), not the floor's or the weak actuator's (docs/robots.md).
 Usage: MENAGERIE_ROOT=... python sims/skid_turn.py [MODEL] (another skid-steer: tests/data/skid_short.xml)
 """
 
@@ -29,8 +28,8 @@ import sys
 import numpy as np
 
 from mlpfac.plants.config import MujocoConfig
-from mlpfac.plants.mjcf.settle import TURN_SHARE, turning
-from mlpfac.plants.mjcf.wheels import skid_track, wheel_speed_limit
+from mlpfac.plants.mjcf.settle import turning
+from mlpfac.plants.mjcf.wheels import skid_track
 from mlpfac.plants.mujoco import MujocoPlant
 from mlpfac.scenario.parse import load
 
@@ -80,12 +79,11 @@ def main(model: str = MODEL) -> None:
     print()
     print("| event (of the scenario, at the start) | track turned as | kinematic centre from the pose frame |")
     print("| --- | --- | --- |")
-    w = TURN_SHARE * (wheel_speed_limit(chosen.robot) or 1.0)
     for scenario in (None, "eight-payload", "eight-friction", "eight-weak-actuator"):
         events = [None] if scenario is None else load(scenario, robot=model).events
         for ev in events:
             ev = ev if ev is None else dataclasses.replace(ev, time=0.0)
-            track, ahead, said = turning(chosen, w, [] if ev is None else [ev])
+            track, ahead, said = turning(chosen, [] if ev is None else [ev])
             where = f"{abs(ahead) * 1e3:.1f} mm {'ahead' if ahead >= 0 else 'back'}"
             name = "none (as it settled)" if ev is None else f"{scenario}: {ev.kind} {ev.params}"
             print(f"| {name} | {track:.3f} m | {where} |")

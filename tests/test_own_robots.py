@@ -303,7 +303,7 @@ def test_a_skid_steers_turning_is_measured_as_it_settles():
     """The track it turns as and its kinematic centre, measured by a turn on its own wheels and floor:
     the same bits each time; measured again on the robot as measured, the pose frame no longer
     slides sideways and the track is the same; a configuration that carries them measures nothing."""
-    from mlpfac.plants.mjcf.settle import TURN_SHARE, turning
+    from mlpfac.plants.mjcf.settle import turning
 
     plant = MujocoPlant(MujocoConfig(model=str(SKID_SHORT)), 0.01, (0.01,))
     found = plant.found()
@@ -313,7 +313,7 @@ def test_a_skid_steers_turning_is_measured_as_it_settles():
     )
     again = MujocoPlant(MujocoConfig(model=str(SKID_SHORT)), 0.01, (0.01,))
     assert again.found() == found  # deterministic
-    track, ahead, _ = turning(again, TURN_SHARE * 8.0)  # its servos' 8 rad/s
+    track, ahead, _ = turning(again)  # its outer wheels at half their servos' 8 rad/s
     assert track == pytest.approx(0.879, rel=0.02) and abs(ahead) < 0.005  # was 70.5 mm at the wheels' middle
     kept = MujocoPlant(MujocoConfig(model=str(SKID_SHORT), **found), 0.01, (0.01,))
     assert "measured" not in kept.robot.description and kept.ik_track == 0.879 and not kept.robot.found
@@ -324,17 +324,16 @@ def test_what_an_event_does_to_a_skid_steers_turning():
     track the short skid-steer turns as and move its kinematic centre (sims/skid_turn.py); the next
     reset undoes the event: measured again without it, the same bits as before."""
     from mlpfac.plants.events import make_event
-    from mlpfac.plants.mjcf.settle import TURN_SHARE, turning
+    from mlpfac.plants.mjcf.settle import turning
 
     plant = MujocoPlant(MujocoConfig(model=str(SKID_SHORT)), 0.01, (0.01,))
-    w = TURN_SHARE * 8.0
-    nominal = turning(plant, w)
-    heavy = turning(plant, w, [make_event("payload", 0.0, mass_scale=3.0)])
-    slippery = turning(plant, w, [make_event("friction", 0.0, mu=0.2)])
+    nominal = turning(plant)
+    heavy = turning(plant, [make_event("payload", 0.0, mass_scale=3.0)])
+    slippery = turning(plant, [make_event("friction", 0.0, mu=0.2)])
     assert nominal[0] == pytest.approx(0.879, rel=0.02) and abs(nominal[1]) < 0.005
     assert heavy[0] == pytest.approx(1.355, rel=0.02) and heavy[1] == pytest.approx(-0.0489, abs=0.003)
     assert slippery[0] == pytest.approx(0.617, rel=0.02) and slippery[1] == pytest.approx(0.0611, abs=0.003)
-    assert turning(plant, w) == nominal
+    assert turning(plant) == nominal
 
 
 def test_kanayama_tracks_a_short_skid_steer_within_10_mm(tmp_path, monkeypatch):

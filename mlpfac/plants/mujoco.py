@@ -43,8 +43,7 @@ from mlpfac.plants.ik import wheel_speeds
 from mlpfac.plants.mjcf import drive
 from mlpfac.plants.mjcf.edits import servo_band
 from mlpfac.plants.mjcf.robot import Robot, read_robot
-from mlpfac.plants.mjcf.settle import TURN_SHARE, turning
-from mlpfac.plants.mjcf.wheels import wheel_speed_limit
+from mlpfac.plants.mjcf.settle import turning
 from mlpfac.plants.mujoco_events import MujocoEvents
 from mlpfac.plants.mujoco_report import MujocoReport
 from mlpfac.plants.mujoco_torque import TorqueDrive
@@ -90,7 +89,7 @@ class MujocoPlant(MujocoEvents, TorqueDrive, MujocoReport):
         config.toml: a run of it measures nothing): the track it turns as, and a pose frame found in
         the middle of its wheels moved to its kinematic centre, where it moves along its heading."""
         r = self.robot
-        track, ahead, said = turning(self, TURN_SHARE * (wheel_speed_limit(r) or 1.0))
+        track, ahead, said = turning(self)
         if not math.isfinite(track):
             self.robot = dataclasses.replace(r, description=f"{r.description}; its turning not measured ({said})")
             return
@@ -327,8 +326,7 @@ class MujocoPlant(MujocoEvents, TorqueDrive, MujocoReport):
         that is not a skid-steer, or does not turn). The plant is reset first, each time."""
         if self.robot.seconds == (-1, -1):
             return None
-        w = TURN_SHARE * (wheel_speed_limit(self.robot) or 1.0)
-        (track0, ahead0, _), (track1, ahead1, _) = turning(self, w), turning(self, w, events)
+        (track0, ahead0, _), (track1, ahead1, _) = turning(self), turning(self, events)
         if not (math.isfinite(track0) and math.isfinite(track1)):
             return None
         return track1 / track0, ahead1 - ahead0

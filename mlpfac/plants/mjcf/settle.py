@@ -10,6 +10,7 @@ import mujoco
 import numpy as np
 
 from mlpfac.exceptions import ConfigError
+from mlpfac.plants.mjcf.wheels import wheel_speed_limit
 
 SETTLE_S = 0.5  # seconds the robot settles on its wheels at least, at construction (the rest pose)
 SETTLE_MAX_S = 10.0  # ... and at most: then it must be at rest
@@ -63,9 +64,9 @@ TURN_SHARE = 0.5  # the outer wheels at this share of the wheel-speed limit, the
 TURN_MIN = 0.1  # a robot that turns at less than this share of the rate asked is not measured
 
 
-def turning(plant, w: float, events: Sequence = ()) -> tuple[float, float, str]:
+def turning(plant, events: Sequence = ()) -> tuple[float, float, str]:
     """A skid-steer's turning, measured once it has settled: from rest at the origin, its outer
-    wheels asked ``w`` and its inner ones ``w / 3`` (through its own drive and IK, on its own
+    wheels asked w = TURN_SHARE of their speed limit and its inner ones w / 3 (through its own drive and IK, on its own
     wheels and floor) for TURN_LEAD_S, then its yaw rate omega and the mean sideways speed v_y of its
     pose frame over TURN_S. Returns the track a differential drive turning as it does has,
     r (w_r - w_l) / omega, and the kinematic centre's distance ahead of the pose frame, -v_y / omega
@@ -74,6 +75,7 @@ def turning(plant, w: float, events: Sequence = ()) -> tuple[float, float, str]:
     words; (nan, nan, why) where it does not turn. ``plant`` is a :class:`~mlpfac.plants.mujoco.MujocoPlant`;
     ``events``: plant events applied in turn at the start (a payload, a floor: what they do to the
     turning; the next reset undoes them)."""
+    w = TURN_SHARE * (wheel_speed_limit(plant.robot) or 1.0)
     r, track = float(plant.ik_radius), float(plant.ik_track)
     w_l, w_r = w / 3, w
     v, omega = r * (w_l + w_r) / 2, r * (w_r - w_l) / track  # what its IK turns into (w_l, w_r)
