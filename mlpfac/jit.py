@@ -43,6 +43,7 @@ HERE = Path(__file__).resolve().parent
 EXTENSIONS = {"core": "mlpfac._kernels", "mujoco": "mlpfac.plants._kernels"}
 MODULES = {  # the modules whose kernels each extension holds
     "core": (
+        "mlpfac.elementary",
         "mlpfac.model",
         "mlpfac.dynamics",
         "mlpfac.control.law",
