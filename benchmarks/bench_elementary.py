@@ -1,0 +1,85 @@
+"""The cost of one call of mlpfac.elementary's functions against the C library's (``math``), in a
+compiled loop. Not a test.
+
+    python benchmarks/bench_elementary.py [--n 1000000] [--rounds 7]
+
+Each function is called on n arguments of the range that runs meet (headings of a few turns,
+angles within a turn, sigmoid arguments, ...) inside a numba kernel that sums the results; the best
+of the rounds' CPU time per call is printed, ours against math's (which numba compiles to the C
+library's function).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import time
+
+import numpy as np
+from numba import njit
+
+from mlpfac import elementary as E
+
+
+def looped(fn, two: bool):
+    if two:
+
+        @njit
+        def loop(a, b):
+            s = 0.0
+            for i in range(a.shape[0]):
+                s += fn(a[i], b[i])
+            return s
+
+    else:
+
+        @njit
+        def loop(a, b):
+            s = 0.0
+            for i in range(a.shape[0]):
+                s += fn(a[i])
+            return s
+
+    return loop
+
+
+def math_of(name: str):
+    f = getattr(math, name)
+    return njit(lambda *a: f(*a))
+
+
+CASES = {  # name: (arguments' range of the first, of the second or None)
+    "sin": ((-20.0, 20.0), None),
+    "cos": ((-20.0, 20.0), None),
+    "atan2": ((-2.0, 2.0), (-2.0, 2.0)),
+    "asin": ((-1.0, 1.0), None),
+    "exp": ((-10.0, 10.0), None),
+    "log": ((1e-3, 1e3), None),
+    "tanh": ((-8.0, 8.0), None),
+    "hypot": ((-2.0, 2.0), (-2.0, 2.0)),
+}
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--n", type=int, default=1_000_000)
+    p.add_argument("--rounds", type=int, default=7)
+    args = p.parse_args()
+    rng = np.random.default_rng(0)
+    print(f"{'function':8s} {'ours ns':>8s} {'math ns':>8s} {'ratio':>6s}")
+    for name, (ra, rb) in CASES.items():
+        a = rng.uniform(*ra, args.n)
+        b = rng.uniform(*rb, args.n) if rb else a
+        ours, theirs = looped(getattr(E, name), rb is not None), looped(math_of(name), rb is not None)
+        ours(a[:10], b[:10]), theirs(a[:10], b[:10])  # compile
+        best = {}
+        for _ in range(args.rounds):
+            for label, loop in (("ours", ours), ("math", theirs)):
+                t = time.process_time()
+                loop(a, b)
+                best[label] = min(best.get(label, math.inf), (time.process_time() - t) / args.n * 1e9)
+        print(f"{name:8s} {best['ours']:8.1f} {best['math']:8.1f} {best['ours'] / best['math']:6.2f}")
+
+
+if __name__ == "__main__":
+    main()
