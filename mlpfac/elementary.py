@@ -467,7 +467,15 @@ def hypot_each(x, y, out):
         out[i] = hypot(x[i], y[i])
 
 
-EACH = {sin: sin_each, cos: cos_each, tanh: tanh_each, exp: exp_each, log: log_each, atan2: atan2_each, hypot: hypot_each}
+EACH = {
+    sin: sin_each,
+    cos: cos_each,
+    tanh: tanh_each,
+    exp: exp_each,
+    log: log_each,
+    atan2: atan2_each,
+    hypot: hypot_each,
+}
 
 
 def each(fn, *xs) -> np.ndarray:
