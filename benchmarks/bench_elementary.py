@@ -6,7 +6,8 @@ compiled loop, and their largest error. Not a test.
 Each function is called on n arguments of the range that runs meet (headings of a few turns,
 angles within a turn, sigmoid arguments, ...) inside a numba kernel that sums the results; the best
 of the rounds' CPU time per call is printed, ours against math's (which numba compiles to the C
-library's function). With ``--ulps N``: the largest error in units in the last place over N
+library's function; numba compiles mlpfac's kernels here, ``MLPFAC_KERNELS=jit``, so that they can
+be called from the loop). With ``--ulps N``: the largest error in units in the last place over N
 random arguments of each domain of tests/test_elementary.py (which checks 10000 of each), against
 mpmath at 200 bits, ours and the C library's.
 """
@@ -15,13 +16,16 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import time
 from pathlib import Path
 
-import numpy as np
-from numba import njit
+os.environ["MLPFAC_KERNELS"] = "jit"  # numba's dispatchers, which a numba loop can call (not the built module's)
 
-from mlpfac import elementary as el
+import numpy as np  # noqa: E402
+from numba import njit  # noqa: E402
+
+from mlpfac import elementary as el  # noqa: E402
 
 
 def looped(fn, two: bool):
