@@ -23,8 +23,10 @@ difference of a figure ``runs.json`` keeps, and any outcome that changed. The en
   kernels of that processor (``OPENBLAS_CORETYPE``) on two threads, as numpy's and scipy's linear
   algebra would run elsewhere (SkylakeX only on a processor with AVX-512: skipped elsewhere).
 
-mlpfac's simulated path calls none of numpy's processor-dispatched maths nor BLAS/LAPACK
-(tests/test_same_bits.py traps them), so only ``libm-no-fma`` should move a bit.
+mlpfac's simulated path calls none of numpy's processor-dispatched maths nor BLAS/LAPACK, and
+none of the C library's maths functions (its own, mlpfac.elementary; tests/test_same_bits.py traps
+them all), so only ``libm-no-fma`` should move a bit, and only in runs on MuJoCo, whose physics
+calls the C library's sin, cos, atan2, ...
 """
 
 from __future__ import annotations
@@ -63,20 +65,25 @@ PROBE = "import numpy as np; a = np.ones((64, 64)); a @ a"  # OpenBLAS's kernels
 
 
 LIBM = ("sin", "cos", "tan", "atan", "atan2", "exp", "expm1", "log", "log1p", "pow", "tanh", "hypot")
+OURS = ("sin", "cos", "atan", "atan2", "exp", "log", "tanh", "hypot")  # mlpfac.elementary's, beside them
 ARGUMENTS = 200_000
 
 
 def libm_child() -> None:
-    """Each function of glibc's maths library the runs call (through Python's math, as numba's
-    kernels call them) on the same pseudo-random arguments: their bits, one JSON object."""
+    """Each function of glibc's maths library (through Python's math, as numba's ``math.sin`` calls
+    it; MuJoCo calls some), and mlpfac.elementary's, on the same pseudo-random arguments: their bits,
+    one JSON object."""
     import math
     import random
+
+    from mlpfac import elementary
 
     rng = random.Random(1)
     xs = [rng.uniform(-10.0, 10.0) for _ in range(ARGUMENTS)]
     args = {"atan2": lambda x: (x, 0.7 * x + 1.0), "hypot": lambda x: (x, 0.7 * x + 1.0)}
     args |= {"pow": lambda x: (abs(x) + 0.1, 0.37), "log": lambda x: (abs(x) + 0.01,), "log1p": lambda x: (abs(x),)}
     out = {f: [getattr(math, f)(*args.get(f, lambda x: (x,))(x)).hex() for x in xs] for f in LIBM}
+    out |= {f"mlpfac {f}": [getattr(elementary, f)(*args.get(f, lambda x: (x,))(x)).hex() for x in xs] for f in OURS}
     print(json.dumps(out))
 
 
@@ -90,7 +97,7 @@ def libm(environments: list[str]) -> None:
     first, *others = environments
     print(f"| function | {' | '.join(others)} (of {ARGUMENTS} arguments, against {first}) |")
     print("|---|" + "---:|" * len(others))
-    for f in LIBM:
+    for f in (*LIBM, *(f"mlpfac {f}" for f in OURS)):
         moved = [sum(a != b for a, b in zip(found[first][f], found[o][f], strict=True)) for o in others]
         print(f"| {f} | {' | '.join(map(str, moved))} |")
 

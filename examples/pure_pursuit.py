@@ -11,9 +11,9 @@ returns (v, omega); ``reset(rng)`` and ``telemetry()`` are optional.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
+
+from mlpfac.elementary import cos, sin  # the same bits on every machine (math's differ by C library)
 
 
 class PurePursuit:
@@ -43,10 +43,10 @@ class PurePursuit:
         e1, e2, e3 = e
         v_r = r[3]
         # the point `lookahead` ahead of the reference pose, in the robot's frame
-        x, y = e1 + self.lookahead * math.cos(e3), e2 + self.lookahead * math.sin(e3)
+        x, y = e1 + self.lookahead * cos(e3), e2 + self.lookahead * sin(e3)
         self.target[:] = x, y
         self.curvature = 2.0 * y / (x * x + y * y)  # the arc through the robot's origin and (x, y)
-        v = min(max(v_r * math.cos(e3) + self.k_v * e1, -self.v_max), self.v_max)
+        v = min(max(v_r * cos(e3) + self.k_v * e1, -self.v_max), self.v_max)
         return v, v * self.curvature
 
     def telemetry(self) -> dict[str, float | np.ndarray]:

@@ -15,9 +15,9 @@ twist (2,), wheel_speeds (2,) and t.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
+
+from mlpfac.elementary import cos, sin  # the same bits on every machine (math's differ by C library)
 
 
 class TorqueLaw:
@@ -48,8 +48,8 @@ class TorqueLaw:
         v_r, w_r = obs.r[3], obs.r[4]
         v, w = obs.twist
         k_x, k_y, k_t = self.k
-        v_c = v_r * math.cos(e3) + k_x * e1
-        w_c = w_r + v_r * (k_y * e2 + k_t * math.sin(e3))
+        v_c = v_r * cos(e3) + k_x * e1
+        w_c = w_r + v_r * (k_y * e2 + k_t * sin(e3))
         self.velocity_cmd[:] = v_c, w_c
         # the accelerations: the reference's, and the twist's error closed at `rate`
         a = obs.r_dot[0] + self.rate * (v_c - v)

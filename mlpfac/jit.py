@@ -44,6 +44,7 @@ EXTENSIONS = {"core": "mlpfac._kernels", "mujoco": "mlpfac.plants._kernels"}
 MODULES = {  # the modules whose kernels each extension holds
     "core": (
         "mlpfac.elementary",
+        "mlpfac.normal",
         "mlpfac.model",
         "mlpfac.dynamics",
         "mlpfac.control.law",

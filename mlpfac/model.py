@@ -4,23 +4,16 @@ compiled and batch-first (:mod:`mlpfac.jit`): the error (2) of B poses and the k
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 
 import numpy as np
 
+from mlpfac.elementary import cos, sin
 from mlpfac.jit import kernel
 
-# Maths whose bits do not depend on the processor (docs/reproducibility.md): glibc's libm through
-# :mod:`math`, element by element, and small linear algebra written out in correctly rounded
-# arithmetic (+, -, *, /, sqrt; einsum, which never calls BLAS), never numpy's SIMD transcendental
-# loops nor BLAS or LAPACK, whose results depend on the processor's instruction set.
-
-
-def each(fn: Callable[..., float], *xs) -> np.ndarray:
-    """``fn`` (a function of :mod:`math`) on every element of the arrays ``xs``, broadcast together."""
-    arrays = np.broadcast_arrays(*(np.asarray(x, dtype=float) for x in xs))
-    flat = np.fromiter(map(fn, *(a.ravel().tolist() for a in arrays)), float, arrays[0].size)
-    return flat.reshape(arrays[0].shape)
+# Maths whose bits do not depend on the machine (docs/reproducibility.md): mlpfac.elementary's sine and
+# cosine, and small linear algebra written out in correctly rounded arithmetic (+, -, *, /, sqrt;
+# einsum, which never calls BLAS), never numpy's SIMD transcendental loops nor BLAS or LAPACK, whose
+# results depend on the processor's instruction set, nor the C library's maths, which differ between libraries.
 
 
 def dot(a: np.ndarray, b: np.ndarray) -> float:
@@ -133,7 +126,7 @@ def wrap(angle: np.ndarray | float) -> np.ndarray | float:
 
 def tracking_error(q: np.ndarray, q_r: np.ndarray) -> np.ndarray:
     """Eq. (2): the error of pose q = (x, y, theta) to q_r, in the robot's frame; e3 wrapped. (3,)"""
-    c, s = math.cos(q[2]), math.sin(q[2])
+    c, s = cos(q[2]), sin(q[2])
     dx, dy = q_r[0] - q[0], q_r[1] - q[1]
     return np.array([c * dx + s * dy, -s * dx + c * dy, wrap(q_r[2] - q[2])])
 
@@ -141,13 +134,13 @@ def tracking_error(q: np.ndarray, q_r: np.ndarray) -> np.ndarray:
 def pose_from_error(e: np.ndarray, q_r: np.ndarray) -> np.ndarray:
     """The pose q whose error (2) to q_r is e (the inverse of :func:`tracking_error`). (3,)"""
     theta = q_r[2] - e[2]
-    c, s = math.cos(theta), math.sin(theta)
+    c, s = cos(theta), sin(theta)
     return np.array([q_r[0] - (c * e[0] - s * e[1]), q_r[1] - (s * e[0] + c * e[1]), theta])
 
 
 def f_true(e: np.ndarray, v_r: float, omega_r: float, T: float) -> np.ndarray:
     """Eq. (5): the drift of the Euler-discretised error dynamics (3). (3,)"""
-    return np.array([e[0] + T * v_r * math.cos(e[2]), e[1] + T * v_r * math.sin(e[2]), e[2] + T * omega_r])
+    return np.array([e[0] + T * v_r * cos(e[2]), e[1] + T * v_r * sin(e[2]), e[2] + T * omega_r])
 
 
 def G_true(e: np.ndarray, T: float) -> np.ndarray:
@@ -157,14 +150,14 @@ def G_true(e: np.ndarray, T: float) -> np.ndarray:
 
 def h_true(e: np.ndarray, v_r: float, omega_r: float, T: float) -> np.ndarray:
     """Eq. (34) with the true functions: (h1, h2, h5) = (G_12, f_1 - e1, f_3 - e3). (3,)"""
-    return np.array([T * e[1], T * v_r * math.cos(e[2]), T * omega_r])
+    return np.array([T * e[1], T * v_r * cos(e[2]), T * omega_r])
 
 
 @kernel("void(f8[:, ::1], f8[::1], f8[:, ::1])")
 def tracking_errors(q, r, out):
     """Eq. (2) for poses q (B, 3) and one reference sample r (>= 3,): out (B, 3), e3 wrapped to (-pi, pi]."""
     for b in range(q.shape[0]):
-        c, s = math.cos(q[b, 2]), math.sin(q[b, 2])
+        c, s = cos(q[b, 2]), sin(q[b, 2])
         dx, dy = r[0] - q[b, 0], r[1] - q[b, 1]
         out[b, 0] = c * dx + s * dy
         out[b, 1] = -s * dx + c * dy
@@ -178,13 +171,13 @@ def kinematic_step(e, r, r_next, Tp, u, noise, e_out, pose_out, h_true):
     for b in range(e.shape[0]):
         e0, e1, e2 = e[b, 0], e[b, 1], e[b, 2]
         u0, u1 = u[b, 0], u[b, 1]
-        h_true[b, 0], h_true[b, 1], h_true[b, 2] = Tp * e1, Tp * r[3] * math.cos(e2), Tp * r[4]
-        n0 = (e0 + Tp * r[3] * math.cos(e2)) + (-Tp * u0 + Tp * e1 * u1) + noise[b, 0]
-        n1 = (e1 + Tp * r[3] * math.sin(e2)) + (-Tp * e0) * u1 + noise[b, 1]
+        h_true[b, 0], h_true[b, 1], h_true[b, 2] = Tp * e1, Tp * r[3] * cos(e2), Tp * r[4]
+        n0 = (e0 + Tp * r[3] * cos(e2)) + (-Tp * u0 + Tp * e1 * u1) + noise[b, 0]
+        n1 = (e1 + Tp * r[3] * sin(e2)) + (-Tp * e0) * u1 + noise[b, 1]
         n2 = (e2 + Tp * r[4]) + (-Tp) * u1 + noise[b, 2]
         e_out[b, 0], e_out[b, 1], e_out[b, 2] = n0, n1, n2
         th = r_next[2] - n2
-        c, s = math.cos(th), math.sin(th)
+        c, s = cos(th), sin(th)
         pose_out[b, 0] = r_next[0] - (c * n0 - s * n1)
         pose_out[b, 1] = r_next[1] - (s * n0 + c * n1)
         pose_out[b, 2] = th

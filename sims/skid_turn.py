@@ -27,6 +27,7 @@ import sys
 
 import numpy as np
 
+from mlpfac.elementary import hypot
 from mlpfac.plants.config import MujocoConfig
 from mlpfac.plants.mjcf.settle import turning
 from mlpfac.plants.mjcf.wheels import skid_track
@@ -46,7 +47,7 @@ def reached(plant: MujocoPlant, v: float, omega: float, seconds: float = 3.0) ->
         plant.step(np.array([v, omega]))
         poses.append(plant.true_pose().copy())
     a, b = poses[int(round(1 / T)) - 1], poses[-1]
-    return float(np.hypot(*(b - a)[:2]) / (seconds - 1)), float((b - a)[2] / (seconds - 1))
+    return hypot(float(b[0] - a[0]), float(b[1] - a[1])) / (seconds - 1), float((b - a)[2] / (seconds - 1))
 
 
 def main(model: str = MODEL) -> None:

@@ -5,8 +5,9 @@ every array of its record and of its metrics.json): the same object under every 
 numpy and OpenBLAS can be told to take. With ``--trap`` every call of numpy's processor-dispatched
 maths (:data:`TRAPPED`) and of ``np.linalg`` raises while a run is built and stepped, and, in a
 process started with ``LD_PRELOAD`` set to :func:`build_shim`'s library, so does every call into
-BLAS or LAPACK (``@``, ``np.dot``, ``np.linalg``, numba's ``np.dot``): the process aborts, naming
-the function, and faulthandler prints where Python was.
+BLAS or LAPACK (``@``, ``np.dot``, ``np.linalg``, numba's ``np.dot``) and into the C library's
+maths functions that round (``sin``, ``exp``, ``pow``, ...; from anywhere but MuJoCo's library):
+the process aborts, naming the function, and faulthandler prints where Python was.
 """
 
 from __future__ import annotations
@@ -178,6 +179,7 @@ SHIM = r"""
 #include <dlfcn.h>
 #include <link.h>
 #include <stdio.h>
+#include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
 #define HIDDEN __attribute__((visibility("hidden"), used))
@@ -214,7 +216,44 @@ __asm__(".globl blas_trap_slow\n.hidden blas_trap_slow\nblas_trap_slow:\n"
         "movdqu 0(%rsp), %xmm0\nmovdqu 16(%rsp), %xmm1\nmovdqu 32(%rsp), %xmm2\nmovdqu 48(%rsp), %xmm3\n"
         "movdqu 64(%rsp), %xmm4\nmovdqu 80(%rsp), %xmm5\nmovdqu 96(%rsp), %xmm6\nmovdqu 112(%rsp), %xmm7\n"
         "addq $136, %rsp\npopq %r9\npopq %r8\npopq %rcx\npopq %rdx\npopq %rsi\npopq %rdi\njmp *%r11\n");
+/* The C library's maths, whose last bits differ between libraries and processors: armed, a call
+   from anywhere but MuJoCo's own library aborts, naming the function and its caller's library. */
+static uintptr_t libm_allowed[16][2];
+static int libm_nallowed;
+static int libm_note(struct dl_phdr_info *info, size_t size, void *data) {
+    if (!info->dlpi_name || !strstr(info->dlpi_name, "libmujoco")) return 0;
+    for (int j = 0; j < info->dlpi_phnum && libm_nallowed < 16; j++, libm_nallowed++) {
+        libm_allowed[libm_nallowed][0] = info->dlpi_addr + info->dlpi_phdr[j].p_vaddr;
+        libm_allowed[libm_nallowed][1] = libm_allowed[libm_nallowed][0] + info->dlpi_phdr[j].p_memsz;
+    }
+    return 0;
+}
+HIDDEN void libm_check(const char *name, void *caller) {
+    if (!blas_trap_armed) return;
+    if (!libm_nallowed) dl_iterate_phdr(libm_note, NULL);
+    for (int i = 0; i < libm_nallowed; i++)
+        if ((uintptr_t)caller >= libm_allowed[i][0] && (uintptr_t)caller < libm_allowed[i][1]) return;
+    Dl_info info;
+    fprintf(stderr, "the C library's %s called in the simulated path from %s (its bits depend on the maths library)\n",
+            name, dladdr(caller, &info) && info.dli_fname ? info.dli_fname : "?");
+    fflush(stderr);
+    abort();
+}
+#define LIBM1(f) double f(double x) { static double (*real)(double); \
+    libm_check(#f, __builtin_return_address(0)); if (!real) real = dlsym(RTLD_NEXT, #f); return real(x); }
+#define LIBM2(f) double f(double x, double y) { static double (*real)(double, double); \
+    libm_check(#f, __builtin_return_address(0)); if (!real) real = dlsym(RTLD_NEXT, #f); return real(x, y); }
+void sincos(double x, double *s, double *c) {
+    static void (*real)(double, double *, double *);
+    libm_check("sincos", __builtin_return_address(0));
+    if (!real) real = dlsym(RTLD_NEXT, "sincos");
+    real(x, s, c);
+}
 """
+LIBM = {  # the C library's functions of doubles that round (not sqrt, fmod, floor, frexp, ldexp: exact)
+    1: "sin cos tan asin acos atan sinh cosh tanh asinh acosh atanh exp exp2 exp10 expm1 log log2 log10 log1p cbrt erf erfc lgamma tgamma",
+    2: "atan2 pow hypot",
+}
 STUB = (
     '__asm__(".globl {name}\\n.type {name},@function\\n{name}:\\n'
     "cmpl $0, blas_trap_armed(%rip)\\njne 1f\\nmovq blas_trap_reals+{off}(%rip), %r11\\n"
@@ -226,9 +265,10 @@ STUB = (
 
 def build_shim(folder: Path) -> Path | None:
     """A library that, preloaded, stands in front of every BLAS and LAPACK function numpy, numpy's
-    linalg and scipy's BLAS (numba's ``np.dot``) import: armed, it aborts naming the function;
-    otherwise it jumps to the real one (found on its first call). None where no C compiler or
-    ``nm`` is found."""
+    linalg and scipy's BLAS (numba's ``np.dot``) import, and of the C library's maths functions of
+    :data:`LIBM`: armed, it aborts naming the function (a maths function called from MuJoCo's own
+    library excepted); otherwise it jumps to the real one (found on its first call). None where no
+    C compiler or ``nm`` is found."""
     import shutil
 
     cc, nm = shutil.which("cc") or shutil.which("gcc"), shutil.which("nm")
@@ -253,9 +293,11 @@ def build_shim(folder: Path) -> Path | None:
     src += [f'HIDDEN const char blas_trap_str_{i}[] = "{n}";' for i, n in enumerate(names)]
     src += ["const char *blas_trap_names[] = {" + ", ".join(f"blas_trap_str_{i}" for i in range(len(names))) + "};"]
     src += [STUB.format(name=n, i=i, off=8 * i) for i, n in enumerate(names)]
+    src += [f"LIBM{k}({f})" for k, fs in LIBM.items() for f in fs.split()]
     (folder / "blas_trap.c").write_text("\n".join(src) + "\n")
     out = folder / "blas_trap.so"
-    subprocess.run([cc, "-shared", "-fPIC", "-O1", "-o", str(out), str(folder / "blas_trap.c"), "-ldl"], check=True)
+    cmd = [cc, "-shared", "-fPIC", "-O1", "-fno-builtin", "-o", str(out), str(folder / "blas_trap.c"), "-ldl"]
+    subprocess.run(cmd, check=True)
     return out
 
 

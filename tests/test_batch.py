@@ -36,12 +36,12 @@ def same_run(a, b) -> None:
 
 @pytest.mark.parametrize("controller", ["adaptive", "corradini", "kanayama"])
 def test_batch_equals_one_at_a_time(controller):
-    # seed 0 diverges with the adaptive law: the batch must drop it there and go on
+    # seed 2 diverges with the adaptive law: the batch must drop it there and go on
     scns = [tight(controller, s, 3.0) for s in range(4)]
     recs = run_batch(scns)
     singles = [run(s) for s in scns]
     if controller == "adaptive":
-        assert [r.status for r in singles] == ["diverged", "ok", "ok", "ok"]
+        assert [r.status for r in singles] == ["ok", "ok", "diverged", "ok"]
     for a, b in zip(recs, singles, strict=True):
         same_run(a, b)
 

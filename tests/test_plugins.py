@@ -387,7 +387,9 @@ def test_the_readmes_controller_runs_as_written(tmp_path):
     import re
 
     text = (REPO / "README.md").read_text()
-    code = re.search(r"```python\n((?:# my_law.py\n)?from math import cos, sin\n\s*class MyLaw.*?)```", text, re.S)
+    code = re.search(
+        r"```python\n((?:# my_law.py\n)?from mlpfac.elementary import cos, sin[^\n]*\n\s*class MyLaw.*?)```", text, re.S
+    )
     assert code, "README: the my_law.py block"
     (tmp_path / "my_law.py").write_text(code.group(1))
     scn = mlpfac.parse({"duration": 1.0, "plant": {"kind": "kinematic"}, "initial": {"error": [0.05, 0.02, 0.1]}})

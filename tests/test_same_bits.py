@@ -6,15 +6,16 @@ depend on the machine the tests run on:
   subprocesses under every SIMD dispatch numpy and OpenBLAS can be told to take, each giving the
   bits of the default;
 - the same runs with numpy's processor-dispatched maths wrapped to raise, and every BLAS and LAPACK
-  function numpy, its linalg and scipy's BLAS (numba's ``np.dot``) call replaced by a trap
-  (a preloaded library), armed while a run is planned, built and stepped: a new call in the
-  simulated path fails here whatever the processor.
+  function numpy, its linalg and scipy's BLAS (numba's ``np.dot``) call and every function of the
+  C library's maths that rounds (sin, exp, pow, ...: from Python's math, a float's ``**``, a kernel,
+  numpy's normal sampler; MuJoCo's own calls excepted) replaced by a trap (a preloaded library),
+  armed while a run is planned, built and stepped: a new call in the simulated path fails here
+  whatever the processor and maths library.
 """
 
 from __future__ import annotations
 
 import json
-import math
 import os
 import subprocess
 import sys
@@ -117,11 +118,15 @@ def test_nothing_in_the_simulated_path_calls_dispatched_maths_or_blas(shim, disp
         ("np.linalg.cholesky(np.eye(3))", "np.linalg.cholesky called"),
         ("np.tanh(np.ones(3))", "np.tanh called"),
         ("np.arctan2(1.0, 2.0)", "np.arctan2 called"),
+        ("math.sin(1.0)", "the C library's sin called"),
+        ("x = 1.1; x ** 2.0", "the C library's pow called"),
+        ("np.random.default_rng(0).standard_normal(10000)", "the C library's exp called"),
     ],
 )
 def test_the_trap_catches(shim, snippet, says):
-    """The trap can fail: each kind of call it stands in front of, armed, ends the process naming it."""
-    code = f"import sys; sys.path.insert(0, {str(HERE)!r}); import numpy as np, same_bits as sb\n"
+    """The trap can fail: each kind of call it stands in front of, armed, ends the process naming it
+    (numpy's ziggurat, ``Generator.standard_normal``, calls the C library's exp in its wedges)."""
+    code = f"import math, sys; sys.path.insert(0, {str(HERE)!r}); import numpy as np, same_bits as sb\n"
     code += f"sb.install_trap()\n{snippet}\nwith sb.armed():\n    {snippet}\n"
     out = subprocess.run(
         [sys.executable, "-c", code], env=os.environ | {"LD_PRELOAD": str(shim)}, capture_output=True, text=True
@@ -174,7 +179,8 @@ def test_the_linear_algebra_written_out_agrees_with_lapack(n):
     against numpy's LAPACK, to rounding; a semi-definite matrix's zero pivot gives a zero column."""
     import numpy as np
 
-    from mlpfac.model import cholesky, each, eigh, solve_lower, solve_spd
+    from mlpfac.elementary import atan2, each
+    from mlpfac.model import cholesky, eigh, solve_lower, solve_spd
 
     rng = np.random.default_rng(n)
     M = rng.standard_normal((5, n, n))
@@ -190,4 +196,4 @@ def test_the_linear_algebra_written_out_agrees_with_lapack(n):
     np.testing.assert_allclose((V * w[..., None, :]) @ np.swapaxes(V, -1, -2), S, atol=1e-12)
     assert (cholesky(np.diag([4.0, 0.0, 9.0])) == np.diag([2.0, 0.0, 3.0])).all()
     x = np.linspace(-3.0, 3.0, 7).reshape(7, 1)
-    assert each(math.atan2, x, 2.0).shape == (7, 1) and each(math.atan2, x, 2.0)[0, 0] == math.atan2(-3.0, 2.0)
+    assert each(atan2, x, 2.0).shape == (7, 1) and each(atan2, x, 2.0)[0, 0] == atan2(-3.0, 2.0)

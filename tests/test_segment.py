@@ -88,7 +88,7 @@ def test_adaptive_batch_compiled_records_max_weight_as_the_step_by_step_loop():
     from mlpfac.loop.runner import _loop
 
     scn = _short("eight-payload", "adaptive", 2.0)
-    scns = [dataclasses.replace(scn.with_overrides(seed=s), divergence_m=0.112) for s in range(4)]  # stops 0 and 2
+    scns = [dataclasses.replace(scn.with_overrides(seed=s), divergence_m=0.125) for s in range(4)]  # stops 2 and 3
     ref = sample(scn.reference, np.arange(scn.steps + 1) * scn.T)
 
     def batch(on_step):

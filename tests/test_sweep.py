@@ -310,11 +310,11 @@ def test_compare_table(tmp_path, capsys):
 def test_worst_seed_is_the_first_to_diverge(tmp_path):
     from test_batch import DIVERGENCE_M
 
-    t = load("paper").table | {"divergence_m": DIVERGENCE_M}  # seed 0 diverges, seed 1 does not
+    t = load("paper").table | {"divergence_m": DIVERGENCE_M}  # seed 2 diverges, seed 1 does not
     (tmp_path / "tight.toml").write_text(to_toml(t))
-    jobs = sweep.plan([str(tmp_path / "tight.toml")], ["adaptive"], [0, 1], 3.0)
+    jobs = sweep.plan([str(tmp_path / "tight.toml")], ["adaptive"], [1, 2], 3.0)
     rows = table(jobs, sweep.execute(jobs, tmp_path / "out"))
-    assert rows[0]["worst_seed"] == 0 and rows[0]["worst_status"] == "diverged" and rows[0]["bounded"] == 1
+    assert rows[0]["worst_seed"] == 2 and rows[0]["worst_status"] == "diverged" and rows[0]["bounded"] == 1
     assert rows[0]["pos_rms_m_ci_lo"] is None  # one bounded run: no interval
 
 

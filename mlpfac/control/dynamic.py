@@ -37,6 +37,7 @@ import numpy as np
 from mlpfac.control.baselines import Stepped
 from mlpfac.control.oracle import Oracle
 from mlpfac.dynamics import P_TMAX, torque_of
+from mlpfac.elementary import cos, sin
 from mlpfac.jit import kernel, seeds
 from mlpfac.plants.events import DelayLine
 
@@ -60,7 +61,7 @@ def fierro_lewis_step(e, r, r_dot, twist, p, g, tau, vc):
     for i in range(e.shape[0]):
         e1, e2, e3 = e[i, 0], e[i, 1], e[i, 2]
         v, w = twist[i, 0], twist[i, 1]
-        c3, s3 = math.cos(e3), math.sin(e3)
+        c3, s3 = cos(e3), sin(e3)
         v_c = v_r * c3 + kx * e1
         w_c = w_r + v_r * (ky * e2 + kth * s3)
         de1 = w * e2 - v + v_r * c3

@@ -25,6 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from mlpfac.elementary import cos, sin
 from mlpfac.exceptions import ConfigError
 from mlpfac.jit import kernel
 
@@ -153,7 +154,7 @@ def corradini_step(e, v_r, omega_r, T, l1, l2, l3, v_max, omega_max, h_hat, u):
     """(35) given the nominal h1 = T e2, h2 = T v_r cos e3, h5 = T omega_r, for B seeds."""
     for b in range(e.shape[0]):
         e0, e1, e2 = e[b, 0], e[b, 1], e[b, 2]
-        h1, h2, h5 = T * e1, T * v_r * math.cos(e2), T * omega_r
+        h1, h2, h5 = T * e1, T * v_r * cos(e2), T * omega_r
         h_hat[b, 0], h_hat[b, 1], h_hat[b, 2] = h1, h2, h5
         _law(e0, e1, e2, h1, h2, h5, v_r, T, l1, l2, l3, v_max, omega_max, u[b])
 
@@ -162,8 +163,8 @@ def corradini_step(e, v_r, omega_r, T, l1, l2, l3, v_max, omega_max, h_hat, u):
 def kanayama_step(e, v_r, omega_r, Kx, Ky, Ktheta, v_max, omega_max, u):
     """Kanayama's law for B seeds: v = v_r cos e3 + Kx e1, omega = omega_r + v_r (Ky e2 + Ktheta sin e3)."""
     for b in range(e.shape[0]):
-        v = v_r * math.cos(e[b, 2]) + Kx * e[b, 0]
-        omega = omega_r + v_r * (Ky * e[b, 1] + Ktheta * math.sin(e[b, 2]))
+        v = v_r * cos(e[b, 2]) + Kx * e[b, 0]
+        omega = omega_r + v_r * (Ky * e[b, 1] + Ktheta * sin(e[b, 2]))
         u[b, 0] = min(max(v, -v_max), v_max)
         u[b, 1] = min(max(omega, -omega_max), omega_max)
 

@@ -58,15 +58,16 @@ import numpy as np
 
 from mlpfac.control.baselines import Stepped
 from mlpfac.control.law import Law, corradini_step, kanayama_step
+from mlpfac.elementary import asin, cos, each, sin
 from mlpfac.jit import as_rows, seeds
-from mlpfac.model import each, tracking_errors
+from mlpfac.model import tracking_errors
 from mlpfac.plants.events import ControlPeriod, DelayLine, Event, SensorDelay, WheelRadius
 
 
 def _sinc(half: float) -> float:
     """sin(half) / half, computed as ``np.sinc(half / pi)`` computes it, with glibc's sine."""
     y = math.pi * (half / math.pi or 1.0e-20)
-    return math.sin(y) / y
+    return sin(y) / y
 
 
 TURNING = ("payload",)  # the events whose turning a skid-steer's oracle is told
@@ -160,7 +161,7 @@ class Oracle(Stepped):
             T_law, c = T, self.hold
         if self.ahead and r[3] > 0.0:  # the heading led by phi: the sliding pose frame follows the path
             E = E.copy()
-            E[:, 2] += math.asin(min(max(self.ahead * float(r[4]) / float(r[3]), -1.0), 1.0))
+            E[:, 2] += asin(min(max(self.ahead * float(r[4]) / float(r[3]), -1.0), 1.0))
         v_max, omega_max = self._limits
         if self.kanayama is not None:  # a velocity law: the robot's c T per step is c times the motion meant
             kanayama_step(E, float(r[3]), float(r[4]), *self.kanayama, c * v_max, c * omega_max, self._u)
@@ -181,12 +182,12 @@ class Oracle(Stepped):
     def _predict(self, E: np.ndarray, r: np.ndarray, sent: list) -> np.ndarray:
         """The error (2) to r of the pose the measured one reaches through ``sent``: exact unicycle arcs."""
         th = r[2] - E[:, 2]
-        c, s = each(math.cos, th), each(math.sin, th)
+        c, s = each(cos, th), each(sin, th)
         x, y = r[0] - (c * E[:, 0] - s * E[:, 1]), r[1] - (s * E[:, 0] + c * E[:, 1])
         for u, dt in sent:
             half = 0.5 * u[:, 1] * dt
             ds = u[:, 0] * dt * each(_sinc, half)  # chord of the arc: v dt sin(half) / half
-            x, y, th = x + ds * each(math.cos, th + half), y + ds * each(math.sin, th + half), th + 2.0 * half
+            x, y, th = x + ds * each(cos, th + half), y + ds * each(sin, th + half), th + 2.0 * half
         self._q[:, 0], self._q[:, 1], self._q[:, 2] = x, y, th
         tracking_errors(self._q, r, self._e)
         return self._e

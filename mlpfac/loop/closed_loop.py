@@ -5,13 +5,13 @@ kernel, to the same bits. :mod:`mlpfac.loop.runner` builds what it needs and run
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 
 import numpy as np
 
 from mlpfac.control.baselines import LawKernel, StateKernel, Stepped
 from mlpfac.control.torque import Observation, reference_rates
+from mlpfac.elementary import hypot
 from mlpfac.interrupts import raise_swallowed
 from mlpfac.loop.compiled import ADAPTIVE, BAD, no_state, segment
 from mlpfac.loop.kernels import bad_seeds
@@ -333,7 +333,7 @@ def _clear_after(rec: RunRecord, stop: tuple[int, int] | None, plant_store: dict
 
 def _diverged(q: np.ndarray, u: np.ndarray, e_true: np.ndarray, z: np.ndarray | None, limit_m: float) -> str | None:
     """Why one seed's step diverged (the reasons of :func:`mlpfac.loop.kernels.bad_seeds`), or None."""
-    err = math.hypot(e_true[0], e_true[1])
+    err = hypot(e_true[0], e_true[1])
     if not (np.isfinite(q).all() and np.isfinite(u).all()):
         return "non-finite pose or command"
     if z is not None and not np.isfinite(z).all():

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 
+from mlpfac.elementary import hypot
 from mlpfac.jit import kernel
 
 
@@ -17,7 +18,7 @@ def bad_seeds(q, u, e_true, z, limit, bad):
         s = q[b, 0] + q[b, 1] + q[b, 2] + u[b, 0] + u[b, 1]
         for i in range(z.shape[1]):
             s += z[b, i] * 0.0
-        x = math.hypot(e_true[b, 0], e_true[b, 1])
+        x = hypot(e_true[b, 0], e_true[b, 1])
         bad[b] = not (math.isfinite(s) and x <= limit)
         n += bad[b]
     return n

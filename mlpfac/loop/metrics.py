@@ -28,15 +28,15 @@ def _stats(rec: RunRecord, lo: int, hi: int) -> dict:
             "max_position_error_m": None,
             "rms_heading_error_rad": None,
         }
-    from mlpfac.model import each  # here: importing the kernels' module checks MLPFAC_KERNELS
+    from mlpfac.elementary import each, hypot  # here: importing the kernels' module checks MLPFAC_KERNELS
 
-    pos = each(math.hypot, e[:, 0], e[:, 1])  # glibc's, not numpy's SIMD loop (docs/reproducibility.md)
+    pos = each(hypot, e[:, 0], e[:, 1])  # ours, not numpy's SIMD loop nor math's (docs/reproducibility.md)
     return {
         "start_s": lo * rec.T,
         "end_s": hi * rec.T,
-        "rms_position_error_m": float(np.sqrt(np.mean(pos**2))),
+        "rms_position_error_m": float(np.sqrt(np.mean(pos * pos))),
         "max_position_error_m": float(np.max(pos)),
-        "rms_heading_error_rad": float(np.sqrt(np.mean(e[:, 2] ** 2))),
+        "rms_heading_error_rad": float(np.sqrt(np.mean(e[:, 2] * e[:, 2]))),
     }
 
 
@@ -230,7 +230,7 @@ class RunMetrics:
 
         def rms(key: str) -> float:
             return math.sqrt(
-                math.fsum(wi * getattr(p, key) ** 2 for wi, p in zip(w, parts, strict=True)) / math.fsum(w)
+                math.fsum(wi * getattr(p, key) * getattr(p, key) for wi, p in zip(w, parts, strict=True)) / math.fsum(w)
             )
 
         return rms("rms_position_error_m"), max(p.max_position_error_m for p in parts), rms("rms_heading_error_rad")

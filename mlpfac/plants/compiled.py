@@ -30,6 +30,7 @@ from typing import NamedTuple
 import mujoco
 import numpy as np
 
+from mlpfac.elementary import atan2, cos, sin
 from mlpfac.exceptions import ConfigError
 from mlpfac.jit import SALT, WHY, built, kernel
 from mlpfac.plants.events import delay_push
@@ -174,7 +175,7 @@ ctypes.c_void_p.in_dll(_LIB, "mju_user_warning").value = ctypes.cast(_warning, c
 @kernel("f8(f8[::1])", ext="mujoco", error_model="python")
 def yaw(xmat: np.ndarray) -> float:
     """Heading of a frame: the angle of its x axis projected on the floor, atan2(R[1, 0], R[0, 0])."""
-    return math.atan2(xmat[3], xmat[0])
+    return atan2(xmat[3], xmat[0])
 
 
 @kernel()
@@ -339,7 +340,7 @@ def plant_step(u0, u1, draw, tele, robot):
     mj_objectVelocity(robot.mp, robot.dp, OBJ_SITE, ints[I_SITE], vel.ctypes.data, 0)  # (angular, linear), world
     th = st[S_THETA]
     tele[0], tele[1] = body_velocity_vw(ml, mr, fl[F_IK_R], fl[F_IK_TRACK])
-    tele[2], tele[3] = vel[3] * math.cos(th) + vel[4] * math.sin(th), vel[2]
+    tele[2], tele[3] = vel[3] * cos(th) + vel[4] * sin(th), vel[2]
     tele[4], tele[5] = (math.nan, math.nan) if ints[I_TAU] else (wl, wr)
     tele[6], tele[7] = ml, mr
     tele[8], tele[9] = sl * robot.qfrc[dl], sr * robot.qfrc[dr]  # as applied: joint limits included

@@ -14,6 +14,7 @@ import numpy as np
 from mlpfac.exceptions import ConfigError
 from mlpfac.jit import as_rows
 from mlpfac.model import cholesky, pose_from_error, tracking_error
+from mlpfac.normal import standard_normal
 from mlpfac.plants.events import ControlPeriod, DelayLine, Event, SensorDelay
 from mlpfac.tables import covariance
 
@@ -58,7 +59,7 @@ class KinematicPlant:
         self.noise = np.zeros((max(N, 1), B, 3))  # step k's noise: one contiguous (B, 3)
         if self.L is not None:
             for b, g in enumerate(rngs):  # each seed alone: L eps_k, eps_k ~ N(0, I)
-                self.noise[:, b] = np.einsum("nk,jk->nj", g.standard_normal((N, 3)), self.L)  # not BLAS
+                self.noise[:, b] = np.einsum("nk,jk->nj", standard_normal(g, (N, 3)), self.L)  # not BLAS
         self._pose = np.array([pose_from_error(e, self.ref[0]) for e in self.e])
         self.history = DelayLine(self._pose)
         self._u, self._h = np.zeros((B, 2)), np.zeros((B, 3))

@@ -36,6 +36,8 @@ from collections.abc import Sequence
 import mujoco
 import numpy as np
 
+from mlpfac.elementary import cos, sin
+from mlpfac.normal import standard_normal
 from mlpfac.plants import compiled as K  # noqa: N812 - the kernel's layout constants, K.F_DT ...
 from mlpfac.plants.config import MujocoConfig
 from mlpfac.plants.events import EVENT_KINDS, DelayLine
@@ -48,7 +50,7 @@ from mlpfac.plants.mujoco_events import MujocoEvents
 from mlpfac.plants.mujoco_report import MujocoReport
 from mlpfac.plants.mujoco_torque import TorqueDrive
 
-NOISE_CHUNK = 1024  # pose-noise draws made at once: the same stream as one draw of 3 per step
+NOISE_CHUNK = 1024  # pose-noise draws (3 deviates each) made at once: the values of one long draw
 
 
 class _Kept:
@@ -184,7 +186,7 @@ class MujocoPlant(MujocoEvents, TorqueDrive, MujocoReport):
         # Turn the rest pose about the vertical through the site, then move the site to (x0, y0).
         p_site, yaw_site = self._site_rest
         turn = float(q0[2]) - yaw_site
-        c, s = math.cos(turn), math.sin(turn)
+        c, s = cos(turn), sin(turn)
         Rz = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
         root = slice(self._qroot, self._qroot + 7)
         pos, quat = d.qpos[root][:3].copy(), d.qpos[root][3:].copy()
@@ -195,7 +197,7 @@ class MujocoPlant(MujocoEvents, TorqueDrive, MujocoReport):
         ]
         mujoco.mju_mulQuat(
             d.qpos[self._qroot + 3 : self._qroot + 7],
-            np.array([math.cos(turn / 2), 0.0, 0.0, math.sin(turn / 2)]),
+            np.array([cos(turn / 2), 0.0, 0.0, sin(turn / 2)]),
             quat,
         )
         mujoco.mj_forward(m, d)
@@ -222,7 +224,7 @@ class MujocoPlant(MujocoEvents, TorqueDrive, MujocoReport):
             mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_SITE, self._site, v, 0)
             th = float(q0[2])
             wheels = [s * d.qvel[dof] for s, dof in zip(self._sign, self._dofs, strict=True)]
-            self._measure_motion(v[3] * math.cos(th) + v[4] * math.sin(th), v[2], *wheels)
+            self._measure_motion(v[3] * cos(th) + v[4] * sin(th), v[2], *wheels)
 
     def _views(self) -> None:
         """What the compiled step reads and writes: the current model and data (their addresses and
@@ -266,8 +268,8 @@ class MujocoPlant(MujocoEvents, TorqueDrive, MujocoReport):
         out = np.empty((n, 3))
         i = 0
         while i < n:
-            if not self._noise_left:  # NOISE_CHUNK steps' draws at once: the values one draw per step gives
-                self._noise_draws, self._noise_left = self.rng.standard_normal((NOISE_CHUNK, 3)), NOISE_CHUNK
+            if not self._noise_left:  # NOISE_CHUNK steps' draws at once
+                self._noise_draws, self._noise_left = standard_normal(self.rng, (NOISE_CHUNK, 3)), NOISE_CHUNK
             j = NOISE_CHUNK - self._noise_left
             take = min(n - i, self._noise_left)
             out[i : i + take] = self._noise_draws[j : j + take]
@@ -279,7 +281,7 @@ class MujocoPlant(MujocoEvents, TorqueDrive, MujocoReport):
         """Body velocity (v, omega) at the site, the wheels rolling to match it."""
         m, d = self.model, self.data
         omega_w = np.array([0.0, 0.0, omega])
-        v_site = np.array([v * math.cos(theta), v * math.sin(theta), 0.0])
+        v_site = np.array([v * cos(theta), v * sin(theta), 0.0])
         d.qvel[self._droot : self._droot + 3] = v_site + np.cross(omega_w, d.xpos[self._root] - d.site_xpos[self._site])
         d.qvel[self._droot + 3 : self._droot + 6] = np.einsum(
             "ji,j->i", d.xmat[self._root].reshape(3, 3), omega_w

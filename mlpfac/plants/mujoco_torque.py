@@ -10,6 +10,7 @@ import dataclasses
 
 import numpy as np
 
+from mlpfac.normal import standard_normal
 from mlpfac.plants import compiled as K  # noqa: N812 - the kernel's layout constants, K.F_DT ...
 from mlpfac.plants.mjcf import drive
 from mlpfac.plants.mjcf.edits import torque_limit
@@ -53,7 +54,7 @@ class TorqueDrive:
         x = np.array([v, omega, wl, wr])
         std = self._motion_std
         if std is not None:
-            x += std * self._motion_rng.standard_normal(4)
+            x += std * standard_normal(self._motion_rng, 4)
         self._motion.push(x)
 
     def motion(self) -> np.ndarray:

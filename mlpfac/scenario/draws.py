@@ -52,8 +52,10 @@ class Distribution:
         rng = np.random.default_rng(np.random.SeedSequence([DRAW_STREAM, seed, zlib.crc32(key.encode())]))
         if self.kind == "uniform":
             return float(self.a + (self.b - self.a) * rng.random())
+        from mlpfac.normal import normal  # here: importing the kernels' module checks MLPFAC_KERNELS
+
         while True:
-            x = float(rng.normal(self.a, self.b))
+            x = normal(rng, self.a, self.b)
             if abs(x - self.a) <= NORMAL_CUT * self.b:
                 return x
 

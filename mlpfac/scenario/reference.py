@@ -11,13 +11,12 @@ p_s(t) = p(speed t), so v_r and omega_r are x speed and the accelerations x spee
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
 
+from mlpfac.elementary import atan2, cos, each, sin
 from mlpfac.exceptions import ConfigError
-from mlpfac.model import each
 
 
 @dataclass(frozen=True)
@@ -31,15 +30,15 @@ class Eight:
     speed: float = 1.0  # x, the same path traversed this many times as fast
 
     def derivatives(self, t: np.ndarray) -> tuple[np.ndarray, ...]:
-        cx, sx = each(math.cos, self.wx * t), each(math.sin, self.wx * t)
-        cy, sy = each(math.cos, self.wy * t), each(math.sin, self.wy * t)
+        cx, sx = each(cos, self.wx * t), each(sin, self.wx * t)
+        cy, sy = each(cos, self.wy * t), each(sin, self.wy * t)
         return (
             self.ax * cx,
             self.ay * sy,
             -self.ax * self.wx * sx,
             self.ay * self.wy * cy,
-            -self.ax * self.wx**2 * cx,
-            -self.ay * self.wy**2 * sy,
+            -self.ax * (self.wx * self.wx) * cx,
+            -self.ay * (self.wy * self.wy) * sy,
         )
 
 
@@ -54,7 +53,7 @@ class Circle:
     speed: float = 1.0  # x, the same path traversed this many times as fast
 
     def derivatives(self, t: np.ndarray) -> tuple[np.ndarray, ...]:
-        c, s = each(math.cos, self.rate * t), each(math.sin, self.rate * t)
+        c, s = each(cos, self.rate * t), each(sin, self.rate * t)
         r, w = self.radius, self.rate
         return (self.cx + r * c, self.cy + r * s, -r * w * s, r * w * c, -r * w * w * c, -r * w * w * s)
 
@@ -70,7 +69,7 @@ class Line:
     speed: float = 1.0  # x, the same path traversed this many times as fast
 
     def derivatives(self, t: np.ndarray) -> tuple[np.ndarray, ...]:
-        dx, dy = self.v * math.cos(self.heading), self.v * math.sin(self.heading)
+        dx, dy = self.v * cos(self.heading), self.v * sin(self.heading)
         zero = np.zeros_like(t)
         return (self.x0 + dx * t, self.y0 + dy * t, dx + zero, dy + zero, zero, zero)
 
@@ -86,16 +85,18 @@ class Lemniscate:
 
     def derivatives(self, t: np.ndarray) -> tuple[np.ndarray, ...]:
         s, w, a = self.rate * t, self.rate, self.a
-        sn, cs = each(math.sin, s), each(math.cos, s)
-        d = 1.0 + sn**2
+        sn, cs = each(sin, s), each(cos, s)
+        d = 1.0 + sn * sn
         x = a * cs / d
         y = a * sn * cs / d
         # d/ds of x and y, then chain rule with ds/dt = w.
         s2 = sn * sn
-        xs = a * sn * (s2 - 3.0) / d**2  # dx/ds
-        ys = -a * (3.0 * s2 - 1.0) / d**2  # dy/ds
-        xss = -a * cs * (s2 * s2 - 12.0 * s2 + 3.0) / (d * d * d)  # not d**3: numpy's pow is dispatched
-        yss = -a * (14.0 * each(math.sin, 2.0 * s) + 3.0 * each(math.sin, 4.0 * s)) / (4.0 * (d * d * d))
+        xs = a * sn * (s2 - 3.0) / (d * d)  # dx/ds
+        ys = -a * (3.0 * s2 - 1.0) / (d * d)  # dy/ds
+        xss = (
+            -a * cs * (s2 * s2 - 12.0 * s2 + 3.0) / (d * d * d)
+        )  # not d**3: pow is the C library's, or numpy's dispatched
+        yss = -a * (14.0 * each(sin, 2.0 * s) + 3.0 * each(sin, 4.0 * s)) / (4.0 * (d * d * d))
         return x, y, w * xs, w * ys, w * w * xss, w * w * yss
 
 
@@ -112,7 +113,7 @@ def sample(curve: Eight | Circle | Line | Lemniscate, t: np.ndarray) -> np.ndarr
     x, y, dx, dy, ddx, ddy = curve.derivatives(k * t)
     dx, dy, ddx, ddy = k * dx, k * dy, k * k * ddx, k * k * ddy
     speed2 = dx * dx + dy * dy
-    theta = np.unwrap(each(math.atan2, dy, dx))
+    theta = np.unwrap(each(atan2, dy, dx))
     v = np.sqrt(speed2)
     omega = (dx * ddy - dy * ddx) / speed2
     return np.stack([x, y, theta, v, omega], axis=-1)

@@ -22,7 +22,7 @@ def _ci95(xs: list[float]) -> tuple[float | None, float | None]:
     from scipy.stats import t
 
     mean = math.fsum(xs) / n
-    sd = math.sqrt(math.fsum((x - mean) ** 2 for x in xs) / (n - 1))
+    sd = math.sqrt(math.fsum((x - mean) * (x - mean) for x in xs) / (n - 1))
     half = float(t.ppf(0.975, n - 1)) * sd / math.sqrt(n)
     return mean - half, mean + half
 

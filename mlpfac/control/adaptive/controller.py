@@ -16,6 +16,7 @@ from mlpfac.control.law import GAIN_RANGE, Law
 from mlpfac.control.variants import VARIANTS  # noqa: F401 -- exported here too (factory, scenario, controllers)
 from mlpfac.jit import as_rows
 from mlpfac.model import G_true, f_true, wrap
+from mlpfac.normal import normal
 from mlpfac.tables import covariance
 
 
@@ -71,7 +72,7 @@ class Adaptive(Stepped):
 
     def _initial_weights(self, rng: np.random.Generator) -> np.ndarray:
         c, a = self.config, self.nets.alpha
-        z0 = rng.normal(0.0, c.weight_std, a)
+        z0 = normal(rng, 0.0, c.weight_std, a)
         if c.output_weight_std is not None:  # rescale the same draws: the random stream does not change
             z0[self.nets.output_mask()] *= c.output_weight_std / c.weight_std
         return z0

@@ -51,6 +51,7 @@ import math
 
 import numpy as np
 
+from mlpfac.elementary import cos, sin
 from mlpfac.jit import kernel
 
 # columns of the per-seed state S
@@ -72,7 +73,7 @@ QUIET_STEPS = 300  # steps without a decision after the input model's alarm (g s
 def pose_of(e, r, q):
     """The pose q whose error (2) to r is e: (2) inverted."""
     th = r[2] - e[2]
-    c, s = math.cos(th), math.sin(th)
+    c, s = cos(th), sin(th)
     q[0] = r[0] - (c * e[0] - s * e[1])
     q[1] = r[1] - (s * e[0] + c * e[1])
     q[2] = th
@@ -84,7 +85,7 @@ def motion(q, qp, T, y):
     mid heading, the heading increment over T)."""
     dth = math.pi - ((math.pi - (q[2] - qp[2])) % (2.0 * math.pi))
     mid = qp[2] + 0.5 * dth
-    y[0] = (math.cos(mid) * (q[0] - qp[0]) + math.sin(mid) * (q[1] - qp[1])) / T
+    y[0] = (cos(mid) * (q[0] - qp[0]) + sin(mid) * (q[1] - qp[1])) / T
     y[1] = dth / T
 
 

@@ -31,6 +31,7 @@ from mlpfac.control.baselines import Stepped
 from mlpfac.control.dynamic import fierro_lewis_step
 from mlpfac.dynamics import P_B, P_M11, P_M22, P_R, P_TMAX, accel_of
 from mlpfac.jit import kernel, seeds
+from mlpfac.normal import normal
 
 LF, LG, NF = 8, 1, 3  # hidden sigmoids of NN_f and NN_G, inputs of NN_f
 ALPHA = 3 * LF + NF * LF + 6 * LG + 3 * LG
@@ -122,7 +123,7 @@ class AdaptiveDynamic(Stepped):
         hidden[3 * LF : 3 * LF + NF * LF] = True
         hidden[3 * LF + NF * LF + 6 * LG :] = True
         for b, g in enumerate(rngs):
-            self.z[b, hidden] = g.normal(0.0, HIDDEN_STD, int(hidden.sum()))
+            self.z[b, hidden] = normal(g, 0.0, HIDDEN_STD, int(hidden.sum()))
         self.P = np.zeros((B, ALPHA, ALPHA))
         for b in range(B):
             self.P[b][np.diag_indices(ALPHA)] = P0

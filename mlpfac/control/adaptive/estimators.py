@@ -156,13 +156,13 @@ class UKF(_WeightFilter):
         n = self.z.shape[-1]
         P0 = np.array(np.broadcast_to(P0, (*self.z.shape, n)), dtype=float)
         self.S = cholesky(P0)  # (..., n, n), P = S S'
-        lam = alpha**2 * (n + kappa) - n
+        lam = alpha * alpha * (n + kappa) - n
         if not n + lam > 0:
             raise ConfigError("ukf_alpha", f"need alpha^2 (n + kappa) > 0, got alpha = {alpha}, kappa = {kappa}")
         self.gamma = np.sqrt(n + lam)
         self.W0m = lam / (n + lam)
         self.Wm = 0.5 / (n + lam)
-        self.W0c = self.W0m + 1.0 - alpha**2 + beta
+        self.W0c = self.W0m + 1.0 - alpha * alpha + beta
 
     @property
     def P(self) -> np.ndarray:

@@ -58,6 +58,7 @@ import math
 import numpy as np
 
 from mlpfac.control.adaptive.delay_bank import HELD, DelayBank, motion, pose_of
+from mlpfac.elementary import cos, sin
 from mlpfac.jit import kernel
 
 # columns of the per-seed state S, per channel c (v: +0, omega: +1)
@@ -126,10 +127,10 @@ def _predict(q, r, h, Sb, d, T, out):
     for j in range(d - 1, -1, -1):
         v, om = Sb[G] * h[0, j], Sb[G + 1] * h[1, j]
         mid = th + 0.5 * T * om
-        x += T * v * math.cos(mid)
-        y += T * v * math.sin(mid)
+        x += T * v * cos(mid)
+        y += T * v * sin(mid)
         th += T * om
-    c, s = math.cos(th), math.sin(th)
+    c, s = cos(th), sin(th)
     dx, dy = r[0] - x, r[1] - y
     out[0] = c * dx + s * dy
     out[1] = -s * dx + c * dy

@@ -22,12 +22,13 @@ from typing import NamedTuple
 import numpy as np
 
 from mlpfac.control.law import _law
+from mlpfac.elementary import cos, sin, tanh
 from mlpfac.jit import kernel
 
 
 @kernel()
 def _sigmoid(a):
-    return 0.5 * (1.0 + math.tanh(0.5 * a))
+    return 0.5 * (1.0 + tanh(0.5 * a))
 
 
 @kernel("void(f8[::1], f8[::1])")
@@ -210,7 +211,7 @@ def _law_kanayama(e0, e1, e2, h2, h5, v_r, T, Kx, Ky, Ktheta, v_max, omega_max, 
     omega = h5 / T + v_r (Ky e2 + Ktheta sin e3); with the nominal h2 = T v_r cos e3, h5 = T omega_r
     it is Kanayama's law. Its feedback does not divide by T v_r: pose noise is not amplified as v_r falls."""
     v = h2 / T + Kx * e0
-    omega = h5 / T + v_r * (Ky * e1 + Ktheta * math.sin(e2))
+    omega = h5 / T + v_r * (Ky * e1 + Ktheta * sin(e2))
     u[0] = min(max(v, -v_max), v_max)
     u[1] = min(max(omega, -omega_max), omega_max)
 
@@ -301,7 +302,7 @@ def adaptive_step(e, v_r, omega_r, first, z, P, S, H, u, innov, h_hat, trace, in
                 f[j] += eb[j]
         if prior:  # f = f_nominal + NN_f, G = G_nominal + NN_G, (5)-(6)
             h1 = G[0, 1] + T * eb[1]
-            h2 = (f[0] + (eb[0] + T * v_r * math.cos(eb[2]))) - eb[0]
+            h2 = (f[0] + (eb[0] + T * v_r * cos(eb[2]))) - eb[0]
             h5 = (f[2] + (eb[2] + T * omega_r)) - eb[2]
         else:
             h1, h2, h5 = G[0, 1], f[0] - eb[0], f[2] - eb[2]  # (34)
@@ -326,8 +327,8 @@ def adaptive_step(e, v_r, omega_r, first, z, P, S, H, u, innov, h_hat, trace, in
             _law(eb[0], eb[1], eb[2], h1, h2, h5, v_r, T, l1, l2, l3, v_max, omega_max, u[b])
         if prior:  # the nominal prediction of e_{k+1}: f_true + G_true u, (5)-(6)
             u0, u1 = u[b, 0], u[b, 1]
-            e_nom[0] = (eb[0] + T * v_r * math.cos(eb[2])) + (-T * u0 + T * eb[1] * u1)
-            e_nom[1] = (eb[1] + T * v_r * math.sin(eb[2])) + (-T * eb[0]) * u1
+            e_nom[0] = (eb[0] + T * v_r * cos(eb[2])) + (-T * u0 + T * eb[1] * u1)
+            e_nom[1] = (eb[1] + T * v_r * sin(eb[2])) + (-T * eb[0]) * u1
             e_nom[2] = (eb[2] + T * omega_r) + (-T) * u1
         u_prev[0], u_prev[1] = u[b, 0], u[b, 1]
         e_prev[0], e_prev[1], e_prev[2] = eb[0], eb[1], eb[2]

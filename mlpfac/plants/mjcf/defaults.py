@@ -78,7 +78,7 @@ def armature(config, m: mujoco.MjModel, dofs: list[int], mass: float, radius: fl
     (a skid-steer) and none of their hinges has rotor inertia in the model."""
     if config.armature is not None or len(dofs) <= 2 or any(float(m.dof_armature[d]) > 0 for d in dofs):
         return {}
-    return {"armature": float(f"{mass * radius**2 / len(dofs):.3g}")}
+    return {"armature": float(f"{mass * radius * radius / len(dofs):.3g}")}
 
 
 def timestep(config, dt: float, periods: tuple[float, ...]) -> dict:
@@ -123,7 +123,7 @@ def servo_step(robot) -> float:
     integrated explicitly), the smallest over the drive's servos."""
     m = robot.model
     pairs = [(a, int(m.jnt_dofadr[m.actuator_trnid[a, 0]])) for a in (*robot.acts, *robot.seconds) if a >= 0]
-    return min(2 * float(m.dof_M0[dof]) / (float(m.actuator_gainprm[a, 0]) * float(m.actuator_gear[a, 0]) ** 2)
+    return min(2 * float(m.dof_M0[dof]) / (float(m.actuator_gainprm[a, 0]) * float(m.actuator_gear[a, 0]) * float(m.actuator_gear[a, 0]))
                for a, dof in pairs)  # fmt: skip
 
 
@@ -143,7 +143,7 @@ def _whole(period: float, dt: float) -> bool:
 
 
 PI_KP, PI_KI = 0.5, 10.0  # the wheel-speed PI loop's gains tuned on our robot (models/diffdrive.xml) ...
-PI_INERTIA = 5.5 * 0.05**2 / 2 + 0.0003125 + 0.001  # ... whose wheel drives J = m r^2 / 2 + I_w (kg m^2)
+PI_INERTIA = 5.5 * 0.05 * 0.05 / 2 + 0.0003125 + 0.001  # ... whose wheel drives J = m r^2 / 2 + I_w (kg m^2)
 
 
 def pi_gains(config, mass: float, radius: float, wheel_inertia: float) -> dict:
@@ -151,7 +151,7 @@ def pi_gains(config, mass: float, radius: float, wheel_inertia: float) -> dict:
     inertia J = m r^2 / 2 + I_w a wheel drives against ours (3 digits)."""
     if config.actuator != "torque":
         return {}
-    scale = (mass * radius**2 / 2 + wheel_inertia) / PI_INERTIA
+    scale = (mass * radius * radius / 2 + wheel_inertia) / PI_INERTIA
     out = {"pi_kp": float(f"{PI_KP * scale:.3g}")} if config.pi_kp is None else {}
     return out | ({"pi_ki": float(f"{PI_KI * scale:.3g}")} if config.pi_ki is None else {})
 

@@ -244,7 +244,7 @@ def find_tendon_pair(m: mujoco.MjModel, d: mujoco.MjData) -> tuple[int, int] | N
     for joints, acts in pairs.items():
         if len(acts) == 2:
             c = np.array([[tendon_joints(m, a)[j] for j in joints] for a in acts])
-            if abs(c[0, 0] * c[1, 1] - c[0, 1] * c[1, 0]) > 1e-9 * np.abs(c).max() ** 2:  # det, 2x2
+            if abs(c[0, 0] * c[1, 1] - c[0, 1] * c[1, 0]) > 1e-9 * np.abs(c).max() * np.abs(c).max():  # det, 2x2
                 return acts[0], acts[1]
     return None
 

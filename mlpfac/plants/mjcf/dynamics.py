@@ -18,12 +18,11 @@ robot at rest, as :func:`mlpfac.plants.mjcf.robot.read_robot` made it (its other
 
 from __future__ import annotations
 
-import math
-
 import mujoco
 import numpy as np
 
 from mlpfac.dynamics import RobotModel
+from mlpfac.elementary import hypot
 from mlpfac.model import dot
 
 
@@ -37,7 +36,7 @@ def read_model(m: mujoco.MjModel, robot, torque_limits: tuple[float, float]) -> 
     axle = d.site_xpos[site]
     R = d.site_xmat[site].reshape(3, 3)
     heading = np.array([R[0, 0], R[1, 0]])
-    heading /= math.hypot(*heading)
+    heading /= hypot(*heading)
     left = np.array([-heading[1], heading[0]])
     bodies = [b for b in range(m.nbody) if _under(m, b, root)]
     mass = float(m.body_subtreemass[root])
@@ -45,7 +44,7 @@ def read_model(m: mujoco.MjModel, robot, torque_limits: tuple[float, float]) -> 
     inertia = 0.0
     for b in bodies:
         rot = d.ximat[b].reshape(3, 3)
-        izz = float(sum(rot[2, k] ** 2 * m.body_inertia[b, k] for k in range(3)))  # e_z' R diag(I) R' e_z
+        izz = float(sum(rot[2, k] * rot[2, k] * m.body_inertia[b, k] for k in range(3)))  # e_z' R diag(I) R' e_z
         dx, dy = d.xipos[b, 0] - axle[0], d.xipos[b, 1] - axle[1]
         inertia += izz + float(m.body_mass[b]) * (dx * dx + dy * dy)
     M = np.zeros((m.nv, m.nv))

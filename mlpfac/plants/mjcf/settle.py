@@ -9,6 +9,7 @@ from collections.abc import Sequence
 import mujoco
 import numpy as np
 
+from mlpfac.elementary import cos, sin
 from mlpfac.exceptions import ConfigError
 from mlpfac.plants.mjcf.wheels import wheel_speed_limit
 
@@ -93,7 +94,7 @@ def turning(plant, events: Sequence = ()) -> tuple[float, float, str]:
         plant.step(np.array([v, omega]))
         pose = plant.true_pose()
         dx, dy = float(pose[0] - last[0]), float(pose[1] - last[1])
-        sideways += -math.sin(float(last[2])) * dx + math.cos(float(last[2])) * dy
+        sideways += -sin(float(last[2])) * dx + cos(float(last[2])) * dy
         last = pose
     turned = float(last[2] - start[2]) / TURN_S
     asked = f"wheels at {w_l:.3g} and {w_r:.3g} rad/s"

@@ -32,7 +32,7 @@ def skid_track(anchors: list[np.ndarray]) -> tuple[float, float]:
     width = norm(anchors[1] - anchors[0])
     base = [norm(anchors[i] - a) for i, a in zip((0, 1), anchors[2:], strict=False)]
     length = sum(base) / len(base)
-    return width + length**2 / width, length
+    return width + length * length / width, length
 
 
 def floor_priority(m: mujoco.MjModel, root: int) -> int:
