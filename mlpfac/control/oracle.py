@@ -70,6 +70,8 @@ def _sinc(half: float) -> float:
 
 
 TURNING = ("payload",)  # the events whose turning a skid-steer's oracle is told
+# the changes the law is told (with them, how the wheels answer a command)
+TOLD = ("wheel_radius", "control_period", "sensor_delay", "turning_track")
 
 
 def told(event: Event) -> tuple[float, str, float]:
@@ -102,9 +104,13 @@ class Oracle(Stepped):
         changes: list[tuple[float, str, float]],
         kinematic: bool,
         kanayama: tuple[float, float, float] | None = None,
+        ik: tuple[float, float] = (1.0, 1.0),
     ) -> None:
-        """``kanayama``: the gains (Kx, Ky, Ktheta) of Kanayama's law, told instead of (35)."""
+        """``kanayama``: the gains (Kx, Ky, Ktheta) of Kanayama's law, told instead of (35); ``ik``: the
+        wheel radius and track the robot's IK turns (v, omega) into wheel speeds with (its wheels'
+        answer, when told, is undone through them)."""
         self.T = float(T)
+        self.ik = (float(ik[0]), float(ik[1]))
         self.kanayama = kanayama
         if kanayama is not None:
             self.name, self.labels = "oracle-kanayama", {}
@@ -123,9 +129,10 @@ class Oracle(Stepped):
         self.k, self.pending = 0, list(self.changes)
         self.radius, self.hold = 1.0, 1.0  # the robot drives radius x the command, held hold x T
         self.turn, self.ahead = 1.0, 0.0  # a skid-steer's track ratio, its kinematic centre's move [m]
+        self.gain, self.offset = 1.0, 0.0  # the wheels turn at gain x the speed asked - offset [rad/s]
         self.pose_step = DelayLine(0)  # which step's pose the plant's measurement is
         self.sent: deque = deque(maxlen=max(self._depth, 1))  # (velocity driven (B, 2), seconds) per step
-        self._h, self._u = np.zeros((B, 3)), np.zeros((B, 2))
+        self._h, self._u, self._out = np.zeros((B, 3)), np.zeros((B, 2)), np.zeros((B, 2))
         self._q, self._e = np.zeros((B, 3)), np.zeros((B, 3))
         self._tele = {"h_hat": self._h[0] if self.single else self._h} if self.kanayama is None else {}
         corradini_step(np.zeros((0, 3)), 1.0, 0.0, self.T, *self.law.lambdas, *self._limits, self._h[:0], self._u[:0])
@@ -142,6 +149,10 @@ class Oracle(Stepped):
             self.turn = value
         elif kind == "kinematic_centre":
             self.ahead = value
+        elif kind == "wheel_gain":
+            self.gain = value
+        elif kind == "wheel_offset":
+            self.offset = value
 
     def step(self, e: np.ndarray, r: np.ndarray) -> np.ndarray:
         E = as_rows(e, 3)
@@ -176,7 +187,25 @@ class Oracle(Stepped):
         if self._depth:
             self.sent.append((self._u * [self.radius, self.radius / self.turn], self.hold * T))
         self.k += 1
-        return self._u[0].copy() if self.single else self._u
+        u = self._u
+        if self.gain != 1.0 or self.offset != 0.0:
+            u = self._answered(r)
+        return u[0].copy() if self.single else u
+
+    def _answered(self, r: np.ndarray) -> np.ndarray:
+        """The command whose wheel speeds, through the IK, the wheels answer with the ones ``self._u``
+        asks: each wheel w asked (w + offset s) / gain, s the sign of its speed along the reference
+        (the friction that slows it opposes its motion, which on the path is the reference's: the
+        command's own sign flips with the noise a law amplifies); as (v, omega) through the IK's
+        radius and track, v + radius offset (s_l + s_r) / 2 and omega + radius offset (s_r - s_l) /
+        track, both / gain."""
+        radius, track = self.ik
+        half = 0.5 * float(r[4]) * track
+        s_l, s_r = np.sign(float(r[3]) - half), np.sign(float(r[3]) + half)
+        lift = radius * self.offset
+        self._out[:, 0] = (self._u[:, 0] + lift * 0.5 * (s_l + s_r)) / self.gain
+        self._out[:, 1] = (self._u[:, 1] + lift * (s_r - s_l) / track) / self.gain
+        return self._out
 
     def _predict(self, E: np.ndarray, r: np.ndarray, sent: list) -> np.ndarray:
         """The error (2) to r of the pose the measured one reaches through ``sent``: exact unicycle arcs."""
