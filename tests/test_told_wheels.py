@@ -146,3 +146,33 @@ def test_on_the_weak_servos_each_told_law_is_no_worse_than_itself_told_nothing(s
         return metrics(run(scn.with_overrides(controller=ctrl, seed=seed)))["phases"]["after"]["rms_position_error_m"]
 
     assert statistics.median(after(told, s) / after(untold, s) for s in range(4)) <= 1.1
+
+
+def test_the_summary_marks_a_told_law_worse_than_itself_told_nothing():
+    """x untold: per seed the told law's RMS / the untold one's, median; marked past 1.1 (oracle 1.2x
+    corradini here), not at or below it (oracle-kanayama 0.5x kanayama), nor on an untold law."""
+    from mlpfac.loop.metrics import RunMetrics
+    from mlpfac.sweeps.paired import UNTOLD_MARK, paired_rows, summary
+    from mlpfac.sweeps.plan import plan
+
+    after = {"oracle": 0.0024, "corradini": 0.002, "oracle-kanayama": 0.001, "kanayama": 0.002}
+    jobs = plan(["eight-wheel-radius"], list(after), [0, 1, 2])
+
+    def fake(scn, ctrl, seed):
+        rms = after[ctrl] * (1 + 0.01 * seed)
+        phases = {"before": {"start_s": 2.0, "end_s": 12.5, "rms_position_error_m": 0.001},
+                  "after": {"start_s": 12.5, "end_s": 25.0, "rms_position_error_m": rms}}  # fmt: skip
+        return {"status": "ok", "outcome": "tracking", "T": 0.01, "steps": 2500, "phases": phases,
+                "scenario": scn, "controller": ctrl, "seed": seed,
+                "position_ms_bins": {"bin_steps": 10, "m2": [rms**2] * 250}}  # fmt: skip
+
+    rows = paired_rows(jobs, {j.key: RunMetrics.from_json(fake(*j.key)) for j in jobs})
+    x = {r["controller"]: r["x_untold_median"] for r in rows}
+    assert x == {
+        "oracle": pytest.approx(1.2),
+        "corradini": None,
+        "oracle-kanayama": pytest.approx(0.5),
+        "kanayama": None,
+    }
+    marked = [line.split("|")[1].strip() for line in summary(rows).splitlines() if UNTOLD_MARK in line]
+    assert marked == ["`oracle`"]
