@@ -176,3 +176,20 @@ def test_the_summary_marks_a_told_law_worse_than_itself_told_nothing():
     }
     marked = [line.split("|")[1].strip() for line in summary(rows).splitlines() if UNTOLD_MARK in line]
     assert marked == ["`oracle`"]
+
+
+def test_the_dynamic_oracle_moves_the_delayed_twist_through_the_torques_sent():
+    """Known answer: without damping or an offset centre of mass the model's accelerations are B tau / M,
+    (tau_l + tau_r) / (r m') and b (tau_r - tau_l) / (r I'): the twist moves by their sum times each
+    torque's seconds."""
+    from mlpfac.control.dynamic import twist_ahead
+    from mlpfac.dynamics import RobotModel
+
+    robot = RobotModel(5.0, 0.2, 0.0, 0.05, 0.3, 1e-3, 2.0)
+    p = robot.packed()
+    m, i = 5.0 + 2 * 1e-3 / 0.05**2, 0.2 + 2 * 0.15**2 * 1e-3 / 0.05**2  # M's diagonal, the wheels' inertia in it
+    sent = [(np.array([[0.2, 0.3]]), 0.01), (np.array([[-0.1, 0.4]]), 0.015)]
+    got = twist_ahead(p, np.array([[0.5, -0.2]]), sent)
+    dv = sum(dt * (t[0, 0] + t[0, 1]) / (0.05 * m) for t, dt in sent)
+    dw = sum(dt * 0.15 * (t[0, 1] - t[0, 0]) / (0.05 * i) for t, dt in sent)
+    np.testing.assert_allclose(got, [[0.5 + dv, -0.2 + dw]], rtol=1e-14)
