@@ -43,10 +43,35 @@ only what the nominal design would need to be redone for the changed robot:
   saturates in the turning test, so one steady turn does not say how the robot then turns (told
   it, Kanayama's law did no better on TIAGo++'s floor: docs/robots.md).
 
+- **how the wheels answer a command**, with every change above (a wheel radius, a control period,
+  a sensor delay, a skid-steer's payload): measured by the factory on a robot with the events, as
+  the plant measures a skid-steer's turning while it settles
+  (:func:`~mlpfac.plants.mjcf.settle.wheels_answer`): driving straight, its wheels asked half and
+  all of the fastest speed the reference asks of a wheel, the speeds they reach, as the line w =
+  gain w_asked - offset. A redesign for the changed robot is a redesign for its wheels as they
+  are: on a light robot whose weak servos (kv 0.1 against 0.1 N m of joint friction,
+  tests/data/weak_servo.xml) turn each wheel 1 rad/s slower than asked, the nominal law runs
+  behind the path by the slip of that lag (e1 = r 1 rad/s / Kx = 3.3 mm with Kanayama's law), an
+  untold radius x s or period x c drives s or c times the command and happens to offset it, and
+  the law told only the change divided its command back and kept the lag, grown by s (1.7-4.1x
+  worse than itself untold). Told the answer, each wheel is asked (w + offset sgn) / gain, w its
+  speed through the IK of the law's command and sgn the sign of its speed along the reference
+  (the friction that slows a wheel opposes its motion, which on the path is the reference's: the
+  command's own sign flips with the noise Corradini's law amplifies); sent as (v, omega) through
+  the IK's radius and track. The predictor moves the pose through the law's command: the wheels
+  now answer it. Wheels that answer as asked (1, 0: to 3 digits, on most robots) change nothing,
+  to the bit. Not told: how they answer a command that changes faster than they follow (the
+  servo's time constant; Corradini's law's omega, amplified pose noise, clipped at a wheel-speed
+  limit, slows a robot it drives: not a change of the robot), nor their answer after an event the
+  law is told nothing of (a payload, a floor, a weak actuator: the law told nothing is the law).
+
 Kanayama's law is a velocity law, so the same telling is simpler: its command divided by the
 radius scale, and on the robot (not the Euler map (7), where f and G scale alike and the law needs
 no change) by the period factor, so that the robot moves per control step as the law meant; and
-the law acts on the error of the same predicted pose.
+the law acts on the error of the same predicted pose, its wheels asked as they answer.
+
+What an oracle is told is the truth of each change, measured on a robot of the scenario's; never
+the run's own state (its wheels' speeds, its pose beyond the measured one).
 """
 
 from __future__ import annotations
