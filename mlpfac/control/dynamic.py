@@ -23,8 +23,11 @@ payload, a weak actuator, a wheel radius change its true model (a floor's fricti
 the rolling model: told, it changes nothing); a control period x c (the robot moves c T a step
 while the reference moves T) the reference in the robot's time (v_r, omega_r / c, their rates / c^2),
 Kx / c (Kanayama's command / c, as ``oracle-kanayama``'s) and the velocity gain / c (the torque is
-held c T); a sensor delay the pose predicted over it as ``oracle`` predicts it (the
-measured twist is as old as the pose: the law uses it as it is).
+held c T); a sensor delay the pose predicted over it as ``oracle`` predicts it, and the measured
+twist, as old as the pose, moved forward through the torques sent since on its model (one Euler
+step a control period): the velocity loop, closing ``VELOCITY_SHARE`` of its error a step, is
+unstable on a twist 3 steps old (PAL TIAGo on torque motors left the floor on every seed, told the
+pose alone, as ``fierro-lewis`` told nothing did).
 """
 
 from __future__ import annotations
@@ -36,7 +39,7 @@ import numpy as np
 
 from mlpfac.control.baselines import Stepped
 from mlpfac.control.oracle import Oracle
-from mlpfac.dynamics import P_TMAX, torque_of
+from mlpfac.dynamics import P_TMAX, accelerations, torque_of
 from mlpfac.elementary import cos, sin
 from mlpfac.jit import kernel, seeds
 from mlpfac.plants.events import DelayLine
@@ -125,7 +128,7 @@ class OracleDynamic(FierroLewis):
         self.p, self._g, self.hold = self.robot.packed(), self.g.copy(), 1.0
         self.k, self.pending = 0, list(self.changes)
         self.pose_step = DelayLine(0)  # which step's pose the measurement is
-        self.sent: deque = deque(maxlen=max(self._depth, 1))
+        self.sent: deque = deque(maxlen=max(self._depth, 1))  # (velocities asked, torques sent (B, 2), seconds)
         self._pred.reset(rng)
 
     def step(self, obs) -> np.ndarray:
@@ -144,8 +147,10 @@ class OracleDynamic(FierroLewis):
         self.k += 1
         e, r, tw = _rows(obs.e, 3), _flat(obs.r), _rows(obs.twist, 2)
         age = k - self.pose_step.read()
-        if age > 0:  # the error of the pose predicted over the delay, through the velocities asked since
-            e = self._pred._predict(e, r, list(self.sent)[-age:])
+        if age > 0:  # the pose predicted over the delay through the velocities asked, the twist through the torques
+            since = list(self.sent)[-age:]
+            e = self._pred._predict(e, r, [(vc, dt) for vc, _, dt in since])
+            tw = twist_ahead(self.p, tw, [(tau, dt) for _, tau, dt in since])
         r_dot = _flat(obs.r_dot)
         if self.hold != 1.0:  # v_r, omega_r / c and their rates / c^2: the reference in the robot's time
             c = self.hold
@@ -153,8 +158,18 @@ class OracleDynamic(FierroLewis):
             r_dot = r_dot / (c * c)
         fierro_lewis_step(e, r, r_dot, tw, self.p, self._g, self._tau, self._vc)
         if self._depth:
-            self.sent.append((self._vc.copy(), self.hold * T))
+            self.sent.append((self._vc.copy(), self._tau.copy(), self.hold * T))
         return self._tau[0].copy() if self.single else self._tau
+
+
+def twist_ahead(p: np.ndarray, twist: np.ndarray, sent: list[tuple[np.ndarray, float]]) -> np.ndarray:
+    """The twists (B, 2) that ``twist`` (B, 2) reaches on the packed model ``p`` through the wheel
+    torques ``sent`` [(torques (B, 2), seconds held)], one Euler step each."""
+    tw, rate = twist.copy(), np.empty_like(twist)
+    for tau, dt in sent:
+        accelerations(p, tw, tau, rate)
+        tw += dt * rate
+    return tw
 
 
 class _NoLaw:

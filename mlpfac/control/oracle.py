@@ -43,10 +43,35 @@ only what the nominal design would need to be redone for the changed robot:
   saturates in the turning test, so one steady turn does not say how the robot then turns (told
   it, Kanayama's law did no better on TIAGo++'s floor: docs/robots.md).
 
+- **how the wheels answer a command**, with every change above (a wheel radius, a control period,
+  a sensor delay, a skid-steer's payload): measured by the factory on a robot with the events, as
+  the plant measures a skid-steer's turning while it settles
+  (:func:`~mlpfac.plants.mjcf.settle.wheels_answer`): driving straight, its wheels asked half and
+  all of the fastest speed the reference asks of a wheel, the speeds they reach, as the line w =
+  gain w_asked - offset. A redesign for the changed robot is a redesign for its wheels as they
+  are: on a light robot whose weak servos (kv 0.1 against 0.1 N m of joint friction,
+  tests/data/weak_servo.xml) turn each wheel 1 rad/s slower than asked, the nominal law runs
+  behind the path by the slip of that lag (e1 = r 1 rad/s / Kx = 3.3 mm with Kanayama's law), an
+  untold radius x s or period x c drives s or c times the command and happens to offset it, and
+  the law told only the change divided its command back and kept the lag, grown by s (1.7-4.1x
+  worse than itself untold). Told the answer, each wheel is asked (w + offset sgn) / gain, w its
+  speed through the IK of the law's command and sgn the sign of its speed along the reference
+  (the friction that slows a wheel opposes its motion, which on the path is the reference's: the
+  command's own sign flips with the noise Corradini's law amplifies); sent as (v, omega) through
+  the IK's radius and track. The predictor moves the pose through the law's command: the wheels
+  now answer it. Wheels that answer as asked (1, 0: to 3 digits, on most robots) change nothing,
+  to the bit. Not told: how they answer a command that changes faster than they follow (the
+  servo's time constant; Corradini's law's omega, amplified pose noise, clipped at a wheel-speed
+  limit, slows a robot it drives: not a change of the robot), nor their answer after an event the
+  law is told nothing of (a payload, a floor, a weak actuator: the law told nothing is the law).
+
 Kanayama's law is a velocity law, so the same telling is simpler: its command divided by the
 radius scale, and on the robot (not the Euler map (7), where f and G scale alike and the law needs
 no change) by the period factor, so that the robot moves per control step as the law meant; and
-the law acts on the error of the same predicted pose.
+the law acts on the error of the same predicted pose, its wheels asked as they answer.
+
+What an oracle is told is the truth of each change, measured on a robot of the scenario's; never
+the run's own state (its wheels' speeds, its pose beyond the measured one).
 """
 
 from __future__ import annotations
@@ -71,6 +96,8 @@ def _sinc(half: float) -> float:
 
 
 TURNING = ("payload",)  # the events whose turning a skid-steer's oracle is told
+# the changes the law is told (with them, how the wheels answer a command)
+TOLD = ("wheel_radius", "control_period", "sensor_delay", "turning_track")
 
 
 def told(event: Event) -> tuple[float, str, float]:
@@ -103,9 +130,13 @@ class Oracle(Stepped):
         changes: list[tuple[float, str, float]],
         kinematic: bool,
         kanayama: tuple[float, float, float] | None = None,
+        ik: tuple[float, float] = (1.0, 1.0),
     ) -> None:
-        """``kanayama``: the gains (Kx, Ky, Ktheta) of Kanayama's law, told instead of (35)."""
+        """``kanayama``: the gains (Kx, Ky, Ktheta) of Kanayama's law, told instead of (35); ``ik``: the
+        wheel radius and track the robot's IK turns (v, omega) into wheel speeds with (its wheels'
+        answer, when told, is undone through them)."""
         self.T = float(T)
+        self.ik = (float(ik[0]), float(ik[1]))
         self.kanayama = kanayama
         if kanayama is not None:
             self.name, self.labels = "oracle-kanayama", {}
@@ -124,9 +155,10 @@ class Oracle(Stepped):
         self.k, self.pending = 0, list(self.changes)
         self.radius, self.hold = 1.0, 1.0  # the robot drives radius x the command, held hold x T
         self.turn, self.ahead = 1.0, 0.0  # a skid-steer's track ratio, its kinematic centre's move [m]
+        self.gain, self.offset = 1.0, 0.0  # the wheels turn at gain x the speed asked - offset [rad/s]
         self.pose_step = DelayLine(0)  # which step's pose the plant's measurement is
         self.sent: deque = deque(maxlen=max(self._depth, 1))  # (velocity driven (B, 2), seconds) per step
-        self._h, self._u = np.zeros((B, 3)), np.zeros((B, 2))
+        self._h, self._u, self._out = np.zeros((B, 3)), np.zeros((B, 2)), np.zeros((B, 2))
         self._q, self._e = np.zeros((B, 3)), np.zeros((B, 3))
         self._tele = {"h_hat": self._h[0] if self.single else self._h} if self.kanayama is None else {}
         corradini_step(np.zeros((0, 3)), 1.0, 0.0, self.T, *self.law.lambdas, *self._limits, self._h[:0], self._u[:0])
@@ -143,6 +175,10 @@ class Oracle(Stepped):
             self.turn = value
         elif kind == "kinematic_centre":
             self.ahead = value
+        elif kind == "wheel_gain":
+            self.gain = value
+        elif kind == "wheel_offset":
+            self.offset = value
 
     def step(self, e: np.ndarray, r: np.ndarray) -> np.ndarray:
         E = as_rows(e, 3)
@@ -177,7 +213,25 @@ class Oracle(Stepped):
         if self._depth:
             self.sent.append((self._u * [self.radius, self.radius / self.turn], self.hold * T))
         self.k += 1
-        return self._u[0].copy() if self.single else self._u
+        u = self._u
+        if self.gain != 1.0 or self.offset != 0.0:
+            u = self._answered(r)
+        return u[0].copy() if self.single else u
+
+    def _answered(self, r: np.ndarray) -> np.ndarray:
+        """The command whose wheel speeds, through the IK, the wheels answer with the ones ``self._u``
+        asks: each wheel w asked (w + offset s) / gain, s the sign of its speed along the reference
+        (the friction that slows it opposes its motion, which on the path is the reference's: the
+        command's own sign flips with the noise a law amplifies); as (v, omega) through the IK's
+        radius and track, v + radius offset (s_l + s_r) / 2 and omega + radius offset (s_r - s_l) /
+        track, both / gain."""
+        radius, track = self.ik
+        half = 0.5 * float(r[4]) * track
+        s_l, s_r = np.sign(float(r[3]) - half), np.sign(float(r[3]) + half)
+        lift = radius * self.offset
+        self._out[:, 0] = (self._u[:, 0] + lift * 0.5 * (s_l + s_r)) / self.gain
+        self._out[:, 1] = (self._u[:, 1] + lift * (s_r - s_l) / track) / self.gain
+        return self._out
 
     def _predict(self, E: np.ndarray, r: np.ndarray, sent: list) -> np.ndarray:
         """The error (2) to r of the pose the measured one reaches through ``sent``: exact unicycle arcs."""

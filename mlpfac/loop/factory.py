@@ -19,9 +19,10 @@ from mlpfac.control.adaptive.controller import VARIANTS, Adaptive
 from mlpfac.control.adaptive.dynamic_level import AdaptiveDynamic
 from mlpfac.control.baselines import Corradini, Kanayama, PluginController, Stepped
 from mlpfac.control.dynamic import OUTER_GAINS, FierroLewis, OracleDynamic
-from mlpfac.control.oracle import TURNING, Oracle, told
+from mlpfac.control.oracle import TOLD, TURNING, Oracle, told
 from mlpfac.control.torque import TorquePluginController
 from mlpfac.plants import make_plant  # noqa: F401 (the plant half of the factory, as mlpfac.loop.factory.make_plant)
+from mlpfac.scenario.on_robot import peak_wheel_speed
 from mlpfac.scenario.parse import Scenario
 from mlpfac.scenario.reference import sample
 
@@ -50,23 +51,39 @@ def make_controller(scn: Scenario, instance: object | None = None, plant=None) -
     if scn.controller in ("oracle", "oracle-kanayama"):  # the controllers told the scenario's events
         g = scn.kanayama
         gains = (g.Kx, g.Ky, g.Ktheta) if scn.controller == "oracle-kanayama" else None
-        changes = [told(ev) for ev in scn.events] + _turning_told(scn, plant)
-        return Oracle(scn.law, scn.T, changes, scn.plant_kind == "kinematic", gains)
+        if scn.plant_kind != "mujoco" or not scn.events:
+            return Oracle(scn.law, scn.T, [told(ev) for ev in scn.events], scn.plant_kind == "kinematic", gains)
+        probe = make_plant(scn, sample(scn.reference, np.arange(2) * scn.T))  # a robot of the scenario's to measure
+        changes = [told(ev) for ev in scn.events] + _turning_told(scn, probe)
+        changes += _answer_told(scn, probe, {t for t, kind, _ in changes if kind in TOLD})
+        return Oracle(scn.law, scn.T, changes, False, gains, (probe.ik_radius, probe.ik_track))
     return Kanayama(scn.law, scn.kanayama, scn.T)
 
 
-def _turning_told(scn: Scenario, plant) -> list[tuple[float, str, float]]:
-    """What each payload does to a skid-steer's turning (:mod:`mlpfac.control.oracle`),
-    measured on a robot of the scenario's (not ``plant``, the run's own); none on another robot."""
-    if scn.plant_kind != "mujoco" or not any(ev.kind in TURNING for ev in scn.events):
+def _turning_told(scn: Scenario, probe) -> list[tuple[float, str, float]]:
+    """What each payload does to a skid-steer's turning (:mod:`mlpfac.control.oracle`), measured on
+    ``probe``, a robot of the scenario's (not the run's own); none on another robot."""
+    if probe.robot.seconds == (-1, -1):  # not a skid-steer: nothing to measure
         return []
-    if plant is not None and plant.robot.seconds == (-1, -1):  # not a skid-steer: nothing to measure
-        return []
-    probe = make_plant(scn, sample(scn.reference, np.arange(2) * scn.T))
     out = []
     for i, ev in enumerate(scn.events):
         if ev.kind in TURNING and (change := probe.turning_change(scn.events[: i + 1])) is not None:
             out += [(float(ev.time), "turning_track", change[0]), (float(ev.time), "kinematic_centre", change[1])]
+    return out
+
+
+def _answer_told(scn: Scenario, probe, times: set[float]) -> list[tuple[float, str, float]]:
+    """How the wheels answer a command (:func:`mlpfac.plants.mjcf.settle.wheels_answer`, at the speeds
+    the reference asks), measured on ``probe`` with the events applied in turn up to each one at
+    ``times`` (those whose change the oracle is told), where it differs from what it was told last."""
+    from mlpfac.plants.mjcf.settle import wheels_answer  # here: importing the factory imports no MuJoCo
+
+    peak = peak_wheel_speed(scn.reference, scn.duration, probe.robot)
+    out, last = [], (1.0, 0.0)
+    for i, ev in enumerate(scn.events):
+        if float(ev.time) in times and (answer := wheels_answer(probe, peak, scn.events[: i + 1])) != last:
+            out += [(float(ev.time), "wheel_gain", answer[0]), (float(ev.time), "wheel_offset", answer[1])]
+            last = answer
     return out
 
 

@@ -14,7 +14,12 @@ the warm-up when there is none). Per scenario and controller:
   two-sided Wilcoxon signed-rank test of the paired differences (scipy), against Corradini's law
   and the oracle on the RMS, and against Corradini's law on the event cost. A run that diverged
   counts as worse than any finished one (a loss, and the largest rank); a pair with a run missing
-  is left out; a pair of equal figures is no win (and is dropped by the test, as Wilcoxon's rule).
+  is left out; a pair of equal figures is no win (and is dropped by the test, as Wilcoxon's rule);
+- **x untold** (a law told the change: ``oracle``, ``oracle-kanayama``, ``oracle-dynamic``): the
+  median over seeds of its RMS / the same law's told nothing (``corradini``, ``kanayama``,
+  ``fierro-lewis``) where that ran too. A told law should be at most ``TOLD_AT_MOST`` of itself
+  untold; the summary marks (``UNTOLD_MARK``) a cell where it is not (docs/robots.md says why where
+  it cannot be).
 """
 
 from __future__ import annotations
@@ -26,6 +31,8 @@ from mlpfac.loop.metrics import RunMetrics
 from mlpfac.sweeps.plan import Job
 
 REFERENCES = ("corradini", "oracle")
+UNTOLD = {"oracle": "corradini", "oracle-kanayama": "kanayama", "oracle-dynamic": "fierro-lewis"}  # told: untold
+TOLD_AT_MOST, UNTOLD_MARK = 1.1, "‡"
 TWIN_IGNORES = ("name", "description", "events", "seed")  # what a scenario's twin without the event may differ in
 
 
@@ -112,6 +119,8 @@ def paired_rows(jobs: list[Job], metrics: dict[tuple, RunMetrics]) -> list[dict]
         row["oracle_pos_rms_m_median"] = median([v for v in refs["oracle"] if v is not None and math.isfinite(v)])
         for r in REFERENCES:
             row[f"wins_vs_{r}"], row[f"pairs_vs_{r}"], row[f"p_vs_{r}"] = compare(x, refs[r])
+        untold = [compared_rms(metrics.get((scn, UNTOLD[ctrl], s))) for s in ss] if ctrl in UNTOLD else []
+        row["x_untold_median"] = median(_ratios(x, untold)) if untold else None
         cost = _event_cost(metrics, scn, ctrl, ss, twin.get(scn), x)
         base = _event_cost(metrics, scn, "corradini", ss, twin.get(scn), refs["corradini"])
         row["no_event_twin"] = twin.get(scn)
@@ -167,7 +176,8 @@ PAIRED_COLUMNS: list[tuple[str, Callable[[dict], str]]] = [
 
 
 def summary(rows: list[dict]) -> str:
-    """Controllers x scenarios: the median RMS [mm] with x oracle, and tracking/lost/diverged unless all tracked."""
+    """Controllers x scenarios: the median RMS [mm] with x oracle, and tracking/lost/diverged unless all
+    tracked; a told law more than TOLD_AT_MOST of itself told nothing marked UNTOLD_MARK."""
     scns = list(dict.fromkeys(r["scenario"] for r in rows))
     ctrls = list(dict.fromkeys(r["controller"] for r in rows))
     cell = {(r["scenario"], r["controller"]): r for r in rows}
@@ -181,6 +191,8 @@ def summary(rows: list[dict]) -> str:
             text += f" ({x:.2g}x)" if x < 10 else f" ({x:.0f}x)"
         if r["tracking"] != r["runs"]:
             text += f" {r['tracking']}/{r['lost']}/{r['diverged']}"
+        if (r.get("x_untold_median") or 0.0) > TOLD_AT_MOST:  # worse than itself told nothing (or lost where it ran)
+            text += f" {UNTOLD_MARK}"
         return text
 
     lines = ["| controller | " + " | ".join(scns) + " |", "|---|" + "---:|" * len(scns)]

@@ -10,7 +10,7 @@ from pathlib import Path
 from mlpfac.files import write_atomic
 from mlpfac.loop.metrics import OUTCOMES, RunMetrics
 from mlpfac.sweeps.folders import PHASES
-from mlpfac.sweeps.paired import PAIRED_COLUMNS, median, summary
+from mlpfac.sweeps.paired import PAIRED_COLUMNS, TOLD_AT_MOST, UNTOLD_MARK, median, summary
 from mlpfac.sweeps.plan import Job
 
 
@@ -206,5 +206,7 @@ def write_paired(out: Path, rows: list[dict], meta: dict) -> list[Path]:
 SUMMARY_NOTE = (
     "\nMedian position RMS [mm] over the seeds, after the event (over the whole run after the warm-up "
     "where there is none), over the runs that finished; (k x): the median over seeds of the ratio to "
-    "the oracle on the same seed; t/l/d: tracking / lost / diverged, where not every run tracked.\n"
+    "the oracle on the same seed; t/l/d: tracking / lost / diverged, where not every run tracked; "
+    f"{UNTOLD_MARK}: a law told the change more than {TOLD_AT_MOST:g}x itself told nothing (the median over "
+    "seeds of the ratio on the same seed).\n"
 )

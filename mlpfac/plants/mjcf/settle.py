@@ -101,3 +101,30 @@ def turning(plant, events: Sequence = ()) -> tuple[float, float, str]:
     if not turned > TURN_MIN * omega:
         return math.nan, math.nan, f"{asked}: it turned at {turned:.3g} of {r * (w_r - w_l) / track:.3g} rad/s"
     return r * (w_r - w_l) / turned, -(sideways / TURN_S) / turned, asked
+
+
+def wheels_answer(plant, peak: float, events: Sequence = ()) -> tuple[float, float]:
+    """How the wheels answer a command, measured once the robot has settled: from rest at the origin,
+    driving straight through its own drive and IK, both wheels asked w1 = ``peak`` / 2 (``peak``: the
+    fastest a wheel turns along the run's reference) for TURN_LEAD_S, then w2 = ``peak`` as long;
+    over the last TURN_S of each, the mean speed its wheels reached, as the plant measures them
+    (``wheel_meas``), over the speed asked: two ratios rho1, rho2, to 3 digits. Returns the line
+    through the two, w = gain w_asked - offset, each to 3 digits: gain = 2 rho2 - rho1, offset =
+    peak (rho2 - rho1) [rad/s]; an offset > 0 where the wheels turn that much slower than asked at
+    every speed (a joint's friction against a weak servo's kv: its steady error, friction / kv);
+    (1, 0) where they answer as asked. ``plant`` is a :class:`~mlpfac.plants.mujoco.MujocoPlant`;
+    ``events``: plant events applied in turn at the start (the next reset undoes them)."""
+    plant.reset(np.zeros(3), np.random.default_rng(0))
+    for event in events:
+        plant.apply(event)
+    lead, n = int(round(TURN_LEAD_S / plant.T)), int(round(TURN_S / plant.T))
+    rho = []
+    for w in (0.5 * peak, peak):
+        reached = 0.0
+        for k in range(lead + n):
+            plant.step(np.array([float(plant.ik_radius) * w, 0.0]))
+            if k >= lead:
+                wheels = plant.telemetry()["wheel_meas"]
+                reached += 0.5 * (float(wheels[0]) + float(wheels[1]))
+        rho.append(float(f"{reached / n / w:.3g}"))
+    return float(f"{2.0 * rho[1] - rho[0]:.3g}"), float(f"{peak * (rho[1] - rho[0]):.3g}")
