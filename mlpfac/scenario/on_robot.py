@@ -192,11 +192,11 @@ def on_robot(table: dict, robot: str) -> dict:
     ref = dict(out.get("reference", {"kind": "eight"}))
     kind = ref.get("kind", "eight")
     curve = make_reference(kind, {k: v for k, v in ref.items() if k != "kind"}) if kind in SPEEDS else None
-    fit = fitted(ref, curve, duration, r)
+    fit = fitted_path(ref, r, out.get("controller"), True) if kind == "path" else fitted(ref, curve, duration, r)
     if fit is not None:
         out["reference"], limits, said = fit
         out.setdefault("controller", {}).update(limits)
-        said += _limits_said(limits)
+        said += _limits_said(limits) if limits else ""
         out["description"] = f"{out.get('description', '')} On {robot}: {said}.".strip()
     out["plant"] = plant
     out["events"] = [_same_change(ev) for ev in raw]
@@ -248,6 +248,61 @@ def fitted(ref: dict, curve, duration: float, r) -> tuple[dict, dict, str] | Non
     return ref, limits, said
 
 
+def fitted_path(ref: dict, r, ctrl, robot: bool) -> tuple[dict, dict, str]:
+    """A path's ``[reference]`` table ``ref`` timed for robot ``r`` (:mod:`mlpfac.scenario.path`): its
+    limits SHARE of the robot's, written in where the table leaves them unset (``robot``: ``--robot``,
+    where a limit the table sets is kept only where it is lower, and the track is the robot's).
+
+    - v_max = SHARE r w_max (a wheel's rim speed; w_max: :func:`wheel_speed_limit`, else the
+      controller's v_max / r), omega_max = 2 v_max / b: |v| + |omega| b / 2 <= v_max;
+    - a_max = SHARE r wdot_max, alpha_max = 2 a_max / b, wdot_max the smaller of what the wheels'
+      largest torque gives the robot's inertia (:func:`wheel_accel_limit`) and w_max / ACCEL_TIME
+      (where nothing limits the torque: the wheels reach their speed limit in ACCEL_TIME);
+    - track = b.
+
+    Returns the table, the controller's limits from the robot (as :func:`fitted`) and what was done."""
+    from mlpfac.plants.mjcf.wheels import wheel_accel_limit, wheel_speed_limit
+    from mlpfac.scenario.waypoints import ACCEL_TIME
+
+    rr, b = float(r.real_radius), float(r.real_track)
+    w_max = wheel_speed_limit(r)
+    law_v, law_omega = _law_limits(ctrl)
+    w = w_max if w_max is not None else law_v / rr
+    torque = wheel_accel_limit(r)
+    wdot = min(w / ACCEL_TIME, torque) if torque is not None else w / ACCEL_TIME
+    rim, acc = SHARE * rr * w, SHARE * rr * wdot
+    robots = {"v_max": rim, "omega_max": 2 * rim / b, "a_max": acc, "alpha_max": 2 * acc / b, "track": b}
+    if w_max is None:  # the controller's limits are the robot's: its omega_max too
+        robots["omega_max"] = min(robots["omega_max"], SHARE * law_omega)
+    out = dict(ref)
+    for key, value in robots.items():
+        value = float(f"{value:.6g}")
+        if key not in out or (robot and (key == "track" or not out[key] <= value)):
+            out[key] = value
+    said = (
+        f"path timed within {SHARE:g} of the wheels' limits (v_max {out['v_max']:g} m/s at the rim, a_max "
+        f"{out['a_max']:g} m/s^2, track {out['track']:g} m)"
+    )
+    limits = {}
+    if w_max is not None:
+        limits = {"v_max": float(f"{rr * w_max:.6g}"), "omega_max": float(f"{2 * rr * w_max / b:.6g}")}
+    return out, limits, said
+
+
+def _law_limits(ctrl) -> tuple[float, float]:
+    """The controller table's (v_max, omega_max), the law's defaults where it leaves them unset or unlimited."""
+    import dataclasses
+
+    from mlpfac.control.law import Law
+
+    out = []
+    for f in dataclasses.fields(Law):
+        if f.name in ("v_max", "omega_max"):
+            x = ctrl.get(f.name) if isinstance(ctrl, dict) else None
+            out.append(float(x) if isinstance(x, int | float) and 0 < x < float("inf") else f.default)
+    return out[0], out[1]
+
+
 def _limits_said(ctrl: dict) -> str:
     return f", v_max {ctrl['v_max']:g} m/s, omega_max {ctrl['omega_max']:g} rad/s"
 
@@ -265,9 +320,15 @@ def on_its_robot(table: dict, scn) -> tuple[dict, dict]:
 
     ref = dict(table.get("reference", {"kind": "eight"}))
     kind = ref.get("kind", "eight")
-    if kind not in SPEEDS:
+    if kind not in SPEEDS and kind != "path":
         return table, {}
     r = make_plant(scn, sample(scn.reference, np.arange(2) * scn.T)).robot  # every check made; its read cached
+    if kind == "path":
+        ref, limits, said = fitted_path(ref, r, table.get("controller"), False)
+        ctrl = dict(table.get("controller", {}))
+        ctrl |= {k: v for k, v in limits.items() if k not in ctrl}
+        out = table | {"reference": ref, "controller": ctrl}
+        return out, {"reference_fit": said + (_limits_said(ctrl) if limits else "")}
     if not any(key in ref for key in (*SPEEDS[kind], "speed")):
         fit = fitted(ref, scn.reference, scn.duration, r)
         if fit is None:
