@@ -44,9 +44,10 @@ K = 5  # the spline's degree: quintic, so that omega_r's rate is continuous too
 CORNER_D = 4.0 * ROOT2 / 3.0  # d of a right angle whose smallest radius of curvature is 1 (at its middle)
 MIN_LEG = 1e-3  # m: consecutive waypoints closer than this are a repeated point
 MAX_TURN_COS = -0.985  # a waypoint may turn the route by up to about 170 degrees (cos 170 = -0.985)
-GRID_DS = 0.02  # m: the timing's grid along a straight span (finer in the corners)
-SPAN_NODES = 32  # grid points per span of the spline, at least
-MAX_NODES = 400_000  # the timing's grid: a path longer or finer than this is refused
+GRID_DS = 0.02  # m: the timing's grid along a span, at most
+CORNER_NODES = 64  # grid points per span of a corner, at least (the limits hold between two to 0.1 %)
+STRAIGHT_NODES = 4  # ... of a straight span
+MAX_NODES = 500_000  # the timing's grid: a path longer or finer than this is refused
 NEWTON = 4  # Newton steps from a point's linear guess to its arc length (quadratic convergence)
 # 5-point Gauss-Legendre on [-1, 1]: exact for polynomials of degree 9 (the straight spans' |C'|)
 GL_X = np.array([-0.9061798459386640, -0.5384693101056831, 0.0, 0.5384693101056831, 0.9061798459386640])
@@ -135,11 +136,14 @@ class Geometry:
         )
 
     def _arc_grid(self) -> None:
-        """The grid of u (every span cut into cells of at most GRID_DS, at least SPAN_NODES), its arc lengths s."""
+        """The grid of u (each span cut into cells of at most GRID_DS, and at least CORNER_NODES in
+        a corner's), its arc lengths s, and the curvature there."""
         spans = np.arange(self.u0, self.u1)
         eighths = spans[:, None] + np.arange(9)[None, :] / 8.0
         rough = self._gauss(eighths[:, :-1].ravel(), eighths[:, 1:].ravel()).reshape(len(spans), 8).sum(axis=1)
-        n = np.maximum(SPAN_NODES, np.ceil(rough / GRID_DS)).astype(int)
+        bent = curvature(*(d(eighths[:, :-1].ravel()) for d in self.dC))[0].reshape(len(spans), 8)
+        least = np.where(np.abs(bent).max(axis=1) * rough > 1e-9, CORNER_NODES, STRAIGHT_NODES)
+        n = np.maximum(least, np.ceil(rough / GRID_DS)).astype(int)
         if n.sum() > MAX_NODES:
             raise ConfigError(
                 "", f"the path needs {n.sum()} grid points to be timed (at most {MAX_NODES}): it is too long"

@@ -20,7 +20,7 @@ from mlpfac.exceptions import ConfigError
 from mlpfac.scenario.path import MAX_TURN_COS, MIN_LEG, Path
 
 PATH_KEYS = ("points", "file", "closed", "v_max", "omega_max", "a_max", "alpha_max", "track", "radius", "speed")
-MAX_POINTS = 2000  # waypoints: a route is its corners (the timing's grid grows with each)
+MAX_POINTS = 1000  # waypoints: a route is its corners (the timing's grid grows with each)
 LENGTH_MAX = 1e4  # m, a waypoint's coordinates and the track
 ACCEL_TIME = 1.0  # s: without a robot's torque, the accelerations reach the speed limits in this time
 RANGES = {  # key: (largest, unit); each must be > 0 (track >= 0)
