@@ -354,6 +354,9 @@ def cmd_run(args: argparse.Namespace) -> int:
     if scn.dropped_events:
         times = ", ".join(f"{t:g} s" for t in scn.dropped_events)
         print(f"note: --duration {scn.duration:g} s ends before the event at {times}: this run has no such event")
+    route = scn.reference  # an open path run past its end
+    if getattr(route, "closed", True) is False and scn.duration > route.duration + scn.T:
+        print(f"note: the route ends at {route.duration:.4g} s; then the reference goes straight on along its last leg")
     baseline = None
     if args.baseline != "none" and not args.no_plot:
         try:

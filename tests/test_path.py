@@ -283,3 +283,19 @@ def test_mlpfac_list_names_the_routes(capsys):
     assert main(["list"]) == 0
     names = [line.split()[0] for line in capsys.readouterr().out.splitlines() if line and not line.startswith(" ")]
     assert "route" in names and "lane-change" in names
+
+
+def test_a_paths_numbers_vary_and_are_drawn_as_any_other(tmp_path):
+    """``--vary reference.speed`` an axis (its breaking point in robustness.json), a waypoint moved by its
+    dotted key, and ``reference.radius`` drawn per seed (recorded in [drawn])."""
+    mlpfac.sweep(
+        ["route"], ["kanayama"], seeds="0", duration=4.0, vary={"reference.speed": [1.0, 3.0]}, out=tmp_path / "a"
+    )
+    rob = json.loads((tmp_path / "a" / "robustness.json").read_text())
+    assert "reference.speed" in json.dumps(rob) and (tmp_path / "a" / "robustness.png").exists()
+    moved = load("route", values={"reference.points.1.0": 5.0})
+    assert moved.reference.points[1] == (5.0, 0.0)
+    drawn = [load("route", values={"reference.radius": {"uniform": [0.1, 0.4]}, "seed": s}) for s in (0, 1)]
+    radii = [d.reference.radius for d in drawn]
+    assert radii[0] != radii[1] and all(0.1 <= r <= 0.4 for r in radii)
+    assert drawn[0].table["drawn"]["reference.radius"] == radii[0]

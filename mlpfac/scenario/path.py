@@ -66,9 +66,7 @@ class Path:
     a_max: float = 1.0  # m/s^2: |dv| + |domega| track / 2 (a wheel's rim acceleration), and |dv|
     alpha_max: float = 2.5  # rad/s^2: |domega|
     track: float = 0.0  # m: the wheels' track (0: v and omega limited apart, as on the kinematic model)
-    radius: float = (
-        0.0  # m: a right-angle corner's smallest radius of curvature (0: max(v_max / (2 omega_max), track / 2))
-    )
+    radius: float = 0.0  # m: a right angle's smallest radius of curvature (0: max(v_max / 2 omega_max, track / 2))
     speed: float = 1.0  # x, the same path traversed this many times as fast
     file: str = ""  # the CSV file the points were read from ("": given inline)
     sha256: str = ""  # of that file
@@ -265,7 +263,7 @@ def control_polygon(points: np.ndarray, closed: bool, radius: float) -> tuple[np
     return c, knots, 0.0, float(len(c) - K)
 
 
-@functools.lru_cache(maxsize=64)
+@functools.lru_cache(maxsize=16)
 def timed(points, closed, radius, v_max, omega_max, a_max, alpha_max, track) -> Geometry:
     """The route's spline and profile, made once per set of inputs (a sweep parses a scenario many times)."""
     return Geometry(np.array(points, dtype=float), closed, radius, (v_max, omega_max, a_max, alpha_max, track))

@@ -17,12 +17,12 @@ import re
 from pathlib import Path as FilePath
 
 from mlpfac.exceptions import ConfigError
+from mlpfac.scenario.limits import ACCEL_TIME, SHARE
 from mlpfac.scenario.path import MAX_TURN_COS, MIN_LEG, Path
 
 PATH_KEYS = ("points", "file", "closed", "v_max", "omega_max", "a_max", "alpha_max", "track", "radius", "speed")
 MAX_POINTS = 1000  # waypoints: a route is its corners (the timing's grid grows with each)
 LENGTH_MAX = 1e4  # m, a waypoint's coordinates and the track
-ACCEL_TIME = 1.0  # s: without a robot's torque, the accelerations reach the speed limits in this time
 RANGES = {  # key: (largest, unit); each must be > 0 (track >= 0)
     "v_max": (20.0, "m/s"),
     "omega_max": (100.0, "rad/s"),
@@ -37,10 +37,8 @@ RANGES = {  # key: (largest, unit); each must be > 0 (track >= 0)
 def make_path(params: dict, where: str, limits: tuple[float | None, float | None] = (None, None)) -> Path:
     """The :class:`Path` of a ``[reference]`` table (``kind`` taken out); ``limits``, the
     controller's (v_max, omega_max), give the speed limits the table leaves unset: SHARE of them
-    (:mod:`mlpfac.scenario.on_robot`), as on every robot; the accelerations then reach them in
+    (:mod:`mlpfac.scenario.limits`), as on every robot; the accelerations then reach them in
     ACCEL_TIME. On a MuJoCo robot the robot's own limits are written in first (``on_robot``)."""
-    from mlpfac.scenario.on_robot import SHARE
-
     for key in params:
         if key not in PATH_KEYS:
             raise ConfigError(f"{where} {key}", f"not a parameter of 'path' (it takes {', '.join(PATH_KEYS)})")
