@@ -228,13 +228,14 @@ def _without_gl(*controllers: str) -> None:
 def cmd_list() -> int:
     from mlpfac.control.baselines import CONTROLLERS
     from mlpfac.control.plugins import entry_points
-    from mlpfac.scenario.parse import load, scenario_names
+    from mlpfac.scenario.parse import read_toml, scenario_names, shipped_dir
 
     names = scenario_names()
     width = max(map(len, names), default=0)
-    for name in names:
-        scn = load(name, build=False)
-        print(f"{name:<{width}}  {scn.plant_kind:<9}  {scn.description}")
+    for name in names:  # the files' own words: a listing times no path (which imports scipy's splines)
+        table = read_toml(shipped_dir() / f"{name}.toml", "scenario file")
+        plant = table.get("plant") if isinstance(table.get("plant"), dict) else {}
+        print(f"{name:<{width}}  {plant.get('kind', 'kinematic'):<9}  {table.get('description', '')}")
     from mlpfac.scenario.on_robot import robots_here
 
     print("\nrobots (--robot NAME, or an MJCF file):")
@@ -354,6 +355,9 @@ def cmd_run(args: argparse.Namespace) -> int:
     if scn.dropped_events:
         times = ", ".join(f"{t:g} s" for t in scn.dropped_events)
         print(f"note: --duration {scn.duration:g} s ends before the event at {times}: this run has no such event")
+    route = scn.reference  # an open path run past its end
+    if getattr(route, "closed", True) is False and scn.duration > route.duration + scn.T:
+        print(f"note: the route ends at {route.duration:.4g} s; then the reference goes straight on along its last leg")
     baseline = None
     if args.baseline != "none" and not args.no_plot:
         try:

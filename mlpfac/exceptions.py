@@ -27,7 +27,7 @@ class UnavailableError(ConfigError):
 class ScriptStopped(BaseException):  # noqa: N818 - not an error: the import of a script ends there
     """Raised in a sweep worker by a call of mlpfac's API at the top level of a user's script that
     the worker imports for its controller class: the import ends there, with what the script
-    defined above the call (:func:`mlpfac.control.plugins._load`), so that a script needs no
+    defined above the call (:func:`mlpfac.control.plugins.load_target`), so that a script needs no
     ``if __name__ == "__main__":`` and its sweep does not start again in every worker."""
 
 

@@ -166,6 +166,33 @@ BAD_FILES: dict[str, tuple[str | bytes, str]] = {
     "twist noise three numbers": (ROBOT + "twist_noise_std = [0.1, 0.1, 0.1]\n", "[plant] twist_noise_std"),
     "wheel speed noise negative": (ROBOT + "wheel_speed_noise_std = -0.1\n", "[plant] wheel_speed_noise_std"),
     "PI gain zero": (ROBOT + 'actuator = "torque"\npi_kp = 0.0\n', "[plant] pi_kp"),
+    "path without waypoints": ('[reference]\nkind = "path"\n', "[reference]: a path takes its waypoints from points"),
+    "path points and file": ('[reference]\nkind = "path"\npoints = [[0, 0], [1, 0]]\nfile = "r.csv"\n', "give one"),
+    "path one waypoint": ('[reference]\nkind = "path"\npoints = [[0, 0]]\n', "[reference] points: an open path needs at least 2 waypoints"),
+    "path closed of two": ('[reference]\nkind = "path"\nclosed = true\npoints = [[0, 0], [1, 0]]\n', "a closed path needs at least 3"),
+    "path repeated waypoint": ('[reference]\nkind = "path"\npoints = [[0, 0], [1, 0], [1, 0], [1, 1]]\n', "waypoint 3 repeats the waypoint before it"),
+    "path waypoint nan": ('[reference]\nkind = "path"\npoints = [[0, 0], [1, nan]]\n', "waypoint 2: (1, nan) must be finite"),
+    "path waypoint far": ('[reference]\nkind = "path"\npoints = [[0, 0], [1e6, 0]]\n', "within +-10000 m"),
+    "path waypoint of three": ('[reference]\nkind = "path"\npoints = [[0, 0], [1, 0, 0]]\n', "waypoint 2: expected [x, y]"),
+    "path waypoint text": ('[reference]\nkind = "path"\npoints = [[0, 0], ["a", 0]]\n', "waypoint 2: expected [x, y]"),
+    "path points a number": ('[reference]\nkind = "path"\npoints = 3\n', "[reference] points: expected a list"),
+    "path turning back": ('[reference]\nkind = "path"\npoints = [[0, 0], [2, 0], [0, 0.1]]\n', "waypoint 2 turns the route back on itself"),
+    "path closed a word": ('[reference]\nkind = "path"\nclosed = "yes"\npoints = [[0, 0], [1, 0]]\n', "[reference] closed"),
+    "path v_max zero": ('[reference]\nkind = "path"\nv_max = 0.0\npoints = [[0, 0], [1, 0]]\n', "[reference] v_max: must be > 0"),
+    "path a_max nan": ('[reference]\nkind = "path"\na_max = nan\npoints = [[0, 0], [1, 0]]\n', "[reference] a_max: expected a finite number"),
+    "path track negative": ('[reference]\nkind = "path"\ntrack = -0.3\npoints = [[0, 0], [1, 0]]\n', "[reference] track: must be >= 0"),
+    "path radius huge": ('[reference]\nkind = "path"\nradius = 1e9\npoints = [[0, 0], [1, 0]]\n', "[reference] radius"),
+    "path a curve's key": ('[reference]\nkind = "path"\nwx = 0.2\npoints = [[0, 0], [1, 0]]\n', "not a parameter of 'path'"),
+    "path too long to time": ('[reference]\nkind = "path"\nclosed = true\npoints = [[0, 0], [9999, 0], [9999, 9999], [0, 9999]]\n', "grid points to be timed"),
+    "path too many waypoints": ('[reference]\nkind = "path"\npoints = [' + ", ".join(f"[{i}, {i % 2}]" for i in range(1001)) + "]\n", "at most 1000"),
+    "path file missing": ('[reference]\nkind = "path"\nfile = "nope.csv"\n', "[reference] file: "),
+    "path file a number": ('[reference]\nkind = "path"\nfile = 3\n', "[reference] file: expected the path of a CSV file"),
+    "path file a folder": ('[reference]\nkind = "path"\nfile = "."\n', "is a folder"),
+    "own reference file missing": ('[reference]\nkind = "nope.py:Route"\n', "[reference] kind: "),
+    "own reference module missing": ('[reference]\nkind = "no_such_pkg.routes:Route"\n', "no module named 'no_such_pkg'"),
+    "own reference a curve's key": ('[reference]\nkind = "nope.py:Route"\nwx = 1.0\n', "not a key of your own reference"),
+    "own reference params a number": ('[reference]\nkind = "nope.py:Route"\nparams = 3\n', "[reference] params: expected a table"),
+    "own reference speed zero": ('[reference]\nkind = "nope.py:Route"\nspeed = 0\n', "[reference] speed"),
     "drawn not the seed's draw": (MINIMAL + EVENT.replace("1.5", "{ uniform = [1.0, 2.0] }") + '[drawn]\n"events.0.factor" = 1.0\n', "is not what seed 0 draws"),
 }  # fmt: skip
 
@@ -175,6 +202,46 @@ def test_bad_scenario_file(tmp_path, capsys, case):
     text, needle = BAD_FILES[case]
     path = tmp_path / "scenario.toml"
     path.write_bytes(text if isinstance(text, bytes) else text.encode())
+    out = tmp_path / "out"
+    assert main(["run", str(path), "--no-log", "--no-plot", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and err.startswith("mlpfac: error: "), err
+    assert needle in err and str(path) in err, err
+    assert not out.exists()
+
+
+ROUTE = '[reference]\nkind = "path"\nfile = "route.csv"\n'
+OWN = '[reference]\nkind = "route.py:{}"\n'
+GOOD = "class R:\n    def __init__(self, k=1.0):\n        self.k = k\n\n    def sample(self, t):\n        return {}\n"
+# name: (scenario file, {a file beside it: its content}, text the message must hold)
+BAD_BESIDE: dict[str, tuple[str, dict[str, str | bytes], str]] = {
+    "csv line not a number": (ROUTE, {"route.csv": "x,y\n0,0\n1,abc\n"}, "route.csv line 3: expected numbers"),
+    "csv header without y": (ROUTE, {"route.csv": "x,z\n0,0\n1,0\n"}, "line 1: a header line must name the columns x and y"),
+    "csv three columns bare": (ROUTE, {"route.csv": "0,0,0\n1,0,0\n"}, "more columns: name them in a header line"),
+    "csv binary": (ROUTE, {"route.csv": b"\xff\xfe\x00\x01"}, "route.csv: not a text file"),
+    "csv empty": (ROUTE, {"route.csv": "x,y\n"}, "[reference] file: an open path needs at least 2 waypoints, got 0"),
+    "csv repeated point": (ROUTE, {"route.csv": "0,0\n1,0\n1,0\n"}, "route.csv line 3 repeats the waypoint before it"),
+    "csv value inf": (ROUTE, {"route.csv": "0,0\n1,inf\n"}, "route.csv line 2: (1, inf) must be finite"),
+    "own reference class missing": (OWN.format("Nope"), {"route.py": GOOD.format("(0.0,) * 7")}, "has no class 'Nope'"),
+    "own reference not a class": (OWN.format("f"), {"route.py": "def f():\n    pass\n"}, "is not a class"),
+    "own reference without sample": (OWN.format("R"), {"route.py": "class R:\n    pass\n"}, "has no sample(t) method"),
+    "own reference import raises": (OWN.format("R"), {"route.py": "1 / 0\n"}, "importing it raised ZeroDivisionError"),
+    "own reference params refused": (OWN.format("R") + "[reference.params]\nq = 2.0\n", {"route.py": GOOD.format("(0.0,) * 7")}, "[reference.params] q: R(**[reference.params])"),
+    "own reference constructor raises": (OWN.format("R") + "[reference.params]\nk = -1.0\n", {"route.py": GOOD.format("(0.0,) * 7").replace("self.k = k", "assert k > 0, 'k > 0'")}, "[reference] params: R(**[reference.params]) raised AssertionError: k > 0"),
+    "own reference six numbers": (OWN.format("R"), {"route.py": GOOD.format("(0.0,) * 6")}, "sample(0) returned 6 numbers, not 7"),
+    "own reference nan at 0": (OWN.format("R"), {"route.py": GOOD.format("(float('nan'),) * 7")}, "sample(0) returned a value that is not finite"),
+    "own reference a word": (OWN.format("R"), {"route.py": GOOD.format("'seven'")}, "sample(0) raised ValueError"),
+    "own reference sample raises": (OWN.format("R"), {"route.py": GOOD.format("1 / t")}, "sample(0) raised ZeroDivisionError"),
+}  # fmt: skip
+
+
+@pytest.mark.parametrize("case", sorted(BAD_BESIDE))
+def test_bad_path_or_reference_class_beside_the_file(tmp_path, capsys, case):
+    text, files, needle = BAD_BESIDE[case]
+    for name, content in files.items():
+        (tmp_path / name).write_bytes(content if isinstance(content, bytes) else content.encode())
+    path = tmp_path / "scenario.toml"
+    path.write_text(MINIMAL + text)
     out = tmp_path / "out"
     assert main(["run", str(path), "--no-log", "--no-plot", "--out", str(out)]) == 2
     err = capsys.readouterr().err.strip()

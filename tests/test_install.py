@@ -35,7 +35,7 @@ def test_the_wheel_holds_every_shipped_scenario_and_robot_file(wheel):
     names = set(zipfile.ZipFile(wheel).namelist())
     for folder, package in (("sims", "mlpfac/sims"), ("models", "mlpfac/models")):
         for f in (ROOT / folder).iterdir():
-            if f.suffix in (".toml", ".xml", ".md"):
+            if f.suffix in (".toml", ".xml", ".md", ".csv"):  # sims/lane-change.csv: a path's waypoints
                 assert f"{package}/{f.name}" in names, f.name
     for f in (ROOT / "mlpfac").rglob("*.py"):  # every module, in every subpackage
         assert f.relative_to(ROOT).as_posix() in names, f

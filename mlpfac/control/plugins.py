@@ -112,7 +112,7 @@ def resolve(spec: str, params: dict | None, T: float, where: str, params_where: 
             if found is None:
                 raise ConfigError(where, f"unknown controller {spec!r}; {_choices()}")
             target, origin = found[0], f"entry point ({found[1]})"
-        cls, sha, kind = _load(target, where)
+        cls, sha, kind = load_target(target, where)
         origin = "file" if kind == "file" else origin
     if not inspect.isclass(cls):
         raise ConfigError(where, f"{target} is not a class (a controller is a class with step(e, r))")
@@ -156,10 +156,12 @@ def _name(cls: type, entry: str | None, where: str) -> str:
     return name
 
 
-def _load(target: str, where: str) -> tuple[object, str | None, str]:
+def load_target(target: str, where: str) -> tuple[object, str | None, str]:
     """The object ``module:Class`` or ``/path/file.py:Class`` names; (object, sha256 of its file, kind).
-    A file is imported once per content (a module named by its sha256), so an edited file is new code."""
-    global IMPORTING
+    A file is imported once per content (a module named by its sha256), so an edited file is new code.
+    (A reference class of the user's is loaded here too: :mod:`mlpfac.scenario.own_reference`.)"""
+    global IMPORTING, USER_CODE
+    USER_CODE = True
     left, sep, attr = target.rpartition(":")
     if not sep or not left or not attr:
         raise ConfigError(where, f"{target!r}: name a class as path/to/file.py:Class or package.module:Class")

@@ -31,7 +31,7 @@ class Observation:
 
     e: np.ndarray  # (3,) the tracking error (2) of the measured pose, in the robot's frame
     r: np.ndarray  # (5,) the reference sample (x_r, y_r, theta_r, v_r, omega_r)
-    r_dot: np.ndarray  # (2,) (dv_r/dt, domega_r/dt)
+    r_dot: np.ndarray  # (2,) (dv_r/dt, domega_r/dt): the reference's own where it gives them, else central differences
     pose: np.ndarray  # (3,) the measured pose (x, y, theta): noise and delay of the scenario's sensor
     twist: np.ndarray  # (2,) the base's (v, omega) as measured (same delay; [plant] twist_noise_std)
     wheel_speeds: np.ndarray  # (2,) (left, right) rad/s, forward positive, as the encoders measure them
@@ -59,7 +59,8 @@ class Observation:
 
 def reference_rates(ref: np.ndarray, T: float) -> np.ndarray:
     """(dv_r/dt, domega_r/dt) at each sample of ``ref`` (N, 5): central differences over the
-    samples (one-sided at the ends), exact to O(T^2) on the smooth references."""
+    samples (one-sided at the ends), exact to O(T^2) on the smooth references. (A path and a
+    reference class of the user's give their own: :func:`mlpfac.scenario.reference.sample_rates`.)"""
     out = np.zeros((len(ref), 2))
     if len(ref) > 2:
         out[1:-1] = (ref[2:, 3:5] - ref[:-2, 3:5]) / (2.0 * T)

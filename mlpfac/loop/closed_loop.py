@@ -101,8 +101,22 @@ class ClosedLoop:
     still live, where each stopped; stepped in Python (:meth:`run_steps`) or compiled between
     events and flushes (:meth:`run_segments`, a MuJoCo plant with a law kernel)."""
 
-    def __init__(self, scns: list[Scenario], ref: np.ndarray, plant, ctrl: Stepped, full: bool, compiled: bool):
+    def __init__(
+        self,
+        scns: list[Scenario],
+        ref: np.ndarray,
+        plant,
+        ctrl: Stepped,
+        full: bool,
+        compiled: bool,
+        rates: np.ndarray | None = None,
+        end: tuple[int, str] | None = None,
+    ):
+        """``rates``: the reference's (dv_r, domega_r) where it gives them (else its samples' finite
+        differences); ``end``: (step, why) where the reference stops being finite (your own class):
+        every seed ends there, as diverged."""
         base = scns[0]
+        self.end = end
         self.base, self.ref, self.ctrl, self.full = base, ref, ctrl, full
         B, N = len(scns), base.steps
         self.B, self.N, self.T = B, N, base.T
@@ -129,7 +143,7 @@ class ClosedLoop:
         bad_seeds(e, np.zeros((0, 2)), e, self.no_z[:0], 1.0, self.bad[:0])
         self.torque = ctrl.level == "torque"  # step(obs) -> wheel torques
         if self.torque:
-            self.r_dot = reference_rates(ref, self.T)
+            self.r_dot = reference_rates(ref, self.T) if rates is None else rates
         self.compiled = compiled and self.listed and _compiled(plant, ctrl)
         if self.compiled:
             self._prepare_segments()
@@ -166,11 +180,15 @@ class ClosedLoop:
         k, N, T = 0, self.N, self.T
         while k < N and self.live:
             raise_swallowed()
+            if self._reference_ended(k):
+                break
             _apply_due(self.pending, k, T, self.plant, self.recs, self.live)
             most = max(1, SEGMENT_PHYSICS // max(p._n for p in self.plant.plants))  # a signal waits no longer
             k1 = min(N, (k // FLUSH_EVERY + 1) * FLUSH_EVERY, k + most)
             if self.pending:  # up to the next event
                 k1 = next((j for j in range(k + 1, k1) if self.pending[0].time <= j * T + 1e-9), k1)
+            if self.end is not None and k < self.end[0]:
+                k1 = min(k1, self.end[0])
             for b in list(self.live):
                 self._segment(b, k, k1)
             k = k1
@@ -195,6 +213,8 @@ class ClosedLoop:
     def run_steps(self, sink, on_step: Callable[[int], None] | None) -> None:
         for k in range(self.N):
             raise_swallowed()
+            if self._reference_ended(k):
+                break
             _apply_due(self.pending, k, self.T, self.plant, self.recs, self.live)
             if not self._control(k) or not self._actuate(k):
                 break
@@ -260,6 +280,14 @@ class ClosedLoop:
         return bool(self.live)
 
     # -- the end of a seed, and of the run
+
+    def _reference_ended(self, k: int) -> bool:
+        """Whether step k is where the reference stopped being finite: every live seed ends there."""
+        if self.end is None or k != self.end[0]:
+            return False
+        for b in list(self.live):
+            self.stop(b, self.end[1], k, k)
+        return True
 
     def stop(self, b: int, reason: str, k: int, plant_rows: int) -> None:
         """Seed b diverged at step k: its record ends here, its plant is no longer stepped, and the

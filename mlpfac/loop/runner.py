@@ -15,25 +15,40 @@ from mlpfac.loop.factory import make_controller, make_plant
 from mlpfac.loop.record import RunRecord
 from mlpfac.plants.base import Plant
 from mlpfac.scenario.parse import Scenario
-from mlpfac.scenario.reference import sample
+from mlpfac.scenario.reference import sample_rates
 
 
 @dataclass
 class Built:
-    """What a run needs before its first step: the reference, the plant and the controller."""
+    """What a run needs before its first step: the reference (its rates where it gives them, and
+    where it stops being finite), the plant and the controller."""
 
     ref: np.ndarray
     plant: Plant
     ctrl: Stepped
+    rates: np.ndarray | None = None
+    end: tuple[int, str] | None = None
+
+
+def reference(scn: Scenario) -> tuple[np.ndarray, np.ndarray | None, tuple[int, str] | None]:
+    """The reference at every step's time (N + 1, 5), its rates (N + 1, 2) where it gives them, and
+    (step, why) where it is first not finite (a reference class of the user's), else None."""
+    ref, rates = sample_rates(scn.reference, np.arange(scn.steps + 1) * scn.T)
+    bad = ~np.isfinite(ref[: scn.steps]).all(axis=1)
+    if not bad.any():
+        return ref, rates, None
+    k = int(np.argmax(bad))
+    why = getattr(scn.reference, "why", None)
+    return ref, rates, (k, (why(k * scn.T) if why else "") or "the reference is not finite")
 
 
 def build(scn: Scenario, instance: object | None = None) -> Built:
     """Sample the reference, build the plant and the controller: what can fail (a bad model, a
     missing actuator) fails here, before a run writes or sends anything. ``instance``: an object of
     the scenario's plug-in controller to run (:func:`mlpfac.loop.factory.make_controller`)."""
-    ref = sample(scn.reference, np.arange(scn.steps + 1) * scn.T)  # (N + 1, 5)
+    ref, rates, end = reference(scn)
     plant = make_plant(scn, ref)
-    return Built(ref, plant, make_controller(scn, instance, plant))
+    return Built(ref, plant, make_controller(scn, instance, plant), rates, end)
 
 
 def run(
@@ -50,7 +65,7 @@ def run(
     A run is the closed loop of :func:`run_batch` with one seed (B = 1).
     """
     built = built or build(scn)
-    return _loop([scn], built.ref, built.plant, built.ctrl, sink, on_step, full=True)[0]
+    return _loop([scn], built.ref, built.plant, built.ctrl, sink, on_step, True, built.rates, built.end)[0]
 
 
 def same_but_seed(scns: list[Scenario]) -> bool:
@@ -76,24 +91,24 @@ def run_batch(scns: list[Scenario], plant_list: bool = False) -> list[RunRecord]
     if not same_but_seed(scns):
         raise ValueError("run_batch needs scenarios that differ in their seed only")
     base = scns[0]
-    ref = sample(base.reference, np.arange(base.steps + 1) * base.T)  # (N + 1, 5)
+    ref, rates, end = reference(base)
     plant = make_plant(base, ref)
     if plant_list or not plant.batched:
         plant = [plant] + [make_plant(s, ref) for s in scns[1:]]
     recs = _loop(scns, ref, plant, make_controller(base, None, plant[0] if isinstance(plant, list) else plant), None,
-                 None, full=False)  # fmt: skip
+                 None, False, rates, end)  # fmt: skip
     if any(r.status == "interrupted" for r in recs):
         raise KeyboardInterrupt
     return recs
 
 
-def _loop(scns, ref, plant, ctrl: Stepped, sink, on_step, full: bool) -> list[RunRecord]:
+def _loop(scns, ref, plant, ctrl: Stepped, sink, on_step, full: bool, rates=None, end=None) -> list[RunRecord]:
     """The closed loop for B = len(scns) seeds of one scenario. ``full``: record every weight (else
     max |z| per step). A list of plants, or a plant without a batch form, steps one per seed."""
-    loop = ClosedLoop(scns, ref, plant, ctrl, full, compiled=on_step is None)
+    loop = ClosedLoop(scns, ref, plant, ctrl, full, on_step is None, rates, end)
     wall0 = time.perf_counter()
     if sink is not None:
-        sink.begin(loop.recs[0], geometry=loop.geometry(), ref_path=ref[: loop.N])
+        sink.begin(loop.recs[0], geometry=loop.geometry(), ref_path=ref[: loop.N if end is None else end[0]])
     try:
         if loop.compiled:
             loop.run_segments(sink)

@@ -18,6 +18,8 @@ import types
 import typing
 
 from mlpfac.exceptions import ConfigError
+from mlpfac.scenario.own_reference import OWN_KEYS
+from mlpfac.scenario.waypoints import PATH_KEYS, RANGES
 from mlpfac.tables import build
 
 HEAD = "<!-- Written by `python -m mlpfac.pages docs` from the code; edit the code, not this page. -->\n"
@@ -55,6 +57,37 @@ CONTROLLER = {
     "adaptive": ("", "the adaptive scheme's options: [below](#controlleradaptive)"),
     "kanayama": ("", "Kanayama's gains: [below](#controllerkanayama)"),
     "params": ("", "keyword arguments of your own controller's class (`Class(T=..., **params)`); a plug-in only"),
+}
+PATH = {  # [reference] kind = "path" (mlpfac.scenario.waypoints): key -> (unit, meaning)
+    "points": ("m", "the waypoints, `[[x, y], ...]`: at least 2 (3 closed), none repeated, no turn back on itself"),
+    "file": ("", "or a CSV file of them (x and y in m, one a line, a header line allowed), from this file's folder"),
+    "closed": ("", "the route returns to its first waypoint and loops (default false: it ends, then goes straight on)"),
+    "radius": (
+        "m",
+        "a right-angle corner's smallest radius of curvature (default: max(v_max / (2 omega_max), track / 2))",
+    ),
+    "v_max": (
+        "m/s",
+        "each wheel's rim speed |v| + |ω| track / 2 (and |v|) at most this (default: 0.5 of the controller's v_max; on a MuJoCo robot 0.5 of its wheels' limit)",
+    ),
+    "omega_max": (
+        "rad/s",
+        "|ω| at most this (default: 0.5 of the controller's omega_max; on a MuJoCo robot 2 v_max / track)",
+    ),
+    "a_max": (
+        "m/s²",
+        "each wheel's rim acceleration |dv| + |dω| track / 2 at most this (default: v_max / 1 s; on a MuJoCo robot 0.5 of what its wheels' torque gives, at most its speed limit / 1 s)",
+    ),
+    "alpha_max": ("rad/s²", "|dω| at most this (default: omega_max / 1 s; on a MuJoCo robot 2 a_max / track)"),
+    "track": (
+        "m",
+        "the wheels' track coupling v and ω in the limits (default 0: apart, as on the kinematic model; on a MuJoCo robot its own)",
+    ),
+    "speed": ("x", "the same path traversed this many times as fast (v, ω x speed, their rates x speed²)"),
+}
+OWN = {
+    "params": ("", "keyword arguments of your own reference class (`Class(**params)`): `[reference.params]`"),
+    "speed": ("x", "the same reference traversed this many times as fast (default 1, at most 100)"),
 }
 # keys whose checks depend on another key: probed with that one set
 CONTEXT = {"detect_mean": {"detect": 1.0}, "input_P_alarm": {"detect": 1.0, "detect_mean": 1.0}}
@@ -225,6 +258,18 @@ def _top_probe(key: str) -> tuple[str, str]:
     return f"{default:g}", _range(lambda v: parse(ctx | {key: v}), key, hint)
 
 
+def _path_probe(key: str) -> tuple[str, str]:
+    """The range of a path's number, from :func:`mlpfac.scenario.waypoints.make_path` itself."""
+    from mlpfac.scenario.waypoints import make_path
+
+    if key not in RANGES:
+        return {"closed": ("false", ""), "points": ("", "within +-10000 m; at most 1000")}.get(key, ("", ""))
+    base = {"points": [[0.0, 0.0], [1.0, 0.0]]}
+    most, unit = RANGES[key]
+    low = _range(lambda v: make_path(base | {key: v}, "[reference]"), key, float)
+    return ("1" if key == "speed" else ""), f"{low}, <= {most:g}"
+
+
 def _initial_probe(key: str) -> tuple[str, str]:
     """The default of an ``[initial]`` key, as :func:`mlpfac.scenario.parse` fills it in."""
     from mlpfac.scenario.parse import parse
@@ -268,6 +313,25 @@ def scenario_page() -> str:
         rows = _dataclass_rows(cls, "[reference]")
         doc = " ".join(inspect.cleandoc(cls.__doc__ or "").split()).replace("``", "`")
         out += ["", f'### `kind = "{kind}"`', "", doc, "", *rows]
+    out += [
+        "",
+        '### `kind = "path"`: your own path',
+        "",
+        "Waypoints, each corner rounded (a quintic B-spline: ω continuous) and the route timed so that each "
+        "wheel's speed and acceleration stay within the limits below: "
+        "[Your own path](scenarios.md#your-own-path). On a MuJoCo robot the limits it leaves unset are its robot's, "
+        "written into the run's `config.toml`.",
+        "",
+        *_plain_rows(PATH, set(PATH_KEYS), '[reference] kind = "path"', _path_probe),
+        "",
+        '### `kind = "file.py:Class"`: your own reference class',
+        "",
+        "A class built as `Class(**[reference.params])` whose `sample(t)` returns (x, y, θ, v, ω, dv, dω): "
+        "[Your own reference class](scenarios.md#your-own-reference-class). `file.py` is taken from this file's "
+        "folder; `package.module:Class` is imported.",
+        "",
+        *_plain_rows(OWN, set(OWN_KEYS), "[reference] (your own class)"),
+    ]
     out += ["", "## `[initial]`", ""]
     out += _plain_rows(INITIAL, _known({"initial": {"x": 1}}, "[initial]"), "[initial]", _initial_probe)
     out += [

@@ -25,8 +25,8 @@ import importlib.resources
 from pathlib import Path
 
 from mlpfac.exceptions import ConfigError
+from mlpfac.scenario.limits import SHARE, fitted_path
 
-SHARE = 0.5  # the reference's peak wheel speed, as a share of the robot's wheel-speed limit
 MENAGERIE_BASES = (
     "pal_tiago",
     "pal_tiago_dual",
@@ -192,11 +192,11 @@ def on_robot(table: dict, robot: str) -> dict:
     ref = dict(out.get("reference", {"kind": "eight"}))
     kind = ref.get("kind", "eight")
     curve = make_reference(kind, {k: v for k, v in ref.items() if k != "kind"}) if kind in SPEEDS else None
-    fit = fitted(ref, curve, duration, r)
+    fit = fitted_path(ref, r, out.get("controller"), True) if kind == "path" else fitted(ref, curve, duration, r)
     if fit is not None:
         out["reference"], limits, said = fit
         out.setdefault("controller", {}).update(limits)
-        said += _limits_said(limits)
+        said += _limits_said(limits) if limits else ""
         out["description"] = f"{out.get('description', '')} On {robot}: {said}.".strip()
     out["plant"] = plant
     out["events"] = [_same_change(ev) for ev in raw]
@@ -265,9 +265,15 @@ def on_its_robot(table: dict, scn) -> tuple[dict, dict]:
 
     ref = dict(table.get("reference", {"kind": "eight"}))
     kind = ref.get("kind", "eight")
-    if kind not in SPEEDS:
+    if kind not in SPEEDS and kind != "path":
         return table, {}
     r = make_plant(scn, sample(scn.reference, np.arange(2) * scn.T)).robot  # every check made; its read cached
+    if kind == "path":
+        ref, limits, said = fitted_path(ref, r, table.get("controller"), False)
+        ctrl = dict(table.get("controller", {}))
+        ctrl |= {k: v for k, v in limits.items() if k not in ctrl}
+        out = table | {"reference": ref, "controller": ctrl}
+        return out, {"reference_fit": said + (_limits_said(ctrl) if limits else "")}
     if not any(key in ref for key in (*SPEEDS[kind], "speed")):
         fit = fitted(ref, scn.reference, scn.duration, r)
         if fit is None:

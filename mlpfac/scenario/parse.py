@@ -210,6 +210,12 @@ def load(
     ctrl = table.get("controller")
     if isinstance(ctrl, dict) and isinstance(ctrl.get("name"), str):  # file.py:Class, from the file's folder
         ctrl["name"] = absolute_spec(ctrl["name"], path.parent)
+    ref = table.get("reference")
+    if isinstance(ref, dict):  # your own reference class, or a path's CSV file, from the file's folder too
+        if isinstance(ref.get("kind"), str):
+            ref["kind"] = absolute_spec(ref["kind"], path.parent)
+        if isinstance(ref.get("file"), str) and ref["file"]:
+            ref["file"] = str((path.parent / Path(ref["file"]).expanduser()).resolve())
     plant = table.get("plant")
     if (
         isinstance(plant, dict)
@@ -288,13 +294,6 @@ def parse(table: dict, source: str = "<scenario>", check_model: bool = True) -> 
     if not isinstance(description, str):
         raise ConfigError(f"{source} description", f"expected a string, got {description!r}")
 
-    ref_table = subtable(table, "reference", source, {"kind": "eight"})
-    kind = ref_table.pop("kind", "eight")
-    for key, val in ref_table.items():
-        if isinstance(val, bool) or not isinstance(val, int | float) or not math.isfinite(val):
-            raise ConfigError(f"{source} [reference] {key}", f"expected a finite number, got {val!r}")
-    reference = make_reference(kind, ref_table, f"{source} [reference]")
-
     initial = subtable(table, "initial", source)
     check_keys(initial, {"error", "moving"}, f"{source} [initial]")
     moving = initial.get("moving", True)
@@ -342,6 +341,12 @@ def parse(table: dict, source: str = "<scenario>", check_model: bool = True) -> 
     if level == "torque":
         torque_drive(name_c, plant_kind, getattr(plant_config, "actuator", None), source)
     law = build(Law, {k: ctrl[k] for k in ("lambdas", "v_max", "omega_max") if k in ctrl}, where)
+    ref_table = subtable(table, "reference", source, {"kind": "eight"})
+    kind = ref_table.pop("kind", "eight")
+    reference = make_reference(kind, ref_table, f"{source} [reference]", (law.v_max, law.omega_max))
+    table = provenance.with_reference(table, reference, source, check_model)
+    if "duration" not in table and hasattr(reference, "duration"):  # a path: once along it (one lap)
+        duration = max(T, T * math.ceil(reference.duration / T - 1e-9))
     ad = subtable(ctrl, "adaptive", where)
     check_keys(ad, ADAPTIVE_KEYS, f"{where}.adaptive")
     nets = build(Networks, {k: ad.pop(k) for k in list(ad) if k in NETWORK_KEYS}, f"{where}.adaptive")

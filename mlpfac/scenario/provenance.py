@@ -36,6 +36,9 @@ def recorded(scn: Recorded) -> tuple[dict, dict]:
     out |= plant.provenance()
     if scn.plugin is not None:
         out["controller"] = scn.plugin.provenance()
+    ref = getattr(scn.reference, "provenance", None)
+    if ref is not None and ref() is not None:  # your own reference class, a path's CSV file
+        out["reference"] = ref()
     out |= torque_need(scn, plant)  # what the reference asks of torque motors, for the run's first line
     return out, plant.found()
 
@@ -80,6 +83,29 @@ def check_model(recorded, config, where: str) -> None:
             f"recorded {str(want)[:12]}...): the file changed, or another MuJoCo compiles it differently; "
             "remove [provenance] to run it with the model as it is now",
         )
+
+
+def with_reference(table: dict, reference, source: str, check: bool) -> dict:
+    """The table with ``[provenance] reference`` naming the reference class's file or the path's CSV
+    file and its sha256; a config.toml whose file changed since it was made is refused (``check``)."""
+    prov = table.get("provenance")
+    now = reference.provenance() if hasattr(reference, "provenance") else None
+    if not isinstance(prov, dict) or now is None:
+        return table
+    was = prov.get("reference")
+    name = now.get("target", now.get("file"))
+    if (
+        check
+        and isinstance(was, dict)
+        and was.get("target", was.get("file")) == name
+        and was.get("sha256") != now.get("sha256")
+    ):
+        raise ConfigError(
+            f"{source} [provenance] reference",
+            f"{name} is not the file this configuration was made with (sha256 {str(now.get('sha256'))[:12]}..., "
+            f"recorded {str(was.get('sha256'))[:12]}...); remove [provenance.reference] to run it as it is now",
+        )
+    return {**table, "provenance": {**prov, "reference": now}}
 
 
 def with_controller(table: dict, plugin: Plugin, source: str, check: bool) -> dict:

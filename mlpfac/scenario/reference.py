@@ -7,10 +7,16 @@ along the sampled times, so it is continuous over a run.
 
 Every kind takes ``speed`` (default 1): the same path traversed ``speed`` times as fast,
 p_s(t) = p(speed t), so v_r and omega_r are x speed and the accelerations x speed^2.
+
+Beside these curves, a reference is your own path (``kind = "path"``: waypoints, rounded and timed
+within the robot's limits, :mod:`mlpfac.scenario.path`) or your own class (``kind =
+"file.py:Class"``, :mod:`mlpfac.scenario.own_reference`): both give the rates of v_r and omega_r
+with the samples (:func:`sample_rates`), where the curves' are taken by finite differences.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -103,11 +109,25 @@ class Lemniscate:
 REFERENCES = {"eight": Eight, "circle": Circle, "line": Line, "lemniscate": Lemniscate}
 
 
-def sample(curve: Eight | Circle | Line | Lemniscate, t: np.ndarray) -> np.ndarray:
+def sample(curve, t: np.ndarray) -> np.ndarray:
     """Reference samples at times ``t``: (N, 5) rows (x_r, y_r, theta_r, v_r, omega_r).
 
     theta_r is unwrapped along ``t`` (continuous as long as it turns less than pi between samples).
     """
+    return sample_rates(curve, t)[0]
+
+
+def sample_rates(curve, t: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+    """(:func:`sample`'s rows, the rates (dv_r/dt, domega_r/dt) (N, 2) where the reference gives
+    them (a path, your own class), else None: the closed-form curves' are their samples' finite
+    differences, :func:`mlpfac.control.torque.reference_rates`)."""
+    if hasattr(curve, "rows"):
+        rows = curve.rows(np.asarray(t, dtype=float))
+        return np.ascontiguousarray(rows[:, :5]), np.ascontiguousarray(rows[:, 5:7])
+    return _curve(curve, t), None
+
+
+def _curve(curve: Eight | Circle | Line | Lemniscate, t: np.ndarray) -> np.ndarray:
     t = np.asarray(t, dtype=float)
     k = curve.speed  # k = 1 changes no bit: 1 * t == t
     x, y, dx, dy, ddx, ddy = curve.derivatives(k * t)
@@ -138,11 +158,28 @@ def _limit(key: str) -> tuple[float, str]:
     return LENGTH_MAX, "m"
 
 
-def make_reference(kind: str, params: dict, where: str = "[reference]"):
-    """Build a reference curve from its scenario table (``kind`` plus the curve's parameters)."""
+def make_reference(kind: str, params: dict, where: str = "[reference]", limits: tuple = (None, None)):
+    """Build a reference from its scenario table (``kind`` plus its parameters): a curve, a path
+    (``limits``: the controller's (v_max, omega_max), for the path's limits the table leaves unset)
+    or your own class."""
+    if kind == "path":
+        from mlpfac.scenario.waypoints import make_path
+
+        return make_path(params, where, limits)
+    if isinstance(kind, str) and ":" in kind:
+        from mlpfac.scenario.own_reference import make_own
+
+        return make_own(kind, params, where)
     cls = REFERENCES.get(kind) if isinstance(kind, str) else None
     if cls is None:
-        raise ConfigError(where, f"unknown reference kind {kind!r}; choose one of {', '.join(REFERENCES)}")
+        raise ConfigError(
+            f"{where} kind",
+            f"unknown reference kind {kind!r}; choose one of {', '.join(REFERENCES)}, path (your waypoints), "
+            "or your own class as path/to/file.py:Class or package.module:Class",
+        )
+    for key, val in params.items():
+        if isinstance(val, bool) or not isinstance(val, int | float) or not math.isfinite(val):
+            raise ConfigError(f"{where} {key}", f"expected a finite number, got {val!r}")
     fields = cls.__dataclass_fields__
     for key in params:
         if key not in fields:
@@ -159,7 +196,7 @@ def make_reference(kind: str, params: dict, where: str = "[reference]"):
     except (TypeError, ValueError) as err:
         raise ConfigError(where, f"bad parameter value: {err}") from None
     with np.errstate(all="ignore"):
-        ok = sample(curve, np.linspace(0.0, 60.0, 601))
+        ok = _curve(curve, np.linspace(0.0, 60.0, 601))
     if not np.all(np.isfinite(ok)) or np.max(ok[:, 3]) > SPEED_MAX or np.max(np.abs(ok[:, 4])) > OMEGA_MAX:
         raise ConfigError(
             where,

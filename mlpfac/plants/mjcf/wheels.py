@@ -117,3 +117,29 @@ def wheel_speed_limit(r) -> float | None:
     else:
         torque = min(edits.torque_limit(m, a, c, True) for a, c in zip(r.acts, r.act_per_wheel, strict=True))
     return torque / damping if damping > 0 and math.isfinite(torque) else None
+
+
+def wheel_accel_limit(r) -> float | None:
+    """The fastest the wheels of robot ``r`` (a :class:`~mlpfac.plants.mjcf.robot.Robot`) speed up
+    on their largest torque tau (rad/s^2), the smaller of driving straight and turning in place:
+    2 tau / (m r^2 + 2 I_w) and tau / (2 I r^2 / b^2 + I_w) (mass m, yaw inertia I, each wheel's
+    inertia I_w, radius r, track b: the nominal dynamic model, :mod:`mlpfac.plants.mjcf.dynamics`);
+    None where nothing limits the torque."""
+    from mlpfac.plants.mjcf.dynamics import read_model
+
+    if r.mix is not None:
+        limits = drive.wheel_torque_limits(r.mix, r.umax)
+    else:
+        torque, kept = r.config.actuator == "torque", r.config.servo_limit == "control"
+        limits = tuple(
+            edits.torque_limit(r.model, a, c, torque, kept and not torque)
+            for a, c in zip(r.acts, r.act_per_wheel, strict=True)
+        )
+    model = read_model(r.model, r, limits)
+    tau = model.torque_limit_Nm
+    if not math.isfinite(tau) or tau <= 0:
+        return None
+    rr, b, Iw = model.wheel_radius_m, model.track_m, model.wheel_inertia_kg_m2
+    straight = 2.0 * tau / (model.mass_kg * rr * rr + 2.0 * Iw)
+    turning = tau / (2.0 * model.yaw_inertia_kg_m2 * rr * rr / (b * b) + Iw)
+    return min(straight, turning)
