@@ -34,9 +34,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from mlpfac.elementary import atan2
+from mlpfac.elementary import atan2, each
 from mlpfac.exceptions import ConfigError
-from mlpfac.model import each
 from mlpfac.scenario.timing import profile
 
 ROOT2 = math.sqrt(2.0)
