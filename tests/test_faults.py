@@ -278,7 +278,7 @@ def test_a_scheduler_that_accepts_and_never_answers_times_out(here):
     port = server.getsockname()[1]
     try:
         proc = _cli("sweep", "kin.toml", "--seeds", "0", "--out", "S", "--scheduler", f"tcp://127.0.0.1:{port}",
-                    "--scheduler-timeout", "1", cwd=here, timeout=30)  # fmt: skip
+                    "--scheduler-timeout", "1", cwd=here, timeout=300)  # fmt: skip
     finally:
         server.close()
     assert proc.returncode == 2 and "--scheduler: cannot reach a Dask scheduler" in _one_line(proc.stderr)

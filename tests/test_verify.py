@@ -8,7 +8,6 @@ import shutil
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest
@@ -222,19 +221,27 @@ def test_a_dataset_whose_robot_is_not_here_is_skipped_and_only_strict_fails(coll
 
 
 def test_sigterm_during_verify_ends_it_as_terminated(collected, tmp_path):
-    """SIGTERM while a dataset's run is re-run: exit 143 and one line, as everywhere else (not 130)."""
+    """SIGTERM while a dataset's run is re-run: exit 143 and one line, as everywhere else (not 130).
+    The sign: the line of the dataset verified before it (``tiny``); the slow one's run lasts minutes
+    of simulated time on any machine, so the signal lands inside it."""
     docs = _copy(collected, tmp_path)
-    slow = docs / "data" / "slow"
+    slow = docs / "data" / "z-slow"  # after tiny
     slow.mkdir()
-    command = "mlpfac sweep paper --controllers adaptive-ukf --seeds 0 --duration 25 --out runs/slow"
+    command = "mlpfac sweep paper --controllers adaptive-ukf --seeds 0 --duration 3000 --out runs/slow"
     (slow / "meta.json").write_text(json.dumps({"command": command}))
     row = json.loads((docs / "data" / "tiny" / RUNS_FILE).read_text())["runs"][0]
     (slow / RUNS_FILE).write_text(json.dumps({"runs": [row | {"controller": "adaptive-ukf", "seed": 0}]}))
     mlpfac = str(Path(sys.executable).with_name("mlpfac"))
     proc = subprocess.Popen([mlpfac, "report", str(docs), "--verify", "1"], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True, cwd=tmp_path)  # fmt: skip
-    time.sleep(4.0)  # past the imports and the plans: inside the run of adaptive-ukf (seconds)
-    proc.send_signal(signal.SIGTERM)
-    out, err = proc.communicate(timeout=10)
+    try:
+        first = proc.stdout.readline()  # tiny's verdict: z-slow's run starts now
+        assert first == "tiny: 1 of 1 runs bit-identical\n", (first, proc.stderr.read() if not first else "")
+        proc.send_signal(signal.SIGTERM)
+        out, err = proc.communicate(timeout=300)  # only bounds a hang
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
     assert proc.returncode == 143 and err.strip() == "mlpfac: terminated", err
     assert out == ""
