@@ -172,7 +172,21 @@ BAD_DATASETS = {
         "runs.json runs[0]: expected a run's row with",
     ),
     "runs.json row a number": ({"meta.json": RUNS_OK, RUNS_FILE: {"runs": [3]}}, "runs.json runs[0]"),
-}
+    "meta.json without a command": (
+        {"meta.json": {"code_version": "abc"}, RUNS_FILE: {"runs": [ROW]}},
+        "zz/meta.json command: missing: a dataset's meta.json names the command that made it",
+    ),
+    "meta.json with an empty command": ({"meta.json": {"command": " "}, RUNS_FILE: {"runs": [ROW]}}, "zz/meta.json command: missing"),
+    "a script's table without a command": ({"meta.json": {}, "table.md": "| a |\n"}, "zz/meta.json command: missing"),
+    "command in a folder that is not there": (
+        {"meta.json": {"command": f"cd no-such-folder && {COMMAND}"}, RUNS_FILE: {"runs": [ROW]}},
+        "zz/meta.json command: cd no-such-folder: no such folder (",
+    ),
+    "command with a flag that needs another": (
+        {"meta.json": {"command": f"{COMMAND} --threshold 0.1"}, RUNS_FILE: {"runs": [ROW]}},
+        "meta.json command: not a command mlpfac reads (--threshold means nothing without --vary",
+    ),
+}  # fmt: skip
 
 
 @pytest.mark.parametrize("case", sorted(BAD_DATASETS))
@@ -187,6 +201,24 @@ def test_a_bad_dataset_is_one_line_before_any_run(collected, tmp_path, capsys, c
     assert main(["report", str(docs), "--verify", "1"]) == 2
     out, err = capsys.readouterr()
     assert out == "" and err.count("\n") == 1 and needle in err and "usage" not in err, err
+
+
+def test_check_and_verify_together_do_both(collected, tmp_path, capsys):
+    """``--check --verify N``: the data run again and the tables checked; exit 1 if either differs."""
+    docs = _copy(collected, tmp_path)
+    page = docs / "page.md"
+    page.write_text("<!-- table: data/tiny view=sweep -->\n<!-- /table -->\n")
+    assert main(["report", str(docs)]) == 0  # the table, written from its data
+    good = page.read_text()
+    assert " | 3 / 0 / 0 |" in good
+    page.write_text(good.replace(" | 3 / 0 / 0 |", " | 2 / 1 / 0 |", 1))
+    capsys.readouterr()
+    assert main(["report", str(docs), "--check", "--verify", "1"]) == 1
+    out, err = capsys.readouterr()
+    assert out == "tiny: 1 of 1 runs bit-identical\n" and "page.md: a table differs from its data" in err, err
+    page.write_text(good)
+    assert main(["report", str(docs), "--verify", "1", "--check"]) == 0
+    assert capsys.readouterr().err == ""
 
 
 SKIPPED = (
