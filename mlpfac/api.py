@@ -137,7 +137,7 @@ def sweep(
     (the rows of paired.json). Ctrl-C raises KeyboardInterrupt (with ``out``, the runs written are
     kept and the next call resumes them). ``robots``: every scenario on each (as ``--robots``)."""
     from mlpfac.plots.robustness import read_robustness
-    from mlpfac.scenario.on_robot import with_robots
+    from mlpfac.scenario.on_robot import robots_named, with_robots
     from mlpfac.sweeps import engine
 
     not_in_a_worker("sweep")
@@ -151,6 +151,8 @@ def sweep(
             raise ConfigError(name, f"expected a whole number, got {value!r}")
     if scheduler is not None and not isinstance(scheduler, str):
         raise ConfigError("scheduler", f"expected a Dask scheduler's address (str), got {scheduler!r}")
+    if robots is not None and (not isinstance(robots, list | tuple) or not all(isinstance(r, str) for r in robots)):
+        raise ConfigError("robots", f"expected a list of robots (names or files), got {robots!r}")
     if out is not None:
         out = user_path(out, "out")
     text = None
@@ -166,21 +168,22 @@ def sweep(
         text = ",".join(specs)
     tmp = None if out is not None else Path(tempfile.mkdtemp(prefix="mlpfac-sweep-"))
     try:
-        result = engine.sweep_folder(
-            with_robots([str(s) for s in scenarios], robots),
-            text,
-            seeds,
-            Path(out) if out is not None else tmp,
-            duration=duration,
-            workers=workers if workers is not None else 2,
-            batched=batched,
-            batch_size=batch_size,
-            scheduler=scheduler,
-            save_rrd=save_rrd,
-            progress=False,
-            vary=vary,
-            threshold=threshold,
-        )
+        with robots_named("robots"):  # a robot's errors name this argument
+            result = engine.sweep_folder(
+                with_robots([str(s) for s in scenarios], robots),
+                text,
+                seeds,
+                Path(out) if out is not None else tmp,
+                duration=duration,
+                workers=workers if workers is not None else 2,
+                batched=batched,
+                batch_size=batch_size,
+                scheduler=scheduler,
+                save_rrd=save_rrd,
+                progress=False,
+                vary=vary,
+                threshold=threshold,
+            )
         robust = Path(out if out is not None else tmp) / "robustness.json"
         robustness = read_robustness(robust) if robust in result.paths else None
     finally:

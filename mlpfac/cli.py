@@ -16,15 +16,8 @@ from pathlib import Path
 
 from mlpfac import exits
 from mlpfac.exits import EXIT_BAD_INPUT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_TERMINATED  # noqa: F401 (cli.EXIT_*)
+from mlpfac.flags import Parser, needs, not_with
 from mlpfac.targets import cli_path
-
-
-class Parser(argparse.ArgumentParser):
-    """argparse, but a usage error is one line (and exit code 2)."""
-
-    def error(self, message: str) -> None:  # type: ignore[override]
-        sys.stderr.write(f"{self.prog}: error: {message}\n")
-        sys.exit(EXIT_BAD_INPUT)
 
 
 def _sink_args(p: argparse.ArgumentParser) -> None:
@@ -38,12 +31,16 @@ def _sink_args(p: argparse.ArgumentParser) -> None:
     x.add_argument("--serve", action="store_true", help="serve a web viewer on 127.0.0.1 (see --bind)")
     x.add_argument("--no-log", action="store_true", help="no recording")
     g.add_argument("--bind", metavar="ADDRESS", default="127.0.0.1", help=BIND_HELP)
-    _port_args(g)
+    needs(p, "--bind", "--serve", "--spawn")  # the viewers started here
+    _port_args(p, g)
 
 
-def _port_args(p) -> None:
-    p.add_argument("--port", type=int, default=9090, help="with --serve: the web viewer's page (default 9090)")
-    p.add_argument("--grpc-port", type=int, default=9876, help="with --serve: its gRPC server (default 9876)")
+def _port_args(p: argparse.ArgumentParser, g) -> None:
+    """``--port`` and ``--grpc-port`` (in ``g``, a group of ``p``): with ``--serve`` only."""
+    g.add_argument("--port", type=int, default=9090, help="with --serve: the web viewer's page (default 9090)")
+    g.add_argument("--grpc-port", type=int, default=9876, help="with --serve: its gRPC server (default 9876)")
+    for flag in ("--port", "--grpc-port"):
+        needs(p, flag, "--serve")
 
 
 BIND_HELP = "address the viewers started here listen on (default 127.0.0.1; 0.0.0.0 is every interface)"
@@ -73,8 +70,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     p.add_argument("--robot", help=ROBOT_HELP)
     p.add_argument("--out", type=cli_path, help="output folder (default runs/SCENARIO-CONTROLLER-sSEED)")
-    p.add_argument("--baseline", default="corradini", help="controller for panel (h) of the figure, or 'none'")
-    p.add_argument("--no-plot", action="store_true", help="skip figure1.png")
+    plot = p.add_mutually_exclusive_group()  # a baseline is drawn in the figure: nothing without one
+    plot.add_argument("--baseline", default="corradini", help="controller for panel (h) of the figure, or 'none'")
+    plot.add_argument("--no-plot", action="store_true", help="skip figure1.png")
     _sink_args(p)
 
     sub.add_parser("list", help="list the shipped scenarios, and the controllers shipped and installed")
@@ -131,7 +129,8 @@ def build_parser() -> argparse.ArgumentParser:
         help="no display needed: serve a web viewer (on 127.0.0.1, see --bind) until Ctrl-C, and say its address",
     )
     p.add_argument("--bind", metavar="ADDRESS", default="127.0.0.1", help=BIND_HELP)
-    _port_args(p)
+    not_with(p, "--bind", "--save")  # --save starts no viewer
+    _port_args(p, p)
 
     p = sub.add_parser(
         "plot",

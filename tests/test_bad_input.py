@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from mlpfac.cli import main
-from mlpfac.scenario.parse import scenario_names
+from mlpfac.scenario.parse import scenario_names, shipped_dir
 
 MINIMAL = 'duration = 0.5\n[plant]\nkind = "kinematic"\n'
 EVENT = '[[events]]\ntime = 0.2\nkind = "control_period"\nfactor = 1.5\n'
@@ -135,6 +135,8 @@ BAD_FILES: dict[str, tuple[str | bytes, str]] = {
     "reference speed beyond a robot": ("[reference]\nspeed = 50.0\n", "beyond a wheeled robot's"),
     "line speed is a factor, v its m/s": ('[reference]\nkind = "line"\nv = 30.0\n', "[reference] v: must lie within"),
     "reference faster than a robot": ('[reference]\nkind = "circle"\nradius = 1000.0\nrate = 1.0\n', "beyond a wheeled robot's"),
+    "reference speed 1e-300": ("[reference]\nspeed = 1e-300\n", "[reference]: the reference speed v_r must stay above zero"),
+    "reference of radius 0": ('[reference]\nkind = "circle"\nradius = 0.0\n', "[reference]: the reference speed v_r must stay above zero"),
     "arrays nested 3000 deep": ("x = " + "[" * 3000 + "]" * 3000 + "\n", "nested too deep"),
     "timestep 1e-7": (ROBOT + "timestep = 1e-7\n", "[plant] timestep: 1e-07 s is outside"),
     "timestep 1e-9": (ROBOT + "timestep = 1e-9\n", "[plant] timestep"),
@@ -312,6 +314,15 @@ def test_a_symlink_loop(tmp_path, capsys, monkeypatch, case):
     assert [p.name for p in tmp_path.iterdir()] == ["loop"]
 
 
+def code_of(argv: list[str]) -> int:
+    """The exit code of the command line ``argv``: main's, or a usage error's (argparse's, and a flag
+    that means nothing without another: mlpfac.flags), which exits at once."""
+    try:
+        return main(argv)
+    except SystemExit as err:
+        return err.code
+
+
 # flags: (argv after "run", text the message must hold)
 BAD_FLAGS = {
     "duration zero": (["paper", "--duration", "0"], "--duration"),
@@ -330,6 +341,12 @@ BAD_FLAGS = {
     "robot file a folder": (["paper", "--robot", "sims.toml"], "folder"),
     "robot file not a robot": (["paper", "--robot", "robot.toml"], "one [plant] table"),
     "robot file of the kinematic plant": (["paper", "--robot", "kin-robot.toml"], "--robot kin-robot.toml [plant] kind: must be"),
+    "robot file missing (toml)": (["paper", "--robot", "missing.toml"], "--robot missing.toml: robot file not found"),
+    "robot file with an unknown key": (["paper", "--robot", "bogus-robot.toml"], "--robot bogus-robot.toml [plant] bogus: unknown key"),
+    "--port without --serve": (["paper", "--port", "9100"], "--port means nothing without --serve"),
+    "--grpc-port without --serve": (["paper", "--grpc-port", "9100"], "--grpc-port means nothing without --serve"),
+    "--bind without a viewer": (["paper", "--bind", "0.0.0.0"], "--bind means nothing without --serve or --spawn"),
+    "--baseline with --no-plot": (["paper", "--baseline", "kanayama", "--no-plot"], "not allowed with argument --baseline"),
 }  # fmt: skip
 
 
@@ -340,7 +357,8 @@ def test_bad_flag(tmp_path, capsys, monkeypatch, case):
     (tmp_path / "sims.toml").mkdir()
     (tmp_path / "robot.toml").write_text('duration = 3.0\n[plant]\nmodel = "x.xml"\n')
     (tmp_path / "kin-robot.toml").write_text('[plant]\nkind = "kinematic"\nmodel = "x.xml"\n')
-    assert main(["run", *argv, "--no-log", "--out", str(tmp_path / "out")]) == 2
+    (tmp_path / "bogus-robot.toml").write_text('[plant]\nmodel = "x.xml"\nbogus = 1\n')
+    assert code_of(["run", *argv, "--no-log", "--out", str(tmp_path / "out")]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and needle in err, err
     assert not (tmp_path / "out").exists()
@@ -365,13 +383,27 @@ BAD_VIEW_PLOT = {
     "check: --workers 0": (["check", "missing.toml", "--workers", "0"], "--workers"),
     "sweep: --robots with an empty name": (["sweep", "paper", "--robots", "diffdrive,,cart"], "--robots"),
     "compare: --robot unknown": (["compare", "paper", "--robot", "nosuch"], "--robot"),
-    "sweep: --robots unknown": (["sweep", "paper", "--robots", "diffdrive,cartt"], "--robots: 'cartt' is neither"),
+    "sweep: --robots unknown": (["sweep", "paper", "--robots", "diffdrive,cartt"], "--robots cartt: neither a robot"),
     "view --serve: --bind not an address": (["view", "D", "--serve", "--bind", "not an address"], "--bind: 'not an address' is not an IP"),
     "view: --bind not an address": (["view", "D", "--bind", "localhost"], "--bind: 'localhost' is not an IP"),
     "report --collect ../x": (["report", "docs", "--collect", "../x=D", "--command", "c"], "--collect ../x=D: NAME is one"),
     "report --collect a/b": (["report", "docs", "--collect", "a/b=D", "--command", "c"], "--collect a/b=D: NAME is one"),
     "report --collect .": (["report", "docs", "--collect", ".=D", "--command", "c"], "--collect .=D: NAME is one"),
     "report --collect an absolute path": (["report", "docs", "--collect", "/tmp/x=D", "--command", "c"], "--collect /tmp/x=D"),
+    # a flag that means nothing without another (mlpfac.flags): refused, nothing written
+    "report --strict without --verify": (["report", "D", "--strict"], "--strict means nothing without --verify"),
+    "report --command without --collect": (["report", "D", "--command", "c"], "--command means nothing without --collect"),
+    "report --code-version without --collect": (["report", "D", "--code-version", "abc"], "--code-version means nothing without --collect"),
+    "report --command of two --collect": (["report", "D", "--collect", "a=D", "--collect", "b=D", "--command", "c"], "--command: is the command of one --collect"),
+    "sweep --threshold without --vary": (["sweep", "paper", "--threshold", "0.1"], "--threshold means nothing without --vary"),
+    "sweep --threshold with a draw only": (["sweep", "paper", "--vary", "T=uniform:0.01:0.02", "--threshold", "0.1"], "--threshold: means nothing without an axis"),
+    "sweep --threshold 1e308": (["sweep", "paper", "--vary", "T=0.01,0.02", "--threshold", "1e308"], "--threshold: must be a number of metres above 0 and at most 10000"),
+    "sweep --batch-size without --batched": (["sweep", "paper", "--batch-size", "8"], "--batch-size means nothing without --batched"),
+    "compare --scheduler-timeout without --scheduler": (["compare", "paper", "--scheduler-timeout", "3"], "--scheduler-timeout means nothing without --scheduler"),
+    "view --port without --serve": (["view", "D", "--port", "9100"], "--port means nothing without --serve"),
+    "view --bind with --save": (["view", "D", "--save", "x.rrd", "--bind", "0.0.0.0"], "--bind means nothing with --save"),
+    "sweep --robots a robot file missing": (["sweep", "paper", "--robots", "diffdrive,nope.toml"], "--robots nope.toml: robot file not found"),
+    "sweep --robots an MJCF missing": (["sweep", "paper", "--robots", "diffdrive,nope.xml"], "--robots nope.xml: MJCF model file not found"),
 }  # fmt: skip
 
 
@@ -380,7 +412,7 @@ def test_bad_view_or_plot(tmp_path, capsys, monkeypatch, case):
     argv, needle = BAD_VIEW_PLOT[case]
     monkeypatch.chdir(tmp_path)
     (tmp_path / "D").mkdir()
-    assert main(argv) == 2
+    assert code_of(argv) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and needle in err, err
     assert [p.name for p in tmp_path.rglob("*")] == ["D"]
@@ -497,3 +529,65 @@ def test_one_wheel_named_takes_the_other_or_says_which_to_name(tmp_path, capsys)
     m = mujoco.MjModel.from_xml_string(wheeled("a 0 0.2, b 0 -0.2"))
     got = resolve(MujocoConfig(right_actuator="b"), m, m.qpos0)
     assert (got.config.left_actuator, got.config.right_actuator, got.keys[0]) == ("a", "b", "left_actuator")
+
+
+# A robot's errors name the robot under the flag or key that brought it (docs/errors.md): argv, the
+# text the one line holds ({here}: the test's folder, where a budget's robot files are found)
+BUDGET = 'scenarios = ["eight-nominal"]\ncontrollers = ["kanayama"]\nseeds = "0"\nduration = 0.5\n{robots}[[budget]]\nlost = 0\n'
+ROBOT_NAMED = {
+    "--robot, a robot file missing": (["run", "eight-nominal", "--robot", "nope.toml"], "mlpfac: error: --robot nope.toml: robot file not found"),
+    "--robots, a robot file missing": (["sweep", "eight-nominal", "--robots", "diffdrive,nope.toml"], "mlpfac: error: --robots nope.toml: robot file not found"),
+    "--robots, a robot file's unknown key": (["sweep", "eight-nominal", "--robots", "diffdrive,bogus.toml"], "mlpfac: error: --robots bogus.toml [plant] bogus: unknown key"),
+    "--robots, a robot file that is no robot": (["compare", "eight-nominal", "--robots", "cart,norobot.toml"], "mlpfac: error: --robots norobot.toml: a robot file holds one [plant]"),
+    "a budget's robot file missing": (["check", "missing.toml"], "mlpfac: error: missing.toml robots {here}/nope.toml: robot file not found"),
+    "a budget's robot file's unknown key": (["check", "bogus-budget.toml"], "mlpfac: error: bogus-budget.toml robots {here}/bogus.toml [plant] bogus: unknown key"),
+    "a budget's robot unknown": (["check", "unknown.toml"], "mlpfac: error: unknown.toml robots zzz: neither a robot"),
+    "check --robot over a budget's robots": (["check", "missing.toml", "--robot", "nope.xml"], "mlpfac: error: --robot nope.xml: MJCF model file not found"),
+    "a budget's robot file, from the budget's folder": (["check", "sub/b.toml"], "mlpfac: error: sub/b.toml robots {here}/sub/bogus.toml [plant] bogus"),
+}  # fmt: skip
+
+
+@pytest.mark.parametrize("case", sorted(ROBOT_NAMED))
+def test_a_robots_error_names_the_flag_or_key_that_brought_it(tmp_path, capsys, monkeypatch, case):
+    argv, needle = ROBOT_NAMED[case]
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "sub").mkdir()
+    for folder in (tmp_path, tmp_path / "sub"):
+        (folder / "bogus.toml").write_text(
+            f'[plant]\nmodel = "{shipped_dir().parent / "models" / "cart.xml"}"\nbogus = 1\n'
+        )
+    (tmp_path / "norobot.toml").write_text("duration = 3.0\n")
+    (tmp_path / "missing.toml").write_text(BUDGET.format(robots='robots = ["nope.toml"]\n'))
+    (tmp_path / "bogus-budget.toml").write_text(BUDGET.format(robots='robots = ["cart", "bogus.toml"]\n'))
+    (tmp_path / "unknown.toml").write_text(BUDGET.format(robots='robots = ["zzz"]\n'))
+    (tmp_path / "sub" / "b.toml").write_text(BUDGET.format(robots='robots = ["bogus.toml"]\n'))
+    before = sorted(p.name for p in tmp_path.rglob("*"))
+    assert code_of([*argv, "--out", "out"]) == 2
+    err = [ln for ln in capsys.readouterr().err.splitlines() if not ln.startswith("mlpfac: planning")]
+    assert len(err) == 1 and err[0].startswith(needle.format(here=tmp_path)), err
+    assert sorted(p.name for p in tmp_path.rglob("*")) == before
+
+
+# Bad input whose extra lines came from outside the one line (a library's warning, a plot's
+# traceback): the command run as a user runs it, its whole stderr read. (argv, the one line's start)
+ONE_LINE_IN_A_PROCESS = {
+    "[reference] speed = 1e-300": (["run", "s.toml"], "mlpfac: error: s.toml [reference]: the reference speed v_r must stay above zero"),
+    "--vary reference.speed=1e-300": (["sweep", "eight-nominal", "--seeds", "0", "--vary", "reference.speed=1e-300"], "mlpfac: error: --vary reference.speed=1e-300: the reference speed v_r must stay above zero"),
+    "--threshold 1e308": (["sweep", "paper", "--seeds", "0", "--vary", "T=0.01,0.02", "--threshold", "1e308"], "mlpfac: error: --threshold: must be"),
+    "a budget's threshold_m = 1e308": (["check", "b.toml"], "mlpfac: error: b.toml threshold_m: must be"),
+    "a budget's threshold_m without vary": (["check", "n.toml"], "mlpfac: error: n.toml threshold_m: means nothing without an axis"),
+}  # fmt: skip
+
+
+@pytest.mark.parametrize("case", sorted(ONE_LINE_IN_A_PROCESS))
+def test_bad_input_is_one_line_in_the_commands_own_process(tmp_path, case):
+    argv, needle = ONE_LINE_IN_A_PROCESS[case]
+    (tmp_path / "s.toml").write_text("duration = 1.0\n[reference]\nspeed = 1e-300\n")
+    budget = 'scenarios = ["paper"]\ncontrollers = ["kanayama"]\nduration = 0.5\n{}[[budget]]\nlost = 0\n'
+    (tmp_path / "b.toml").write_text(budget.format('vary = ["T=0.01,0.02"]\nthreshold_m = 1e308\n'))
+    (tmp_path / "n.toml").write_text(budget.format("threshold_m = 0.1\n"))
+    cmd = [sys.executable, "-m", "mlpfac.cli", *argv, "--out", "out"]
+    proc = subprocess.run(cmd, cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    err = [ln for ln in proc.stderr.splitlines() if not ln.startswith("mlpfac: planning")]
+    assert proc.returncode == 2 and len(err) == 1 and err[0].startswith(needle), proc.stderr
+    assert not (tmp_path / "out").exists()

@@ -235,6 +235,12 @@ def test_plot_panels_over_a_wrong_typed_robustness_json_is_one_line_and_keeps_th
     (here / "S" / "robustness.json").write_text(json.dumps({"meta": {}, "curves": [dict(CURVE, tracking="all")]}))
     assert main(["plot", "S"]) == 2
     assert _one_line(capsys.readouterr().err).endswith("curves[0].tracking: expected a number, got 'all'")
+    for meta, curve, where in (({"threshold_m": 1e308}, CURVE, "meta.threshold_m"),
+                               ({}, dict(CURVE, threshold_m=1e308), "curves[0].threshold_m")):  # fmt: skip
+        (here / "S" / "robustness.json").write_text(json.dumps({"meta": meta, "curves": [curve]}))
+        assert main(["plot", "S", "--panels", "out.png"]) == 2  # a threshold drawn on a log scale: not absurd
+        assert f"robustness.json {where}: must be a number of metres above 0" in _one_line(capsys.readouterr().err)
+        assert (here / "out.png").read_bytes() == b"earlier"
 
 
 def test_a_baseline_holding_nan_is_a_bad_baseline(here, capsys):
@@ -278,7 +284,7 @@ def test_a_scheduler_that_accepts_and_never_answers_times_out(here):
     port = server.getsockname()[1]
     try:
         proc = _cli("sweep", "kin.toml", "--seeds", "0", "--out", "S", "--scheduler", f"tcp://127.0.0.1:{port}",
-                    "--scheduler-timeout", "1", cwd=here, timeout=30)  # fmt: skip
+                    "--scheduler-timeout", "1", cwd=here, timeout=300)  # fmt: skip
     finally:
         server.close()
     assert proc.returncode == 2 and "--scheduler: cannot reach a Dask scheduler" in _one_line(proc.stderr)

@@ -457,3 +457,92 @@ def test_sweep_workers_see_the_environment_of_the_sweep_that_uses_them(tmp_path,
         assert not rows.errors, rows.errors
         got.append(rows[0]["pos_rms_m_median"])
     assert got[0] != got[1]
+
+
+SCRIBBLER = '''
+
+class Tidy(BatchLaw):
+    """BatchLaw, also for one seed's arrays (an object given to the Python API runs one seed)."""
+
+    name = "tidy"
+
+    def step(self, e, r):
+        out = super().step(e, r)
+        return out if np.ndim(e) == 2 else out[0]
+
+
+class Scribbler(Tidy):
+    """Tidy, then it writes into every array it was given (in place, as a law's own scratch)."""
+
+    name = "scribbler"
+
+    def step(self, e, r):
+        out = super().step(e, r)
+        e[...] = 1e3
+        r[...] = 0.0
+        return out
+
+
+class NanRows(BatchLaw):
+    """BatchLaw whose commands are NaN at step 5 for the seeds whose controller stream draws below 0.5."""
+
+    name = "nan-rows"
+
+    def reset(self, rngs):
+        self.bad = [g.random() < 0.5 for g in (rngs if isinstance(rngs, list) else [rngs])]
+        self.k = 0
+
+    def step(self, e, r):
+        out = super().step(e, r)
+        self.k += 1
+        if self.k == 5:
+            out[self.bad] = np.nan
+        return out
+'''
+
+
+def test_a_batch_form_plugin_that_writes_into_its_arrays_changes_nothing(tmp_path):
+    """The batch form is handed copies, batched or not, and so is an object given to the Python API:
+    a law that writes into e and r after its step runs to the bit as the same law that does not
+    (the runner's reference and errors intact)."""
+    (tmp_path / "b.py").write_text(BATCHED + SCRIBBLER)
+    (tmp_path / "k.toml").write_text(KINEMATIC)
+    args = ["sweep", "k.toml", "--controllers", "b.py:BatchLaw,b.py:Scribbler", "--seeds", "0-3", "--workers", "1"]
+    for out, flags in (("a", []), ("b", ["--batched"])):
+        done = cli([*args, "--out", out, *flags], tmp_path)
+        assert done.returncode == 0, done.stderr
+        for seed in range(4):
+            ma, mb = (
+                json.loads((tmp_path / out / f"k/{name}/seed-{seed:04d}/metrics.json").read_text())
+                for name in ("batch-law", "scribbler")
+            )
+            assert mb["status"] == "ok" and mb["rms_position_error_m"] == ma["rms_position_error_m"], (out, seed)
+    module = {}
+    exec(compile(BATCHED + SCRIBBLER, str(tmp_path / "b.py"), "exec"), module)
+    recs = [mlpfac.run(str(tmp_path / "k.toml"), controller=module[c](T=0.01)) for c in ("Tidy", "Scribbler")]
+    assert recs[1].status == "ok" and np.array_equal(recs[0].pose, recs[1].pose)  # an object given, one seed
+
+
+def test_a_batch_whose_row_is_not_finite_stops_only_that_seed(tmp_path):
+    """A batch-form command with a NaN row stops that seed alone, with the reason its run alone gives
+    (its row, not the batch's); batched and one by one, every seed ends the same."""
+    from mlpfac.loop.closed_loop import seeded_generators
+
+    (tmp_path / "b.py").write_text(BATCHED + SCRIBBLER)
+    (tmp_path / "k.toml").write_text(KINEMATIC)
+    bad = [seeded_generators(s)[0].random() < 0.5 for s in range(6)]
+    assert any(bad) and not all(bad)
+    args = ["sweep", "k.toml", "--controllers", "b.py:NanRows", "--seeds", "0-5", "--workers", "1"]
+    ends = {}
+    for out, flags in (("a", []), ("b", ["--batched"])):
+        assert cli([*args, "--out", out, *flags], tmp_path).returncode == 0
+        ends[out] = [
+            (m["status"], m["reason"], m["steps"])
+            for m in (
+                json.loads((tmp_path / out / f"k/nan-rows/seed-{s:04d}/metrics.json").read_text()) for s in range(6)
+            )
+        ]
+    assert ends["a"] == ends["b"]
+    for (status, reason, _), b in zip(ends["b"], bad, strict=True):
+        assert status == ("diverged" if b else "ok")
+        assert reason == ("step returned a non-finite command [nan nan] at t = 0.04 s" if b else ""), reason

@@ -1,9 +1,11 @@
 """SIGINT and SIGTERM at a random time of a run, a sweep and a check (loading, settling the robot,
-compiling, stepping, writing): the command ends within 2 s, with no traceback, and leaves no partial
-folder (a folder is missing, or whole: a run's config.toml and metrics.json, nothing staged).
+compiling, stepping, writing): the command ends with its signal's code, no traceback, and leaves no
+partial folder (a folder is missing, or whole: a run's config.toml and metrics.json, nothing staged).
 
-The times are drawn from MLPFAC_SIGNAL_SEED (default 0): set another to try other times; a failure
-names the seed and the time."""
+The time is a share, drawn from MLPFAC_SIGNAL_SEED (default 0), of how long the same command takes
+on this machine unsignalled (measured first, once per command): the draws fall in the same phases
+on a machine 3x faster or slower. Set another seed to try other times; a failure names the seed
+and the time. How soon it stops is measured, not tested: ``benchmarks/bench_stop.py``."""
 
 from __future__ import annotations
 
@@ -22,14 +24,35 @@ SEED = int(os.environ.get("MLPFAC_SIGNAL_SEED", "0"))
 BUDGET = (
     'scenarios = ["eight-nominal"]\ncontrollers = ["kanayama"]\nseeds = "0-1"\nduration = 1.0\n[[budget]]\nlost = 0\n'
 )
-COMMANDS = {  # argv, and the seconds it takes here about (the signal falls within them)
-    "run": (["run", "eight-nominal", "--controller", "kanayama", "--duration", "2", "--out", "R"], 5.0),
-    "sweep": (["sweep", "eight-nominal", "--controllers", "kanayama", "--seeds", "0-1", "--duration", "1",
-               "--workers", "2", "--out", "S"], 4.0),
-    "check": (["check", "b.toml", "--workers", "2", "--out", "C"], 4.0),
+COMMANDS = {
+    "run": ["run", "eight-nominal", "--controller", "kanayama", "--duration", "2", "--out", "R"],
+    "sweep": ["sweep", "eight-nominal", "--controllers", "kanayama", "--seeds", "0-1", "--duration", "1",
+              "--workers", "2", "--out", "S"],
+    "check": ["check", "b.toml", "--workers", "2", "--out", "C"],
 }  # fmt: skip
 SIGNALS = {"SIGINT": (signal.SIGINT, 130), "SIGTERM": (signal.SIGTERM, 143)}
-STOP_S = 2.0
+HANG_S = 120.0  # bounds a hang only
+
+
+def start(argv: list[str], cwd: Path) -> subprocess.Popen:
+    """The command started in ``cwd``, with the budget file ``check`` reads."""
+    (cwd / "b.toml").write_text(BUDGET)
+    return subprocess.Popen(
+        [sys.executable, "-m", "mlpfac.cli", *argv], cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+    )
+
+
+@pytest.fixture(scope="module")
+def spans(tmp_path_factory) -> dict[str, float]:
+    """How long each command takes on this machine, start to exit, unsignalled (seconds)."""
+    out = {}
+    for command, argv in COMMANDS.items():
+        t0 = time.monotonic()
+        proc = start(argv, tmp_path_factory.mktemp(command))
+        _, err = proc.communicate(timeout=HANG_S)
+        assert proc.returncode == 0, err
+        out[command] = time.monotonic() - t0
+    return out
 
 
 def _not_partial(root: Path) -> list[str]:
@@ -49,27 +72,26 @@ def _not_partial(root: Path) -> list[str]:
 
 @pytest.mark.parametrize("command", sorted(COMMANDS))
 @pytest.mark.parametrize("name", sorted(SIGNALS))
-def test_a_signal_at_a_random_time_stops_within_2_s_and_leaves_no_partial_folder(tmp_path, command, name):
+def test_a_signal_at_a_random_time_stops_it_and_leaves_no_partial_folder(tmp_path, spans, command, name):
     sig, code = SIGNALS[name]
-    argv, span = COMMANDS[command]
-    delay = random.Random(f"{SEED}-{command}-{name}").uniform(0.0, span)
-    (tmp_path / "b.toml").write_text(BUDGET)
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "mlpfac.cli", *argv], cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-        text=True,
-    )  # fmt: skip
-    time.sleep(delay)
+    share = random.Random(f"{SEED}-{command}-{name}").uniform(0.0, 1.0)
+    delay = share * spans[command]
+    proc = start(COMMANDS[command], tmp_path)
+    time.sleep(delay)  # a share of the command's own measured span: the random time is the test's input
     done_before = proc.poll() is not None
     proc.send_signal(sig)
     t0 = time.monotonic()
     try:
-        _, err = proc.communicate(timeout=STOP_S)
+        _, err = proc.communicate(timeout=HANG_S)
     except subprocess.TimeoutExpired:
         proc.kill()
         _, err = proc.communicate()
-        pytest.fail(f"{command}: {name} at {delay:.2f} s (seed {SEED}) did not stop it within {STOP_S} s: {err}")
+        pytest.fail(f"{command}: {name} at {delay:.2f} s (seed {SEED}) did not stop it within {HANG_S} s: {err}")
     took = time.monotonic() - t0
-    where = f"{command}: {name} at {delay:.2f} s (seed {SEED}), exit {proc.returncode} after {took:.2f} s"
+    where = (
+        f"{command}: {name} at {delay:.2f} s ({share:.0%} of {spans[command]:.2f} s, seed {SEED}), "
+        f"exit {proc.returncode} after {took:.2f} s"
+    )
     if "Fatal Python error: init_import_site" in err:  # the interpreter's own start, before any code of ours
         return
     assert "Traceback" not in err, f"{where}\n{err}"

@@ -169,15 +169,16 @@ def test_ctrl_c_of_the_command_line(tmp_path):
         "--seeds",
         "0-200",
         "--duration",
-        "1",
+        "25",  # minutes in all on any machine: still running at the sign
         "--workers",
         "2",
         "--out",
         str(out),
     ]
     p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    deadline = time.monotonic() + 60
-    while not list(out.glob("*/*/seed-*/metrics.json")) and time.monotonic() < deadline:
+    deadline = time.monotonic() + 120  # the sign: a finished run folder (the timeout only bounds a hang)
+    while not list(out.glob("*/*/seed-*/metrics.json")):
+        assert p.poll() is None and time.monotonic() < deadline, "no run finished"
         time.sleep(0.1)
     p.send_signal(signal.SIGINT)
     _, err = p.communicate(timeout=60)
@@ -195,8 +196,8 @@ def test_ctrl_c_while_a_folder_is_written_waits_for_the_folder(tmp_path):
 
     written = []
     with pytest.raises(KeyboardInterrupt), sigint_deferred():
-        os.kill(os.getpid(), signal.SIGINT)
-        time.sleep(0.05)  # the signal has arrived: without the deferral, KeyboardInterrupt is raised here
+        # its handler has run when raise_signal returns: without the deferral, KeyboardInterrupt is raised here
+        signal.raise_signal(signal.SIGINT)
         written.append("metrics.json")
     assert written == ["metrics.json"]
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler

@@ -146,6 +146,7 @@ def test_a_torque_controller_that_raises_is_its_failure(probe, monkeypatch):
 VELOCITY = TORQUE.replace('actuator = "torque"', 'actuator = "velocity"')
 NO_ROBOT = 'class Law:\n    level = "torque"\n    def __init__(self, T):\n        pass\n    def step(self, obs):\n        return 0.0, 0.0\n'
 BAD_LEVEL = 'class Law:\n    level = "force"\n    def __init__(self, T):\n        pass\n    def step(self, e, r):\n        return 0.0, 0.0\n'
+BUDGET = 'scenarios = ["eight-torque"]\ncontrollers = ["probe.py:Probe"]\nseeds = "0"\nduration = 0.5\n{robots}[[budget]]\nlost = 0\n'
 # name: (files, argv, what the one line holds)
 BAD_TORQUE = {
     "on velocity servos": ({"v.toml": VELOCITY}, ["run", "v.toml", "--controller", "probe.py:Probe"], 'set actuator = "torque" in [plant]'),
@@ -158,6 +159,14 @@ BAD_TORQUE = {
     "robot in params": ({"p.toml": TORQUE + '[controller]\nname = "probe.py:Probe"\n[controller.params]\nrobot = 1\n'}, ["run", "p.toml"], "[controller.params] robot"),
     "noise of the twist": ({"w.toml": TORQUE + "twist_noise_std = [0.1, -1.0]\n"}, ["run", "w.toml", "--controller", "fierro-lewis"], "twist_noise_std"),
     "noise of the wheels": ({"w.toml": TORQUE + 'wheel_speed_noise_std = "a"\n'}, ["run", "w.toml", "--controller", "fierro-lewis"], "wheel_speed_noise_std"),
+    # on a robot a flag or key brought: that robot is named, under its flag or key, not the file's [plant]
+    "--robot with velocity servos": ({}, ["run", "eight-torque", "--robot", "cart", "--controller", "probe.py:Probe"], "mlpfac: error: --robot cart: Probe is a torque-level"),
+    "--robot, a shipped one": ({}, ["run", "eight-torque", "--robot", "diffdrive", "--controller", "fierro-lewis"], "mlpfac: error: --robot diffdrive: fierro-lewis is"),
+    "--robot, its file says velocity": ({"r.toml": f'[plant]\nmodel = "{SCENE}"\nactuator = "velocity"\n'}, ["run", "eight-torque", "--robot", "r.toml", "--controller", "fierro-lewis"], "mlpfac: error: --robot r.toml: fierro-lewis is"),
+    "--robots, one with velocity servos": ({}, ["sweep", "eight-torque", "--robots", "tug,diffdrive", "--controllers", "probe.py:Probe"], "mlpfac: error: --robots diffdrive: Probe is"),
+    "compare --robot": ({}, ["compare", "eight-torque", "--robot", "cart", "--controllers", "fierro-lewis"], "mlpfac: error: --robot cart: fierro-lewis is"),
+    "a budget's robots": ({"b.toml": BUDGET.format(robots='robots = ["tug", "cart"]\n')}, ["check", "b.toml"], "b.toml robots cart: Probe is a torque-level"),
+    "check --robot": ({"b.toml": BUDGET.format(robots="")}, ["check", "b.toml", "--robot", "cart"], "mlpfac: error: --robot cart: Probe is"),
 }  # fmt: skip
 
 
@@ -318,6 +327,37 @@ def test_a_batch_form_torque_class_gives_its_seeds_one_by_one_runs(tmp_path):
             f = f"t/{name}/seed-{seed:04d}/metrics.json"
             a, b = (json.loads((tmp_path / d / f).read_text()) for d in ("a", "b"))
             assert a["rms_position_error_m"] == b["rms_position_error_m"] and a["outcome"] == "tracking"
+
+
+SCRIBBLER = """
+
+class Scribbler(BatchTorque):
+    \"\"\"BatchTorque, then it writes into every array of the observation it was given.\"\"\"
+
+    name = "scribbler"
+
+    def step(self, obs):
+        out = super().step(obs)
+        for a in (obs.e, obs.r, obs.r_dot, obs.pose, obs.twist, obs.wheel_speeds):
+            a[...] = 1e3
+        return out
+"""
+
+
+def test_a_batch_form_torque_class_that_writes_into_its_observation_changes_nothing(tmp_path):
+    """The batch form's observation is copies, batched or not: a law that writes into every array it
+    was given runs to the bit as the same law that does not."""
+    (tmp_path / "bt.py").write_text(BATCHED_TORQUE + SCRIBBLER)
+    (tmp_path / "t.toml").write_text(TORQUE.replace("duration = 0.5", "duration = 1.0"))
+    args = ["sweep", "t.toml", "--controllers", "bt.py:BatchTorque,bt.py:Scribbler", "--seeds", "0-2", "--workers", "1"]
+    for out, flags in (("a", []), ("b", ["--batched"])):
+        assert cli([*args, "--out", out, *flags], tmp_path).returncode == 0
+        for seed in range(3):
+            ma, mb = (
+                json.loads((tmp_path / out / f"t/{name}/seed-{seed:04d}/metrics.json").read_text())
+                for name in ("batch-torque", "scribbler")
+            )
+            assert mb["status"] == "ok" and mb["rms_position_error_m"] == ma["rms_position_error_m"], (out, seed)
 
 
 @pytest.mark.parametrize(

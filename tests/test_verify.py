@@ -8,7 +8,6 @@ import shutil
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest
@@ -173,7 +172,21 @@ BAD_DATASETS = {
         "runs.json runs[0]: expected a run's row with",
     ),
     "runs.json row a number": ({"meta.json": RUNS_OK, RUNS_FILE: {"runs": [3]}}, "runs.json runs[0]"),
-}
+    "meta.json without a command": (
+        {"meta.json": {"code_version": "abc"}, RUNS_FILE: {"runs": [ROW]}},
+        "zz/meta.json command: missing: a dataset's meta.json names the command that made it",
+    ),
+    "meta.json with an empty command": ({"meta.json": {"command": " "}, RUNS_FILE: {"runs": [ROW]}}, "zz/meta.json command: missing"),
+    "a script's table without a command": ({"meta.json": {}, "table.md": "| a |\n"}, "zz/meta.json command: missing"),
+    "command in a folder that is not there": (
+        {"meta.json": {"command": f"cd no-such-folder && {COMMAND}"}, RUNS_FILE: {"runs": [ROW]}},
+        "zz/meta.json command: cd no-such-folder: no such folder (",
+    ),
+    "command with a flag that needs another": (
+        {"meta.json": {"command": f"{COMMAND} --threshold 0.1"}, RUNS_FILE: {"runs": [ROW]}},
+        "meta.json command: not a command mlpfac reads (--threshold means nothing without --vary",
+    ),
+}  # fmt: skip
 
 
 @pytest.mark.parametrize("case", sorted(BAD_DATASETS))
@@ -188,6 +201,24 @@ def test_a_bad_dataset_is_one_line_before_any_run(collected, tmp_path, capsys, c
     assert main(["report", str(docs), "--verify", "1"]) == 2
     out, err = capsys.readouterr()
     assert out == "" and err.count("\n") == 1 and needle in err and "usage" not in err, err
+
+
+def test_check_and_verify_together_do_both(collected, tmp_path, capsys):
+    """``--check --verify N``: the data run again and the tables checked; exit 1 if either differs."""
+    docs = _copy(collected, tmp_path)
+    page = docs / "page.md"
+    page.write_text("<!-- table: data/tiny view=sweep -->\n<!-- /table -->\n")
+    assert main(["report", str(docs)]) == 0  # the table, written from its data
+    good = page.read_text()
+    assert " | 3 / 0 / 0 |" in good
+    page.write_text(good.replace(" | 3 / 0 / 0 |", " | 2 / 1 / 0 |", 1))
+    capsys.readouterr()
+    assert main(["report", str(docs), "--check", "--verify", "1"]) == 1
+    out, err = capsys.readouterr()
+    assert out == "tiny: 1 of 1 runs bit-identical\n" and "page.md: a table differs from its data" in err, err
+    page.write_text(good)
+    assert main(["report", str(docs), "--verify", "1", "--check"]) == 0
+    assert capsys.readouterr().err == ""
 
 
 SKIPPED = (
@@ -222,19 +253,27 @@ def test_a_dataset_whose_robot_is_not_here_is_skipped_and_only_strict_fails(coll
 
 
 def test_sigterm_during_verify_ends_it_as_terminated(collected, tmp_path):
-    """SIGTERM while a dataset's run is re-run: exit 143 and one line, as everywhere else (not 130)."""
+    """SIGTERM while a dataset's run is re-run: exit 143 and one line, as everywhere else (not 130).
+    The sign: the line of the dataset verified before it (``tiny``); the slow one's run lasts minutes
+    of simulated time on any machine, so the signal lands inside it."""
     docs = _copy(collected, tmp_path)
-    slow = docs / "data" / "slow"
+    slow = docs / "data" / "z-slow"  # after tiny
     slow.mkdir()
-    command = "mlpfac sweep paper --controllers adaptive-ukf --seeds 0 --duration 25 --out runs/slow"
+    command = "mlpfac sweep paper --controllers adaptive-ukf --seeds 0 --duration 3000 --out runs/slow"
     (slow / "meta.json").write_text(json.dumps({"command": command}))
     row = json.loads((docs / "data" / "tiny" / RUNS_FILE).read_text())["runs"][0]
     (slow / RUNS_FILE).write_text(json.dumps({"runs": [row | {"controller": "adaptive-ukf", "seed": 0}]}))
     mlpfac = str(Path(sys.executable).with_name("mlpfac"))
     proc = subprocess.Popen([mlpfac, "report", str(docs), "--verify", "1"], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True, cwd=tmp_path)  # fmt: skip
-    time.sleep(4.0)  # past the imports and the plans: inside the run of adaptive-ukf (seconds)
-    proc.send_signal(signal.SIGTERM)
-    out, err = proc.communicate(timeout=10)
+    try:
+        first = proc.stdout.readline()  # tiny's verdict: z-slow's run starts now
+        assert first == "tiny: 1 of 1 runs bit-identical\n", (first, proc.stderr.read() if not first else "")
+        proc.send_signal(signal.SIGTERM)
+        out, err = proc.communicate(timeout=300)  # only bounds a hang
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
     assert proc.returncode == 143 and err.strip() == "mlpfac: terminated", err
     assert out == ""

@@ -44,7 +44,7 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
-def _wait(what: str, ready, timeout: float = 30.0, procs: tuple[subprocess.Popen, ...] = ()):
+def _wait(what: str, ready, timeout: float = 120.0, procs: tuple[subprocess.Popen, ...] = ()):
     t_end = time.monotonic() + timeout
     while time.monotonic() < t_end:
         for p in procs:

@@ -19,7 +19,7 @@ from mlpfac.checks.judge import Case, Verdict
 from mlpfac.checks.limits import AFTER_THE_CHANGE, FIGURES, Group, Limit
 from mlpfac.exceptions import ConfigError
 from mlpfac.loop.metrics import RunMetrics
-from mlpfac.sweeps.robustness import breaking_points, check_threshold, curves, nominal
+from mlpfac.sweeps.robustness import NO_AXIS, breaking_points, check_threshold, curves, nominal
 from mlpfac.sweeps.vary import Vary, parse_vary
 
 SIDE = {"holds_up_to": "above", "holds_down_to": "below"}
@@ -42,10 +42,9 @@ def read_vary(table: dict, path, flags: Vary | None = None) -> tuple[Vary, float
         if again is not None:
             raise ConfigError(f"--vary {again}", f"the budget {path} varies it already")
         vary = Vary(vary.axes + flags.axes, vary.draws | flags.draws)
-    try:
-        threshold = check_threshold(table.get("threshold_m"))
-    except ConfigError as err:
-        raise ConfigError(f"{path} threshold_m", err.what) from None
+    threshold = check_threshold(table.get("threshold_m"), f"{path} threshold_m")
+    if threshold is not None and not vary.axes:
+        raise ConfigError(f"{path} threshold_m", NO_AXIS)
     return vary, threshold
 
 

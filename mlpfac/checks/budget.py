@@ -10,7 +10,7 @@ from pathlib import Path
 
 from mlpfac.checks.limits import FIGURES, PHASE_NAMES, Group, Limit
 from mlpfac.exceptions import ConfigError
-from mlpfac.scenario.on_robot import split_robot, with_robots
+from mlpfac.scenario.on_robot import robots_named, split_robot, with_robots
 from mlpfac.sweeps.plan import MAX_RUNS, Job, parse_controllers, parse_seeds, plan
 from mlpfac.sweeps.vary import Vary
 
@@ -29,6 +29,7 @@ class Budget:
     limits: list[Limit]
     vary: Vary = field(default_factory=Vary)
     threshold: float | None = None
+    robots_by: str = "--robot"  # the flag or key of its robots, which their errors name
 
     def needs_baseline(self) -> Limit | None:
         return next((b for b in self.limits if any(FIGURES[f].baseline for f in b.figures)), None)
@@ -37,8 +38,11 @@ class Budget:
         """The runs (ConfigError naming this file's ``scenarios`` key for a scenario that cannot
         load) and their groups; each limit's filters must match a group, and "after" needs an event."""
         try:
-            jobs = plan(self.scenarios, self.controllers, self.seeds, self.duration, self.vary)
+            with robots_named(self.robots_by):
+                jobs = plan(self.scenarios, self.controllers, self.seeds, self.duration, self.vary)
         except ConfigError as err:
+            if err.where.startswith(self.robots_by):  # a robot's, named already
+                raise
             raise ConfigError(
                 f"{self.path} {'vary' if err.where.startswith('--vary') else 'scenarios'}", str(err)
             ) from None
@@ -86,10 +90,9 @@ def read_budget(path: Path, robot: str | None = None, flags: Vary | None = None)
     scenarios = [str(here / s) if s.endswith(".toml") and not Path(s).is_absolute() else s for s in scenarios]
     given = _strings(table, "robots", path, required=False)
     robots = [robot] if robot is not None else [_near_robot(r, here) for r in given] if given else None
-    try:  # every scenario on each robot, as SCENARIO@ROBOT (mlpfac.scenario.on_robot)
+    robots_by = "--robot" if robot is not None else f"{path} robots"  # what names a robot's errors
+    with robots_named(robots_by):  # every scenario on each robot, as SCENARIO@ROBOT (mlpfac.scenario.on_robot)
         scenarios = with_robots(scenarios, robots)
-    except ConfigError as err:
-        raise ConfigError("--robot" if robot is not None else f"{path} robots", err.what) from None
     specs = _strings(table, "controllers", path, required=False)
     controllers: list[str | None] = [None]
     if specs is not None:
@@ -121,8 +124,9 @@ def read_budget(path: Path, robot: str | None = None, flags: Vary | None = None)
     if n > MAX_RUNS:
         raise ConfigError(f"{path} vary", f"{n} runs is more than the limit of {MAX_RUNS}; split the budget")
     return Budget(
-        path, list(dict.fromkeys(scenarios)), controllers, seeds, seeds_text, duration, limits, vary, threshold
-    )
+        path, list(dict.fromkeys(scenarios)), controllers, seeds, seeds_text, duration, limits, vary, threshold,
+        robots_by,
+    )  # fmt: skip
 
 
 def _limit(b: dict, index: int, path: Path, here: Path) -> Limit:
@@ -203,8 +207,8 @@ def _near(spec: str, here: Path) -> str:
 
 
 def _near_robot(robot: str, here: Path) -> str:
-    """A budget's robot: an MJCF file from the budget's folder, else a name."""
-    return str(here / robot) if robot.endswith(".xml") and not Path(robot).is_absolute() else robot
+    """A budget's robot: an MJCF or robot file from the budget's folder, else a name."""
+    return str(here / robot) if robot.endswith((".xml", ".toml")) and not Path(robot).is_absolute() else robot
 
 
 def _is_number(v) -> bool:

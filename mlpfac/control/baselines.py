@@ -257,43 +257,50 @@ class PluginController(Stepped):
     def _new(self, cls: type):
         return cls(T=self.T, **self.plugin.params)
 
+    @property
+    def whole_batch(self) -> bool:
+        """The class is stepped once for all seeds, with arrays (B, ...); False for a given object
+        running one seed (arrays without the batch axis) and for one instance per seed."""
+        return self.plugin.batched and (self.B > 1 or self._given is None)
+
     def step(self, e: np.ndarray, r: np.ndarray) -> np.ndarray:
-        E = e if self.B > 1 or self._given is None else e[0]
+        # copies, in every form: what the controller writes into them is its own, never the runner's
+        # reference or errors (nor another seed's)
         return self._commands(
-            lambda: self._call("step", self.objs[0].step, E, r),
-            (self.B, 2) if E.ndim == 2 else (2,),
+            lambda: self._call("step", self.objs[0].step, e.copy() if self.whole_batch else e[0].copy(), r.copy()),
             lambda b: self._call("step", self.objs[b].step, e[b].copy(), r.copy()),
         )
 
-    def _commands(self, whole, shape: tuple[int, ...], seed, what: str = "(v, omega)") -> np.ndarray:
-        """(B, 2) commands: ``whole()`` of shape ``shape`` for a batched class, else ``seed(b)`` for each
-        live seed; a seed whose command is none (``_command``) is stopped with the reason, NaN in its row."""
+    def _commands(self, whole, seed, what: str = "(v, omega)") -> np.ndarray:
+        """(B, 2) commands: ``whole()`` for a batched class ((B, 2), or (2,) for a given object running
+        one seed), else ``seed(b)`` for each live seed. A seed whose command is none (``_command``)
+        is stopped with the reason, NaN in its row: in a batch, only the seeds whose row is not
+        finite, each with the reason its one-at-a-time run gives; a batch of the wrong shape or type, every seed."""
         u = np.full((self.B, 2), np.nan)
         if self.plugin.batched:
-            out = self._command(whole(), shape, what)
+            out = self._command(whole(), (self.B, 2) if self.whole_batch else (2,), what, finite=False)
             if isinstance(out, str):
                 self.why.update(dict.fromkeys(self.live, out))
-            else:
-                u[:] = out
-            return u
+                return u
+            seed = out.reshape(self.B, 2).__getitem__  # each live seed's row, checked as its own command
         for b in self.live:
-            out = self._command(seed(b), (2,), what)
-            if isinstance(out, str):
-                self.why[b] = out
+            row = self._command(seed(b), (2,), what)
+            if isinstance(row, str):
+                self.why[b] = row
             else:
-                u[b] = out
+                u[b] = row
         return u
 
     @staticmethod
-    def _command(out, shape: tuple[int, ...], what: str = "(v, omega)") -> np.ndarray | str:
-        """The command as an array of ``shape``, or why it is not one."""
+    def _command(out, shape: tuple[int, ...], what: str = "(v, omega)", finite: bool = True) -> np.ndarray | str:
+        """The command as an array of ``shape`` (finite unless ``finite`` is False), or why it is not one."""
         try:
             u = np.asarray(out, dtype=float)
         except (TypeError, ValueError):
             return f"step returned {type(out).__name__}, not {what}"
         if u.shape != shape:
             return f"step returned shape {u.shape}, expected {shape} {what}"
-        if not np.isfinite(u).all():
+        if finite and not np.isfinite(u).all():
             return f"step returned a non-finite command {np.array2string(u, precision=3)}"
         return u
 

@@ -40,8 +40,10 @@ class Observation:
     def __getitem__(self, key: str):
         return getattr(self, key)
 
-    def seed(self, b: int) -> Observation:
-        """Seed b's own observation (copies), from a batch's."""
+    def seed(self, b: int | slice) -> Observation:
+        """Seed b's own observation, from a batch's (``slice(None)``: the whole batch's), every array a
+        copy: what a controller writes into them is its own, never the runner's (its reference, errors,
+        measurements) nor another seed's."""
         return Observation(
             self.e[b].copy(),
             self.r.copy(),
@@ -51,10 +53,6 @@ class Observation:
             self.wheel_speeds[b].copy(),
             self.t,
         )
-
-    def single(self) -> Observation:
-        """The batch of one seed as one run's observation (arrays without the batch axis)."""
-        return Observation(self.e[0], self.r, self.r_dot, self.pose[0], self.twist[0], self.wheel_speeds[0], self.t)
 
 
 def reference_rates(ref: np.ndarray, T: float) -> np.ndarray:
@@ -85,10 +83,8 @@ class TorquePluginController(PluginController):
         return cls(T=self.T, robot=self.robot, **self.plugin.params)
 
     def step(self, obs: Observation) -> np.ndarray:
-        one = self.B == 1 and self._given is not None
         return self._commands(
-            lambda: self._call("step", self.objs[0].step, obs.single() if one else obs),
-            (2,) if one else (self.B, 2),
+            lambda: self._call("step", self.objs[0].step, obs.seed(slice(None) if self.whole_batch else 0)),
             lambda b: self._call("step", self.objs[b].step, obs.seed(b)),
             WHAT,
         )

@@ -20,6 +20,7 @@ class PlantSpec(Protocol):
     plant_config: object
     T: float
     source: str
+    plant_from: str  # the robot its [plant] came from (--robot NAME), "" for the file's own
     events: tuple
     controller: str
     level: str  # "torque": the controller commands the wheels' torques
@@ -41,22 +42,51 @@ def make_plant(scn: PlantSpec, ref: np.ndarray):
             periods = (scn.T, *(ev.factor * scn.T for ev in scn.events if isinstance(ev, ControlPeriod)))
             plant = robot = MujocoPlant(scn.plant_config, scn.T, periods)
     except ConfigError as err:
-        where = err.where if err.where.startswith(scn.source) else f"{scn.source} [plant] {err.where}".rstrip()
+        where = err.where if err.where.startswith(scn.source) else f"{plant_where(scn)} {err.where}".rstrip()
         raise type(err)(where, err.what) from None  # UnavailableError stays itself
     if scn.level == "torque":  # a controller of the wheels' torques
         actuator = None if robot is None else robot.config.actuator
-        if robot is None or actuator != "torque":
-            raise ConfigError(
-                f"{scn.source} [plant] actuator",
-                f"{scn.controller} is a torque-level controller: it commands wheel torques, which the robot's "
-                f'{actuator} servos do not take; set actuator = "torque" in [plant] (torque motors with the same limit)',
-            )
+        refuse_torque(scn.controller, scn.plant_kind, actuator, scn.source, scn.plant_from)
         robot.torque_commands()
     for i, ev in enumerate(scn.events):
         plant.check_event(ev, f"{scn.source} [[events]] #{i + 1}")
     if robot is not None:
         _check_size(scn, robot)
     return plant
+
+
+def plant_where(scn: PlantSpec) -> str:
+    """What a message about the scenario's plant names: its file's ``[plant]``, or the robot it was
+    put on (``--robot NAME``, renamed to the flag or key that brought it: mlpfac.scenario.on_robot)."""
+    return scn.plant_from or f"{scn.source} [plant]"
+
+
+def refuse_torque(
+    controller: str, kind: str, actuator: str | None, source: str, plant_from: str = "", read: bool = True
+) -> None:
+    """A torque-level controller is refused, in one line naming what chose the plant (the file
+    ``source``'s ``[plant]``, or the robot ``plant_from``), on a plant (``kind``) without torque
+    motors: ``actuator`` is the robot's as read (``read``), or the file's before the robot is read
+    (None, unset, passes: the model answers)."""
+    what = f"{controller} is a torque-level controller: it commands wheel torques"
+    if kind == "mujoco" and (actuator == "torque" or (actuator is None and not read)):
+        return
+    if plant_from:  # the robot a flag or key named: its file sets the actuator, not the scenario's
+        raise ConfigError(
+            plant_from,
+            f"{what}, which this robot's {actuator or 'velocity'} servos do not take; choose one with torque motors "
+            '(cart-torque, diffdrive-torque, tug, tiago-torque, or a robot file with actuator = "torque" in its [plant])',
+        )
+    if kind != "mujoco":
+        raise ConfigError(
+            f"{source} [plant] kind",
+            f'{what}: it drives a MuJoCo robot\'s wheel torques; set kind = "mujoco" and actuator = "torque" in [plant]',
+        )
+    raise ConfigError(
+        f"{source} [plant] actuator",
+        f'{what}, which the robot\'s {actuator} servos do not take; set actuator = "torque" in [plant] '
+        "(torque motors with the same limit)",
+    )
 
 
 MAX_PHYSICS_STEPS = 10**9  # physics steps of one run, at most (hours of simulation)

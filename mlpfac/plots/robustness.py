@@ -210,6 +210,21 @@ def panels_plot(folders: list[Path]) -> bytes | None:
     return buf.getvalue()
 
 
+THRESHOLD_MAX = 1e4  # m: a median position RMS beyond 10 km (the largest reference) is no limit
+
+
+def check_threshold(threshold: float | None, where: str = "--threshold") -> float | None:
+    """The breaking points' limit on the median position RMS in metres (None: each run's tracking
+    limit); a ConfigError naming ``where`` for one that is not a number, not positive, or absurd."""
+    if threshold is None:
+        return None
+    if isinstance(threshold, bool) or not isinstance(threshold, int | float):
+        raise ConfigError(where, f"expected a number of metres, got {threshold!r}")
+    if not 0 < threshold <= THRESHOLD_MAX:
+        raise ConfigError(where, f"must be a number of metres above 0 and at most {THRESHOLD_MAX:g}, got {threshold!r}")
+    return float(threshold)
+
+
 MIN_INTERVAL_RUNS = 6  # the fewest runs whose median has a 95 % interval (median_interval)
 CURVE_FIELDS: dict[str, tuple[type, ...]] = {
     "scenario": (str,), "controller": (str,), "point": (dict,), "runs": (int,), "finished": (int,),
@@ -265,12 +280,11 @@ def read_robustness(path: Path) -> dict:
         raise ConfigError(f"{path} curves", "expected the list of rows a sweep writes")
     if not isinstance(data.get("breaking_points", []), list) or not isinstance(data.get("meta", {}), dict):
         raise ConfigError(str(path), "expected breaking_points (a list) and meta (a table) as a sweep writes them")
-    threshold = data.get("meta", {}).get("threshold_m")
-    if threshold is not None and (isinstance(threshold, bool) or not isinstance(threshold, int | float)):
-        raise ConfigError(f"{path} meta.threshold_m", f"expected a number or null, got {threshold!r}")
+    check_threshold(data.get("meta", {}).get("threshold_m"), f"{path} meta.threshold_m")  # a number or null
     for i, r in enumerate(data["curves"]):
         where = f"{path} curves[{i}]"
         _typed(r, CURVE_FIELDS, where)
+        check_threshold(r["threshold_m"], f"{where}.threshold_m")  # drawn on a log scale
         _numbers(r["point"], f"{where}.point")
         if not isinstance(r.get("set", {}), dict):
             raise ConfigError(f"{where}.set", f"expected a table of settings, got {r['set']!r}")

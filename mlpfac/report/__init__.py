@@ -7,6 +7,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from mlpfac.flags import needs
 from mlpfac.targets import cli_path
 
 
@@ -41,3 +42,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--strict", action="store_true", help="with --verify: a dataset that cannot run here (its robot) is an error"
     )
+    needs(p, "--strict", "--verify")
+    needs(p, "--command", "--collect")
+    needs(p, "--code-version", "--collect")

@@ -267,21 +267,29 @@ def _collect_item(item: str) -> tuple[str, str]:
 
 
 def run_cli(args: argparse.Namespace) -> int:
-    """``mlpfac report``: collect, then check (exit 1 if a table differs) or write the tables."""
+    """``mlpfac report``: collect, then verify the data (``--verify``) and check the tables
+    (``--check``), both when both are given (exit 1 if a run or a table differs), or write the tables."""
     collects = [_collect_item(item) for item in args.collect]  # every one checked before any is copied
+    if args.made_by is not None and len(collects) > 1:
+        raise ConfigError(
+            "--command", f"is the command of one --collect; {len(collects)} were given: collect each apart"
+        )
     for name, results in collects:
         print(f"{results} -> {collect(args.docs / 'data' / name, Path(results), args.made_by, args.code_version)}")
+    code = 0
     if args.verify is not None:
         from mlpfac.report.verify import run_cli as verify
 
-        return verify(args.docs, args.verify, args.strict)  # a line per dataset as it is done
+        code = verify(args.docs, args.verify, args.strict)  # a line per dataset as it is done
     if args.check:
         old = stale(args.docs)
         for page in old:
             print(
                 f"mlpfac: {page}: a table differs from its data; `mlpfac report {args.docs}` writes it", file=sys.stderr
             )
-        return 1 if old else 0
+        code = max(code, 1 if old else 0)
+    if args.verify is not None or args.check:
+        return code
     for page, n, changed in write(args.docs):
         print(f"{page}: {n} tables, {'written' if changed else 'unchanged'}")
     return 0

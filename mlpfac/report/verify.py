@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from mlpfac.exceptions import ConfigError, MlpfacError, UnavailableError
+from mlpfac.flags import Parser
 
 RUNS_FILE = "runs.json"
 UNTIMED = ("wall_time_s", "rrd")  # what differs between two runs of the same bits: time, and the recording's bytes
@@ -121,8 +122,8 @@ class Verdict:
         return not (self.skipped or self.unverified) and self.identical != self.checked
 
 
-class _Parser(argparse.ArgumentParser):
-    """argparse that raises instead of printing its usage and exiting."""
+class _Parser(Parser):
+    """The command line's parser (its flags' rules too), raising instead of printing its usage and exiting."""
 
     def error(self, message: str):
         raise ConfigError("", message)
@@ -165,7 +166,7 @@ def _plan(command: str, root: Path, where: str = "command"):
     words, folder = _words(command, where)
     if words[:1] != ["mlpfac"] or words[1:2] not in (["sweep"], ["compare"]):
         raise ScriptTableError(command, "a script's table: run its command again to check it")
-    from mlpfac.sweeps.cli import scenarios_of
+    from mlpfac.sweeps.cli import robots_named_as, scenarios_of
     from mlpfac.sweeps.plan import parse_controllers, parse_seeds, plan
     from mlpfac.sweeps.vary import parse_vary
 
@@ -174,7 +175,9 @@ def _plan(command: str, root: Path, where: str = "command"):
     except ConfigError as err:
         raise ConfigError(where, f"not a command mlpfac reads ({err.what}): {command!r}") from None
     where_run = root / folder if folder is not None else root
-    with contextlib.chdir(where_run):
+    if not where_run.is_dir():
+        raise ConfigError(where, f"cd {folder}: no such folder ({where_run}): {command!r}")
+    with contextlib.chdir(where_run), robots_named_as(args):
         jobs = plan(
             scenarios_of(args),
             parse_controllers(args.controllers),
@@ -240,7 +243,14 @@ def prepare(folder: Path, root: Path) -> Planned:
     """A dataset's files read and checked and its command planned again: ConfigError (bad input)
     for files or a command that are not what ``report --collect`` writes."""
     meta = folder / "meta.json"
-    command = read_json(folder, "meta.json").get("command", "")
+    command = read_json(folder, "meta.json").get("command")
+    if command is None or (
+        isinstance(command, str) and not command.strip()
+    ):  # what made the dataset is what --verify runs, and what its page says
+        raise ConfigError(
+            f"{meta} command",
+            "missing: a dataset's meta.json names the command that made it (report --collect NAME=... --command ...)",
+        )
     p = Planned(Verdict(folder.name, command if isinstance(command, str) else ""))
     _words(command, f"{meta} command")  # a command that is no command line is bad input, even for a script's table
     if not (folder / RUNS_FILE).is_file():

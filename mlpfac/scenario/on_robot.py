@@ -20,8 +20,10 @@ controller put on another robot, by one rule (docs/robots.md):
 
 from __future__ import annotations
 
+import contextlib
 import copy
 import importlib.resources
+from collections.abc import Iterator
 from pathlib import Path
 
 from mlpfac.exceptions import ConfigError
@@ -61,6 +63,27 @@ ROBOT_HELP = (
     "what it can drive (docs/robots.md)"
 )
 AT = "@"  # SCENARIO@ROBOT: a scenario of a sweep on a robot (--robot, --robots, a budget's robots)
+ROBOT_FLAG = "--robot"  # what a message about a robot names first: renamed to what brought it (robots_named)
+
+
+def robot_where(robot: str) -> str:
+    """Where a message about ``robot`` points: ``--robot ROBOT``, which :func:`robots_named` renames
+    to the flag or key that brought the robot (``--robots ROBOT``, ``budget.toml robots ROBOT``)."""
+    return f"{ROBOT_FLAG} {robot}"
+
+
+@contextlib.contextmanager
+def robots_named(by: str) -> Iterator[None]:
+    """A ConfigError about a robot raised inside (its ``where`` begins with ``--robot``) named by
+    ``by``, the flag or key that brought the robots: one rule for ``--robot``, ``--robots``, a
+    budget's ``robots`` and the Python API's ``robots`` (docs/errors.md)."""
+    try:
+        yield
+    except ConfigError as err:
+        head, sep, rest = err.where.partition(" ")
+        if head != ROBOT_FLAG or by == ROBOT_FLAG:
+            raise
+        raise type(err)(f"{by}{sep}{rest}", err.what) from None
 
 
 def with_robots(scenarios: list[str], robots: list[str] | None) -> list[str]:
@@ -92,7 +115,7 @@ def model_of(robot: str) -> str:
     """The ``[plant] model`` a ``--robot`` names: a shipped robot, a Menagerie one (``NAME``,
     ``menagerie:NAME[/ENTRY]``), an MJCF file (from the current folder), or a robot file's."""
     if not isinstance(robot, str) or not robot:
-        raise ConfigError("--robot", f"expected a robot's name or an MJCF file, got {robot!r}")
+        raise ConfigError(ROBOT_FLAG, f"expected a robot's name or an MJCF file, got {robot!r}")
     if robot in SHIPPED:
         robot = _shipped(robot)
         return str(robot_table(robot)["model"]) if robot.endswith(".toml") else robot
@@ -105,9 +128,9 @@ def model_of(robot: str) -> str:
         return str(robot_table(robot)["model"])
     if path.suffix.lower() != ".xml":
         known = ", ".join([*SHIPPED, *MENAGERIE_BASES])
-        raise ConfigError("--robot", f"{robot!r} is neither a robot ({known}) nor an MJCF file (.xml)")
+        raise ConfigError(robot_where(robot), f"neither a robot ({known}) nor an MJCF (.xml) or robot (.toml) file")
     if not path.is_file():
-        raise ConfigError("--robot", f"{path}: MJCF model file not found")
+        raise ConfigError(robot_where(robot), "MJCF model file not found")
     return str(path.resolve())
 
 
@@ -123,13 +146,16 @@ def robot_table(robot: str) -> dict:
         return {"kind": "mujoco", "model": model_of(robot)}
     from mlpfac.tables import read_toml
 
-    table = read_toml(path, "robot file")
+    try:
+        table = read_toml(path, "robot file")
+    except ConfigError as err:  # named by the flag: "--robot r.toml: robot file not found"
+        raise ConfigError(robot_where(robot), err.what) from None
     plant = table.get("plant")
     if set(table) != {"plant"} or not isinstance(plant, dict) or not isinstance(plant.get("model"), str):
-        raise ConfigError(f"--robot {path}", "a robot file holds one [plant] table with its model")
+        raise ConfigError(robot_where(robot), "a robot file holds one [plant] table with its model")
     if plant.get("kind", "mujoco") != "mujoco":
         raise ConfigError(
-            f"--robot {path} [plant] kind", f'must be "mujoco" (a robot file\'s model), got {plant["kind"]!r}'
+            f"{robot_where(robot)} [plant] kind", f'must be "mujoco" (a robot file\'s model), got {plant["kind"]!r}'
         )
     plant = {"kind": "mujoco", **plant}
     if not plant["model"].startswith("menagerie:"):
@@ -171,6 +197,7 @@ def on_robot(table: dict, robot: str) -> dict:
     from mlpfac.plants.events import ControlPeriod, parse_event
     from mlpfac.plants.mujoco import robot_of
     from mlpfac.scenario.reference import make_reference
+    from mlpfac.tables import build
 
     out = copy.deepcopy(table)
     out.pop("provenance", None)  # what another robot's run simulated
@@ -183,12 +210,12 @@ def on_robot(table: dict, robot: str) -> dict:
     raw = out.get("events", []) if isinstance(out.get("events"), list) else []
     events = [parse_event(ev, duration, f"[[events]] #{i + 1}") for i, ev in enumerate(raw)]
     periods = (T, *(ev.factor * T for ev in events if isinstance(ev, ControlPeriod)))
+    where = robot_where(robot)
+    config = build(MujocoConfig, {k: v for k, v in plant.items() if k != "kind"}, f"{where} [plant]")
     try:
-        r = robot_of(MujocoConfig(**{k: v for k, v in plant.items() if k != "kind"}), periods)
-    except TypeError as err:
-        raise ConfigError(f"--robot {robot}", f"not a [plant] key: {err}") from None
+        r = robot_of(config, periods)
     except ConfigError as err:
-        raise type(err)(f"--robot {robot}: {err.where}".rstrip(": "), err.what) from None
+        raise type(err)(f"{where}: {err.where}".rstrip(": "), err.what) from None
     ref = dict(out.get("reference", {"kind": "eight"}))
     kind = ref.get("kind", "eight")
     curve = make_reference(kind, {k: v for k, v in ref.items() if k != "kind"}) if kind in SPEEDS else None

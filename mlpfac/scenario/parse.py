@@ -25,6 +25,7 @@ from mlpfac.control.plugins import Plugin, absolute_spec, is_plugin_spec, resolv
 from mlpfac.control.variants import TORQUE_LEVEL, VARIANTS
 from mlpfac.exceptions import ConfigError
 from mlpfac.model import pose_from_error
+from mlpfac.plants import refuse_torque
 from mlpfac.plants.events import Event, parse_event
 from mlpfac.scenario import provenance
 from mlpfac.scenario.draws import put as put_value
@@ -91,6 +92,7 @@ class Scenario:
     table: dict
     dropped_events: tuple[float, ...] = ()  # times of the file's events a shorter --duration left out
     plugin: Plugin | None = None  # a user's controller (mlpfac.control.plugins); None: a shipped one
+    plant_from: str = ""  # the robot its [plant] came from (--robot NAME: messages name it); "": the file's own
 
     @property
     def drawn(self) -> dict[str, float]:
@@ -135,7 +137,7 @@ class Scenario:
                 raise ConfigError("--seed", f"expected a whole number >= 0, got {seed!r}")
             table["seed"] = seed
         if duration is None:
-            return parse(table, self.source, check_model=False)
+            return parse(table, self.source, check_model=False, plant_from=self.plant_from)
         if isinstance(duration, bool) or not isinstance(duration, int | float) or not math.isfinite(duration):
             raise ConfigError("--duration", f"expected a finite number of seconds, got {duration!r}")
         if duration < self.T:
@@ -147,7 +149,7 @@ class Scenario:
             table["events"] = kept
         table["duration"] = duration
         try:
-            scn = parse(table, self.source, check_model=False)
+            scn = parse(table, self.source, check_model=False, plant_from=self.plant_from)
         except ConfigError as err:
             if err.where.endswith(" duration"):
                 raise ConfigError(f"--duration {duration:g}", err.what) from None
@@ -224,15 +226,16 @@ def load(
         and not plant["model"].startswith("menagerie:")
     ):
         plant["model"] = str((path.parent / Path(plant["model"]).expanduser()).resolve())
+    plant_from = ""
     if robot is not None:
-        from mlpfac.scenario.on_robot import on_robot
+        from mlpfac.scenario.on_robot import on_robot, robot_where
 
         parse(table, str(path), check_model=False)  # the file's own errors first, named as its own
-        table = on_robot(table, robot)
+        table, plant_from = on_robot(table, robot), robot_where(robot)
         for key, value in (values or {}).items():  # a limit asked for wins over the robot's (--vary controller.v_max)
             if key.startswith("controller."):
                 put_value(table, key, value)
-    scn = parse(table, str(path))
+    scn = parse(table, str(path), plant_from=plant_from)
     if not build:  # the file's data only (a listing): no robot is read, none downloaded
         return scn
     said = {}
@@ -241,12 +244,12 @@ def load(
 
         fitted, said = on_its_robot(table, scn)
         if fitted is not table:
-            table, scn = fitted, parse(fitted, str(path), check_model=False)
+            table, scn = fitted, parse(fitted, str(path), check_model=False)  # (no robot: its own [plant])
     table["provenance"], found = provenance.recorded(scn)
     table["provenance"] |= said
     if found:  # the robot's parts the file left to the model: written in, so its config.toml re-runs the same
         table["plant"] = table["plant"] | found
-        return parse(table, str(path), check_model=False)
+        return parse(table, str(path), check_model=False, plant_from=plant_from)
     return dataclasses.replace(scn, table=scn.table | {"provenance": table["provenance"]})
 
 
@@ -269,11 +272,13 @@ def memory_needed(steps: int, alpha: int, estimator: str) -> int:
     return 8 * steps * (40 + alpha) + filt
 
 
-def parse(table: dict, source: str = "<scenario>", check_model: bool = True) -> Scenario:
+def parse(table: dict, source: str = "<scenario>", check_model: bool = True, plant_from: str = "") -> Scenario:
     """Validate a scenario table (as read from TOML) into a :class:`Scenario`.
 
     A table with ``[provenance]`` (a run's config.toml) must name the same compiled model it was
-    made with; ``check_model=False`` skips that compile where the table's model was just checked."""
+    made with; ``check_model=False`` skips that compile where the table's model was just checked.
+    ``plant_from``: the robot (``--robot NAME``) the table's ``[plant]`` came from, which messages
+    about it name in place of the file."""
     if not isinstance(table, dict):
         raise ConfigError(source, "expected a table of scenario keys")
     check_keys(table, TOP_KEYS, source)
@@ -308,7 +313,7 @@ def parse(table: dict, source: str = "<scenario>", check_model: bool = True) -> 
 
     plant_table = subtable(table, "plant", source, {"kind": "kinematic"})
     plant_kind = plant_table.pop("kind", "kinematic")
-    where = f"{source} [plant]"
+    where = f"{plant_from} [plant]" if plant_from else f"{source} [plant]"
     if plant_kind == "kinematic":
         from mlpfac.plants.kinematic import KinematicConfig
 
@@ -339,7 +344,7 @@ def parse(table: dict, source: str = "<scenario>", check_model: bool = True) -> 
         )
     level = plugin.level if plugin is not None else "torque" if name_c in TORQUE_LEVEL else "velocity"
     if level == "torque":
-        torque_drive(name_c, plant_kind, getattr(plant_config, "actuator", None), source)
+        refuse_torque(name_c, plant_kind, getattr(plant_config, "actuator", None), source, plant_from, read=False)
     law = build(Law, {k: ctrl[k] for k in ("lambdas", "v_max", "omega_max") if k in ctrl}, where)
     ref_table = subtable(table, "reference", source, {"kind": "eight"})
     kind = ref_table.pop("kind", "eight")
@@ -391,24 +396,8 @@ def parse(table: dict, source: str = "<scenario>", check_model: bool = True) -> 
         events=tuple(events),
         table=restore_draws(table, draws),
         plugin=plugin,
+        plant_from=plant_from,
     )
-
-
-def torque_drive(name: str, plant_kind: str, actuator: str | None, source: str) -> None:
-    """A torque-level controller is refused, in one line, on a plant without torque motors (an
-    ``actuator`` still unset is checked when the robot is read)."""
-    if plant_kind != "mujoco":
-        raise ConfigError(
-            f"{source} [plant] kind",
-            f'{name} is a torque-level controller: it drives a MuJoCo robot\'s wheel torques; set kind = "mujoco" '
-            'and actuator = "torque" in [plant]',
-        )
-    if actuator not in (None, "torque"):
-        raise ConfigError(
-            f"{source} [plant] actuator",
-            f"{name} is a torque-level controller: it commands wheel torques, which the robot's {actuator} servos "
-            'do not take; set actuator = "torque" in [plant] (torque motors with the same limit)',
-        )
 
 
 def _plugin(ctrl: dict, T: float, where: str, source: str) -> Plugin:

@@ -197,12 +197,14 @@ def make_reference(kind: str, params: dict, where: str = "[reference]", limits: 
         raise ConfigError(where, f"bad parameter value: {err}") from None
     with np.errstate(all="ignore"):
         ok = _curve(curve, np.linspace(0.0, 60.0, 601))
-    if not np.all(np.isfinite(ok)) or np.max(ok[:, 3]) > SPEED_MAX or np.max(np.abs(ok[:, 4])) > OMEGA_MAX:
+    if np.any(ok[:, 3] <= 1e-6):  # first: where v_r is 0, omega_r = 0 / 0 is not finite (speed = 1e-300)
+        raise ConfigError(where, "the reference speed v_r must stay above zero (the gains divide by T v_r)")
+    if not np.all(np.isfinite(ok)):
+        raise ConfigError(where, "the reference is not finite along its path: its parameters overflow")
+    if np.max(ok[:, 3]) > SPEED_MAX or np.max(np.abs(ok[:, 4])) > OMEGA_MAX:
         raise ConfigError(
             where,
             f"the reference asks for speeds beyond a wheeled robot's (v_r up to {SPEED_MAX:g} m/s, |omega_r| up to "
-            f"{OMEGA_MAX:g} rad/s; this one: {np.nanmax(ok[:, 3]):.3g} m/s, {np.nanmax(np.abs(ok[:, 4])):.3g} rad/s)",
+            f"{OMEGA_MAX:g} rad/s; this one: {np.max(ok[:, 3]):.3g} m/s, {np.max(np.abs(ok[:, 4])):.3g} rad/s)",
         )
-    if not np.all(ok[:, 3] > 1e-6):
-        raise ConfigError(where, "the reference speed v_r must stay above zero (the gains divide by T v_r)")
     return curve

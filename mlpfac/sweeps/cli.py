@@ -9,6 +9,7 @@ import shlex
 import sys
 from pathlib import Path
 
+from mlpfac.flags import needs
 from mlpfac.targets import cli_path
 
 COMPARE_CONTROLLERS = ("adaptive", "corradini", "kanayama")
@@ -57,6 +58,12 @@ def _add_common(p: argparse.ArgumentParser, seeds: str, out: str) -> None:
         "--scheduler-timeout", type=float, default=10.0, help="seconds to wait for the scheduler (default 10)"
     )
     g.add_argument("--save-rrd", action="store_true", help="also save each run's rerun recording as run.rrd")
+    for flag, other in (
+        ("--threshold", "--vary"),
+        ("--batch-size", "--batched"),
+        ("--scheduler-timeout", "--scheduler"),
+    ):
+        needs(p, flag, other)
 
 
 def add_sweep_arguments(p: argparse.ArgumentParser) -> None:
@@ -94,18 +101,20 @@ def run_compare_cli(args: argparse.Namespace) -> int:
 def scenarios_of(args: argparse.Namespace) -> list[str]:
     """The scenarios a parsed ``sweep`` / ``compare`` command line runs, each on its robots
     (``--robot``, ``--robots``); ``compare`` without scenarios: every shipped one. The command and
-    ``report --verify``, which plans a dataset's recorded command again, read a command line the same way."""
-    from mlpfac.exceptions import ConfigError
+    ``report --verify``, which plans a dataset's recorded command again, read a command line the
+    same way, and plan it inside :func:`robots_named_as` (a robot named by its flag)."""
     from mlpfac.scenario.on_robot import robots_flag, with_robots
     from mlpfac.scenario.parse import scenario_names
 
     robots = [args.robot] if args.robot is not None else robots_flag(args.robots, "--robots")
-    try:
-        return with_robots(args.scenarios or scenario_names(), robots)
-    except ConfigError as err:  # a robot of --robots is named by its own flag
-        if args.robots is None or not err.where.startswith("--robot"):
-            raise
-        raise ConfigError("--robots" + err.where.removeprefix("--robot"), err.what) from None
+    return with_robots(args.scenarios or scenario_names(), robots)
+
+
+def robots_named_as(args: argparse.Namespace):
+    """Messages about a robot inside named by the flag that brought it (``--robots``, ``--robot``)."""
+    from mlpfac.scenario.on_robot import robots_named
+
+    return robots_named("--robots" if args.robots is not None else "--robot")
 
 
 def _run_cli(args: argparse.Namespace, stem: str) -> int:
@@ -115,12 +124,13 @@ def _run_cli(args: argparse.Namespace, stem: str) -> int:
 
     columns = SWEEP_COLUMNS if stem == "sweep" else COMPARE_COLUMNS
     cmd = shlex.join(["mlpfac", *sys.argv[1:]]) if sys.argv[1:] else f"mlpfac {stem} ..."
-    done = sweep_folder(
-        scenarios_of(args), args.controllers, args.seeds, args.out, duration=args.duration, workers=args.workers,
-        batched=args.batched, batch_size=args.batch_size, scheduler=args.scheduler,
-        scheduler_timeout=args.scheduler_timeout, save_rrd=args.save_rrd, stem=stem, columns=columns, command=cmd,
-        vary=args.vary, threshold=args.threshold,
-    )  # fmt: skip
+    with robots_named_as(args):  # a robot's errors, found as the scenarios are put on it, name its flag
+        done = sweep_folder(
+            scenarios_of(args), args.controllers, args.seeds, args.out, duration=args.duration, workers=args.workers,
+            batched=args.batched, batch_size=args.batch_size, scheduler=args.scheduler,
+            scheduler_timeout=args.scheduler_timeout, save_rrd=args.save_rrd, stem=stem, columns=columns, command=cmd,
+            vary=args.vary, threshold=args.threshold,
+        )  # fmt: skip
     if done.code is not None:
         return done.code
     print(markdown(done.rows, columns), end="")

@@ -215,7 +215,7 @@ def sweep_folder(
     ``command`` is what re-runs it (for messages); ``vary`` the ``--vary`` axes and draws
     (:mod:`mlpfac.sweeps.vary`), ``threshold`` the breaking points' limit in metres
     (:mod:`mlpfac.sweeps.robustness`)."""
-    from mlpfac.sweeps.robustness import check_threshold
+    from mlpfac.sweeps.robustness import NO_AXIS, check_threshold
     from mlpfac.sweeps.vary import parse_vary
 
     seed_list = parse_seeds(seeds)
@@ -223,6 +223,8 @@ def sweep_folder(
     workers = check_execution_flags(workers, batch_size, scheduler, scheduler_timeout)
     axes = parse_vary(vary)
     threshold = check_threshold(threshold)
+    if threshold is not None and not axes.axes:
+        raise ConfigError("--threshold", NO_AXIS.replace("vary", "--vary"))
     scenarios = list(dict.fromkeys(scenarios))
     n = len(scenarios) * len(names) * len(seed_list) * axes.size
     if n > MAX_RUNS:

@@ -235,22 +235,27 @@ def _pool_results(
                 if nxt is not None:
                     submit(nxt)
                 yield res
+        thread = _pool_thread(pool)
         pool.shutdown(wait=False)
         for p in set(mp.active_children()) - before:  # a worker whose recording hung cannot exit cleanly
             p.join(EXIT_GRACE_S)
             if p.is_alive():
                 p.kill()
+        with sigint_deferred():
+            _join(thread)
     except BaseException as err:  # also GeneratorExit: the consumer stopped
         workers_now = set(mp.active_children()) - before
         for p in workers_now:  # this pool's workers: they ignore SIGINT and SIGTERM
             p.kill()
         with sigint_deferred():
-            for f in pending:
-                f.cancel()
             for p in workers_now:
                 p.join(EXIT_GRACE_S)  # killed: at once, unless the machine is swamped
             _end_result_pipe(pool)
-            pool.shutdown(wait=False, cancel_futures=True)  # its thread sees the workers gone and ends
+            thread = _pool_thread(pool)
+            # its thread sees the workers gone, fails every future left and ends; a future cancelled
+            # here would make it raise instead (Python 3.11 sets the failure on a cancelled one too)
+            pool.shutdown(wait=False)
+            _join(thread)
         if isinstance(err, BrokenProcessPool):  # seen by a result or by a submit, whichever comes first
             raise WorkerLostError(
                 "a worker process died (killed from outside, or out of memory: see `dmesg`); "
@@ -269,6 +274,21 @@ def _end_result_pipe(pool) -> None:
     if writer is not None:
         with contextlib.suppress(OSError):
             writer.close()
+
+
+def _pool_thread(pool):
+    """The pool's thread (None before its first task), taken before ``shutdown``, which forgets it."""
+    return getattr(pool, "_executor_manager_thread", None)
+
+
+def _join(thread) -> None:
+    """Wait for the pool's thread to end (EXIT_GRACE_S at most), once its workers are gone. A thread
+    still ending when the interpreter exits races Python's own wake-up of it at exit
+    (concurrent.futures writes to a pipe that the thread is closing: "Exception ignored in: <module
+    'threading'> ... OSError: [Errno 9] Bad file descriptor" after the sweep's last line, about 1 in
+    25 SIGTERMs); with it ended, the command exits with no thread of the pool's left to wake."""
+    if thread is not None:
+        thread.join(EXIT_GRACE_S)
 
 
 def _dask_results(client, tasks: list[list[Job]], batched: bool, save_rrd: bool) -> Iterator[list[dict]]:

@@ -32,6 +32,7 @@ from pathlib import Path
 from mlpfac.exceptions import ConfigError
 from mlpfac.files import write_atomic
 from mlpfac.loop.metrics import RunMetrics
+from mlpfac.plots.robustness import check_threshold  # noqa: F401 (the sweep's, the budget's and the file's)
 from mlpfac.sweeps.paired import compared_rms, median
 from mlpfac.sweeps.plan import Job
 
@@ -42,15 +43,7 @@ SIDES = ("below", "above")
 FROM = re.compile(r"friction (\S+) -> ")  # the robot's own friction, in a friction event's record
 
 
-def check_threshold(threshold: float | None) -> float | None:
-    """The breaking points' limit on the median position RMS in metres (None: each run's tracking limit)."""
-    if threshold is None:
-        return None
-    if isinstance(threshold, bool) or not isinstance(threshold, int | float):
-        raise ConfigError("--threshold", f"expected a number of metres, got {threshold!r}")
-    if not (math.isfinite(threshold) and threshold > 0):
-        raise ConfigError("--threshold", f"must be a positive number of metres, got {threshold!r}")
-    return float(threshold)
+NO_AXIS = "means nothing without an axis to break along (vary KEY=VALUES; a draw has no breaking point)"
 
 
 def median_interval(xs: list[float]) -> tuple[float | None, float | None]:

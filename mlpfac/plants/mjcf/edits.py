@@ -1,7 +1,8 @@
 """What the plant needs of a robot beyond its files, made as :class:`mujoco.MjSpec` edits (the files
 are never changed): a pose frame on a body or at an offset from a site, round tyres on mesh
 wheels, the robot's other actuated joints locked at their start pose, the wheel drive turned into
-torque motors, and the geometry read from meshes (wheel radius, the viewer's shapes).
+torque motors, the servos' force limits kept by the plant; and the drive's limits as the plant
+reads them (:func:`torque_limit`, :func:`servo_band`).
 """
 
 from __future__ import annotations
@@ -11,7 +12,7 @@ import math
 import mujoco
 import numpy as np
 
-from mlpfac.model import matmul, norm
+from mlpfac.model import matmul
 
 POSE_SITE = "mlpfac_pose"  # the site added where the pose is measured (a body, or a site with an offset)
 TYRE = "mlpfac_tyre"  # the sphere tyres added to mesh wheels (tyre = "sphere")
@@ -21,17 +22,6 @@ MESH = int(mujoco.mjtGeom.mjGEOM_MESH)
 def add_pose_site(spec: mujoco.MjSpec, body: int, pos: np.ndarray, quat: np.ndarray) -> None:
     """A site on ``body`` at ``pos``, ``quat`` (body frame): the frame where the pose is measured."""
     spec.bodies[body].add_site(name=POSE_SITE, pos=pos, quat=quat)
-
-
-def offset_from_site(m: mujoco.MjModel, site: int, offset) -> tuple[int, np.ndarray, np.ndarray]:
-    """Body, position and orientation of a frame ``offset`` (in the site's axes) from ``site``."""
-    R = np.empty(9)
-    mujoco.mju_quat2Mat(R, m.site_quat[site])
-    return (
-        int(m.site_bodyid[site]),
-        m.site_pos[site] + matmul(R.reshape(3, 3), np.asarray(offset, float)[:, None])[:, 0],
-        m.site_quat[site],
-    )
 
 
 def lock_other_joints(spec: mujoco.MjSpec, m: mujoco.MjModel, qpos: np.ndarray, keep: tuple[int, ...]) -> list[str]:
@@ -111,38 +101,6 @@ def _coupled(bodies: set[int], m: mujoco.MjModel) -> set[int]:
         bodies = bodies | more
 
 
-def by_name(m_from: mujoco.MjModel, values: np.ndarray, m_to: mujoco.MjModel, obj: str, default: np.ndarray):
-    """Values per joint (obj = "qpos") or actuator ("ctrl") of one model moved to another by name."""
-    out = default.copy()
-    if obj == "ctrl":
-        for a in range(m_to.nu):
-            b = mujoco.mj_name2id(m_from, mujoco.mjtObj.mjOBJ_ACTUATOR, m_to.actuator(a).name)
-            if m_to.actuator(a).name and b >= 0:
-                out[a] = values[b]
-        return out
-    width = {0: 7, 1: 4, 2: 1, 3: 1}
-    for j in range(m_to.njnt):
-        name = m_to.joint(j).name
-        i = mujoco.mj_name2id(m_from, mujoco.mjtObj.mjOBJ_JOINT, name) if name else -1
-        if i >= 0:
-            n = width[int(m_to.jnt_type[j])]
-            out[m_to.jnt_qposadr[j] : m_to.jnt_qposadr[j] + n] = values[
-                m_from.jnt_qposadr[i] : m_from.jnt_qposadr[i] + n
-            ]
-    return out
-
-
-def mesh_radius(m: mujoco.MjModel, geom: int, joint: int) -> float:
-    """Largest distance of a mesh geom's vertices from its body's hinge axis: the wheel's radius."""
-    mesh = int(m.geom_dataid[geom])
-    verts = m.mesh_vert[m.mesh_vertadr[mesh] : m.mesh_vertadr[mesh] + m.mesh_vertnum[mesh]]
-    R = np.empty(9)
-    mujoco.mju_quat2Mat(R, m.geom_quat[geom])
-    p = matmul(verts, R.reshape(3, 3).T) + m.geom_pos[geom] - m.jnt_pos[joint]
-    a = m.jnt_axis[joint] / norm(m.jnt_axis[joint])
-    return float(np.sqrt(np.max(np.sum(p * p, axis=1) - matmul(p, a[:, None])[:, 0] ** 2)))
-
-
 def sphere_tyres(spec: mujoco.MjSpec, m: mujoco.MjModel, wheels, radius: float, priority: int) -> None:
     """On each wheel (joint, collision geoms): a sphere tyre of ``radius`` about the hinge's anchor,
     with the friction and contact bits of the wheel's own collision geom, which stops colliding."""
@@ -219,15 +177,3 @@ def servo_band(m: mujoco.MjModel, a: int) -> float:
     limits (:func:`unclamp`): the force limit (the actuator's and its joint's over the gear) / kv."""
     gear = abs(float(m.actuator_gear[a, 0]))
     return torque_limit(m, a, gear, False, kept=True) / gear / float(m.actuator_gainprm[a, 0])
-
-
-def mesh_shape(m: mujoco.MjModel, g: int) -> dict:
-    """A mesh geom's vertices (V, 3) float32 and triangles (F, 3) int32, in the geom's frame."""
-    mesh = int(m.geom_dataid[g])
-    v0, nv = int(m.mesh_vertadr[mesh]), int(m.mesh_vertnum[mesh])
-    f0, nf = int(m.mesh_faceadr[mesh]), int(m.mesh_facenum[mesh])
-    return {
-        "mesh": m.mesh(mesh).name or f"mesh{mesh}",
-        "vertices": m.mesh_vert[v0 : v0 + nv].astype(np.float32),
-        "faces": m.mesh_face[f0 : f0 + nf].astype(np.int32),
-    }

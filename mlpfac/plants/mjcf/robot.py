@@ -1,11 +1,13 @@
 """A differential-drive robot as its MJCF model describes it: which actuators drive which wheels,
 where the pose is measured, the wheel radius and track, the drive's limits and the rest pose.
 
-:func:`read_robot` reads (and checks) all of it once from a :class:`MujocoConfig` (the parts it leaves
-unset found first by :mod:`mlpfac.plants.mjcf.detect`), making what the
-model does not say itself (a pose frame on a body, sphere tyres on mesh wheels, locked arms, a
-timestep) as :class:`mujoco.MjSpec` edits (:mod:`mlpfac.plants.mjcf.edits`); the stepping plant
-(:class:`mlpfac.plants.mujoco.MujocoPlant`) drives the robot it describes. Nothing here steps a run.
+:func:`read_robot` reads (and checks) all of it once from a :class:`MujocoConfig`: the model made
+ready step by step (:mod:`mlpfac.plants.mjcf.prepare`: the parts the configuration leaves unset
+found by :mod:`mlpfac.plants.mjcf.detect`, what the model does not say itself chosen by
+:mod:`mlpfac.plants.mjcf.defaults` and made as :class:`mujoco.MjSpec` edits by
+:mod:`mlpfac.plants.mjcf.edits`), then the robot settled on its wheels and measured there. The
+stepping plant (:class:`mlpfac.plants.mujoco.MujocoPlant`) drives the robot it describes. Nothing
+here steps a run.
 """
 
 from __future__ import annotations
@@ -21,18 +23,10 @@ from mlpfac.exceptions import ConfigError
 from mlpfac.model import norm
 from mlpfac.plants.compiled import yaw
 from mlpfac.plants.config import MujocoConfig, check_timestep
-from mlpfac.plants.mjcf import defaults, drive, edits, shapes
+from mlpfac.plants.mjcf import defaults, drive, edits, prepare, shapes
 from mlpfac.plants.mjcf import wheels as wheel_parts
-from mlpfac.plants.mjcf.detect import (
-    WHEEL_SHAPES,
-    collision_geoms,
-    describe,
-    is_motor,
-    names,
-    resolve,
-)
-from mlpfac.plants.mjcf.settle import SETTLE_S, cannot_simulate, settle
-from mlpfac.plants.model_file import fingerprint, is_menagerie, load_spec
+from mlpfac.plants.mjcf.detect import WHEEL_SHAPES, collision_geoms
+from mlpfac.plants.mjcf.settle import cannot_simulate, settle
 
 MAX_SUBSTEPS = 10_000  # physics steps in one control period, at most
 
@@ -132,197 +126,110 @@ def read_robot(config: MujocoConfig, periods: tuple[float, ...] = ()) -> Robot:
 
 
 def _read_robot(config: MujocoConfig, stamp: tuple[int, int], periods: tuple[float, ...] = ()) -> Robot:
-    """The robot of ``config`` (:func:`read_robot`). Its wheel servos are tried, and where they chatter
-    (:func:`mlpfac.plants.mjcf.defaults.chatters`) with ``servo_limit`` unset, their force limits are kept
-    through their control instead (``servo_limit = "control"``, :func:`mlpfac.plants.mjcf.edits.unclamp`):
-    the model compiled again, the robot settled again (the same robot as read with that key set)."""
-    user, probe = config, True
-    spec, path = load_spec(config.model)
-    where = config.model if is_menagerie(config.model) else str(path)
-    m = _compile(spec, where)
-    spec_dt = float(m.opt.timestep)
-    sha256 = fingerprint(m)
-    chosen = defaults.keyframe(config, m)
-    config = defaults.with_chosen(config, chosen)
-    qpos0, ctrl0 = _keyframe(m, config, where)
-    found = resolve(config, m, qpos0)
-    config = found.config
-    drv = drive.resolve_ids(m, config, where)
-    if drv.tendon:
-        acts = drv.acts
+    """The robot of ``config`` (:func:`read_robot`): its model made ready step by step
+    (:mod:`mlpfac.plants.mjcf.prepare`: compiled, its drive found, its other joints locked, its
+    wheels found, its tyres, rotors and motors made, its skids freed, its servos' limits), then the
+    robot settled and measured. Where its wheel servos chatter (:func:`mlpfac.plants.mjcf.defaults.chatters`)
+    with ``servo_limit`` unset, it is read again at a timestep that integrates them, else their
+    force limits are kept through their control (``servo_limit = "control"``)."""
+    r = prepare.compiled(config)
+    prepare.find_drive(r, periods)
+    prepare.lock_others(r)
+    prepare.find_wheels(r)
+    prepare.make_wheels(r)
+    prepare.free_skids(r)
+    prepare.limit_servos(r)
+    robot = _settled(r)
+    if r.config.actuator == "velocity" and config.servo_limit is None and defaults.chatters(robot):
+        robot = _unchattered(r, robot, stamp, periods)
+    return _pi_chosen(robot)
+
+
+def _unchattered(r: prepare.Reading, robot: Robot, stamp: tuple[int, int], periods: tuple[float, ...]) -> Robot:
+    """A robot whose wheel servos chatter: read again at the largest timestep that divides the periods
+    and integrates them (down to 1/16 of the model's, where the configuration sets none), else with
+    their force limits kept through their control (``servo_limit = "control"``), settled again."""
+    dt = robot.dt
+    step = defaults.smaller_timestep(defaults.servo_step(robot), periods or (dt,), r.spec_dt * defaults.SMALLEST_STEP)
+    if step is not None and r.user.timestep is None:  # a timestep that integrates them, read again at it
+        robot = _read_robot(dataclasses.replace(r.user, timestep=step, servo_limit="model"), stamp, periods)
+        return dataclasses.replace(
+            robot,
+            config=dataclasses.replace(robot.config, servo_limit=None),
+            found=(*(k for k in robot.found if k != "servo_limit"), "timestep"),
+            description=f"{robot.description}; timestep {step:g} s (the wheel servos chatter at {dt:g} s)",
+        )
+    edits.unclamp(r.spec, r.m, r.servos)  # kept within their limits by their control: no longer chatter
+    r.compile()
+    r.choose({"servo_limit": "control"})
+    r.suffix = f"; the wheel servos' force limit kept by their control (as MuJoCo clamps it they chatter at {dt:g} s)"
+    return _settled(r)
+
+
+def _settled(r: prepare.Reading) -> Robot:
+    """The robot settled on its wheels from the start pose, measured there (its track, which way each
+    wheel turns, the actuator units per wheel unit) and checked to drive as shipped."""
+    m, config, joints, seconds = r.m, r.config, r.joints, r.seconds
+    site = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, edits.POSE_SITE if r.site is None else m.site(r.site).name)
+    root = int(m.body_rootid[m.site_bodyid[site]])
+    jnt = int(m.body_jntadr[root])
+    if jnt < 0 or int(m.jnt_type[jnt]) != mujoco.mjtJoint.mjJNT_FREE:
+        kind, name = config.frame
+        raise ConfigError(
+            kind, f"the body tree of {kind} {name!r} must hang from a <freejoint/> (a robot free to drive)"
+        )
+    wheel_bodies = tuple(int(m.jnt_bodyid[j]) for j in r.driven)
+    tyres = tuple(g for b in wheel_bodies for g in collision_geoms(m, b) if int(m.geom_type[g]) in WHEEL_SHAPES)
+    dt = float(m.opt.timestep)
+    check_timestep(dt, "timestep", "the model's timestep ")
+    try:
+        d = mujoco.MjData(m)
+        settle(m, d, dt, r.qpos0, r.ctrl0, int(m.jnt_dofadr[jnt]), r.where)
+    except mujoco.FatalError as err:  # an arena too small for the model (<size memory>), say
+        raise cannot_simulate(r.where, err) from None
+    anchors = [d.xanchor[j].copy() for j in r.driven]
+    track, turns = _track(config, anchors)
+    sign = wheel_parts.wheel_signs(config, d, site, joints, anchors[:2])
+    dofs = (int(m.jnt_dofadr[joints[0]]), int(m.jnt_dofadr[joints[1]]))
+    if r.drv.tendon:
+        c, inverse, umax = [1.0, 1.0], *drive.mix(m, d.qpos, r.acts, dofs, sign)
     else:
-        acts = (
-            wheel_parts.actuator_id(m, config, "left_actuator", where),
-            wheel_parts.actuator_id(m, config, "right_actuator", where),
-        )
-        if acts[0] == acts[1]:
-            raise ConfigError(
-                "right_actuator", f"left and right wheels need two actuators, both are {config.left_actuator!r}"
-            )
-    keep = [*acts, *(a for a in drv.seconds if a >= 0)]
-    joints = list(drv.joints) if drv.tendon else [int(m.actuator_trnid[a, 0]) for a in acts]
-    if drv.tendon:
-        joints = wheel_parts.left_first(m, config, joints, qpos0)
-    more = defaults.others(config, m, set(keep)) | defaults.timestep(config, float(m.opt.timestep), periods)
-    config = defaults.with_chosen(config, more)
-    chosen |= more
-    description = describe(m, config, acts, joints)
-    keep_names = [m.actuator(a).name for a in keep]
-    joint_names = [m.joint(j).name for j in joints]
-    locked: list[str] = []
-    if config.other_actuators == "lock":
-        m_full = m
-        locked = edits.lock_other_joints(spec, m, qpos0, tuple(keep))
-        m = _compile(spec, where)
-        qpos0 = edits.by_name(m_full, qpos0, m, "qpos", m.qpos0)
-        ctrl0 = edits.by_name(m_full, ctrl0, m, "ctrl", np.zeros(m.nu))
-        keep = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_ACTUATOR, n) for n in keep_names]
-        joints = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, n) for n in joint_names]
-        acts = (keep[0], keep[1])
-    seconds = [keep[2] if drv.seconds[0] >= 0 else -1]
-    seconds.append(keep[-1] if drv.seconds[1] >= 0 else -1)
-    if config.timestep is not None:
-        spec.option.timestep = float(config.timestep)
-    site = _pose_frame(spec, m, config, where)
-    driven = [*joints, *(int(m.actuator_trnid[a, 0]) for a in seconds if a >= 0)]
-    wheels = [(j, collision_geoms(m, int(m.jnt_bodyid[j]))) for j in driven]
-    for key, (_, geoms) in zip(("left_actuator", "right_actuator"), wheels, strict=False):
-        if not any(int(m.geom_type[g]) in WHEEL_SHAPES for g in geoms):
-            raise ConfigError(
-                key,
-                f"the body moved by {getattr(config, key)!r} has no sphere, cylinder or mesh collision geom (the wheel)",
-            )
-    root0 = int(m.body_rootid[m.jnt_bodyid[joints[0]]])
-    floor = wheel_parts.floor_priority(m, root0)
-    rims = [g for _, geoms in wheels for g in geoms if int(m.geom_type[g]) in WHEEL_SHAPES]
-    more = defaults.tyre(config, m, rims, floor)
-    config, chosen = defaults.with_chosen(config, more), chosen | more
-    drawn = [g for g in range(m.ngeom) if m.body_rootid[m.geom_bodyid[g]] == root0]
-    visual_only = any(m.geom_contype[g] == 0 and m.geom_conaffinity[g] == 0 for g in drawn)
-    if config.tyre == "sphere":
-        radius = config.wheel_radius or max(wheel_parts.radius(m, g, j) for j, geoms in wheels for g in geoms)
-        edits.sphere_tyres(spec, m, wheels, radius, floor + 1)
-    if len(driven) > 2:  # a skid-steer
-        radius = max(wheel_parts.radius(m, g, j) for j, geoms in wheels for g in geoms if g in rims)
-        more = defaults.armature(config, m, [int(m.jnt_dofadr[j]) for j in driven], m.body_subtreemass[root0], radius)
-        config, chosen = defaults.with_chosen(config, more), chosen | more
-    if config.armature is not None:
-        edits.set_armature(spec, driven, config.armature)
-    wheel_speed = wheel_parts.speed_limits(m, acts) if not drv.tendon else [None, None]
-    if config.actuator == "torque":
-        edits.to_torque_motors(spec, m, [a for a in (*acts, *seconds) if a >= 0 and not is_motor(m, a)])
-    edited = config.tyre == "sphere" or config.actuator == "torque" or config.armature is not None
-    if site is None or edited or config.timestep is not None:
-        m = _compile(spec, where)
-    if config.casters != "model":  # floor contacts at rest that are not the wheels and drag: they slide
-        bodies = {int(m.jnt_bodyid[j]) for j in driven}
-        try:
-            skids = defaults.skids(m, qpos0, ctrl0, SETTLE_S, root0, bodies)
-        except mujoco.FatalError as err:  # an arena too small for the model (<size memory>), say
-            raise cannot_simulate(where, err) from None
-        if skids and config.casters is None:
-            config, chosen = (
-                defaults.with_chosen(config, {"casters": "frictionless"}),
-                chosen | {"casters": "frictionless"},
-            )
-        if skids:
-            defaults.frictionless(spec, skids, floor)
-            m = _compile(spec, where)
-    servos = [a for a in (*acts, *seconds) if a >= 0 and config.actuator == "velocity" and not drv.tendon]
-    if config.servo_limit == "control" and servos:
-        edits.unclamp(spec, m, servos)
-        m = _compile(spec, where)
-    site0, suffix = site, ""
-    while True:  # once, or twice: again with servo_limit = "control" where the servos chatter
-        site = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, edits.POSE_SITE if site0 is None else m.site(site0).name)
-        root = int(m.body_rootid[m.site_bodyid[site]])
-        jnt = int(m.body_jntadr[root])
-        if jnt < 0 or int(m.jnt_type[jnt]) != mujoco.mjtJoint.mjJNT_FREE:
-            kind, name = config.frame
-            raise ConfigError(
-                kind, f"the body tree of {kind} {name!r} must hang from a <freejoint/> (a robot free to drive)"
-            )
-        wheel_bodies = tuple(int(m.jnt_bodyid[j]) for j in driven)
-        tyres = tuple(g for b in wheel_bodies for g in collision_geoms(m, b) if int(m.geom_type[g]) in WHEEL_SHAPES)
-        dt = float(m.opt.timestep)
-        check_timestep(dt, "timestep", "the model's timestep ")
-        try:
-            d = mujoco.MjData(m)
-            settle(m, d, dt, qpos0, ctrl0, int(m.jnt_dofadr[jnt]), where)
-        except mujoco.FatalError as err:  # an arena too small for the model (<size memory>), say
-            raise cannot_simulate(where, err) from None
-        anchors = [d.xanchor[j].copy() for j in driven]
-        width = norm(anchors[1] - anchors[0])
-        track, turns = width, ""
-        if len(driven) > 2:  # a skid-steer: the track it turns as (turning_track, else wheel_parts.skid_track)
-            rule, base = wheel_parts.skid_track(anchors)
-            track = rule if config.turning_track is None else float(config.turning_track)
-            turns = f"; turning as a track of {track:.3g} m ({width:.3g} m across, {base:.3g} m front to rear" + (
-                ")" if config.turning_track is None else f"; W + L^2/W would be {rule:.3g} m)"
-            )
-        sign = wheel_parts.wheel_signs(config, d, site, joints, anchors[:2])
-        dofs = (int(m.jnt_dofadr[joints[0]]), int(m.jnt_dofadr[joints[1]]))
-        if drv.tendon:
-            c, inverse, umax = [1.0, 1.0], *drive.mix(m, d.qpos, acts, dofs, sign)
-        else:
-            c = [s * g for s, g in zip(sign, m.actuator_gear[list(acts), 0], strict=True)]
-            inverse, umax = None, None
-        c2 = [
-            0.0 if a < 0 else float(s * m.actuator_gear[a, 0] * wheel_parts.same_way(m, d, a, j))
-            for a, s, j in zip(seconds, sign, joints, strict=True)
-        ]
-        limit = [w / abs(ci) for w, ci in zip(wheel_speed, c, strict=True) if w is not None]
-        robot = Robot(
-            where=where,
-            config=config,
-            found=(*found.keys, *chosen),
-            description=description + turns + defaults.said(chosen, config) + suffix,
-            sha256=sha256,
-            spec=spec,
-            model=m,
-            dt=dt,
-            acts=(acts[0], acts[1]),
-            site=site,
-            root=root,
-            qroot=int(m.jnt_qposadr[jnt]),
-            droot=int(m.jnt_dofadr[jnt]),
-            dofs=dofs,
-            wheel_bodies=wheel_bodies,
-            tyres=tyres,
-            qpos_rest=d.qpos.copy(),
-            ctrl_rest=d.ctrl.copy(),
-            site_rest=(d.site_xpos[site].copy(), yaw(d.site_xmat[site])),
-            real_radius=max(wheel_parts.radius(m, g, int(m.body_jntadr[m.geom_bodyid[g]])) for g in tyres),
-            real_track=track,
-            sign=sign,
-            act_per_wheel=(float(c[0]), float(c[1])),
-            geometry=shapes.static_geometry(m, d, site, root, visual_only),
-            max_wheel_speed=min(limit) if limit else None,
-            locked=tuple(locked),
-            seconds=(seconds[0], seconds[1]),
-            second_per_wheel=(c2[0], c2[1]),
-            mix=inverse,
-            umax=umax,
-        )
-        defaults.check_drive(m, d, robot, config, where)
-        chatter = probe and config.actuator == "velocity" and user.servo_limit is None and defaults.chatters(robot)
-        if not chatter:
-            return _pi_chosen(robot)
-        floor = spec_dt * defaults.SMALLEST_STEP
-        step = defaults.smaller_timestep(defaults.servo_step(robot), periods or (dt,), floor)
-        if step is not None and user.timestep is None:  # a timestep that integrates them, read again at it
-            robot = _read_robot(dataclasses.replace(user, timestep=step, servo_limit="model"), stamp, periods)
-            return dataclasses.replace(
-                robot,
-                config=dataclasses.replace(robot.config, servo_limit=None),
-                found=(*(k for k in robot.found if k != "servo_limit"), "timestep"),
-                description=f"{robot.description}; timestep {step:g} s (the wheel servos chatter at {dt:g} s)",
-            )
-        edits.unclamp(spec, m, servos)  # kept within their limits by their control: no longer chatter
-        m = _compile(spec, where)
-        config, chosen, probe = defaults.with_chosen(config, {"servo_limit": "control"}), chosen, False
-        chosen |= {"servo_limit": "control"}
-        suffix = f"; the wheel servos' force limit kept by their control (as MuJoCo clamps it they chatter at {dt:g} s)"
+        c = [s * g for s, g in zip(sign, m.actuator_gear[list(r.acts), 0], strict=True)]
+        inverse, umax = None, None
+    c2 = [
+        0.0 if a < 0 else float(s * m.actuator_gear[a, 0] * wheel_parts.same_way(m, d, a, j))
+        for a, s, j in zip(seconds, sign, joints, strict=True)
+    ]
+    limit = [w / abs(ci) for w, ci in zip(r.wheel_speed, c, strict=True) if w is not None]
+    robot = Robot(
+        where=r.where, config=config, found=(*r.found, *r.chosen),
+        description=r.description + turns + defaults.said(r.chosen, config) + r.suffix,
+        sha256=r.sha256, spec=r.spec, model=m, dt=dt, acts=(r.acts[0], r.acts[1]), site=site, root=root,
+        qroot=int(m.jnt_qposadr[jnt]), droot=int(m.jnt_dofadr[jnt]), dofs=dofs, wheel_bodies=wheel_bodies,
+        tyres=tyres, qpos_rest=d.qpos.copy(), ctrl_rest=d.ctrl.copy(),
+        site_rest=(d.site_xpos[site].copy(), yaw(d.site_xmat[site])),
+        real_radius=max(wheel_parts.radius(m, g, int(m.body_jntadr[m.geom_bodyid[g]])) for g in tyres),
+        real_track=track, sign=sign, act_per_wheel=(float(c[0]), float(c[1])),
+        geometry=shapes.static_geometry(m, d, site, root, r.visual_only),
+        max_wheel_speed=min(limit) if limit else None, locked=tuple(r.locked), seconds=(seconds[0], seconds[1]),
+        second_per_wheel=(c2[0], c2[1]), mix=inverse, umax=umax,
+    )  # fmt: skip
+    defaults.check_drive(m, d, robot, config, r.where)
+    return robot
+
+
+def _track(config: MujocoConfig, anchors: list[np.ndarray]) -> tuple[float, str]:
+    """The track the robot turns as, from its wheels' anchors at rest, and what to say of it: the
+    wheels' distance, or a skid-steer's (``turning_track``, else :func:`mlpfac.plants.mjcf.wheels.skid_track`)."""
+    width = norm(anchors[1] - anchors[0])
+    if len(anchors) <= 2:
+        return width, ""
+    rule, base = wheel_parts.skid_track(anchors)
+    track = rule if config.turning_track is None else float(config.turning_track)
+    turns = f"; turning as a track of {track:.3g} m ({width:.3g} m across, {base:.3g} m front to rear" + (
+        ")" if config.turning_track is None else f"; W + L^2/W would be {rule:.3g} m)"
+    )
+    return track, turns
 
 
 def _pi_chosen(robot: Robot) -> Robot:
@@ -337,47 +244,3 @@ def _pi_chosen(robot: Robot) -> Robot:
     said = defaults.said(chosen, config)
     text = robot.description + (said if "; chosen:" not in robot.description else said.replace("; chosen:", ","))
     return dataclasses.replace(robot, config=config, found=(*robot.found, *chosen), description=text)
-
-
-def _compile(spec: mujoco.MjSpec, where: str) -> mujoco.MjModel:
-    try:
-        return spec.compile()
-    except ValueError as err:
-        raise ConfigError(where, f"MuJoCo cannot load the model: {' '.join(str(err).split())}") from None
-
-
-def _keyframe(m: mujoco.MjModel, config: MujocoConfig, where: str) -> tuple[np.ndarray, np.ndarray]:
-    """The start pose and controls: the named keyframe's, or the model's default pose and zero."""
-    if config.keyframe is None:
-        return m.qpos0.copy(), np.zeros(m.nu)
-    k = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_KEY, config.keyframe)
-    if k < 0:
-        raise ConfigError(
-            "keyframe",
-            f"no keyframe named {config.keyframe!r} in {where} ({names(m, mujoco.mjtObj.mjOBJ_KEY, m.nkey)})",
-        )
-    return m.key_qpos[k].copy(), m.key_ctrl[k].copy()
-
-
-def _pose_frame(spec: mujoco.MjSpec, m: mujoco.MjModel, config: MujocoConfig, where: str) -> int | None:
-    """The pose frame's site id, or None when a site is added for it (a body, or an offset)."""
-    kind, name = config.frame
-    offset = np.asarray(config.offset, dtype=float)
-    if kind == "body":
-        b = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, name)
-        if b <= 0:
-            raise ConfigError(
-                "body", f"no body named {name!r} in {where} ({names(m, mujoco.mjtObj.mjOBJ_BODY, m.nbody)})"
-            )
-        edits.add_pose_site(spec, b, offset, np.array([1.0, 0.0, 0.0, 0.0]))
-        return None
-    site = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, name)
-    if site < 0:
-        raise ConfigError(
-            "site",
-            f"no site named {name!r} in {where} ({names(m, mujoco.mjtObj.mjOBJ_SITE, m.nsite)}); a body's frame can be named instead (body = ...)",
-        )
-    if not np.any(offset):
-        return site
-    edits.add_pose_site(spec, *edits.offset_from_site(m, site, offset))
-    return None

@@ -47,6 +47,18 @@ def static_geometry(m: mujoco.MjModel, d: mujoco.MjData, site: int, root: int, v
             "rgba": [round(float(x), 6) for x in rgba],
         }
         if kind == "mesh":
-            shape |= edits.mesh_shape(m, g)
+            shape |= mesh_shape(m, g)
         shapes.append(shape)
     return shapes
+
+
+def mesh_shape(m: mujoco.MjModel, g: int) -> dict:
+    """A mesh geom's vertices (V, 3) float32 and triangles (F, 3) int32, in the geom's frame."""
+    mesh = int(m.geom_dataid[g])
+    v0, nv = int(m.mesh_vertadr[mesh]), int(m.mesh_vertnum[mesh])
+    f0, nf = int(m.mesh_faceadr[mesh]), int(m.mesh_facenum[mesh])
+    return {
+        "mesh": m.mesh(mesh).name or f"mesh{mesh}",
+        "vertices": m.mesh_vert[v0 : v0 + nv].astype(np.float32),
+        "faces": m.mesh_face[f0 : f0 + nf].astype(np.int32),
+    }

@@ -9,7 +9,7 @@ import mujoco
 import numpy as np
 
 from mlpfac.exceptions import ConfigError
-from mlpfac.model import dot, norm
+from mlpfac.model import dot, matmul, norm
 from mlpfac.plants.config import MujocoConfig
 from mlpfac.plants.mjcf import drive, edits
 from mlpfac.plants.mjcf.detect import ROUND, base_frame, is_motor, is_velocity_servo, names
@@ -17,7 +17,18 @@ from mlpfac.plants.mjcf.detect import ROUND, base_frame, is_motor, is_velocity_s
 
 def radius(m: mujoco.MjModel, g: int, joint: int) -> float:
     """A wheel geom's radius: a sphere's or cylinder's size, a mesh's reach from the hinge axis."""
-    return float(m.geom_size[g, 0]) if int(m.geom_type[g]) in ROUND else edits.mesh_radius(m, g, joint)
+    return float(m.geom_size[g, 0]) if int(m.geom_type[g]) in ROUND else mesh_radius(m, g, joint)
+
+
+def mesh_radius(m: mujoco.MjModel, geom: int, joint: int) -> float:
+    """Largest distance of a mesh geom's vertices from its body's hinge axis: the wheel's radius."""
+    mesh = int(m.geom_dataid[geom])
+    verts = m.mesh_vert[m.mesh_vertadr[mesh] : m.mesh_vertadr[mesh] + m.mesh_vertnum[mesh]]
+    R = np.empty(9)
+    mujoco.mju_quat2Mat(R, m.geom_quat[geom])
+    p = matmul(verts, R.reshape(3, 3).T) + m.geom_pos[geom] - m.jnt_pos[joint]
+    a = m.jnt_axis[joint] / norm(m.jnt_axis[joint])
+    return float(np.sqrt(np.max(np.sum(p * p, axis=1) - matmul(p, a[:, None])[:, 0] ** 2)))
 
 
 def skid_track(anchors: list[np.ndarray]) -> tuple[float, float]:
