@@ -6,9 +6,9 @@ with its rates (dv_r/dt, domega_r/dt), within the limits of the robot that drive
    quarter of either leg): a right angle's smallest radius of curvature is then ``radius``, a gentler
    corner's larger and a sharper one's smaller (the timing slows for it). Between corners the path is
    exactly straight (omega_r = 0).
-2. **The curve.** One cubic B-spline (:class:`scipy.interpolate.BSpline`) whose control points lie
-   on the legs (at d and 2 d on either side of each corner) and at the corners: a span whose four
-   control points lie on one leg is that leg, and the curve's second derivative is continuous, so
+2. **The curve.** One quintic B-spline (:class:`scipy.interpolate.BSpline`) whose control points lie
+   on the legs (at d and 2 d on either side of each corner) and at the corners: a span whose
+   control points all lie on one leg is that leg, and the curve's derivatives up to the third are continuous, so
    its curvature, and omega_r, are continuous (each corner's curvature rises from zero to 1 / radius
    and back). A closed route is a periodic B-spline, started in the middle of its first corner.
 3. **Arc length.** s(u) by 5-point Gauss-Legendre quadrature on a grid of the spline's parameter
@@ -108,7 +108,7 @@ class Geometry:
 
         c, t, self.u0, self.u1 = control_polygon(points, closed, radius)
         self.closed = closed
-        self.C = BSpline(t, c, K, extrapolate=False)
+        self.C = BSpline.construct_fast(t, c, K, extrapolate=False)  # the knots are ours: no checks (np.unique sorts)
         self.dC = [self.C.derivative(n) for n in (1, 2, 3)]
         self._arc_grid()
         self.v, self.a, self.t = profile(self.s, self.kappa, self.dkappa, limits, closed)
