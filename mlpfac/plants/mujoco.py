@@ -47,6 +47,8 @@ from mlpfac.plants.mjcf.settle import turning
 from mlpfac.plants.mujoco_events import MujocoEvents
 from mlpfac.plants.mujoco_report import MujocoReport
 from mlpfac.plants.mujoco_torque import TorqueDrive
+from mlpfac.plants.odometry import N_SENSE_TELE, SENSE_TELEMETRY
+from mlpfac.plants.sensors import Sensing, add_gyro
 
 NOISE_CHUNK = 1024  # pose-noise draws made at once: the same stream as one draw of 3 per step
 
@@ -149,6 +151,16 @@ class MujocoPlant(MujocoEvents, TorqueDrive, MujocoReport):
         self.fl[K.F_WMAX] = math.inf if self.max_wheel_speed is None else self.max_wheel_speed
         if self._noise is not None:
             self.fl[K.F_STD : K.F_STD + 3] = self._noise
+        self._sensing = None  # the pose source (mlpfac.plants.sensors): None for the truth
+        if config.pose_source != "truth":
+            if config.gyro:  # MuJoCo's gyro on the pose frame, in the scene the plant compiles
+                self._spec_nominal = spec = r.spec.copy()
+                add_gyro(spec, r.model, r.site)
+                self._spec, self.model = spec.copy(), spec.compile()
+                self.data = mujoco.MjData(self.model)
+            self._sensing = Sensing(config, self.model, r.dofs, r.sign, self.ik_radius, self.ik_track,
+                                    min((self.T, *periods)))  # fmt: skip
+        self._sense = np.zeros(0)
 
     def _umax(self) -> None:
         """The drive's limits of the current model into fl: the tendon drive's inverse and its motors'
@@ -214,9 +226,14 @@ class MujocoPlant(MujocoEvents, TorqueDrive, MujocoReport):
         self._history = DelayLine(np.zeros(3))  # one row, which the first measurement replaces
         self._views()
         K.read_pose(self._site_xpos, self._site_xmat, self.st)
-        K.measure(self.ints, self.fl, self.st, self.draws(1)[0], self._history.hist, self._history.fill)
+        draw = self.draws(1)[0] if self._sensing is None else np.zeros(3)  # the robot knows where it starts
+        K.measure(self.ints, self.fl, self.st, draw, self._history.hist, self._history.fill)
         if self.ints[K.I_TAU]:
             self._motion_rng = rng.spawn(1)[0]  # its own stream: the pose noise's is the same with or without it
+        if self._sensing is not None:  # spawned after the motion's: a truth run's streams are as they were
+            self._sense = self._sensing.start(rng, d.qpos, d.sensordata, self.true_pose())
+            self._pack()
+        if self.ints[K.I_TAU]:
             self._motion = DelayLine(np.zeros(4))
             v = np.zeros(6)
             mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_SITE, self._site, v, 0)
@@ -228,15 +245,19 @@ class MujocoPlant(MujocoEvents, TorqueDrive, MujocoReport):
         """What the compiled step reads and writes: the current model and data (their addresses and
         views into them, made again when an event replaces them), the robot's arrays, the delay line."""
         self._site_xpos, self._site_xmat = self.data.site_xpos[self._site], self.data.site_xmat[self._site]
-        self.tele = np.zeros(K.N_TELE)
+        self.tele = np.zeros(K.N_TELE + (N_SENSE_TELE if self._sensing is not None else 0))
         self._tele = {key: self.tele[2 * i : 2 * i + 2] for i, key in enumerate(K.TELEMETRY)}
+        if self._sensing is not None:  # the pose source's telemetry (mlpfac.plants.odometry)
+            lo = K.N_TELE
+            for key, w in SENSE_TELEMETRY:
+                self._tele[key], lo = self.tele[lo : lo + w], lo + w
         self._pack()
 
     def _pack(self) -> None:
         m, d = self.model, self.data
         self._args = K.Robot(m._address, d._address, d.ctrl, d.qvel, d.qpos, d.qfrc_actuator, self._site_xpos,
                              self._site_xmat, d.xmat[self._root], self.ints, self.fl, self.st, self._history.hist,
-                             self._history.fill, np.empty(6))  # fmt: skip
+                             self._history.fill, np.empty(6), self._sense, d.sensordata)  # fmt: skip
 
     def kernel_args(self) -> K.Robot:
         """The robot as :func:`mlpfac.plants.compiled.plant_step` takes it (valid until the next event),
@@ -260,7 +281,10 @@ class MujocoPlant(MujocoEvents, TorqueDrive, MujocoReport):
         return self.sim_time
 
     def draws(self, n: int) -> np.ndarray:
-        """The next n pose-noise draws (n, 3) of the plant's stream (zeros without noise)."""
+        """The next n pose-noise draws (n, 3) of the plant's stream (zeros without noise); with a pose
+        source other than the truth, its sensors' draws (n, 4) (:meth:`mlpfac.plants.sensors.Sensing.draws`)."""
+        if self._sensing is not None:
+            return self._sensing.draws(n)
         if self._noise is None:
             return np.zeros((n, 3))
         out = np.empty((n, 3))
@@ -305,7 +329,10 @@ class MujocoPlant(MujocoEvents, TorqueDrive, MujocoReport):
         K.plant_step(float(u[0]), float(u[1]), self.draws(1)[0], self.tele, self._args)
         if self._motion is not None:
             t = self.tele
-            self._measure_motion(t[2], t[3], t[6], t[7])
+            if self._sensing is not None:  # from the encoders and the gyro
+                self._measure_motion(*self._tele["sensed"])
+            else:
+                self._measure_motion(t[2], t[3], t[6], t[7])
 
     def telemetry(self) -> dict[str, np.ndarray | float]:
         """``u_meas`` (2,) (v, omega) from the measured wheel speeds through the nominal FK;
