@@ -165,7 +165,7 @@ class Stream:
 SLIP = 0.01  # std of each wheel's increment (and the gyro's), as a share of itself: slip, a radius off
 Q_POSE = 1e-6  # m^2/s: a random walk of x and y beyond the wheels' (a skid, a sideways slide)
 Q_HEADING = 1e-6  # rad^2/s: of theta
-Q_SCALE = 1e-2  # 1/s: of each wheel's scale factor ("fused": a radius that changes, a load)
+Q_SCALE = 3e-4  # 1/s: of each wheel's scale factor ("fused": a radius that changes, a load)
 P0_POSE, P0_SCALE = 1e-8, 1e-2  # the start: known to 0.1 mm, 0.1 mrad; the wheels' scale to 10 %
 GYRO_SENSOR = "mlpfac_gyro"
 
