@@ -54,7 +54,9 @@ def check_sensing(config) -> None:
         raise ConfigError("pose_source", f"choose {' or '.join(map(repr, SOURCES))}, got {src!r}")
     cpr = config.encoder_cpr
     if cpr is not None and (isinstance(cpr, bool) or not isinstance(cpr, int) or not 1 <= cpr <= CPR_MAX):
-        raise ConfigError("encoder_cpr", f"expected a whole number of counts a revolution in 1 .. {CPR_MAX}, got {cpr!r}")
+        raise ConfigError(
+            "encoder_cpr", f"expected a whole number of counts a revolution in 1 .. {CPR_MAX}, got {cpr!r}"
+        )
     if not isinstance(config.gyro, bool):
         raise ConfigError("gyro", f"expected true or false, got {config.gyro!r}")
     for key in ("gyro_noise", "gyro_bias"):
@@ -69,7 +71,9 @@ def check_sensing(config) -> None:
     if config.fix_rate_hz is not None and not config.fix_rate_hz > 0:
         raise ConfigError("fix_rate_hz", f"must be positive (fixes a second), got {config.fix_rate_hz!r}")
     if config.fix_latency_s is not None and config.fix_latency_s < 0:
-        raise ConfigError("fix_latency_s", f"must be >= 0 s (a fix arrives after it is taken), got {config.fix_latency_s!r}")
+        raise ConfigError(
+            "fix_latency_s", f"must be >= 0 s (a fix arrives after it is taken), got {config.fix_latency_s!r}"
+        )
     for key, unit in (("fix_noise_m", "m"), ("fix_noise_rad", "rad")):
         x = getattr(config, key)
         if x is not None and not 0 <= x <= FIX_NOISE_MAX:
