@@ -24,7 +24,7 @@ class KinematicConfig:
         1e-6  # covariance of eps_k: scalar (R I_3), diagonal or 3x3
     )
     pose_source: str = "truth"  # the model (7) has no wheels and no gyro: only "truth"
-    gyro: bool = False
+    gyro: bool = False  # refused: the model (7) has no body to carry a gyro
 
     def __post_init__(self) -> None:
         covariance(self.noise_cov, 3, "noise_cov")
