@@ -37,8 +37,14 @@ SOURCES = {
     "odometry": {"pose_source": "odometry", "encoder_cpr": 4096},
     "odometry+gyro": {"pose_source": "odometry", "encoder_cpr": 4096, "gyro": True, "gyro_noise": 0.01},
     "fused": {"pose_source": "fused", "encoder_cpr": 4096, "fix_rate_hz": 10.0, "fix_latency_s": 0.1},
-    "fused+gyro": {"pose_source": "fused", "encoder_cpr": 4096, "gyro": True, "gyro_noise": 0.01,
-                   "fix_rate_hz": 10.0, "fix_latency_s": 0.1},  # fmt: skip
+    "fused+gyro": {
+        "pose_source": "fused",
+        "encoder_cpr": 4096,
+        "gyro": True,
+        "gyro_noise": 0.01,
+        "fix_rate_hz": 10.0,
+        "fix_latency_s": 0.1,
+    },  # fmt: skip
 }
 
 
