@@ -47,8 +47,7 @@ from mlpfac.plants.mjcf.settle import turning
 from mlpfac.plants.mujoco_events import MujocoEvents
 from mlpfac.plants.mujoco_report import MujocoReport
 from mlpfac.plants.mujoco_torque import TorqueDrive
-from mlpfac.plants.odometry import N_SENSE_TELE, SENSE_TELEMETRY
-from mlpfac.plants.sensors import Sensing, add_gyro
+from mlpfac.plants.sensors import SensingPlant
 
 NOISE_CHUNK = 1024  # pose-noise draws made at once: the same stream as one draw of 3 per step
 
@@ -66,7 +65,7 @@ class _Kept:
         getattr(plant, self.array)[self.index] = value
 
 
-class MujocoPlant(MujocoEvents, TorqueDrive, MujocoReport):
+class MujocoPlant(MujocoEvents, TorqueDrive, MujocoReport, SensingPlant):
     """The MuJoCo robot behind the :class:`~mlpfac.plants.base.Plant` interface.
 
     ``model`` and ``data`` are the current :class:`mujoco.MjModel` / :class:`mujoco.MjData` (an
@@ -151,16 +150,7 @@ class MujocoPlant(MujocoEvents, TorqueDrive, MujocoReport):
         self.fl[K.F_WMAX] = math.inf if self.max_wheel_speed is None else self.max_wheel_speed
         if self._noise is not None:
             self.fl[K.F_STD : K.F_STD + 3] = self._noise
-        self._sensing = None  # the pose source (mlpfac.plants.sensors): None for the truth
-        if config.pose_source != "truth":
-            if config.gyro:  # MuJoCo's gyro on the pose frame, in the scene the plant compiles
-                self._spec_nominal = spec = r.spec.copy()
-                add_gyro(spec, r.model, r.site)
-                self._spec, self.model = spec.copy(), spec.compile()
-                self.data = mujoco.MjData(self.model)
-            self._sensing = Sensing(config, self.model, r.dofs, r.sign, self.ik_radius, self.ik_track,
-                                    min((self.T, *periods)))  # fmt: skip
-        self._sense = np.zeros(0)
+        self._build_sensing(config, r, (self.T, *periods))  # the pose source (mlpfac.plants.sensors)
 
     def _umax(self) -> None:
         """The drive's limits of the current model into fl: the tendon drive's inverse and its motors'
@@ -245,12 +235,9 @@ class MujocoPlant(MujocoEvents, TorqueDrive, MujocoReport):
         """What the compiled step reads and writes: the current model and data (their addresses and
         views into them, made again when an event replaces them), the robot's arrays, the delay line."""
         self._site_xpos, self._site_xmat = self.data.site_xpos[self._site], self.data.site_xmat[self._site]
-        self.tele = np.zeros(K.N_TELE + (N_SENSE_TELE if self._sensing is not None else 0))
+        self.tele = np.zeros(K.N_TELE + self._sensing_width())
         self._tele = {key: self.tele[2 * i : 2 * i + 2] for i, key in enumerate(K.TELEMETRY)}
-        if self._sensing is not None:  # the pose source's telemetry (mlpfac.plants.odometry)
-            lo = K.N_TELE
-            for key, w in SENSE_TELEMETRY:
-                self._tele[key], lo = self.tele[lo : lo + w], lo + w
+        self._tele |= self._sensing_telemetry(self.tele, K.N_TELE)
         self._pack()
 
     def _pack(self) -> None:

@@ -239,3 +239,38 @@ class Sensing:
     def draws(self, n: int) -> np.ndarray:
         """(n, 4) standard normals of the next n steps: the gyro's noise, a fix's noise (x, y, theta)."""
         return np.concatenate([self.gyro.take(n), self.fix.take(n)], axis=1)
+
+
+class SensingPlant:
+    """The pose source of the MuJoCo plant (its attributes are :class:`~mlpfac.plants.mujoco.MujocoPlant`'s):
+    ``_sensing`` (None for the truth) and the estimator's array ``_sense`` (empty for the truth:
+    the compiled step's branch)."""
+
+    def _build_sensing(self, config, r, periods: tuple[float, ...]) -> None:
+        """The estimator of ``config``'s source for the robot ``r`` just read; with a gyro, the
+        plant's scene compiled again with MuJoCo's gyro on its pose frame."""
+        import mujoco
+
+        self._sensing, self._sense = None, np.zeros(0)
+        if config.pose_source == "truth":
+            return
+        if config.gyro:
+            self._spec_nominal = spec = r.spec.copy()
+            add_gyro(spec, r.model, r.site)
+            self._spec, self.model = spec.copy(), spec.compile()
+            self.data = mujoco.MjData(self.model)
+        self._sensing = Sensing(config, self.model, r.dofs, r.sign, self.ik_radius, self.ik_track, min(periods))
+
+    def _sensing_width(self) -> int:
+        from mlpfac.plants.odometry import N_SENSE_TELE
+
+        return 0 if self._sensing is None else N_SENSE_TELE
+
+    def _sensing_telemetry(self, tele: np.ndarray, lo: int) -> dict[str, np.ndarray]:
+        """The estimator's telemetry keys, views of ``tele`` from ``lo`` (:data:`mlpfac.plants.odometry.SENSE_TELEMETRY`)."""
+        from mlpfac.plants.odometry import SENSE_TELEMETRY
+
+        out = {}
+        for key, w in SENSE_TELEMETRY if self._sensing is not None else ():
+            out[key], lo = tele[lo : lo + w], lo + w
+        return out
