@@ -229,7 +229,8 @@ def write_paired(out: Path, rows: list[dict], meta: dict) -> list[Path]:
     write_atomic(paths[0], buf.getvalue())
     write_atomic(paths[1], markdown(rows, PAIRED_COLUMNS) + note)
     write_atomic(paths[2], json.dumps({"meta": meta, "rows": rows}, indent=2) + "\n")
-    write_atomic(paths[3], summary(rows) + SUMMARY_NOTE)
+    estimated = any(r.get("est_rms_m_median") is not None for r in rows)
+    write_atomic(paths[3], summary(rows) + SUMMARY_NOTE + (ESTIMATE_NOTE if estimated else ""))
     return paths
 
 
@@ -237,4 +238,8 @@ SUMMARY_NOTE = (
     "\nMedian position RMS [mm] over the seeds, after the event (over the whole run after the warm-up "
     "where there is none), over the runs that finished; (k x): the median over seeds of the ratio to "
     "the oracle on the same seed; t/l/d: tracking / lost / diverged, where not every run tracked.\n"
+)
+ESTIMATE_NOTE = (
+    "[belief off X]: where the pose was estimated ([plant] pose_source), the median over the seeds of the "
+    "estimate's error RMS [mm] (belief against truth) in the same phase; every other figure is the truth's.\n"
 )
