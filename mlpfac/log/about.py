@@ -53,7 +53,7 @@ def about_text(record: RunRecord, description: str = "", ended: bool = False) ->
     else:
         lines.append("**no event**: the robot as the controller believes it")
     if record.pose_source != "truth":
-        fixes = ", the fixes white as they arrive" if record.pose_source == "fused" else ""
+        fixes = ", the fixes lime as they arrive" if record.pose_source == "fused" else ""
         lines += ["", f"**pose from {record.pose_source}**: the controller is given the robot's own estimate; the "
                   f"true path blue, the believed path teal{fixes}; the figures are the truth's"]  # fmt: skip
     if ended:

@@ -13,8 +13,9 @@ from mlpfac.log.scene import PATH_STRIDE, POSE_STRIDE, driven_path, strided
 from mlpfac.log.series import time_index
 from mlpfac.loop.record import RunRecord
 
-BELIEF_COLOR = (60, 220, 200)  # the believed path: teal beside the true path's blue
-FIX_COLOR = (250, 250, 250)  # the fixes: white dots
+BELIEF_COLOR = (60, 220, 200)  # the believed path: teal, narrower than the true path's blue under it
+FIX_TRAIL = 50  # the fixes shown at once: the newest, labelled, and those before it (5 s at 10 Hz)
+FIX_COLOR = (140, 210, 30)  # the fixes: lime dots (the top view is light, the floor dark)
 
 
 def estimated(record: RunRecord) -> bool:
@@ -25,17 +26,19 @@ def send_belief_static(rec: rr.RecordingStream, record: RunRecord) -> None:
     """The styles of the believed path, the believed pose and the fixes."""
     if not estimated(record):
         return
-    rec.log("world/belief", rr.LineStrips3D.from_fields(colors=[BELIEF_COLOR], radii=[0.008]), static=True)
-    rec.log("top/plane/belief", rr.LineStrips2D.from_fields(colors=[BELIEF_COLOR], radii=[0.01]), static=True)
+    rec.log("world/belief", rr.LineStrips3D.from_fields(colors=[BELIEF_COLOR], radii=[0.004]), static=True)
+    rec.log("top/plane/belief", rr.LineStrips2D.from_fields(colors=[BELIEF_COLOR], radii=[0.005]), static=True)
     rec.log("top/plane/belief_now", rr.Arrows2D.from_fields(colors=[BELIEF_COLOR], radii=[0.03]), static=True)
     if "fix" in record.plant and record.pose_source == "fused":
         rec.log("world/fixes", rr.Points3D.from_fields(colors=[FIX_COLOR], radii=[0.015]), static=True)
-        rec.log("top/plane/fixes", rr.Points2D.from_fields(colors=[FIX_COLOR], radii=[0.02]), static=True)
+        rec.log("top/plane/fixes", rr.Points2D.from_fields(colors=[FIX_COLOR], radii=[0.015]), static=True)
+        rec.log("top/plane/fix_now", rr.Points2D.from_fields(colors=[FIX_COLOR], radii=[0.03]), static=True)
 
 
 def send_belief(rec: rr.RecordingStream, record: RunRecord, a: int, b: int, last: bool = False) -> None:
     """Steps a .. b - 1: the believed path and pose (at the strides of the true ones; ``last``: step
-    b - 1 too), and every fix that arrived, at the step it arrived (its label: when it was taken)."""
+    b - 1 too), and at each step a fix arrived, the fix (``top/plane/fix_now``, its label: when it
+    was taken) and the trail of the FIX_TRAIL fixes up to it (``world/fixes``, ``top/plane/fixes``)."""
     if not estimated(record) or b <= a:
         return
     meas = record.pose_meas
@@ -66,12 +69,13 @@ def send_belief(rec: rr.RecordingStream, record: RunRecord, a: int, b: int, last
     arrived = a + np.flatnonzero(np.all(np.isfinite(fix[a:b]), axis=1))
     if not len(arrived):
         return
-    f = fix[arrived]
-    labels = [f"fix taken at {t:.2f} s" for t in f[:, 3]]
+    before = np.flatnonzero(np.all(np.isfinite(fix[:b]), axis=1))  # every fix so far, for the trail
+    trails = [before[max(0, j - FIX_TRAIL + 1) : j + 1] for j in np.searchsorted(before, arrived)]
+    f, lengths = np.concatenate([fix[t] for t in trails]), [len(t) for t in trails]
     idx = time_index(record, arrived)
-    rec.send_columns(
-        "world/fixes",
-        indexes=idx,
-        columns=rr.Points3D.columns(positions=np.c_[f[:, :2], np.full(len(f), 0.01)], labels=labels),
-    )
-    rec.send_columns("top/plane/fixes", indexes=idx, columns=rr.Points2D.columns(positions=f[:, :2], labels=labels))
+    trail = rr.Points3D.columns(positions=np.c_[f[:, :2], np.full(len(f), 0.01)]).partition(lengths)
+    rec.send_columns("world/fixes", indexes=idx, columns=trail)
+    rec.send_columns("top/plane/fixes", indexes=idx, columns=rr.Points2D.columns(positions=f[:, :2]).partition(lengths))
+    now = fix[arrived]
+    labels = [f"fix taken at {t:.2f} s" for t in now[:, 3]]
+    rec.send_columns("top/plane/fix_now", indexes=idx, columns=rr.Points2D.columns(positions=now[:, :2], labels=labels))
