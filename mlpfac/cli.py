@@ -397,12 +397,28 @@ def _outcome(m: dict) -> str:
     return f", {m['outcome']} ({which} phase's position RMS {side} {m['lost_threshold_m']:.3g} m)"
 
 
+def _belief(m: dict) -> list[str]:
+    """A run whose pose was estimated: what the truth shows (a belief that tracked while the truth was
+    lost, said first), then the estimate's error beside the truth's figures."""
+    est = m.get("estimate")
+    if not est:
+        return []
+    said = [est["said"]] if est.get("said") else []
+    return said + [
+        f"pose from {est['pose_source']}: the estimate's error (belief against truth) RMS "
+        f"{_fmt(est['rms_position_error_m'], 1e3, ' mm')}, max {_fmt(est['max_position_error_m'], 1e3, ' mm')}, "
+        f"heading RMS {_fmt(est['rms_heading_error_rad'], 1e3, ' mrad')}; the figures below are the truth's"
+    ]
+
+
 def _print_summary(m: dict, out: Path) -> None:
     print(
         f"{m['scenario']} / {m['controller']} / seed {m['seed']}: {m['status']}"
         + (f" ({m['reason']})" if m["reason"] else "")
         + (_outcome(m) if m["status"] == "ok" else "")
     )
+    for line in _belief(m):
+        print(f"  {line}")
     for ev in m["events"]:
         print(f"  event at {ev['time']:g} s: {ev['text']}")
     print(

@@ -56,6 +56,7 @@ MODULES = {  # the modules whose kernels each extension holds
         "mlpfac.control.adaptive.delay_bank",
         "mlpfac.plants.events",
         "mlpfac.plants.ik",
+        "mlpfac.plants.odometry",
     ),
     "mujoco": ("mlpfac.plants.compiled", "mlpfac.loop.compiled"),
 }

@@ -66,7 +66,8 @@ ROOT = HERE.parent
 
 # (scenario, controllers, duration, --vary): short runs that reach every controller (None: every
 # shipped one, on FALLBACK those the kinematic model cannot run), our robot, the
-# cart, torque motors, an event (moved early by a --vary point), a drawn plant and paths
+# cart, torque motors, an event (moved early by a --vary point), a drawn plant, paths, and a pose
+# from odometry and from odometry fused with delayed fixes
 RUNS = [
     ("paper", None, 3.0, ["events.0.time=2.5"]),
     ("eight-payload", ("corradini", "kanayama", "adaptive", "adaptive-ukf", "oracle"), 1.0, ["events.0.time=0.6"]),
@@ -77,6 +78,8 @@ RUNS = [
     ("route", ("kanayama", "adaptive"), 1.0, ["reference.points.1.0=5.5"]),  # a path, a waypoint moved
     ("lane-change", ("corradini",), 1.0, []),  # a path from a CSV file
     ("route@diffdrive-torque", ("fierro-lewis",), 0.6, []),  # a path's own rates, to a torque-level law
+    ("eight-wheel-radius-odometry", ("kanayama", "adaptive"), 1.0, ["events.0.time=0.5"]),
+    ("eight-wheel-radius-fused", ("kanayama", "adaptive"), 1.0, ["events.0.time=0.5", "plant.fix_latency_s=0.05"]),
 ]
 FALLBACK = "eight-torque"  # where a shipped controller runs that the kinematic model cannot (torque level)
 MENAGERIE = [("tiago-friction", ("corradini", "adaptive"), 1.0, ["events.0.time=0.5"])]

@@ -455,6 +455,9 @@ def test_the_outputs_page_names_every_field_the_code_writes():
 
     rows = mlpfac.sweep(["paper"], ["corradini", "oracle"], seeds="0-1", duration=13.0, workers=1)
     m = mlpfac.metrics(mlpfac.run("paper", controller="corradini", duration=13.0))
-    assert _fields("outputs.md", "metrics") == set(m)
-    assert _fields("outputs.md", "sweep") == set(rows[0])
-    assert _fields("outputs.md", "paired") == set(rows.paired[0])
+    # and the fields of a pose that was estimated (pose_source), only there
+    est = mlpfac.metrics(mlpfac.run("eight-wheel-radius-fused", controller="kanayama", duration=3.0))
+    est_rows = mlpfac.sweep(["eight-wheel-radius-fused"], ["kanayama"], seeds="0", duration=3.0, workers=1)
+    assert _fields("outputs.md", "metrics") == set(m) | set(est) and "estimate" in est
+    assert _fields("outputs.md", "sweep") == set(rows[0]) | set(est_rows[0]) and "est_rms_m_median" in est_rows[0]
+    assert _fields("outputs.md", "paired") == set(rows.paired[0]) | set(est_rows.paired[0])

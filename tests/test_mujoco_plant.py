@@ -681,6 +681,8 @@ def test_the_eight_scenarios_are_shipped():
         "eight-control-period",
         "eight-sensor-delay",
         "eight-torque",
+        "eight-wheel-radius-odometry",  # its pose from the encoders (mlpfac.plants.sensors)
+        "eight-wheel-radius-fused",  # ... and a localizer's fixes
     }
 
 

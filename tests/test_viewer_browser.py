@@ -319,3 +319,30 @@ def test_web_viewer_renders_each_robot(tmp_path: Path, robot: str) -> None:
     )
     assert len(small.getvalue()) < PICTURE_BYTES
     _keep(small.getvalue(), f"robot-{robot}.png")
+
+
+@pytest.mark.skipif(CHROMIUM is None, reason="no chromium binary (Debian: apt-get install chromium)")
+def test_web_viewer_shows_what_the_robot_believed(tmp_path: Path) -> None:
+    """A pose fused from odometry and fixes: the believed path and the fixes beside the true path on
+    the left, the estimate's error plotted on the right."""
+    from mlpfac.cli import main
+    from mlpfac.log.belief import BELIEF_COLOR, FIX_COLOR
+    from mlpfac.log.schema import ESTIMATE_COLORS
+    from mlpfac.scenario.parse import load, to_toml
+
+    table = copy.deepcopy(load("eight-wheel-radius-fused").table)
+    table["duration"], table["events"][0]["time"] = 8.0, 4.0
+    table.pop("provenance", None)
+    (tmp_path / "fused.toml").write_text(to_toml(table))
+    out = tmp_path / "fused"
+    assert main(["run", str(tmp_path / "fused.toml"), "--controller", "kanayama", "--no-plot", "--out", str(out)]) == 0
+    png = render(
+        out / "run.rrd",
+        tmp_path,
+        lambda img: _shows(
+            img,
+            {"believed path": BELIEF_COLOR, "fixes": FIX_COLOR},  # on the true path (blue, wider: tested above)
+            {"estimate's error": ESTIMATE_COLORS[0]},
+        ),
+    )
+    _keep(png, "viewer-belief.png")

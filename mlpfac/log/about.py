@@ -52,6 +52,10 @@ def about_text(record: RunRecord, description: str = "", ended: bool = False) ->
         lines.append(f"**event at {record.split_s:g} s**; the controller is not told")
     else:
         lines.append("**no event**: the robot as the controller believes it")
+    if record.pose_source != "truth":
+        fixes = ", the fixes lime as they arrive" if record.pose_source == "fused" else ""
+        lines += ["", f"**pose from {record.pose_source}**: the controller is given the robot's own estimate; the "
+                  f"true path blue, the believed path teal{fixes}; the figures are the truth's"]  # fmt: skip
     if ended:
         lines += ["", *_where_to_look(record)]
     lines += ["", COLOURS + (LEARNING_COLOURS if "z" in record.ctrl else "") + "; events: dark-red diamonds"]
@@ -65,6 +69,14 @@ def _where_to_look(record: RunRecord) -> list[str]:
     e = e[np.all(np.isfinite(e), axis=1)]
     out = [f"**{record.status}**" + (f" ({record.reason})" if record.reason else "")]
     run = RunMetrics.from_json(metrics(record))  # the figures of metrics.json, computed once
+    est = run.estimate
+    if est:  # what the robot believed: a belief that tracked while the truth was lost, said first
+        out += ["", f"**{est['said']}**"] if est.get("said") else []
+        out += [""]
+        out.append(
+            f"the estimate's error (believed - true): position RMS {1e3 * (est['rms_position_error_m'] or 0):.1f} mm, "
+            f"max {1e3 * (est['max_position_error_m'] or 0):.1f} mm"
+        )
     whole = run.figures("whole")
     if not len(e) or whole is None:
         return out

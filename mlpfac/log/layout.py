@@ -31,6 +31,7 @@ VIEWS = (
     ("errors", "e2 sideways [m]", "/errors/e2", True),
     ("errors", "e3 heading [rad]", "/errors/e3", True),
     ("errors", "|(e1, e2)| [m]", "/errors/position", True),
+    ("errors", "estimate's error: position [m], heading [rad]", "/errors/estimate", True),
     ("speeds", "v [m/s]", "/controls/v", True),
     ("speeds", "omega [rad/s]", "/controls/omega", True),
     ("speeds", "wheel speeds [rad/s]", "/wheels", True),
@@ -42,6 +43,7 @@ VIEWS = (
     ("ekf", "trace(P)", "/ekf/trace_P", False),
     ("ekf", "mean diag(P)", "/ekf/mean_diag_P", False),
     ("ekf", "innovation [m, m, rad]", "/ekf/innovation", False),
+    ("ekf", "pose sensors: twist, wheel speeds, the estimate's std, wheel scales", "/sensors", False),
     ("ekf", "other plant telemetry", "/plant", False),
     ("ekf", "other ctrl telemetry", "/ctrl", False),
 )

@@ -18,6 +18,7 @@ import rerun as rr
 
 from mlpfac.interrupts import Terminated
 from mlpfac.log.about import about_text
+from mlpfac.log.belief import send_belief, send_belief_static
 from mlpfac.log.layout import ABOUT, blueprint, marked_origins
 from mlpfac.log.scene import PATH_STRIDE, POSE_STRIDE, send_poses, send_static_scene, strided
 from mlpfac.log.schema import EVENT_COLOR
@@ -106,6 +107,7 @@ class RerunSink:
         ref = record.ref if ref_path is None else np.asarray(ref_path, dtype=float)
         self.ref_path = ref[np.all(np.isfinite(ref[:, :2]), axis=1), :2]
         send_static_scene(self.rec, self.ref_path, geometry)
+        send_belief_static(self.rec, record)  # a pose that was estimated (mlpfac.log.belief)
         self._send_about(record, ended=False)
 
     def flush(self, record: RunRecord, upto: int | None = None, force: bool = False) -> None:
@@ -122,6 +124,7 @@ class RerunSink:
             self._update_series(record)
             send_series(self.rec, self.series, record, a, b)
             send_poses(self.rec, record, strided(a, b, POSE_STRIDE), strided(a, b, PATH_STRIDE))
+            send_belief(self.rec, record, a, b)
             self.sent = b
             self._mark_events(record)
             self.last_send = time.monotonic()
@@ -149,6 +152,7 @@ class RerunSink:
                     last if (n - 1) % POSE_STRIDE else last[:0],
                     last if (n - 1) % PATH_STRIDE else last[:0],
                 )
+                send_belief(self.rec, record, n - 1, n, last=True)
             if not self.blueprint_sent:
                 self._send_blueprint(record)
             self._send_status(record)

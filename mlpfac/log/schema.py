@@ -46,6 +46,7 @@ REFSPEED_COLOR: RGB = (150, 150, 150)
 TRUE_COLOR: RGB = (150, 150, 150)
 P_COLOR: RGB = (240, 200, 80)
 OTHER_COLOR: RGB = (200, 200, 200)
+ESTIMATE_COLORS: tuple[RGB, ...] = ((60, 220, 200), (40, 150, 140))  # the estimate's error: teal, as its path
 WEIGHT_COLORS: dict[str, RGB] = {  # one hue per network and layer
     "NN_f/output": (90, 160, 255),
     "NN_f/hidden": (120, 220, 160),
@@ -124,6 +125,16 @@ SCHEMA: tuple[Row, ...] = (
     # (v, omega) of the axle midpoint and the (left, right) wheel torques: named by index, as always.
     Row("u_true", "plant", LINES, "plant/u_true/{name}", "m/s, rad/s", ("0", "1"), labels="u_true"),
     Row("torque", "plant", LINES, "plant/torque/{name}", "N m", ("0", "1"), labels="torque"),
+    # A pose that was estimated ([plant] pose_source; mlpfac.log.belief draws the believed path and the fixes).
+    Row("estimate_error", "record", LINES, "errors/estimate/{name}", "m, rad", ("position", "heading"),
+        "{name}: believed - true", ESTIMATE_COLORS),
+    Row("fix", "plant", SCENE, "world/fixes top/plane/fixes", "m, m, rad, s"),
+    Row("sensed", "plant", LINES, "sensors/{name}", "m/s, rad/s, rad/s, rad/s", ("v", "omega", "left", "right"),
+        "{name} sensed", (MEAS_COLOR, MEAS_COLOR, *WHEEL_MEAS_COLORS)),
+    Row("estimate_std", "plant", LINES, "sensors/estimate_std/{name}", "m, m, rad", ("x", "y", "theta"),
+        "{name} std", ERROR_COLORS[:3]),
+    Row("odometry_scale", "plant", LINES, "sensors/wheel_scale/{name}", "", _LR, "{name} wheel's scale",
+        WHEEL_MEAS_COLORS),
     # Controller telemetry.
     Row("z", "ctrl", LAYERS, "weights/{layer}", colors=WEIGHT_COLORS, width=1.0, labels="z", prefix="w"),
     Row("z", "ctrl", CHANGE, "weight_change/{layer}", colors=WEIGHT_COLORS, width=2.0, labels="z", prefix="w"),

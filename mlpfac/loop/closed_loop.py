@@ -155,6 +155,7 @@ class ClosedLoop:
                         self.u[b])  # fmt: skip
         rec.warmup_s, rec.split_s = scn.warmup, scn.events[0].time if scn.events else None
         rec.labels = dict(self.ctrl.labels)
+        rec.pose_source = getattr(scn.plant_config, "pose_source", "truth")  # what pose_meas is
         return rec
 
     def geometry(self) -> list[dict]:

@@ -99,6 +99,10 @@ def _metrics(rec: RunRecord) -> dict:
     out["sim_time_s"] = rec.sim_time_s
     out["wall_time_s"] = rec.wall_time_s
     out |= outcome(rec, phases)
+    if rec.pose_source != "truth":  # what the robot believed, beside the truth (mlpfac.loop.belief)
+        from mlpfac.loop.belief import believed
+
+        out["estimate"] = believed(rec, phase_bounds(rec), out["lost_threshold_m"], out["outcome"])
     w = max(1, int(round(BIN_S / rec.T)))
     pos2 = np.sum(rec.e_true[:n, :2] ** 2, axis=1)
     out["position_ms_bins"] = {
@@ -172,6 +176,7 @@ class RunMetrics:
     excluded_s: tuple[float, float] = (0.0, 0.0)  # the warm-up left out of the phases
     events: tuple[dict, ...] = ()
     bins: tuple[int, tuple[float | None, ...]] | None = None  # position_ms_bins: (steps a bin, mean squares)
+    estimate: dict | None = None  # what the robot believed (mlpfac.loop.belief); None: its pose was the truth
     data: dict = field(default_factory=dict, repr=False, compare=False)
 
     @classmethod
@@ -197,6 +202,7 @@ class RunMetrics:
             excluded_s=tuple(m.get("excluded_s") or (0.0, 0.0)),
             events=tuple(m.get("events") or ()),
             bins=(int(bins["bin_steps"]), tuple(bins["m2"])) if isinstance(bins, dict) else None,
+            estimate=m.get("estimate") if isinstance(m.get("estimate"), dict) else None,
             data=m,
         )
 

@@ -38,6 +38,18 @@ class RunRecord:
     labels: dict[str, list[str]] = field(default_factory=dict)  # per-component names of telemetry
     sim_time_s: float = 0.0  # physical time simulated by the plant
     wall_time_s: float = 0.0
+    pose_source: str = "truth"  # where pose_meas came from ([plant] pose_source): "truth", "odometry", "fused"
+
+    @property
+    def estimate_error(self) -> np.ndarray | None:
+        """(N, 2) the estimate's error a step, believed - true: |(x, y)| (m) and the heading (rad,
+        wrapped); None when the pose was the truth (``pose_source``)."""
+        if self.pose_source == "truth":
+            return None
+        from mlpfac.model import wrap
+
+        d = self.pose_meas - self.pose
+        return np.c_[np.sqrt(d[:, 0] ** 2 + d[:, 1] ** 2), wrap(d[:, 2])]
 
     @classmethod
     def allocate(cls, scenario: str, controller: str, seed: int, T: float, N: int) -> RunRecord:

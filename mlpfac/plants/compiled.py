@@ -35,6 +35,7 @@ from mlpfac.exceptions import ConfigError
 from mlpfac.jit import SALT, WHY, built, kernel
 from mlpfac.plants.events import delay_push
 from mlpfac.plants.ik import body_velocity_vw, wheel_speeds_lr
+from mlpfac.plants.odometry import O_GADR, O_GYRO, O_QL, O_QR, O_X, sense_step
 
 # ints: I_AL2, I_AR2 a second wheel's actuator on each side (skid-steer; -1: none), I_MIX 1 for two
 # motors on tendons over both wheels (a (v, omega) drive; I_AL, I_AR are those motors), I_CLAMP 1 for
@@ -88,6 +89,8 @@ class Robot(NamedTuple):
     hist: np.ndarray
     fill: np.ndarray
     vel: np.ndarray  # (6,) mj_objectVelocity's output
+    sense: np.ndarray  # the pose source's estimator (mlpfac.plants.odometry's layout); empty: the truth
+    sensordata: np.ndarray  # MjData.sensordata (the gyro's reading)
 
 
 def _library() -> str:
@@ -133,7 +136,7 @@ def with_robot(signature: str, *more):
 
     args, ret = normalize_signature(signature)
     f1, i1 = types.float64[::1], types.int64[::1]
-    fields = (types.int64, types.int64, *[f1] * 7, i1, f1, f1, types.float64[:, ::1], i1, f1)
+    fields = (types.int64, types.int64, *[f1] * 7, i1, f1, f1, types.float64[:, ::1], i1, f1, f1, f1)
     assert len(fields) == len(Robot._fields), "with_robot names a type for each field of Robot, in order"
     return ret(*args, *more, types.NamedTuple(fields, Robot))
 
@@ -294,6 +297,21 @@ def measure(ints, fl, st, draw, hist, fill):
     delay_push(hist, fill, m)
 
 
+@kernel()
+def sense(draw, tele, robot):
+    """The pose the robot estimates (:func:`mlpfac.plants.odometry.sense_step`: its encoders, the
+    driven wheels' hinge angles forward; its gyro; the fixes of its true pose) into the delay line,
+    its telemetry after the plant's (``tele[N_TELE:]``)."""
+    s, fl, st = robot.sense, robot.fl, robot.st
+    phl, phr = fl[F_SL] * robot.qpos[int(s[O_QL])], fl[F_SR] * robot.qpos[int(s[O_QR])]
+    rate = robot.sensordata[int(s[O_GADR])] if s[O_GYRO] else 0.0
+    sense_step(s, phl, phr, rate, st[S_TIME], st[S_POSE], st[S_POSE + 1], st[S_POSE + 2], draw, tele, N_TELE)
+    m = np.empty(3)
+    for j in range(3):
+        m[j] = s[O_X + j]
+    delay_push(robot.hist, robot.fill, m)
+
+
 @kernel(lambda: with_robot("i8()"), ext="mujoco")
 def diverged(robot):
     """WARNED when MuJoCo warned during a step of this robot, RESET when MuJoCo reset the data on a bad state (its time no longer ours), NOT_FINITE, LIFTED
@@ -334,7 +352,10 @@ def plant_step(u0, u1, draw, tele, robot):
         wl, wr = wheel_speeds_lr(u0, u1, fl[F_IK_R], fl[F_IK_TRACK], fl[F_WMAX])
     _physics(robot.mp, robot.dp, robot.ctrl, qvel, ints, fl, st, wl, wr)
     read_pose(robot.site_xpos, robot.site_xmat, st)
-    measure(ints, fl, st, draw, robot.hist, robot.fill)
+    if robot.sense.shape[0]:  # a pose source other than the truth (mlpfac.plants.sensors)
+        sense(draw, tele, robot)
+    else:
+        measure(ints, fl, st, draw, robot.hist, robot.fill)
     dl, dr, sl, sr = ints[I_DL], ints[I_DR], fl[F_SL], fl[F_SR]
     ml, mr = sl * qvel[dl], sr * qvel[dr]
     mj_objectVelocity(robot.mp, robot.dp, OBJ_SITE, ints[I_SITE], vel.ctypes.data, 0)  # (angular, linear), world

@@ -14,6 +14,7 @@ import numpy as np
 
 from mlpfac.exceptions import ConfigError
 from mlpfac.plants.model_file import is_menagerie, menagerie_name, model_path, shipped_model
+from mlpfac.plants.sensors import check_sensing
 
 LIMITS = ("wheel_radius", "track", "turning_track", "max_wheel_speed", "timestep")
 ARMATURE_MAX = 1e3  # kg m^2 on a wheel's hinge, at most
@@ -80,6 +81,16 @@ class MujocoConfig:
     wheel_speed_noise_std: float = 0.0  # std of noise on the wheel speeds a torque-level controller measures (rad/s)
     pi_kp: float | None = None  # torque drive: PI proportional gain, N m per rad/s; None: scaled to the robot's inertia
     pi_ki: float | None = None  # torque drive: PI integral gain, N m per rad; None: scaled to the robot's inertia
+    # --- what the robot senses of its pose (mlpfac.plants.sensors) ---
+    pose_source: str = "truth"  # "truth" (the pose, + pose_noise_std), "odometry" (wheels, gyro), "fused" (+ fixes)
+    encoder_cpr: int | None = None  # the wheel encoders' counts a revolution; None: exact angles
+    gyro: bool = False  # the heading rate from a gyro on the pose frame (MuJoCo's gyro sensor), not the wheels
+    gyro_noise: float = 0.0  # std of white noise on each gyro reading (rad/s)
+    gyro_bias: float = 0.0  # constant bias of the gyro (rad/s); a distribution draws it per seed
+    fix_rate_hz: float | None = None  # "fused": absolute fixes of the pose a second (None: 10)
+    fix_latency_s: float | None = None  # "fused": a fix arrives this long after it was taken (None: 0)
+    fix_noise_m: float | None = None  # "fused": std of a fix's position noise (m; None: 0.02)
+    fix_noise_rad: float | None = None  # "fused": std of a fix's heading noise (rad; None: 0.02)
 
     def __post_init__(self) -> None:
         choices = {
@@ -127,6 +138,7 @@ class MujocoConfig:
             raise ConfigError("pi_ki", f"must be a number >= 0, got {ki!r}")
         self.noise_std()
         self.motion_noise_std()
+        check_sensing(self)
         if is_menagerie(self.model):  # resolved (perhaps downloaded) when the robot is read, not here
             menagerie_name(self.model)
         else:

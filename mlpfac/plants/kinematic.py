@@ -24,9 +24,19 @@ class KinematicConfig:
     noise_cov: float | tuple[float, ...] | tuple[tuple[float, ...], ...] = (
         1e-6  # covariance of eps_k: scalar (R I_3), diagonal or 3x3
     )
+    pose_source: str = "truth"  # the model (7) has no wheels and no gyro: only "truth"
+    gyro: bool = False  # refused: the model (7) has no body to carry a gyro
 
     def __post_init__(self) -> None:
         covariance(self.noise_cov, 3, "noise_cov")
+        if self.gyro is not False:
+            raise ConfigError("gyro", "the kinematic plant (7) has no body to carry a gyro: use a MuJoCo robot")
+        if self.pose_source != "truth":
+            raise ConfigError(
+                "pose_source",
+                f"{self.pose_source!r}: the kinematic plant (7) has no wheels to count or gyro to read, its pose is "
+                'the truth (with noise_cov): use a MuJoCo robot for "odometry" or "fused"',
+            )
 
 
 class KinematicPlant:

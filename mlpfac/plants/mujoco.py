@@ -49,6 +49,7 @@ from mlpfac.plants.mjcf.settle import turning
 from mlpfac.plants.mujoco_events import MujocoEvents
 from mlpfac.plants.mujoco_report import MujocoReport
 from mlpfac.plants.mujoco_torque import TorqueDrive
+from mlpfac.plants.sensors import SensingPlant
 
 NOISE_CHUNK = 1024  # pose-noise draws (3 deviates each) made at once: the values of one long draw
 
@@ -66,7 +67,7 @@ class _Kept:
         getattr(plant, self.array)[self.index] = value
 
 
-class MujocoPlant(MujocoEvents, TorqueDrive, MujocoReport):
+class MujocoPlant(MujocoEvents, TorqueDrive, MujocoReport, SensingPlant):
     """The MuJoCo robot behind the :class:`~mlpfac.plants.base.Plant` interface.
 
     ``model`` and ``data`` are the current :class:`mujoco.MjModel` / :class:`mujoco.MjData` (an
@@ -151,6 +152,7 @@ class MujocoPlant(MujocoEvents, TorqueDrive, MujocoReport):
         self.fl[K.F_WMAX] = math.inf if self.max_wheel_speed is None else self.max_wheel_speed
         if self._noise is not None:
             self.fl[K.F_STD : K.F_STD + 3] = self._noise
+        self._build_sensing(config, r, (self.T, *periods))  # the pose source (mlpfac.plants.sensors)
 
     def _umax(self) -> None:
         """The drive's limits of the current model into fl: the tendon drive's inverse and its motors'
@@ -216,9 +218,14 @@ class MujocoPlant(MujocoEvents, TorqueDrive, MujocoReport):
         self._history = DelayLine(np.zeros(3))  # one row, which the first measurement replaces
         self._views()
         K.read_pose(self._site_xpos, self._site_xmat, self.st)
-        K.measure(self.ints, self.fl, self.st, self.draws(1)[0], self._history.hist, self._history.fill)
+        draw = self.draws(1)[0] if self._sensing is None else np.zeros(3)  # the robot knows where it starts
+        K.measure(self.ints, self.fl, self.st, draw, self._history.hist, self._history.fill)
         if self.ints[K.I_TAU]:
             self._motion_rng = rng.spawn(1)[0]  # its own stream: the pose noise's is the same with or without it
+        if self._sensing is not None:  # spawned after the motion's: a truth run's streams are as they were
+            self._sense = self._sensing.start(rng, d.qpos, d.sensordata, self.true_pose())
+            self._pack()
+        if self.ints[K.I_TAU]:
             self._motion = DelayLine(np.zeros(4))
             v = np.zeros(6)
             mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_SITE, self._site, v, 0)
@@ -230,15 +237,16 @@ class MujocoPlant(MujocoEvents, TorqueDrive, MujocoReport):
         """What the compiled step reads and writes: the current model and data (their addresses and
         views into them, made again when an event replaces them), the robot's arrays, the delay line."""
         self._site_xpos, self._site_xmat = self.data.site_xpos[self._site], self.data.site_xmat[self._site]
-        self.tele = np.zeros(K.N_TELE)
+        self.tele = np.zeros(K.N_TELE + self._sensing_width())
         self._tele = {key: self.tele[2 * i : 2 * i + 2] for i, key in enumerate(K.TELEMETRY)}
+        self._tele |= self._sensing_telemetry(self.tele, K.N_TELE)
         self._pack()
 
     def _pack(self) -> None:
         m, d = self.model, self.data
         self._args = K.Robot(m._address, d._address, d.ctrl, d.qvel, d.qpos, d.qfrc_actuator, self._site_xpos,
                              self._site_xmat, d.xmat[self._root], self.ints, self.fl, self.st, self._history.hist,
-                             self._history.fill, np.empty(6))  # fmt: skip
+                             self._history.fill, np.empty(6), self._sense, d.sensordata)  # fmt: skip
 
     def kernel_args(self) -> K.Robot:
         """The robot as :func:`mlpfac.plants.compiled.plant_step` takes it (valid until the next event),
@@ -262,7 +270,10 @@ class MujocoPlant(MujocoEvents, TorqueDrive, MujocoReport):
         return self.sim_time
 
     def draws(self, n: int) -> np.ndarray:
-        """The next n pose-noise draws (n, 3) of the plant's stream (zeros without noise)."""
+        """The next n pose-noise draws (n, 3) of the plant's stream (zeros without noise); with a pose
+        source other than the truth, its sensors' draws (n, 4) (:meth:`mlpfac.plants.sensors.Sensing.draws`)."""
+        if self._sensing is not None:
+            return self._sensing.draws(n)
         if self._noise is None:
             return np.zeros((n, 3))
         out = np.empty((n, 3))
@@ -307,7 +318,10 @@ class MujocoPlant(MujocoEvents, TorqueDrive, MujocoReport):
         K.plant_step(float(u[0]), float(u[1]), self.draws(1)[0], self.tele, self._args)
         if self._motion is not None:
             t = self.tele
-            self._measure_motion(t[2], t[3], t[6], t[7])
+            if self._sensing is not None:  # from the encoders and the gyro
+                self._measure_motion(*self._tele["sensed"])
+            else:
+                self._measure_motion(t[2], t[3], t[6], t[7])
 
     def telemetry(self) -> dict[str, np.ndarray | float]:
         """``u_meas`` (2,) (v, omega) from the measured wheel speeds through the nominal FK;

@@ -3,7 +3,8 @@ controller put on another robot, by one rule (docs/robots.md):
 
 - the robot is its model alone (``[plant] kind = "mujoco"``, ``model``), or a robot file's
   ``[plant]`` table: every other part is found or chosen in the model
-  (:mod:`mlpfac.plants.mjcf.defaults`); the scenario's pose noise is kept;
+  (:mod:`mlpfac.plants.mjcf.defaults`); the scenario's pose noise and pose source (its encoders,
+  gyro and fixes: :mod:`mlpfac.plants.sensors`) are kept;
 - the reference is slowed in time (the same path, v and omega x k, k <= 1) until its peak wheel
   speed (|v| + |omega| b / 2) / r at ``[reference] speed = 1`` is at most ``SHARE`` of the robot's
   wheel-speed limit (a ``speed`` the file or ``--vary`` sets then runs that path as many times as fast): the
@@ -203,8 +204,11 @@ def on_robot(table: dict, robot: str) -> dict:
     out.pop("provenance", None)  # what another robot's run simulated
     old = out.get("plant") if isinstance(out.get("plant"), dict) else {}
     plant = robot_table(robot)
-    if "pose_noise_std" in old and "pose_noise_std" not in plant:
-        plant["pose_noise_std"] = old["pose_noise_std"]
+    from mlpfac.plants.sensors import SENSOR_KEYS
+
+    for key in ("pose_noise_std", *SENSOR_KEYS):  # what the robot senses of its pose goes with the scenario
+        if key in old and key not in plant:
+            plant[key] = old[key]
     T = float(out.get("T", 0.01))
     duration = float(out.get("duration", 25.0))
     raw = out.get("events", []) if isinstance(out.get("events"), list) else []

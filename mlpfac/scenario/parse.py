@@ -322,6 +322,9 @@ def parse(table: dict, source: str = "<scenario>", check_model: bool = True, pla
         from mlpfac.plants.config import MujocoConfig
 
         plant_config = build(MujocoConfig, plant_table, where)
+        from mlpfac.plants.sensors import check_run
+
+        check_run(plant_config, duration, T, where)  # the fixes against the run's length and period
     else:
         raise ConfigError(f"{where} kind", f"unknown plant {plant_kind!r}; choose kinematic or mujoco")
     if "provenance" in table and check_model:

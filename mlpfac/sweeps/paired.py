@@ -113,6 +113,11 @@ def paired_rows(jobs: list[Job], metrics: dict[tuple, RunMetrics]) -> list[dict]
             row[how] = sum(m is not None and m.outcome == how for m in ms)
         done = [m for m in ms if m is not None]
         row["phase"] = done[0].last_phase if done else None
+        if any(m.estimate for m in done):  # a pose that was estimated: the belief's error, in the same phase
+            est = [(m.estimate["phases"].get(row["phase"]) or {}).get("rms_position_error_m") for m in done]
+            row["est_rms_m_median"] = median(
+                [v for m, v in zip(done, est, strict=True) if m.finished and v is not None]
+            )
         row["pos_rms_m_median"] = median([v for v in x if v is not None and math.isfinite(v)])
         refs = {r: [compared_rms(metrics.get((scn, r, s))) for s in ss] for r in REFERENCES}
         row["x_oracle_median"] = median(_ratios(x, refs["oracle"]))
@@ -193,6 +198,8 @@ def summary(rows: list[dict]) -> str:
             text += f" {r['tracking']}/{r['lost']}/{r['diverged']}"
         if (r.get("x_untold_median") or 0.0) > TOLD_AT_MOST:  # worse than itself told nothing (or lost where it ran)
             text += f" {UNTOLD_MARK}"
+        if r.get("est_rms_m_median") is not None:
+            text += f" [belief off {_mm(r['est_rms_m_median'])}]"
         return text
 
     lines = ["| controller | " + " | ".join(scns) + " |", "|---|" + "---:|" * len(scns)]

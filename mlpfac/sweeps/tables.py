@@ -68,6 +68,8 @@ def aggregate(jobs: list[Job], metrics: dict[tuple, RunMetrics]) -> list[dict]:
             row["max_err_m_max"] = max(mx) if mx else None
             weights = [m.max_abs_weight for m in ms if m.max_abs_weight is not None]
             row["max_abs_weight"] = max(weights) if weights else None  # over every run, diverged ones too
+            if any(m.estimate for m in ms):  # a pose that was estimated: its error beside the truth's
+                row |= _estimate(ok, phase)
             row["worst_seed"] = worst.seed if worst else None
             row["worst_status"] = worst.status if worst else None
             if js[0].point:  # a grid point of --vary: its values by key
@@ -76,6 +78,33 @@ def aggregate(jobs: list[Job], metrics: dict[tuple, RunMetrics]) -> list[dict]:
                 row["draws"] = [_drawn(j, metrics.get(j.key), phase) for j in js]
             rows.append(row)
     return rows
+
+
+def _estimate(ok: list[RunMetrics], phase: str) -> dict:
+    """The estimate's error (belief against truth) in ``phase`` over the runs that finished: the median
+    of its position RMS, its largest position error, and how many runs believed they tracked while the
+    truth was lost."""
+    phases = [m.estimate["phases"].get(phase) or {} for m in ok if m.estimate]
+    rms = [p["rms_position_error_m"] for p in phases if p.get("rms_position_error_m") is not None]
+    mx = [p["max_position_error_m"] for p in phases if p.get("max_position_error_m") is not None]
+    fooled = sum(m.outcome == "lost" and m.estimate.get("believed_outcome") == "tracking" for m in ok if m.estimate)
+    return {"est_rms_m_median": median(rms), "est_max_m_max": max(mx) if mx else None, "believed_tracking_lost": fooled}
+
+
+ESTIMATE_FIELDS = ["est_rms_m_median", "est_max_m_max", "believed_tracking_lost"]
+ESTIMATE_COLUMNS: list[tuple[str, Callable[[dict], str]]] = [
+    ("estimate's error RMS median [mm]", lambda r: _f(r.get("est_rms_m_median"), 1e3)),
+    ("estimate's error max [mm]", lambda r: _f(r.get("est_max_m_max"), 1e3)),
+    ("lost, believed tracking", lambda r: str(r.get("believed_tracking_lost", "-"))),
+]
+
+
+def with_estimate(rows: list[dict], columns: list, fields: list) -> tuple[list, list]:
+    """The columns and CSV fields, with the estimate's where a row has a pose that was estimated (a
+    sweep of the truth alone keeps its tables as they were)."""
+    if not any("est_rms_m_median" in r for r in rows):
+        return columns, fields
+    return columns + ESTIMATE_COLUMNS, fields + ESTIMATE_FIELDS
 
 
 def _drawn(job: Job, m: RunMetrics | None, phase: str) -> dict:
@@ -155,10 +184,11 @@ def write_tables(out: Path, stem: str, rows: list[dict], columns, meta: dict) ->
 
     buf = io.StringIO()
     axes = list(dict.fromkeys(k for r in rows for k in r.get("vary", {})))  # a column per --vary axis
-    w = csv.DictWriter(buf, fieldnames=CSV_FIELDS[:1] + axes + CSV_FIELDS[1:], lineterminator="\n")
+    columns, fields = with_estimate(rows, columns, CSV_FIELDS)
+    w = csv.DictWriter(buf, fieldnames=fields[:1] + axes + fields[1:], lineterminator="\n")
     w.writeheader()
     for r in rows:
-        w.writerow({k: ("" if r[k] is None else r[k]) for k in CSV_FIELDS} | r.get("vary", {}))
+        w.writerow({k: ("" if r.get(k) is None else r[k]) for k in fields} | r.get("vary", {}))
     paths = [out / f"{stem}.csv", out / f"{stem}.md", out / f"{stem}.json"]
     note = (
         "\nStatistics over the runs that finished (tracking or lost; not over diverged ones); 95 % CI of "
@@ -199,7 +229,8 @@ def write_paired(out: Path, rows: list[dict], meta: dict) -> list[Path]:
     write_atomic(paths[0], buf.getvalue())
     write_atomic(paths[1], markdown(rows, PAIRED_COLUMNS) + note)
     write_atomic(paths[2], json.dumps({"meta": meta, "rows": rows}, indent=2) + "\n")
-    write_atomic(paths[3], summary(rows) + SUMMARY_NOTE)
+    estimated = any(r.get("est_rms_m_median") is not None for r in rows)
+    write_atomic(paths[3], summary(rows) + SUMMARY_NOTE + (ESTIMATE_NOTE if estimated else ""))
     return paths
 
 
@@ -209,4 +240,8 @@ SUMMARY_NOTE = (
     "the oracle on the same seed; t/l/d: tracking / lost / diverged, where not every run tracked; "
     f"{UNTOLD_MARK}: a law told the change more than {TOLD_AT_MOST:g}x itself told nothing (the median over "
     "seeds of the ratio on the same seed).\n"
+)
+ESTIMATE_NOTE = (
+    "[belief off X]: where the pose was estimated ([plant] pose_source), the median over the seeds of the "
+    "estimate's error RMS [mm] (belief against truth) in the same phase; every other figure is the truth's.\n"
 )
