@@ -41,3 +41,27 @@ def standard_normal(rng: np.random.Generator, size: int | tuple[int, ...] | None
 def normal(rng: np.random.Generator, loc: float, scale: float, size: int | tuple[int, ...] | None = None):
     """Normal deviates of mean ``loc`` and standard deviation ``scale``, as ``rng.normal``."""
     return loc + scale * standard_normal(rng, size)
+
+
+CHUNK = 1024  # rows of deviates a stream draws at once
+
+
+class Stream:
+    """Standard normal draws (n, width) of one seeded stream, drawn CHUNK rows at a time: the values
+    one draw of ``width`` a step gives, however the steps are grouped. ``rng`` None: zeros."""
+
+    def __init__(self, rng: np.random.Generator | None, width: int) -> None:
+        self.rng, self.width, self.left = rng, width, 0
+
+    def take(self, n: int) -> np.ndarray:
+        out = np.zeros((n, self.width))
+        i = 0
+        while self.rng is not None and i < n:
+            if not self.left:
+                self.buf, self.left = standard_normal(self.rng, (CHUNK, self.width)), CHUNK
+            j = CHUNK - self.left
+            k = min(n - i, self.left)
+            out[i : i + k] = self.buf[j : j + k]
+            self.left -= k
+            i += k
+        return out

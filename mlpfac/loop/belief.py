@@ -9,23 +9,24 @@ import math
 
 import numpy as np
 
+from mlpfac.elementary import each, hypot
 from mlpfac.loop.record import RunRecord
 
 
 def _figures(rec: RunRecord, lo: int, hi: int) -> dict:
     """The estimate's error over steps lo .. hi: position (|(x, y) believed - true|) and heading (wrapped)."""
-    from mlpfac.model import each, wrap
+    from mlpfac.model import wrap
 
     if hi <= lo:
         return {"rms_position_error_m": None, "max_position_error_m": None, "rms_heading_error_rad": None,
                 "max_heading_error_rad": None}  # fmt: skip
     d = rec.pose_meas[lo:hi] - rec.pose[lo:hi]
-    pos = each(math.hypot, d[:, 0], d[:, 1])
+    pos = each(hypot, d[:, 0], d[:, 1])
     head = np.abs(wrap(d[:, 2]))
     return {
-        "rms_position_error_m": float(np.sqrt(np.mean(pos**2))),
+        "rms_position_error_m": float(np.sqrt(np.mean(pos * pos))),
         "max_position_error_m": float(np.max(pos)),
-        "rms_heading_error_rad": float(np.sqrt(np.mean(head**2))),
+        "rms_heading_error_rad": float(np.sqrt(np.mean(head * head))),
         "max_heading_error_rad": float(np.max(head)),
     }
 
@@ -35,8 +36,6 @@ def believed(rec: RunRecord, bounds: dict[str, tuple[int, int]], limit: float, o
     RMS of the tracking error the controller saw per phase, and the outcome that error would give
     (``believed_outcome``); ``said``: a line for a run whose truth is lost (or diverged) while its
     belief tracked."""
-    from mlpfac.model import each
-
     n = rec.n
     out = {"pose_source": rec.pose_source} | _figures(rec, 0, n)
     phases, seen = {}, []
@@ -45,7 +44,8 @@ def believed(rec: RunRecord, bounds: dict[str, tuple[int, int]], limit: float, o
         phases[name] = _figures(rec, lo, hi)
         if hi > lo:
             e = rec.e[lo:hi]
-            rms = float(np.sqrt(np.mean(each(math.hypot, e[:, 0], e[:, 1]) ** 2)))
+            dist = each(hypot, e[:, 0], e[:, 1])
+            rms = float(np.sqrt(np.mean(dist * dist)))
             phases[name]["believed_rms_position_error_m"] = rms
             seen.append(rms)
     out["phases"] = phases

@@ -37,7 +37,7 @@ import mujoco
 import numpy as np
 
 from mlpfac.elementary import cos, sin
-from mlpfac.normal import standard_normal
+from mlpfac.normal import Stream
 from mlpfac.plants import compiled as K  # noqa: N812 - the kernel's layout constants, K.F_DT ...
 from mlpfac.plants.config import MujocoConfig
 from mlpfac.plants.events import EVENT_KINDS, DelayLine
@@ -50,8 +50,6 @@ from mlpfac.plants.mujoco_events import MujocoEvents
 from mlpfac.plants.mujoco_report import MujocoReport
 from mlpfac.plants.mujoco_torque import TorqueDrive
 from mlpfac.plants.sensors import SensingPlant
-
-NOISE_CHUNK = 1024  # pose-noise draws (3 deviates each) made at once: the values of one long draw
 
 
 class _Kept:
@@ -214,7 +212,7 @@ class MujocoPlant(MujocoEvents, TorqueDrive, MujocoReport, SensingPlant):
         self._torque_max = self._force_limits()
         self.st = np.zeros(K.N_ST)
         self.st[K.S_THETA] = float(q0[2])
-        self._noise_left = 0
+        self._pose_noise = Stream(rng if self._noise is not None else None, 3)
         self._history = DelayLine(np.zeros(3))  # one row, which the first measurement replaces
         self._views()
         K.read_pose(self._site_xpos, self._site_xmat, self.st)
@@ -274,19 +272,7 @@ class MujocoPlant(MujocoEvents, TorqueDrive, MujocoReport, SensingPlant):
         source other than the truth, its sensors' draws (n, 4) (:meth:`mlpfac.plants.sensors.Sensing.draws`)."""
         if self._sensing is not None:
             return self._sensing.draws(n)
-        if self._noise is None:
-            return np.zeros((n, 3))
-        out = np.empty((n, 3))
-        i = 0
-        while i < n:
-            if not self._noise_left:  # NOISE_CHUNK steps' draws at once
-                self._noise_draws, self._noise_left = standard_normal(self.rng, (NOISE_CHUNK, 3)), NOISE_CHUNK
-            j = NOISE_CHUNK - self._noise_left
-            take = min(n - i, self._noise_left)
-            out[i : i + take] = self._noise_draws[j : j + take]
-            self._noise_left -= take
-            i += take
-        return out
+        return self._pose_noise.take(n)
 
     def _set_velocity(self, v: float, omega: float, theta: float) -> None:
         """Body velocity (v, omega) at the site, the wheels rolling to match it."""

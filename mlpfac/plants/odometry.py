@@ -109,10 +109,11 @@ def _predict(s, src, dst, dpl, dpr, dthg, dt, x, u, xn, F, G, N):
     motion(x, u, s[O_R], s[O_B], int(s[O_GYRO]), xn, F, G)
     q = s[O_Q]
     base = q * q / 6.0  # an increment's two rounding errors, each uniform over a count
-    N[0] = base + (s[O_SLIP] * dpl) ** 2
-    N[1] = base + (s[O_SLIP] * dpr) ** 2
+    sl, sr, sg = s[O_SLIP] * dpl, s[O_SLIP] * dpr, s[O_SLIP] * dthg
+    N[0] = base + sl * sl
+    N[1] = base + sr * sr
     g = s[O_GNOISE]
-    N[2] = dt * dt * (0.5 * g * g + s[O_GBIAS] * s[O_GBIAS]) + (s[O_SLIP] * dthg) ** 2
+    N[2] = dt * dt * (0.5 * g * g + s[O_GBIAS] * s[O_GBIAS]) + sg * sg
     po = src + NX
     FP = np.empty((NX, NX))
     for i in range(NX):

@@ -26,6 +26,7 @@ from typing import NamedTuple
 import numpy as np
 
 from mlpfac.exceptions import ConfigError
+from mlpfac.normal import Stream
 
 SOURCES = ("truth", "odometry", "fused")
 GYRO_MAX = 10.0  # rad/s of gyro noise or bias, at most (a gyro that bad is no gyro)
@@ -34,7 +35,6 @@ CPR_MAX = 10**9  # counts a revolution, at most
 FIX_DEFAULTS = {"fix_rate_hz": 10.0, "fix_latency_s": 0.0, "fix_noise_m": 0.02, "fix_noise_rad": 0.02}
 SENSOR_KEYS = ("pose_source", "encoder_cpr", "gyro", "gyro_noise", "gyro_bias", *FIX_DEFAULTS)
 TRUTH_ONLY = ("pose_noise_std", "twist_noise_std", "wheel_speed_noise_std")  # noise of what "truth" gives
-CHUNK = 1024  # draws made at once, per stream: the values one draw a step gives
 
 
 class Fixes(NamedTuple):
@@ -142,27 +142,6 @@ def described(config) -> str:
             f"(noise {f.noise_m:g} m, {f.noise_rad:g} rad); wheel scale factors estimated"
         )
     return text
-
-
-class Stream:
-    """Standard normal draws (n, width) of one seeded stream, made CHUNK rows at a time: the values
-    one draw of ``width`` a step gives, however the steps are grouped. ``rng`` None: zeros."""
-
-    def __init__(self, rng: np.random.Generator | None, width: int) -> None:
-        self.rng, self.width, self.left = rng, width, 0
-
-    def take(self, n: int) -> np.ndarray:
-        out = np.zeros((n, self.width))
-        i = 0
-        while self.rng is not None and i < n:
-            if not self.left:
-                self.buf, self.left = self.rng.standard_normal((CHUNK, self.width)), CHUNK
-            j = CHUNK - self.left
-            k = min(n - i, self.left)
-            out[i : i + k] = self.buf[j : j + k]
-            self.left -= k
-            i += k
-        return out
 
 
 # The estimator's process noise (docs/equations.md): what a real base's odometry is tuned with.
