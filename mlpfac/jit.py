@@ -55,6 +55,7 @@ MODULES = {  # the modules whose kernels each extension holds
         "mlpfac.control.adaptive.delay_bank",
         "mlpfac.plants.events",
         "mlpfac.plants.ik",
+        "mlpfac.plants.terrain",
     ),
     "mujoco": ("mlpfac.plants.compiled", "mlpfac.loop.compiled"),
 }

@@ -34,6 +34,7 @@ from mlpfac.exceptions import ConfigError
 from mlpfac.jit import SALT, WHY, built, kernel
 from mlpfac.plants.events import delay_push
 from mlpfac.plants.ik import body_velocity_vw, wheel_speeds_lr
+from mlpfac.plants.terrain import W_NPATCH, ground_at, patches, push
 
 # ints: I_AL2, I_AR2 a second wheel's actuator on each side (skid-steer; -1: none), I_MIX 1 for two
 # motors on tendons over both wheels (a (v, omega) drive; I_AL, I_AR are those motors), I_CLAMP 1 for
@@ -42,7 +43,8 @@ from mlpfac.plants.ik import body_velocity_vw, wheel_speeds_lr
 # torque-level controller: the torque drive without its PI loop)
 I_AL, I_AR, I_DL, I_DR, I_SITE, I_NSUB, I_TORQUE, I_NOISE, I_AL2, I_AR2, I_MIX, I_CLAMP, I_DL2, I_DR2 = range(14)
 I_TAU = 14
-N_INTS = 15
+I_ROOT = 15  # the robot's root body (where a force event pushes)
+N_INTS = 16
 # fl
 F_CL, F_CR, F_SL, F_SR, F_IK_R, F_IK_TRACK, F_WMAX, F_DT, F_KP, F_KI, F_TLMAX, F_TRMAX, F_RADIUS, F_ZREST = range(14)
 F_STD = 14  # three pose-noise standard deviations
@@ -87,6 +89,15 @@ class Robot(NamedTuple):
     hist: np.ndarray
     fill: np.ndarray
     vel: np.ndarray  # (6,) mj_objectVelocity's output
+    # the world (mlpfac.plants.mujoco_world, mlpfac.plants.terrain): the data's xfrc_applied, geom_xpos
+    # and the model's geom_friction (flat), the packed world ((0,): none), the rough ground's heights,
+    # the force schedule (steps, 5)
+    xfrc: np.ndarray
+    geom_xpos: np.ndarray
+    geom_friction: np.ndarray
+    world: np.ndarray
+    ground: np.ndarray
+    push: np.ndarray
 
 
 def _library() -> str:
@@ -132,7 +143,8 @@ def with_robot(signature: str, *more):
 
     args, ret = normalize_signature(signature)
     f1, i1 = types.float64[::1], types.int64[::1]
-    fields = (types.int64, types.int64, *[f1] * 7, i1, f1, f1, types.float64[:, ::1], i1, f1)
+    f2 = types.float64[:, ::1]
+    fields = (types.int64, types.int64, *[f1] * 7, i1, f1, f1, f2, i1, f1, *[f1] * 4, f2, f2)
     assert len(fields) == len(Robot._fields), "with_robot names a type for each field of Robot, in order"
     return ret(*args, *more, types.NamedTuple(fields, Robot))
 
@@ -312,7 +324,10 @@ def diverged(robot):
         s += x
     if not math.isfinite(s):
         return NOT_FINITE
-    if robot.site_xpos[2] - fl[F_ZREST] > 0.5 * fl[F_RADIUS]:
+    z = robot.site_xpos[2]
+    if robot.world.shape[0]:  # above the ground under it (mlpfac.plants.terrain)
+        z -= ground_at(robot.world, robot.ground, robot.site_xpos[0], robot.site_xpos[1])
+    if z - fl[F_ZREST] > 0.5 * fl[F_RADIUS]:
         return LIFTED
     if robot.root_xmat[8] < 0.5:
         return TIPPED
@@ -331,6 +346,12 @@ def plant_step(u0, u1, draw, tele, robot):
         wl, wr = u0, u1
     else:
         wl, wr = wheel_speeds_lr(u0, u1, fl[F_IK_R], fl[F_IK_TRACK], fl[F_WMAX])
+    w = robot.world
+    if w.shape[0]:  # the floor patches under the tyres, the force of this step (mlpfac.plants.terrain)
+        if w[W_NPATCH] > 0:
+            patches(w, robot.geom_friction, robot.geom_xpos)
+        if robot.push.shape[0]:
+            push(w, robot.push, robot.xfrc, ints[I_ROOT], st[S_THETA], tele[N_TELE : N_TELE + 3])
     _physics(robot.mp, robot.dp, robot.ctrl, qvel, ints, fl, st, wl, wr)
     read_pose(robot.site_xpos, robot.site_xmat, st)
     measure(ints, fl, st, draw, robot.hist, robot.fill)

@@ -1,0 +1,252 @@
+"""The world around a MuJoCo robot: the terrain of a scenario's ``[world]`` built into the scene the
+plant compiles (the robot's files are never edited), the floor tilted by a ``slope`` event, and
+the forces of ``force`` events. :class:`MujocoWorld` is the part of
+:class:`~mlpfac.plants.mujoco.MujocoPlant` that does it.
+
+- **Ramps**: one convex mesh each (a trapezoid prism: up, top, down), a static geom of the world.
+- **Rough ground**: a MuJoCo heightfield over the arena at the floor's height, its heights those
+  drawn for the run (:mod:`mlpfac.plants.world`).
+- **Patches**: flush with the floor, so no geom: each control step, the compiled step sets each
+  tyre's sliding friction to the patch's under its centre, or to its own off the patches
+  (:func:`mlpfac.plants.terrain.patches`). A flush geom with a contact priority would touch the
+  tyre together with the floor, at the same point, and MuJoCo would share the normal force between
+  two frictions; a patch a millimetre proud of the floor would be a step.
+- **Slope**: gravity turned in the floor's frame at the event (the robot settled on the flat floor
+  first: a scene tilted from the start fails the settle check); the viewer draws the floor tilted.
+- **Forces**: a schedule per control step (:meth:`mlpfac.plants.events.Force.schedule`, made at
+  reset from the run's seed) that the compiled step writes into ``xfrc_applied`` of the root body
+  every control step (MuJoCo keeps it across physics steps), turned into the world's axes when it
+  is the robot's (:func:`mlpfac.plants.terrain.push`); telemetry ``force`` says what was applied.
+
+The new geoms take the floor's friction and contact priority, so the tyres' friction stays the
+contact's, as on the floor. A robot reset at a pose over the terrain is lifted onto it (the
+highest ground under its footprint); at a run's start it stands on the flat pad the rough ground
+leaves there and on no ramp, as it settled.
+"""
+
+from __future__ import annotations
+
+import math
+
+import mujoco
+import numpy as np
+
+from mlpfac.exceptions import ConfigError
+from mlpfac.plants import terrain as W  # noqa: N812 - the packed world's layout, W.W_STEP ...
+from mlpfac.plants.events import Force, Slope, force_schedule, run_seed
+from mlpfac.plants.mjcf.wheels import floor_priority
+from mlpfac.plants.world import CURVATURE
+
+FORCE_COLUMNS = 5  # a force schedule's row: world (fx, fy), robot (fx, fy), torque_z
+HFIELD_BASE = 0.05  # m of the heightfield's base below the floor (MuJoCo's size[3])
+
+
+class MujocoWorld:
+    """set_world, the terrain's checks, the slope and the forces of the MuJoCo plant (its attributes
+    are :class:`~mlpfac.plants.mujoco.MujocoPlant`'s)."""
+
+    def _no_world(self) -> None:
+        """No terrain, no force: nothing packed, nothing done in the step (the bits of a run without them)."""
+        self.terrain, self._forces, self._steps = None, (), 0
+        self._wld, self._ground = np.zeros(0), np.zeros((0, 0))
+        self._push, self._force_now = np.zeros((0, FORCE_COLUMNS)), np.zeros(3)
+        self._reach = 0.0
+
+    def set_world(self, terrain, events=(), steps: int = 0, where: str = "[world]") -> None:
+        """Build ``terrain`` (a :class:`~mlpfac.plants.world.Terrain`, or None) into the robot's scene,
+        checked against the robot first, and apply the ``force`` events of ``events`` over a run of
+        ``steps`` control steps from each reset on."""
+        self._forces, self._steps = tuple(events), int(steps)
+        if terrain is not None:
+            self._check_terrain(terrain, where)
+            spec = self._spec_nominal.copy()
+            _build(spec, terrain, self.model, self._root)
+            self._spec_nominal, self._spec = spec, spec.copy()
+            self.model = spec.compile()
+            self.data = mujoco.MjData(self.model)
+            self._reach = _reach(self.robot.model, self.robot.qpos_rest, self._root, self._site)
+        self.terrain = terrain
+        has_force = any(isinstance(ev, Force) for ev in self._forces)
+        if terrain is not None or has_force:
+            m = self.model
+            self._wld, self._ground = W.pack(terrain, self._tyres, [float(m.geom_friction[g, 0]) for g in self._tyres])
+        self._changed = True  # the next reset starts from the nominal scene, with the world
+
+    def _check_terrain(self, terrain, where: str) -> None:
+        """What the robot needs of ``terrain``: tyres that can touch the bottom of the rough ground's
+        troughs, wheels that can climb each ramp, tyres whose friction is the contact's (patches)."""
+        r = float(self.robot.real_radius)
+        if terrain.bumps is not None and terrain.bumps.curvature * r > 1.0:
+            b = terrain.bumps
+            need = math.sqrt(CURVATURE * b.height * r)
+            raise ConfigError(
+                f"{where} bumps wavelength",
+                f"a heightfield too fine for the tyre: its troughs curve at up to {b.curvature:.3g} 1/m, tighter than "
+                f"the tyre's radius of {r:g} m; lengthen the wavelength to at least {need:.3g} m or lower the height",
+            )
+        if terrain.patches:
+            self._tyres_take_friction(f"{where} patches")
+        m0, (tl, tr) = self.robot.model, self._torque_max
+        mass = float(m0.body_subtreemass[self._root])
+        g = float(np.sqrt(np.sum(m0.opt.gravity * m0.opt.gravity)))
+        share, mu = (
+            _on_wheels(m0, self.robot.qpos_rest, self._tyres, mass * g),
+            float(m0.geom_friction[self._tyres[0], 0]),
+        )
+        drive = (tl + tr) * (len(self._tyres) // 2) / r
+        for i, ramp in enumerate(terrain.ramps):
+            tan = ramp.height / ramp.up
+            sin = tan / math.sqrt(1.0 + tan * tan)
+            pull = mass * g * sin
+            if pull > drive or tan > mu * share:
+                why = (
+                    f"its wheels' torque gives {drive:.3g} N"
+                    if pull > drive
+                    else f"the tyres' friction {mu:g} on the {share:.0%} of its weight its wheels carry holds a slope of "
+                    f"at most {math.degrees(math.atan(mu * share)):.3g} deg"
+                )
+                raise ConfigError(
+                    f"{where} ramps #{i + 1}",
+                    f"the wheels cannot climb it: a slope of {math.degrees(math.atan(tan)):.3g} deg pulls the "
+                    f"{mass:.3g} kg robot back with {pull:.3g} N, and {why}; lower it or lengthen it",
+                )
+
+    def _tyres_take_friction(self, where: str) -> None:
+        """A ConfigError unless the tyres' contact priority is above the floor's (their friction is the contact's)."""
+        m = self.model
+        others = [g for g in range(m.ngeom) if m.body_rootid[m.geom_bodyid[g]] != self._root]
+        floor = max((int(m.geom_priority[g]) for g in others), default=-1)
+        if any(m.geom_priority[g] <= floor for g in self._tyres):
+            raise ConfigError(
+                where,
+                f"the tyre geoms need a priority above the floor's ({floor}) for their friction to be the "
+                'contact\'s: give them one in the model, or set tyre = "sphere" in [plant]',
+            )
+
+    def _world_reset(self, q0: np.ndarray, rng: np.random.Generator) -> None:
+        """At a reset: the robot lifted onto the terrain under its footprint (not into it), the tyres'
+        own friction, the force schedule of this run (from its seed) from its first step."""
+        if self._wld.shape[0] == 0:
+            return
+        self._wld[W.W_STEP] = 0.0
+        if self.terrain is not None:
+            lift = self._ground_under(float(q0[0]), float(q0[1]), self._reach)
+            if lift > 0.0:
+                self.data.qpos[self._qroot + 2] += lift
+                mujoco.mj_forward(self.model, self.data)
+        o = W.W_HEAD + W.W_RAMP * int(self._wld[W.W_NRAMP]) + W.W_PATCH * int(self._wld[W.W_NPATCH])
+        for k, g in enumerate(self._tyres):
+            self.model.geom_friction[g, 0] = self._wld[o + W.W_TYRE * k + 1]
+        sched = force_schedule(self._forces, self.T, self._steps, run_seed(rng))
+        self._push = np.zeros((0, FORCE_COLUMNS)) if sched is None else sched
+
+    def ground(self, x: float, y: float) -> float:
+        """The ground's height at (x, y) (m; 0 without terrain)."""
+        return float(W.ground_height(self._wld, self._ground, float(x), float(y))) if self._wld.shape[0] else 0.0
+
+    def _ground_under(self, x: float, y: float, reach: float) -> float:
+        """The highest ground within ``reach`` of (x, y), sampled every 1 cm (and at every heightfield point)."""
+        step = 0.01
+        if self._ground.shape[0]:
+            step = min(step, float(self._wld[W.W_DX]), float(self._wld[W.W_DY]))
+        n = int(math.ceil(reach / step))
+        best = 0.0
+        for i in range(-n, n + 1):
+            for j in range(-n, n + 1):
+                if (i * i + j * j) * step * step <= reach * reach:
+                    best = max(best, self.ground(x + i * step, y + j * step))
+        return best
+
+    def _world_friction(self, mu: float) -> None:
+        """A ``friction`` event: the tyres' own friction off the patches is now ``mu``."""
+        if self._wld.shape[0]:
+            o = W.W_HEAD + W.W_RAMP * int(self._wld[W.W_NRAMP]) + W.W_PATCH * int(self._wld[W.W_NPATCH])
+            self._wld[o + 1 : o + W.W_TYRE * len(self._tyres) : W.W_TYRE] = mu
+
+    def _slope(self, event: Slope) -> str:
+        """The floor tilted: gravity turned in its frame (the nominal gravity's magnitude)."""
+        g0 = self.robot.model.opt.gravity
+        g = float(np.sqrt(np.sum(g0 * g0)))
+        gx, gy, gz = event.gravity(g)
+        self._spec.option.gravity = [gx, gy, gz]
+        self._recompile()
+        toward = f" uphill towards {event.heading_deg or 0.0:g} deg" if event.angle_deg else " (level)"
+        return f"floor tilted {event.angle_deg:g} deg{toward}: gravity pulls {math.sqrt(gx * gx + gy * gy):.3g} m/s^2 downhill"
+
+    def _force_text(self, event: Force) -> str:
+        parts = [f"{k} {v:g}" for k, v in (("fx", event.fx), ("fy", event.fy)) if v]
+        parts += [f"torque_z {event.torque_z:g} N m"] if event.torque_z else []
+        what = ", ".join(parts) + (" N" if parts and not event.torque_z else "")
+        if event.std:
+            what = (what + " + " if what else "") + f"noise of {event.std:g} N std a control step"
+        how = f" for {event.steps(self.T) * self.T:g} s" if event.duration is not None else " from now on"
+        wave = f", sinusoidal of period {event.period:g} s" if event.period is not None else ""
+        return f"force {what} in the {event.frame or 'world'}'s axes on the robot{wave}{how}"
+
+    def terrain_record(self) -> dict:
+        """What a recording draws of the terrain (:meth:`mlpfac.plants.world.Terrain.as_dict`; {} without)."""
+        return {} if self.terrain is None else self.terrain.as_dict()
+
+
+def _build(spec: mujoco.MjSpec, terrain, m: mujoco.MjModel, root: int) -> None:
+    """The terrain's ramps (convex meshes) and rough ground (a heightfield) as static geoms of the
+    world in ``spec``, with the floor's friction and contact priority (``m``: the robot's model)."""
+    floor = [g for g in range(m.ngeom) if m.body_rootid[m.geom_bodyid[g]] != root]
+    top = max(floor, key=lambda g: int(m.geom_priority[g])) if floor else None
+    look = {
+        "priority": floor_priority(m, root),
+        "friction": m.geom_friction[top].copy() if top is not None else [1.0, 0.005, 0.0001],
+        "condim": int(m.geom_condim[top]) if top is not None else 3,
+        "rgba": [0.45, 0.42, 0.38, 1.0],
+    }
+    for i, r in enumerate(terrain.ramps):
+        name = f"mlpfac_ramp_{i}"
+        spec.add_mesh(name=name, uservert=ramp_vertices(r).ravel().tolist())
+        spec.worldbody.add_geom(name=name, type=mujoco.mjtGeom.mjGEOM_MESH, meshname=name, **look)
+    if terrain.grid is not None:
+        x0, y0, x1, y1 = terrain.arena
+        nrow, ncol = terrain.grid.shape
+        height = float(terrain.bumps.height)
+        spec.add_hfield(name="mlpfac_bumps", nrow=nrow, ncol=ncol, size=[(x1 - x0) / 2, (y1 - y0) / 2, height, HFIELD_BASE],
+                        userdata=(terrain.grid / height).ravel().tolist())  # fmt: skip
+        spec.worldbody.add_geom(name="mlpfac_bumps", type=mujoco.mjtGeom.mjGEOM_HFIELD, hfieldname="mlpfac_bumps",
+                                pos=[(x0 + x1) / 2, (y0 + y1) / 2, 0.0], **look)  # fmt: skip
+
+
+def ramp_vertices(r) -> np.ndarray:
+    """The 8 corners (8, 3) of a placed ramp's prism in the world: its foot, the top's two edges and
+    its end, each across its width, at the floor and at their heights."""
+    L = r.up + r.top + r.down
+    profile = [(0.0, 0.0), (r.up, r.height), (r.up + r.top, r.height), (L, 0.0)]
+    out = []
+    for along, z in profile:
+        for across in (-0.5 * r.width, 0.5 * r.width):
+            out.append([r.x + along * r.c - across * r.s, r.y + along * r.s + across * r.c, z])
+    return np.array(out)
+
+
+def _reach(m: mujoco.MjModel, qpos: np.ndarray, root: int, site: int) -> float:
+    """How far the robot's colliding geoms reach from its pose frame, across the floor (m)."""
+    d = mujoco.MjData(m)
+    d.qpos[:] = qpos
+    mujoco.mj_kinematics(m, d)
+    p = d.site_xpos[site]
+    reach = 0.0
+    for g in range(m.ngeom):
+        if m.body_rootid[m.geom_bodyid[g]] == root and (m.geom_contype[g] or m.geom_conaffinity[g]):
+            dx, dy = d.geom_xpos[g, 0] - p[0], d.geom_xpos[g, 1] - p[1]
+            reach = max(reach, float(np.sqrt(dx * dx + dy * dy)) + float(m.geom_rbound[g]))
+    return reach
+
+
+def _on_wheels(m: mujoco.MjModel, qpos: np.ndarray, tyres, weight: float) -> float:
+    """The share of the robot's weight its tyres carry at rest (the rest of it on casters and skids)."""
+    d = mujoco.MjData(m)
+    d.qpos[:] = qpos
+    mujoco.mj_forward(m, d)
+    f, carried = np.zeros(6), 0.0
+    for i in range(d.ncon):
+        if int(d.contact[i].geom1) in tyres or int(d.contact[i].geom2) in tyres:
+            mujoco.mj_contactForce(m, d, i, f)
+            carried += abs(float(f[0]))
+    return min(1.0, carried / weight) if weight > 0 else 1.0
