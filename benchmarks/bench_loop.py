@@ -39,8 +39,9 @@ import numpy as np  # noqa: E402
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from perf_floor import PhysicsFloor  # noqa: E402
 
+from mlpfac.loop.closed_loop import seeded_generators  # noqa: E402
 from mlpfac.loop.factory import make_plant  # noqa: E402
-from mlpfac.loop.runner import run, seeded_generators  # noqa: E402
+from mlpfac.loop.runner import run  # noqa: E402
 from mlpfac.scenario.parse import load  # noqa: E402
 from mlpfac.scenario.reference import sample  # noqa: E402
 

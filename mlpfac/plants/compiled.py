@@ -34,7 +34,7 @@ from mlpfac.exceptions import ConfigError
 from mlpfac.jit import SALT, WHY, built, kernel
 from mlpfac.plants.events import delay_push
 from mlpfac.plants.ik import body_velocity_vw, wheel_speeds_lr
-from mlpfac.plants.terrain import W_NPATCH, ground_at, patches, push
+from mlpfac.plants.terrain import W_NPATCH, W_NTILE, ground_at, patches, place_tiles, push
 
 # ints: I_AL2, I_AR2 a second wheel's actuator on each side (skid-steer; -1: none), I_MIX 1 for two
 # motors on tendons over both wheels (a (v, omega) drive; I_AL, I_AR are those motors), I_CLAMP 1 for
@@ -89,14 +89,16 @@ class Robot(NamedTuple):
     hist: np.ndarray
     fill: np.ndarray
     vel: np.ndarray  # (6,) mj_objectVelocity's output
-    # the world (mlpfac.plants.mujoco_world, mlpfac.plants.terrain): the data's xfrc_applied, geom_xpos
-    # and the model's geom_friction (flat), the packed world ((0,): none), the rough ground's heights,
-    # the force schedule (steps, 5)
+    # the world (mlpfac.plants.mujoco_world, mlpfac.plants.terrain): the data's xfrc_applied, geom_xpos,
+    # mocap_pos, mocap_quat and the model's geom_friction (flat), the packed world ((0,): none), the
+    # rough ground's nodes, the force schedule (steps, 5)
     xfrc: np.ndarray
     geom_xpos: np.ndarray
+    mocap_pos: np.ndarray
+    mocap_quat: np.ndarray
     geom_friction: np.ndarray
     world: np.ndarray
-    ground: np.ndarray
+    nodes: np.ndarray
     push: np.ndarray
 
 
@@ -144,7 +146,7 @@ def with_robot(signature: str, *more):
     args, ret = normalize_signature(signature)
     f1, i1 = types.float64[::1], types.int64[::1]
     f2 = types.float64[:, ::1]
-    fields = (types.int64, types.int64, *[f1] * 7, i1, f1, f1, f2, i1, f1, *[f1] * 4, f2, f2)
+    fields = (types.int64, types.int64, *[f1] * 7, i1, f1, f1, f2, i1, f1, *[f1] * 6, f2, f2)
     assert len(fields) == len(Robot._fields), "with_robot names a type for each field of Robot, in order"
     return ret(*args, *more, types.NamedTuple(fields, Robot))
 
@@ -190,15 +192,18 @@ def yaw(xmat: np.ndarray) -> float:
 
 
 @kernel()
-def _physics(mp, dp, ctrl, qvel, ints, fl, st, wl, wr):
+def _physics(mp, dp, ctrl, qvel, ints, fl, st, wl, wr, robot):
     """One control period: the wheel commands held for n physics steps, each ``mj_step2`` (actuation,
     integration) then ``mj_step1`` (the new state's positions, velocities, sensors). The velocity
     servos are MuJoCo's (with ``I_CLAMP`` their controls kept within their force limits, :func:`_within`,
     every physics step); the torque drive is a discrete wheel-speed PI loop evaluated every physics
     step: tau = kp e + ki I, clamped to the torque limit, I integrating e only while tau is not
     clamped (no wind-up). With ``I_TAU`` (wl, wr) are the wheels' torques themselves, clamped to
-    the limit and held."""
+    the limit and held. On rough ground the contact tiles are placed before each physics step's
+    collisions (:func:`mlpfac.plants.terrain.place_tiles`)."""
     n, al, ar, dl, dr = ints[I_NSUB], ints[I_AL], ints[I_AR], ints[I_DL], ints[I_DR]
+    w = robot.world
+    tiles = w.shape[0] > 0 and w[W_NTILE] > 0
     cl, cr = fl[F_CL], fl[F_CR]
     al2, ar2 = ints[I_AL2], ints[I_AR2]
     if ints[I_TORQUE] == 0 and ints[I_CLAMP]:
@@ -211,6 +216,8 @@ def _physics(mp, dp, ctrl, qvel, ints, fl, st, wl, wr):
             if ar2 >= 0:
                 ctrl[ar2] = _within(fl[F_CR2] * wr, qvel[dr2], fl, 3)
             mj_step2(mp, dp)
+            if tiles:
+                place_tiles(w, robot.nodes, robot.geom_xpos, robot.mocap_pos, robot.mocap_quat)
             mj_step1(mp, dp)
     elif ints[I_TORQUE] == 0:
         ctrl[al] = cl * wl
@@ -221,7 +228,11 @@ def _physics(mp, dp, ctrl, qvel, ints, fl, st, wl, wr):
             ctrl[ar2] = fl[F_CR2] * wr
         mj_step2(mp, dp)
         for _ in range(n - 1):
+            if tiles:
+                place_tiles(w, robot.nodes, robot.geom_xpos, robot.mocap_pos, robot.mocap_quat)
             mj_step(mp, dp)
+        if tiles:
+            place_tiles(w, robot.nodes, robot.geom_xpos, robot.mocap_pos, robot.mocap_quat)
         mj_step1(mp, dp)
     else:
         sl, sr, kp, ki, dt = fl[F_SL], fl[F_SR], fl[F_KP], fl[F_KI], fl[F_DT]
@@ -238,6 +249,8 @@ def _physics(mp, dp, ctrl, qvel, ints, fl, st, wl, wr):
             if ints[I_MIX]:
                 il, ir = _mix(ctrl, al, ar, fl, tl, tr, il, ir, el * dt, er * dt)
                 mj_step2(mp, dp)
+                if tiles:
+                    place_tiles(w, robot.nodes, robot.geom_xpos, robot.mocap_pos, robot.mocap_quat)
                 mj_step1(mp, dp)
                 continue
             if -tl_max <= tl <= tl_max:
@@ -255,6 +268,8 @@ def _physics(mp, dp, ctrl, qvel, ints, fl, st, wl, wr):
             if ar2 >= 0:
                 ctrl[ar2] = tr / fl[F_CR2]
             mj_step2(mp, dp)
+            if tiles:
+                place_tiles(w, robot.nodes, robot.geom_xpos, robot.mocap_pos, robot.mocap_quat)
             mj_step1(mp, dp)
         st[S_IL], st[S_IR] = il, ir
     st[S_TIME] += n * fl[F_DT]
@@ -326,7 +341,7 @@ def diverged(robot):
         return NOT_FINITE
     z = robot.site_xpos[2]
     if robot.world.shape[0]:  # above the ground under it (mlpfac.plants.terrain)
-        z -= ground_at(robot.world, robot.ground, robot.site_xpos[0], robot.site_xpos[1])
+        z -= ground_at(robot.world, robot.nodes, robot.site_xpos[0], robot.site_xpos[1])
     if z - fl[F_ZREST] > 0.5 * fl[F_RADIUS]:
         return LIFTED
     if robot.root_xmat[8] < 0.5:
@@ -352,7 +367,7 @@ def plant_step(u0, u1, draw, tele, robot):
             patches(w, robot.geom_friction, robot.geom_xpos)
         if robot.push.shape[0]:
             push(w, robot.push, robot.xfrc, ints[I_ROOT], st[S_THETA], tele[N_TELE : N_TELE + 3])
-    _physics(robot.mp, robot.dp, robot.ctrl, qvel, ints, fl, st, wl, wr)
+    _physics(robot.mp, robot.dp, robot.ctrl, qvel, ints, fl, st, wl, wr, robot)
     read_pose(robot.site_xpos, robot.site_xmat, st)
     measure(ints, fl, st, draw, robot.hist, robot.fill)
     dl, dr, sl, sr = ints[I_DL], ints[I_DR], fl[F_SL], fl[F_SR]

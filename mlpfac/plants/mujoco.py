@@ -245,8 +245,9 @@ class MujocoPlant(MujocoEvents, TorqueDrive, MujocoReport, MujocoWorld):
                              self._site_xmat, d.xmat[self._root], self.ints, self.fl, self.st, self._history.hist,
                              self._history.fill, np.empty(6),
                              # the world (mlpfac.plants.mujoco_world): empty without terrain or forces
-                             d.xfrc_applied.reshape(-1), d.geom_xpos.reshape(-1), m.geom_friction.reshape(-1),
-                             self._wld, self._ground, self._push)  # fmt: skip
+                             d.xfrc_applied.reshape(-1), d.geom_xpos.reshape(-1), d.mocap_pos.reshape(-1),
+                             d.mocap_quat.reshape(-1), m.geom_friction.reshape(-1), self._wld, self._nodes,
+                             self._push)  # fmt: skip
 
     def kernel_args(self) -> K.Robot:
         """The robot as :func:`mlpfac.plants.compiled.plant_step` takes it (valid until the next event),

@@ -39,6 +39,8 @@ from mlpfac.plants.world import CURVATURE
 
 FORCE_COLUMNS = 5  # a force schedule's row: world (fx, fy), robot (fx, fy), torque_z
 HFIELD_BASE = 0.05  # m of the heightfield's base below the floor (MuJoCo's size[3])
+TILE_SIZE = 0.5  # m: half the width a contact tile is drawn (a plane: it moves with its geom)
+CLEARANCE = 1.5  # the heightfield collides where the robot's other geoms reach within this x its height at rest
 
 
 class MujocoWorld:
@@ -48,7 +50,7 @@ class MujocoWorld:
     def _no_world(self) -> None:
         """No terrain, no force: nothing packed, nothing done in the step (the bits of a run without them)."""
         self.terrain, self._forces, self._steps = None, (), 0
-        self._wld, self._ground = np.zeros(0), np.zeros((0, 0))
+        self._wld, self._nodes = np.zeros(0), np.zeros((0, 0))
         self._push, self._force_now = np.zeros((0, FORCE_COLUMNS)), np.zeros(3)
         self._reach = 0.0
 
@@ -57,19 +59,22 @@ class MujocoWorld:
         checked against the robot first, and apply the ``force`` events of ``events`` over a run of
         ``steps`` control steps from each reset on."""
         self._forces, self._steps = tuple(events), int(steps)
+        tiles = ()
         if terrain is not None:
             self._check_terrain(terrain, where)
             spec = self._spec_nominal.copy()
-            _build(spec, terrain, self.model, self._root)
+            tiles = _build(spec, terrain, self.robot.model, self.robot.qpos_rest, self._root, where)
             self._spec_nominal, self._spec = spec, spec.copy()
             self.model = spec.compile()
             self.data = mujoco.MjData(self.model)
             self._reach = _reach(self.robot.model, self.robot.qpos_rest, self._root, self._site)
+            body = lambda name: mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_BODY, name)  # noqa: E731
+            tiles = [(g, int(self.model.body_mocapid[body(b)]), reach) for g, b, reach in tiles]
         self.terrain = terrain
         has_force = any(isinstance(ev, Force) for ev in self._forces)
         if terrain is not None or has_force:
-            m = self.model
-            self._wld, self._ground = W.pack(terrain, self._tyres, [float(m.geom_friction[g, 0]) for g in self._tyres])
+            mus = [float(self.model.geom_friction[g, 0]) for g in self._tyres]
+            self._wld, self._nodes = W.pack(terrain, self._tyres, mus, tiles)
         self._changed = True  # the next reset starts from the nominal scene, with the world
 
     def _check_terrain(self, terrain, where: str) -> None:
@@ -134,7 +139,12 @@ class MujocoWorld:
             if lift > 0.0:
                 self.data.qpos[self._qroot + 2] += lift
                 mujoco.mj_forward(self.model, self.data)
-        o = W.W_HEAD + W.W_RAMP * int(self._wld[W.W_NRAMP]) + W.W_PATCH * int(self._wld[W.W_NPATCH])
+            if self._wld[W.W_NTILE] > 0:  # the contact tiles under the wheels and casters where they stand
+                d = self.data
+                W.place_tiles(self._wld, self._nodes, d.geom_xpos.reshape(-1), d.mocap_pos.reshape(-1),
+                              d.mocap_quat.reshape(-1))  # fmt: skip
+                mujoco.mj_forward(self.model, d)
+        o = W.offsets(self._wld)[2]
         for k, g in enumerate(self._tyres):
             self.model.geom_friction[g, 0] = self._wld[o + W.W_TYRE * k + 1]
         sched = force_schedule(self._forces, self.T, self._steps, run_seed(rng))
@@ -142,13 +152,13 @@ class MujocoWorld:
 
     def ground(self, x: float, y: float) -> float:
         """The ground's height at (x, y) (m; 0 without terrain)."""
-        return float(W.ground_height(self._wld, self._ground, float(x), float(y))) if self._wld.shape[0] else 0.0
+        return float(W.ground_height(self._wld, self._nodes, float(x), float(y))) if self._wld.shape[0] else 0.0
 
     def _ground_under(self, x: float, y: float, reach: float) -> float:
         """The highest ground within ``reach`` of (x, y), sampled every 1 cm (and at every heightfield point)."""
         step = 0.01
-        if self._ground.shape[0]:
-            step = min(step, float(self._wld[W.W_DX]), float(self._wld[W.W_DY]))
+        if self._nodes.shape[0]:
+            step = min(step, 0.25 * float(self._wld[W.W_BS]))
         n = int(math.ceil(reach / step))
         best = 0.0
         for i in range(-n, n + 1):
@@ -160,7 +170,7 @@ class MujocoWorld:
     def _world_friction(self, mu: float) -> None:
         """A ``friction`` event: the tyres' own friction off the patches is now ``mu``."""
         if self._wld.shape[0]:
-            o = W.W_HEAD + W.W_RAMP * int(self._wld[W.W_NRAMP]) + W.W_PATCH * int(self._wld[W.W_NPATCH])
+            o = W.offsets(self._wld)[2]
             self._wld[o + 1 : o + W.W_TYRE * len(self._tyres) : W.W_TYRE] = mu
 
     def _slope(self, event: Slope) -> str:
@@ -188,9 +198,16 @@ class MujocoWorld:
         return {} if self.terrain is None else self.terrain.as_dict()
 
 
-def _build(spec: mujoco.MjSpec, terrain, m: mujoco.MjModel, root: int) -> None:
-    """The terrain's ramps (convex meshes) and rough ground (a heightfield) as static geoms of the
-    world in ``spec``, with the floor's friction and contact priority (``m``: the robot's model)."""
+def _build(spec: mujoco.MjSpec, terrain, m: mujoco.MjModel, qpos: np.ndarray, root: int, where: str) -> list:
+    """The terrain's ramps (convex meshes) and rough ground in ``spec``, with the floor's friction,
+    contact priority and contact bits (``m``: the robot's nominal model, ``qpos``: at rest), on a
+    static body of their own (the robot's geoms keep their ids). The rough ground: a contact tile
+    for each geom the robot stands on at rest (a plane on a mocap body, :mod:`mlpfac.plants.terrain`),
+    which that geom alone touches: its contact bits become its tile's and the ramps' (bits no geom
+    uses), so it no longer touches the floor; and the heightfield, which the rest of the robot
+    touches, where it reaches that low at rest (its chassis's lowest point within 1.5 x the
+    height: the heightfield's test costs a physics step as much as the robot's others). Returns
+    (geom, its tile's body, the geom's reach below its centre) of each tile."""
     floor = [g for g in range(m.ngeom) if m.body_rootid[m.geom_bodyid[g]] != root]
     top = max(floor, key=lambda g: int(m.geom_priority[g])) if floor else None
     look = {
@@ -199,18 +216,61 @@ def _build(spec: mujoco.MjSpec, terrain, m: mujoco.MjModel, root: int) -> None:
         "condim": int(m.geom_condim[top]) if top is not None else 3,
         "rgba": [0.45, 0.42, 0.38, 1.0],
     }
+    ct, ca = (int(m.geom_contype[top]), int(m.geom_conaffinity[top])) if top is not None else (1, 1)
+    feet, low = _feet(m, qpos, root) if terrain.grid is not None else ([], np.inf)
+    used = 0
+    for g in range(m.ngeom):
+        used |= int(m.geom_contype[g]) | int(m.geom_conaffinity[g])
+    free = [1 << k for k in range(31) if not used & (1 << k)]
+    if len(free) < len(feet) + 1:
+        raise ConfigError(
+            f"{where} bumps",
+            f"the robot's model uses {31 - len(free)} of MuJoCo's 31 contact bits; the rough ground needs "
+            f"{len(feet) + 1} free ones (one for each of its {len(feet)} geoms on the floor, one for the ramps)",
+        )
+    ramp_bit = free[-1] if feet else 0
+    hfield = terrain.grid is not None and low < CLEARANCE * terrain.bumps.height
+    ground = spec.worldbody.add_body(name="mlpfac_ground") if terrain.ramps or hfield else None
     for i, r in enumerate(terrain.ramps):
         name = f"mlpfac_ramp_{i}"
         spec.add_mesh(name=name, uservert=ramp_vertices(r).ravel().tolist())
-        spec.worldbody.add_geom(name=name, type=mujoco.mjtGeom.mjGEOM_MESH, meshname=name, **look)
-    if terrain.grid is not None:
+        ground.add_geom(name=name, type=mujoco.mjtGeom.mjGEOM_MESH, meshname=name, contype=ct, conaffinity=ca | ramp_bit,
+                        **look)  # fmt: skip
+    if hfield:
         x0, y0, x1, y1 = terrain.arena
         nrow, ncol = terrain.grid.shape
         height = float(terrain.bumps.height)
-        spec.add_hfield(name="mlpfac_bumps", nrow=nrow, ncol=ncol, size=[(x1 - x0) / 2, (y1 - y0) / 2, height, HFIELD_BASE],
-                        userdata=(terrain.grid / height).ravel().tolist())  # fmt: skip
-        spec.worldbody.add_geom(name="mlpfac_bumps", type=mujoco.mjtGeom.mjGEOM_HFIELD, hfieldname="mlpfac_bumps",
-                                pos=[(x0 + x1) / 2, (y0 + y1) / 2, 0.0], **look)  # fmt: skip
+        spec.add_hfield(name="mlpfac_bumps", nrow=nrow, ncol=ncol, size=[(x1 - x0) / 2, (y1 - y0) / 2, height,
+                        HFIELD_BASE], userdata=(terrain.grid / height).ravel().tolist())  # fmt: skip
+        ground.add_geom(name="mlpfac_bumps", type=mujoco.mjtGeom.mjGEOM_HFIELD, hfieldname="mlpfac_bumps",
+                        pos=[(x0 + x1) / 2, (y0 + y1) / 2, 0.0], contype=ct, conaffinity=ca, **look)  # fmt: skip
+    out = []
+    for i, (g, x, y, reach) in enumerate(feet):  # each tile at first under its geom at rest, flat: the floor
+        tile = spec.worldbody.add_body(name=f"mlpfac_tile_{i}", mocap=True, pos=[x, y, 0.0])
+        tile.add_geom(name=f"mlpfac_tile_{i}", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[TILE_SIZE, TILE_SIZE, 1.0],
+                      contype=0, conaffinity=free[i], group=4, **look)  # fmt: skip
+        spec.geoms[g].contype, spec.geoms[g].conaffinity = free[i] | ramp_bit, 0
+        out.append((g, f"mlpfac_tile_{i}", reach))
+    return out
+
+
+def _feet(m: mujoco.MjModel, qpos: np.ndarray, root: int) -> tuple[list[tuple[int, float, float, float]], float]:
+    """The robot's geoms that touch the floor at rest (its tyres, casters, skids), each with where it
+    is: (x, y) and the height of its centre above the floor (its reach below it); and the lowest
+    point of its other colliding geoms at rest (m)."""
+    d = mujoco.MjData(m)
+    d.qpos[:] = qpos
+    mujoco.mj_forward(m, d)
+    mine = [g for g in range(m.ngeom) if m.body_rootid[m.geom_bodyid[g]] == root]
+    feet = sorted({int(g) for c in d.contact[: d.ncon] for g in (c.geom1, c.geom2) if int(g) in mine})
+    low = np.inf
+    for g in mine:
+        if g not in feet and (m.geom_contype[g] or m.geom_conaffinity[g]):
+            R = d.geom_xmat[g].reshape(3, 3)
+            c, h = m.geom_aabb[g, :3], m.geom_aabb[g, 3:]
+            z = d.geom_xpos[g, 2] + sum(R[2, k] * c[k] for k in range(3)) - sum(abs(R[2, k]) * h[k] for k in range(3))
+            low = min(low, float(z))
+    return [(g, *(float(x) for x in d.geom_xpos[g])) for g in feet], low
 
 
 def ramp_vertices(r) -> np.ndarray:

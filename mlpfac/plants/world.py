@@ -10,10 +10,12 @@ build the same world (:mod:`mlpfac.plants.mujoco_world` builds it into the robot
 drawn is recorded by its digest (:attr:`Terrain.digest`, the scenario's ``[drawn]``).
 
 The rough ground is value noise, arithmetic only (the same bits on every machine): a coarse grid of
-uniform random heights every half wavelength, from a stream of its own (the run's seed and
-``BUMPS_STREAM``), interpolated by a bi-smoothstep onto a grid eight points a wavelength, scaled
-to span [0, height], and flattened to 0 within ``START_PAD`` of the robot's start (blending in over half a wavelength),
-where the robot rests as it settled on the flat floor.
+uniform random heights (nodes) every half wavelength, from a stream of its own (the run's seed and
+``BUMPS_STREAM``), a bi-smoothstep between them, flattened to 0 within ``START_PAD`` of the robot's
+start (blending in over half a wavelength), where the robot rests as it settled on the flat floor,
+and scaled so that its heights, sampled eight points a wavelength (the heightfield), span
+[0, height] (:func:`mlpfac.plants.terrain.bumps_at`, one function for the heightfield, the
+contact tiles and the divergence test).
 """
 
 from __future__ import annotations
@@ -150,23 +152,32 @@ class PlacedRamp:
 @dataclass(frozen=True, eq=False)
 class Terrain:
     """The ground a run drives on (:func:`resolve`): the arena (x0, y0, x1, y1), its ramps where they
-    lie, the rough ground's heights (``grid`` (rows, columns): row i at y = y0 + i dy, column j at
-    x = x0 + j dx; None without bumps), the patches, and the digest of what was drawn."""
+    lie, the patches, and the rough ground: its random ``nodes`` (rows along y, columns along x)
+    and the constants of its surface (:data:`mlpfac.plants.terrain.BUMPS`), its heights sampled on
+    the arena (``grid`` (rows, columns): row i at y = y0 + i dy, column j at x = x0 + j dx, the
+    heightfield), the digest of what was drawn; None without bumps."""
 
     arena: tuple[float, float, float, float]
     ramps: tuple[PlacedRamp, ...] = ()
     patches: tuple[Patch, ...] = ()
+    bumps: Bumps | None = None
+    nodes: np.ndarray | None = None
+    surface: tuple[float, ...] = ()
     grid: np.ndarray | None = None
     cell: tuple[float, float] = (0.0, 0.0)  # (dx, dy) of the grid
-    bumps: Bumps | None = None
     digest: str = ""  # sha256 of the heights drawn ("" without bumps)
+
+    def packed(self) -> tuple[np.ndarray, np.ndarray]:
+        """Its packed form (:func:`mlpfac.plants.terrain.pack`): the world array and the nodes."""
+        from mlpfac.plants.terrain import pack
+
+        return pack(self)
 
     def height(self, x: float, y: float) -> float:
         """The ground's height at (x, y) (m): the rough ground and the ramps, the higher of them."""
-        from mlpfac.plants.terrain import ground_height, pack
+        from mlpfac.plants.terrain import ground_height
 
-        w, g = pack(self)
-        return float(ground_height(w, g, float(x), float(y)))
+        return float(ground_height(*self.packed(), float(x), float(y)))
 
     def as_dict(self) -> dict:
         """What a recording draws of it (plain numbers and arrays): :mod:`mlpfac.log.terrain`."""
@@ -205,8 +216,9 @@ def resolve(world: World, ref: np.ndarray, start: np.ndarray, seed: int, where: 
             )
     if world.bumps is None:
         return Terrain(arena, ramps, world.patches)
-    grid, cell = draw_bumps(world.bumps, arena, start, seed, f"{where} bumps")
-    return Terrain(arena, ramps, world.patches, grid, cell, world.bumps, hashlib.sha256(grid.tobytes()).hexdigest())
+    nodes, surface, grid, cell = draw_bumps(world.bumps, arena, start, seed, f"{where} bumps")
+    digest = hashlib.sha256(nodes.tobytes() + np.array(surface).tobytes() + grid.tobytes()).hexdigest()
+    return Terrain(arena, ramps, world.patches, world.bumps, nodes, surface, grid, cell, digest)
 
 
 def _place(ramp: Ramp, ref: np.ndarray) -> PlacedRamp:
@@ -237,16 +249,12 @@ def terrain_near(r: PlacedRamp, x: float, y: float) -> float:
     return math.sqrt(du * du + dw * dw)
 
 
-def _smooth(t: np.ndarray) -> np.ndarray:
-    """The smoothstep 3 t^2 - 2 t^3 of t in [0, 1]."""
-    return t * t * (3.0 - 2.0 * t)
+def draw_bumps(bumps: Bumps, arena: tuple[float, float, float, float], start: np.ndarray, seed: int, where: str):
+    """The rough ground of ``bumps`` over ``arena`` for ``seed`` (the module's docstring): its nodes,
+    the constants of its surface (:data:`mlpfac.plants.terrain.BUMPS`), its heights sampled on a grid
+    of the arena (the heightfield) and the grid's (dx, dy)."""
+    from mlpfac.plants.terrain import BUMPS, W_HEAD, W_SCALE, sample_bumps
 
-
-def draw_bumps(
-    bumps: Bumps, arena: tuple[float, float, float, float], start: np.ndarray, seed: int, where: str
-) -> tuple[np.ndarray, tuple[float, float]]:
-    """The heights (rows, columns) of ``bumps`` over ``arena`` for ``seed`` and the grid's (dx, dy):
-    value noise (the module's docstring), arithmetic only."""
     x0, y0, x1, y1 = arena
     lam = bumps.wavelength
     ncol = int(math.ceil((x1 - x0) * POINTS_PER_WAVE / lam)) + 1
@@ -261,15 +269,13 @@ def draw_bumps(
     node = 0.5 * lam
     rng = np.random.default_rng(np.random.SeedSequence([BUMPS_STREAM, int(seed)]))
     nodes = rng.random((int(math.ceil((y1 - y0) / node)) + 2, int(math.ceil((x1 - x0) / node)) + 2))
-    u = np.arange(ncol) * dx / node
-    v = np.arange(nrow) * dy / node
-    i, j = np.floor(v).astype(np.int64), np.floor(u).astype(np.int64)
-    tv, tu = _smooth(v - i)[:, None], _smooth(u - j)[None, :]
-    a, b = nodes[i][:, j], nodes[i][:, j + 1]
-    c, d = nodes[i + 1][:, j], nodes[i + 1][:, j + 1]
-    f = (a + (b - a) * tu) + ((c + (d - c) * tu) - (a + (b - a) * tu)) * tv
-    f = (f - f.min()) / (f.max() - f.min())
-    px, py = x0 + np.arange(ncol) * dx - float(start[0]), y0 + np.arange(nrow) * dy - float(start[1])
-    r = np.sqrt(py[:, None] * py[:, None] + px[None, :] * px[None, :])
-    f = f * _smooth(np.clip((r - START_PAD) / node, 0.0, 1.0))
-    return bumps.height * (f / f.max()), (dx, dy)
+    lo, hi = float(nodes.min()), float(nodes.max())
+    surface = [x0, y0, node, lo, hi - lo, 1.0, float(start[0]), float(start[1]), START_PAD, node]
+    w = np.zeros(W_HEAD)
+    grid = np.empty((nrow, ncol))
+    w[list(BUMPS)] = surface
+    sample_bumps(w, nodes, x0, y0, dx, dy, grid)  # at scale 1: the heightfield's top is bumps.height
+    surface[BUMPS.index(W_SCALE)] = bumps.height / float(grid.max())
+    w[list(BUMPS)] = surface
+    sample_bumps(w, nodes, x0, y0, dx, dy, grid)
+    return nodes, tuple(surface), grid, (dx, dy)
