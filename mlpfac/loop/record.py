@@ -38,6 +38,7 @@ class RunRecord:
     labels: dict[str, list[str]] = field(default_factory=dict)  # per-component names of telemetry
     sim_time_s: float = 0.0  # physical time simulated by the plant
     wall_time_s: float = 0.0
+    world: dict = field(default_factory=dict)  # the terrain driven on, as drawn (mlpfac.plants.world.Terrain.as_dict)
 
     @classmethod
     def allocate(cls, scenario: str, controller: str, seed: int, T: float, N: int) -> RunRecord:

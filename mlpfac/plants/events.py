@@ -234,8 +234,10 @@ class Force(Event):
     def validate(self) -> None:
         if self.frame is not None and self.frame not in FRAMES:
             raise ConfigError("frame", f"choose 'world' or 'robot', got {self.frame!r}")
-        if not any((self.fx, self.fy, self.torque_z, self.std)):
-            raise ConfigError("", "a force event needs 'fx', 'fy', 'torque_z' or 'std' (not all zero)")
+        if all(x is None for x in (self.fx, self.fy, self.torque_z, self.std)):
+            raise ConfigError(
+                "", "a force event needs 'fx', 'fy', 'torque_z' or 'std' (0 is no force: a point of an axis)"
+            )
         if self.period is not None and self.std is not None:
             raise ConfigError("period", "a force is periodic or noise ('std'), not both")
 

@@ -41,6 +41,7 @@ FORCE_COLUMNS = 5  # a force schedule's row: world (fx, fy), robot (fx, fy), tor
 HFIELD_BASE = 0.05  # m of the heightfield's base below the floor (MuJoCo's size[3])
 TILE_SIZE = 0.5  # m: half the width a contact tile is drawn (a plane: it moves with its geom)
 CLEARANCE = 1.5  # the heightfield collides where the robot's other geoms reach within this x its height at rest
+SPRUNG_S = 0.2  # s: the time constant of a sprung caster's contact (MuJoCo's is 0.02 s: rigid)
 
 
 class MujocoWorld:
@@ -59,22 +60,26 @@ class MujocoWorld:
         checked against the robot first, and apply the ``force`` events of ``events`` over a run of
         ``steps`` control steps from each reset on."""
         self._forces, self._steps = tuple(events), int(steps)
-        tiles = ()
+        tiles, floor = (), 0.0
         if terrain is not None:
+            m0, rest = self.robot.model, self.robot.qpos_rest
+            floor = _floor(m0, rest, self._root)
+            feet, low = _feet(m0, rest, self._root, floor)
+            site = self.robot.site_rest[0]
+            self._reach = max(math.sqrt((x - site[0]) ** 2 + (y - site[1]) ** 2) + r for _, x, y, r in feet)
             self._check_terrain(terrain, where)
             spec = self._spec_nominal.copy()
-            tiles = _build(spec, terrain, self.robot.model, self.robot.qpos_rest, self._root, where)
+            tiles = _build(spec, terrain, m0, self._root, floor, feet, low, self._tyres, where)
             self._spec_nominal, self._spec = spec, spec.copy()
             self.model = spec.compile()
             self.data = mujoco.MjData(self.model)
-            self._reach = _reach(self.robot.model, self.robot.qpos_rest, self._root, self._site)
             body = lambda name: mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_BODY, name)  # noqa: E731
             tiles = [(g, int(self.model.body_mocapid[body(b)]), reach) for g, b, reach in tiles]
         self.terrain = terrain
         has_force = any(isinstance(ev, Force) for ev in self._forces)
         if terrain is not None or has_force:
             mus = [float(self.model.geom_friction[g, 0]) for g in self._tyres]
-            self._wld, self._nodes = W.pack(terrain, self._tyres, mus, tiles)
+            self._wld, self._nodes = W.pack(terrain, self._tyres, mus, tiles, floor)
         self._changed = True  # the next reset starts from the nominal scene, with the world
 
     def _check_terrain(self, terrain, where: str) -> None:
@@ -91,6 +96,13 @@ class MujocoWorld:
             )
         if terrain.patches:
             self._tyres_take_friction(f"{where} patches")
+        for i, ramp in enumerate(terrain.ramps):
+            if ramp.near(*terrain.start) < self._reach:
+                raise ConfigError(
+                    f"{where} ramps #{i + 1} at",
+                    f"the ramp lies under the robot's wheels or casters at its start (within {self._reach:.2g} m of it; "
+                    "a run starts on the flat floor, where the robot settled): place it further along the path",
+                )
         m0, (tl, tr) = self.robot.model, self._torque_max
         mass = float(m0.body_subtreemass[self._root])
         g = float(np.sqrt(np.sum(m0.opt.gravity * m0.opt.gravity)))
@@ -198,18 +210,24 @@ class MujocoWorld:
         return {} if self.terrain is None else self.terrain.as_dict()
 
 
-def _build(spec: mujoco.MjSpec, terrain, m: mujoco.MjModel, qpos: np.ndarray, root: int, where: str) -> list:
+def _build(
+    spec: mujoco.MjSpec, terrain, m: mujoco.MjModel, root: int, z0: float, feet: list, low: float, tyres, where: str
+) -> list:
     """The terrain's ramps (convex meshes) and rough ground in ``spec``, with the floor's friction,
-    contact priority and contact bits (``m``: the robot's nominal model, ``qpos``: at rest), on a
-    static body of their own (the robot's geoms keep their ids). The rough ground: a contact tile
-    for each geom the robot stands on at rest (a plane on a mocap body, :mod:`mlpfac.plants.terrain`),
-    which that geom alone touches: its contact bits become its tile's and the ramps' (bits no geom
-    uses), so it no longer touches the floor; and the heightfield, which the rest of the robot
-    touches, where it reaches that low at rest (its chassis's lowest point within 1.5 x the
-    height: the heightfield's test costs a physics step as much as the robot's others). Returns
-    (geom, its tile's body, the geom's reach below its centre) of each tile."""
-    floor = [g for g in range(m.ngeom) if m.body_rootid[m.geom_bodyid[g]] != root]
-    top = max(floor, key=lambda g: int(m.geom_priority[g])) if floor else None
+    contact priority and contact bits (``m``: the robot's nominal model), on a static body of their
+    own (the robot's geoms keep their ids) at the floor's height ``z0``. ``feet`` (geom, x, y, reach)
+    are the robot's geoms on the floor at rest, ``low`` how high the lowest of its others is. The
+    rough ground: a contact tile for each foot (a plane on a mocap body,
+    :mod:`mlpfac.plants.terrain`), which that foot alone touches: its contact bits become its tile's
+    and the ramps' (bits no geom uses), so it no longer touches the floor; and the heightfield, which
+    the rest of the robot touches, where it reaches that low at rest (within ``CLEARANCE`` x the
+    height: the heightfield's test costs a physics step as much as the robot's others). A robot on
+    more than three feet (casters ahead of and behind its wheels, which a rigid chassis cannot keep
+    all on uneven ground) has its casters sprung: their contacts soft (MuJoCo's solref, time
+    constant ``SPRUNG_S``), as such robots' casters are. Returns (foot, its tile's body, its
+    reach below its centre) of each tile."""
+    scene = [g for g in range(m.ngeom) if m.body_rootid[m.geom_bodyid[g]] != root]
+    top = max(scene, key=lambda g: int(m.geom_priority[g])) if scene else None
     look = {
         "priority": floor_priority(m, root),
         "friction": m.geom_friction[top].copy() if top is not None else [1.0, 0.005, 0.0001],
@@ -217,7 +235,12 @@ def _build(spec: mujoco.MjSpec, terrain, m: mujoco.MjModel, qpos: np.ndarray, ro
         "rgba": [0.45, 0.42, 0.38, 1.0],
     }
     ct, ca = (int(m.geom_contype[top]), int(m.geom_conaffinity[top])) if top is not None else (1, 1)
-    feet, low = _feet(m, qpos, root) if terrain.grid is not None else ([], np.inf)
+    if len(feet) > 3:  # a chassis on more than three points: its casters sprung
+        for g, *_ in feet:
+            if g not in tyres:
+                spec.geoms[g].solref = [SPRUNG_S, 1.0]
+    if terrain.grid is None:
+        feet = []
     used = 0
     for g in range(m.ngeom):
         used |= int(m.geom_contype[g]) | int(m.geom_conaffinity[g])
@@ -230,10 +253,10 @@ def _build(spec: mujoco.MjSpec, terrain, m: mujoco.MjModel, qpos: np.ndarray, ro
         )
     ramp_bit = free[-1] if feet else 0
     hfield = terrain.grid is not None and low < CLEARANCE * terrain.bumps.height
-    ground = spec.worldbody.add_body(name="mlpfac_ground") if terrain.ramps or hfield else None
+    ground = spec.worldbody.add_body(name="mlpfac_ground", pos=[0.0, 0.0, z0]) if terrain.ramps or hfield else None
     for i, r in enumerate(terrain.ramps):
         name = f"mlpfac_ramp_{i}"
-        spec.add_mesh(name=name, uservert=ramp_vertices(r).ravel().tolist())
+        spec.add_mesh(name=name, uservert=r.corners().ravel().tolist())
         ground.add_geom(name=name, type=mujoco.mjtGeom.mjGEOM_MESH, meshname=name, contype=ct, conaffinity=ca | ramp_bit,
                         **look)  # fmt: skip
     if hfield:
@@ -246,7 +269,7 @@ def _build(spec: mujoco.MjSpec, terrain, m: mujoco.MjModel, qpos: np.ndarray, ro
                         pos=[(x0 + x1) / 2, (y0 + y1) / 2, 0.0], contype=ct, conaffinity=ca, **look)  # fmt: skip
     out = []
     for i, (g, x, y, reach) in enumerate(feet):  # each tile at first under its geom at rest, flat: the floor
-        tile = spec.worldbody.add_body(name=f"mlpfac_tile_{i}", mocap=True, pos=[x, y, 0.0])
+        tile = spec.worldbody.add_body(name=f"mlpfac_tile_{i}", mocap=True, pos=[x, y, z0])
         tile.add_geom(name=f"mlpfac_tile_{i}", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[TILE_SIZE, TILE_SIZE, 1.0],
                       contype=0, conaffinity=free[i], group=4, **look)  # fmt: skip
         spec.geoms[g].contype, spec.geoms[g].conaffinity = free[i] | ramp_bit, 0
@@ -254,13 +277,28 @@ def _build(spec: mujoco.MjSpec, terrain, m: mujoco.MjModel, qpos: np.ndarray, ro
     return out
 
 
-def _feet(m: mujoco.MjModel, qpos: np.ndarray, root: int) -> tuple[list[tuple[int, float, float, float]], float]:
-    """The robot's geoms that touch the floor at rest (its tyres, casters, skids), each with where it
-    is: (x, y) and the height of its centre above the floor (its reach below it); and the lowest
-    point of its other colliding geoms at rest (m)."""
+def _floor(m: mujoco.MjModel, qpos: np.ndarray, root: int) -> float:
+    """The floor's height under the robot at rest: where its contacts with the scene are (m)."""
+    d = _at_rest(m, qpos)
+    mine = {g for g in range(m.ngeom) if m.body_rootid[m.geom_bodyid[g]] == root}
+    z = [float(c.pos[2]) for c in d.contact[: d.ncon] if (int(c.geom1) in mine) != (int(c.geom2) in mine)]
+    return sum(z) / len(z) if z else 0.0
+
+
+def _at_rest(m: mujoco.MjModel, qpos: np.ndarray) -> mujoco.MjData:
     d = mujoco.MjData(m)
     d.qpos[:] = qpos
     mujoco.mj_forward(m, d)
+    return d
+
+
+def _feet(
+    m: mujoco.MjModel, qpos: np.ndarray, root: int, floor: float
+) -> tuple[list[tuple[int, float, float, float]], float]:
+    """The robot's geoms that touch the floor at rest (its tyres, casters, skids), each with where it
+    is: (x, y) and the height of its centre above the floor (its reach below it); and how high above
+    the floor the lowest point of its other colliding geoms is at rest (m)."""
+    d = _at_rest(m, qpos)
     mine = [g for g in range(m.ngeom) if m.body_rootid[m.geom_bodyid[g]] == root]
     feet = sorted({int(g) for c in d.contact[: d.ncon] for g in (c.geom1, c.geom2) if int(g) in mine})
     low = np.inf
@@ -269,34 +307,9 @@ def _feet(m: mujoco.MjModel, qpos: np.ndarray, root: int) -> tuple[list[tuple[in
             R = d.geom_xmat[g].reshape(3, 3)
             c, h = m.geom_aabb[g, :3], m.geom_aabb[g, 3:]
             z = d.geom_xpos[g, 2] + sum(R[2, k] * c[k] for k in range(3)) - sum(abs(R[2, k]) * h[k] for k in range(3))
-            low = min(low, float(z))
-    return [(g, *(float(x) for x in d.geom_xpos[g])) for g in feet], low
-
-
-def ramp_vertices(r) -> np.ndarray:
-    """The 8 corners (8, 3) of a placed ramp's prism in the world: its foot, the top's two edges and
-    its end, each across its width, at the floor and at their heights."""
-    L = r.up + r.top + r.down
-    profile = [(0.0, 0.0), (r.up, r.height), (r.up + r.top, r.height), (L, 0.0)]
-    out = []
-    for along, z in profile:
-        for across in (-0.5 * r.width, 0.5 * r.width):
-            out.append([r.x + along * r.c - across * r.s, r.y + along * r.s + across * r.c, z])
-    return np.array(out)
-
-
-def _reach(m: mujoco.MjModel, qpos: np.ndarray, root: int, site: int) -> float:
-    """How far the robot's colliding geoms reach from its pose frame, across the floor (m)."""
-    d = mujoco.MjData(m)
-    d.qpos[:] = qpos
-    mujoco.mj_kinematics(m, d)
-    p = d.site_xpos[site]
-    reach = 0.0
-    for g in range(m.ngeom):
-        if m.body_rootid[m.geom_bodyid[g]] == root and (m.geom_contype[g] or m.geom_conaffinity[g]):
-            dx, dy = d.geom_xpos[g, 0] - p[0], d.geom_xpos[g, 1] - p[1]
-            reach = max(reach, float(np.sqrt(dx * dx + dy * dy)) + float(m.geom_rbound[g]))
-    return reach
+            low = min(low, float(z) - floor)
+    x = d.geom_xpos
+    return [(g, float(x[g, 0]), float(x[g, 1]), float(x[g, 2]) - floor) for g in feet], low
 
 
 def _on_wheels(m: mujoco.MjModel, qpos: np.ndarray, tyres, weight: float) -> float:

@@ -35,18 +35,19 @@ from mlpfac.jit import kernel
 # geom it carries, its mocap index, the geom's reach below its centre)
 W_NRAMP, W_NPATCH, W_NTYRE, W_NTILE, W_STEP = range(5)
 W_BUMPS, W_BX0, W_BY0, W_BS, W_FMIN, W_FRANGE, W_SCALE, W_PADX, W_PADY, W_PAD0, W_PADW = range(5, 16)
-W_HEAD, W_RAMP, W_PATCH, W_TYRE, W_TILE = 16, 9, 4, 2, 3
+W_Z0 = 16  # the floor's height in the world (a Menagerie scene's may not be 0): the ground's heights are above it
+W_HEAD, W_RAMP, W_PATCH, W_TYRE, W_TILE = 17, 9, 4, 2, 3
 BUMPS = (W_BX0, W_BY0, W_BS, W_FMIN, W_FRANGE, W_SCALE, W_PADX, W_PADY, W_PAD0, W_PADW)
 
 
-def pack(terrain=None, tyres=(), mus=(), tiles=()) -> tuple[np.ndarray, np.ndarray]:
+def pack(terrain=None, tyres=(), mus=(), tiles=(), floor: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """The packed world of a :class:`~mlpfac.plants.world.Terrain` (or None), the tyres' geom ids and
-    friction off the patches, and the contact tiles (geom, mocap index, reach); and
-    the rough ground's nodes ((0, 0) without bumps)."""
+    friction off the patches, the contact tiles (geom, mocap index, reach) and the floor's height;
+    and the rough ground's nodes ((0, 0) without bumps)."""
     ramps = () if terrain is None else terrain.ramps
     patches = () if terrain is None else terrain.patches
     w = np.zeros(W_HEAD + W_RAMP * len(ramps) + W_PATCH * len(patches) + W_TYRE * len(tyres) + W_TILE * len(tiles))
-    w[[W_NRAMP, W_NPATCH, W_NTYRE, W_NTILE]] = len(ramps), len(patches), len(tyres), len(tiles)
+    w[[W_NRAMP, W_NPATCH, W_NTYRE, W_NTILE, W_Z0]] = len(ramps), len(patches), len(tyres), len(tiles), floor
     o = W_HEAD
     for r in ramps:
         w[o : o + W_RAMP] = (r.x, r.y, r.c, r.s, r.up, r.top, r.down, r.height, r.width)
@@ -128,8 +129,8 @@ def sample_bumps(w, nodes, x0, y0, dx, dy, out):
 
 @kernel()
 def ground_at(w, nodes, x, y):
-    """The ground's height at (x, y) (m): the rough ground and the ramps (up, top, down across their
-    width), the highest of them."""
+    """The ground's height at (x, y) above the floor (m): the rough ground and the ramps (up, top,
+    down across their width), the highest of them."""
     h = 0.0
     if w[W_BUMPS] != 0.0:
         h = bumps_at(w, nodes, x, y)[0]
@@ -171,7 +172,7 @@ def place_tiles(w, nodes, geom_xpos, mocap_pos, mocap_quat):
         h, hx, hy = bumps_at(w, nodes, x, y)
         n = 1.0 / math.sqrt(1.0 + hx * hx + hy * hy)
         nx, ny, nz = -hx * n, -hy * n, n
-        mocap_pos[3 * m], mocap_pos[3 * m + 1], mocap_pos[3 * m + 2] = x, y, h
+        mocap_pos[3 * m], mocap_pos[3 * m + 1], mocap_pos[3 * m + 2] = x, y, w[W_Z0] + h
         q = 1.0 / math.sqrt(2.0 * (1.0 + nz))  # the turn of z onto the normal: (1 + nz, z x n) / |.|
         mocap_quat[4 * m], mocap_quat[4 * m + 1] = (1.0 + nz) * q, -ny * q
         mocap_quat[4 * m + 2], mocap_quat[4 * m + 3] = nx * q, 0.0

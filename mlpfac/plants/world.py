@@ -36,7 +36,7 @@ BUMPS_HEIGHT_MAX = 0.2  # m of rough ground, top to bottom, at most
 WAVELENGTH_MIN, WAVELENGTH_MAX = 0.01, 10.0  # m between crests of the rough ground
 RAMP_WIDTH = 1.2  # m across the path, where a ramp does not say
 ARENA_MARGIN = 1.0  # m: the arena is the reference's bounding box and this much around it (the viewer's floor)
-START_PAD = 0.5  # m: the rough ground is flat within this of the robot's start (a ramp starts beyond it)
+START_PAD = 0.5  # m: the rough ground is flat within this of the robot's start
 GRID_POINTS_MAX = 4_000_000  # points of a heightfield, at most
 POINTS_PER_WAVE = 8  # heightfield points a wavelength
 BUMPS_STREAM = 0x62756D70  # tags the rough ground's stream apart from every other stream of a run
@@ -148,16 +148,40 @@ class PlacedRamp:
     height: float
     width: float
 
+    def corners(self) -> np.ndarray:
+        """Its prism's 8 corners (8, 3), above the floor: its foot, the top's two edges and its end
+        (along it), each at its two sides (across it), at the floor and at their heights."""
+        profile = [
+            (0.0, 0.0),
+            (self.up, self.height),
+            (self.up + self.top, self.height),
+            (self.up + self.top + self.down, 0.0),
+        ]
+        out = []
+        for along, z in profile:
+            for across in (-0.5 * self.width, 0.5 * self.width):
+                out.append([self.x + along * self.c - across * self.s, self.y + along * self.s + across * self.c, z])
+        return np.array(out)
+
+    def near(self, x: float, y: float) -> float:
+        """How far (x, y) is from its footprint (m; 0 on it)."""
+        u = (x - self.x) * self.c + (y - self.y) * self.s
+        w = -(x - self.x) * self.s + (y - self.y) * self.c
+        du = max(0.0, -u, u - (self.up + self.top + self.down))
+        dw = max(0.0, abs(w) - 0.5 * self.width)
+        return math.sqrt(du * du + dw * dw)
+
 
 @dataclass(frozen=True, eq=False)
 class Terrain:
-    """The ground a run drives on (:func:`resolve`): the arena (x0, y0, x1, y1), its ramps where they
-    lie, the patches, and the rough ground: its random ``nodes`` (rows along y, columns along x)
+    """The ground a run drives on (:func:`resolve`): the arena (x0, y0, x1, y1), where the robot
+    starts, its ramps where they lie, the patches, and the rough ground: its random ``nodes`` (rows along y, columns along x)
     and the constants of its surface (:data:`mlpfac.plants.terrain.BUMPS`), its heights sampled on
     the arena (``grid`` (rows, columns): row i at y = y0 + i dy, column j at x = x0 + j dx, the
     heightfield), the digest of what was drawn; None without bumps."""
 
     arena: tuple[float, float, float, float]
+    start: tuple[float, float]  # where the robot starts (x, y): on the flat floor
     ramps: tuple[PlacedRamp, ...] = ()
     patches: tuple[Patch, ...] = ()
     bumps: Bumps | None = None
@@ -183,17 +207,19 @@ class Terrain:
         """What a recording draws of it (plain numbers and arrays): :mod:`mlpfac.log.terrain`."""
         return {
             "arena": list(self.arena),
-            "ramps": [vars(r).copy() for r in self.ramps],
+            "ramps": [r.corners() for r in self.ramps],
             "patches": [{"x": p.x, "y": p.y, "radius": p.radius, "mu": p.mu} for p in self.patches],
             "grid": None if self.grid is None else self.grid.astype(np.float32),
             "cell": list(self.cell),
+            "packed": self.packed(),  # the ground's heights, as the plant measures them
         }
 
 
 def resolve(world: World, ref: np.ndarray, start: np.ndarray, seed: int, where: str) -> Terrain | None:
     """The terrain of ``world`` for a run: ``ref`` (N + 1, 5) the reference over the whole run,
     ``start`` the robot's start (x, y), ``seed`` the run's. None for an empty world. A patch outside
-    the arena or a ramp under the robot's start is a ConfigError naming it (``where``: ``[world]``)."""
+    the arena is a ConfigError naming it (``where``: ``[world]``; a ramp under the robot's start is
+    the plant's, which knows how far the robot reaches)."""
     if not world:
         return None
     xy = ref[:, :2]
@@ -207,18 +233,12 @@ def resolve(world: World, ref: np.ndarray, start: np.ndarray, seed: int, where: 
                 f"{arena[3]:.3g} m (the reference's bounding box and {ARENA_MARGIN:g} m around it)",
             )
     ramps = tuple(_place(r, ref) for r in world.ramps)
-    for i, r in enumerate(ramps):
-        if terrain_near(r, float(start[0]), float(start[1])) < START_PAD:
-            raise ConfigError(
-                f"{where} ramps #{i + 1} at",
-                f"the ramp lies within {START_PAD:g} m of the robot's start (a run starts on the flat floor): "
-                "place it further along the path",
-            )
+    at = (float(start[0]), float(start[1]))
     if world.bumps is None:
-        return Terrain(arena, ramps, world.patches)
+        return Terrain(arena, at, ramps, world.patches)
     nodes, surface, grid, cell = draw_bumps(world.bumps, arena, start, seed, f"{where} bumps")
     digest = hashlib.sha256(nodes.tobytes() + np.array(surface).tobytes() + grid.tobytes()).hexdigest()
-    return Terrain(arena, ramps, world.patches, world.bumps, nodes, surface, grid, cell, digest)
+    return Terrain(arena, at, ramps, world.patches, world.bumps, nodes, surface, grid, cell, digest)
 
 
 def _place(ramp: Ramp, ref: np.ndarray) -> PlacedRamp:
@@ -238,15 +258,6 @@ def _place(ramp: Ramp, ref: np.ndarray) -> PlacedRamp:
     third = ramp.length / 3.0
     width = RAMP_WIDTH if ramp.width is None else ramp.width
     return PlacedRamp(x, y, cos(th), sin(th), third, third, ramp.length - 2.0 * third, ramp.height, width)
-
-
-def terrain_near(r: PlacedRamp, x: float, y: float) -> float:
-    """How far (x, y) is from ramp ``r``'s footprint (m; 0 on it)."""
-    u = (x - r.x) * r.c + (y - r.y) * r.s
-    w = -(x - r.x) * r.s + (y - r.y) * r.c
-    du = max(0.0, -u, u - (r.up + r.top + r.down))
-    dw = max(0.0, abs(w) - 0.5 * r.width)
-    return math.sqrt(du * du + dw * dw)
 
 
 def draw_bumps(bumps: Bumps, arena: tuple[float, float, float, float], start: np.ndarray, seed: int, where: str):
