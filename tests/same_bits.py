@@ -65,7 +65,8 @@ ROOT = HERE.parent
 
 # (scenario, controllers, duration, --vary): short runs that reach every controller (None: every
 # shipped one, on FALLBACK those the kinematic model cannot run), our robot, the
-# cart, torque motors, an event (moved early by a --vary point) and a drawn plant
+# cart, torque motors, an event (moved early by a --vary point), a drawn plant, rough ground and a
+# force of noise
 RUNS = [
     ("paper", None, 3.0, ["events.0.time=2.5"]),
     ("eight-payload", ("corradini", "kanayama", "adaptive", "adaptive-ukf", "oracle"), 1.0, ["events.0.time=0.6"]),
@@ -73,6 +74,8 @@ RUNS = [
     ("eight-torque", ("corradini", "adaptive-input-delay"), 0.6, []),
     ("eight-sensor-delay", ("oracle", "oracle-kanayama"), 1.0, ["events.0.time=0.5"]),
     ("cart-sensor-delay", ("kanayama", "adaptive-real-fast"), 1.0, ["events.0.time=0.5"]),
+    ("eight-bumps", ("kanayama",), 1.0, []),  # rough ground drawn per seed, carried by contact tiles
+    ("eight-push", ("corradini",), 1.0, ["events.0.time=0.3", "events.0.std=5.0", "events.0.duration=0.5"]),  # noise
 ]
 FALLBACK = "eight-torque"  # where a shipped controller runs that the kinematic model cannot (torque level)
 MENAGERIE = [("tiago-friction", ("corradini", "adaptive"), 1.0, ["events.0.time=0.5"])]

@@ -56,3 +56,14 @@ class RunRecord:
             e_true=nan((N, 3), np.nan),
             u=nan((N, 2), np.nan),
         )
+
+
+def force_windows(events, end: float) -> list[tuple[float, float]]:
+    """When a ``force`` event of ``events`` (a record's or a metrics.json's) acts: (start, stop) in
+    s, a push for its duration, a force that stays until ``end``."""
+    out = []
+    for ev in events:
+        if isinstance(ev, dict) and ev.get("kind") == "force":
+            t, d = float(ev["time"]), (ev.get("params") or {}).get("duration")
+            out.append((t, min(end, t + float(d)) if d is not None else end))
+    return out

@@ -219,8 +219,8 @@ class Force(Event):
     left, turned with the robot every control step). From ``time`` on for ``duration`` s (a push;
     omitted: it stays, a tow or a wind); with ``period`` a sinusoid of amplitude (fx, fy, torque_z)
     starting at zero; with ``std`` white noise of that standard deviation (N) on fx and fy, drawn
-    for each control step from a stream of the run's seed and the event's own (:meth:`schedule`),
-    held for the step, added to (fx, fy)."""
+    for each control step from a stream of its own (the run's seed and the event's place), held for
+    the step, added to (fx, fy)."""
 
     kind: ClassVar[str] = "force"
     fx: float | None = param(float, required=False, minimum=-FORCE_MAX, maximum=FORCE_MAX)

@@ -262,7 +262,7 @@ def _build(
     if hfield:
         x0, y0, x1, y1 = terrain.arena
         nrow, ncol = terrain.grid.shape
-        height = float(terrain.bumps.height)
+        height = float(terrain.grid.max())  # the heightfield's top: MuJoCo scales its data to [0, 1]
         spec.add_hfield(name="mlpfac_bumps", nrow=nrow, ncol=ncol, size=[(x1 - x0) / 2, (y1 - y0) / 2, height,
                         HFIELD_BASE], userdata=(terrain.grid / height).ravel().tolist())  # fmt: skip
         ground.add_geom(name="mlpfac_bumps", type=mujoco.mjtGeom.mjGEOM_HFIELD, hfieldname="mlpfac_bumps",

@@ -9,13 +9,13 @@ arena. Every plant of a run, and the probes a run builds, is given that one terr
 build the same world (:mod:`mlpfac.plants.mujoco_world` builds it into the robot's scene). What is
 drawn is recorded by its digest (:attr:`Terrain.digest`, the scenario's ``[drawn]``).
 
-The rough ground is value noise, arithmetic only (the same bits on every machine): a coarse grid of
-uniform random heights (nodes) every half wavelength, from a stream of its own (the run's seed and
-``BUMPS_STREAM``), a bi-smoothstep between them, flattened to 0 within ``START_PAD`` of the robot's
-start (blending in over half a wavelength), where the robot rests as it settled on the flat floor,
-and scaled so that its heights, sampled eight points a wavelength (the heightfield), span
-[0, height] (:func:`mlpfac.plants.terrain.bumps_at`, one function for the heightfield, the
-contact tiles and the divergence test).
+The rough ground is value noise, arithmetic only (the same bits on every machine): uniform random
+heights in [0, height) on a lattice of nodes every half wavelength, fixed in the world and drawn
+from streams of their own (the run's seed, ``BUMPS_STREAM``, the node's row: the same ground under
+a shorter run), a bi-smoothstep between them, flattened to 0 within ``START_PAD`` of the robot's
+start (blending in over half a wavelength), where the robot rests as it settled on the flat floor
+(:func:`mlpfac.plants.terrain.bumps_at`, one function for the heightfield sampled eight points a
+wavelength, the contact tiles and the divergence test).
 """
 
 from __future__ import annotations
@@ -39,7 +39,9 @@ ARENA_MARGIN = 1.0  # m: the arena is the reference's bounding box and this much
 START_PAD = 0.5  # m: the rough ground is flat within this of the robot's start
 GRID_POINTS_MAX = 4_000_000  # points of a heightfield, at most
 POINTS_PER_WAVE = 8  # heightfield points a wavelength
-BUMPS_STREAM = 0x62756D70  # tags the rough ground's stream apart from every other stream of a run
+BUMPS_STREAM = 0x62756D70  # tags the rough ground's streams apart from every other stream of a run
+NODE0 = 2**31  # a node's row and column counted from here (the streams take whole numbers >= 0)
+PROBE = 8  # the digest of a draw: the nodes within this many of the world's origin
 # The largest curvature of the bi-smoothstep surface of span h over nodes s apart: 6 h / s^2 along an
 # axis and (3 / 2)^2 h / s^2 across, so at most 8.25 h / s^2; with s = wavelength / 2, 33 h / wavelength^2.
 CURVATURE = 33.0
@@ -53,7 +55,7 @@ class Ramp:
     at: float = param(float, minimum=0.0, maximum=1.0)  # where its foot is: a share of the path's length over the run
     height: float = param(float, positive=True, maximum=RAMP_HEIGHT_MAX)  # m, of its flat top
     length: float = param(float, positive=True, maximum=LENGTH_MAX)  # m along the path: up, top and down
-    width: float | None = param(float, required=False, positive=True, maximum=LENGTH_MAX)  # m across it (1.2)
+    width: float | None = param(float, required=False, positive=True, maximum=LENGTH_MAX)  # m across it (none: 1.2 m)
 
     def __post_init__(self) -> None:
         check_params(self)
@@ -70,7 +72,7 @@ class Ramp:
 class Bumps:
     """Rough ground over the whole arena: a heightfield drawn per seed (the module's docstring)."""
 
-    height: float = param(float, positive=True, maximum=BUMPS_HEIGHT_MAX)  # m from its lowest to its highest point
+    height: float = param(float, positive=True, maximum=BUMPS_HEIGHT_MAX)  # m: heights drawn in [0, height)
     wavelength: float = param(float, minimum=WAVELENGTH_MIN, maximum=WAVELENGTH_MAX)  # m between crests
 
     def __post_init__(self) -> None:
@@ -89,7 +91,7 @@ class Patch:
     tyre touching the floor inside it slides on ``mu``."""
 
     x: float = param(float, minimum=-1e6, maximum=1e6)  # m, its centre in the world
-    y: float = param(float, minimum=-1e6, maximum=1e6)
+    y: float = param(float, minimum=-1e6, maximum=1e6)  # m; inside the arena (the path's bounding box and 1 m)
     radius: float = param(float, positive=True, maximum=LENGTH_MAX)  # m
     mu: float = param(float, minimum=MU_MIN, maximum=MU_MAX)  # the tyre's sliding friction on it
 
@@ -189,7 +191,7 @@ class Terrain:
     surface: tuple[float, ...] = ()
     grid: np.ndarray | None = None
     cell: tuple[float, float] = (0.0, 0.0)  # (dx, dy) of the grid
-    digest: str = ""  # sha256 of the heights drawn ("" without bumps)
+    digest: str = ""  # sha256 of the draw (draw_bumps; "" without bumps)
 
     def packed(self) -> tuple[np.ndarray, np.ndarray]:
         """Its packed form (:func:`mlpfac.plants.terrain.pack`): the world array and the nodes."""
@@ -236,8 +238,7 @@ def resolve(world: World, ref: np.ndarray, start: np.ndarray, seed: int, where: 
     at = (float(start[0]), float(start[1]))
     if world.bumps is None:
         return Terrain(arena, at, ramps, world.patches)
-    nodes, surface, grid, cell = draw_bumps(world.bumps, arena, start, seed, f"{where} bumps")
-    digest = hashlib.sha256(nodes.tobytes() + np.array(surface).tobytes() + grid.tobytes()).hexdigest()
+    nodes, surface, grid, cell, digest = draw_bumps(world.bumps, arena, start, seed, f"{where} bumps")
     return Terrain(arena, at, ramps, world.patches, world.bumps, nodes, surface, grid, cell, digest)
 
 
@@ -260,11 +261,26 @@ def _place(ramp: Ramp, ref: np.ndarray) -> PlacedRamp:
     return PlacedRamp(x, y, cos(th), sin(th), third, third, ramp.length - 2.0 * third, ramp.height, width)
 
 
+def node_heights(seed: int, rows: range, cols: range) -> np.ndarray:
+    """The rough ground's random node heights, uniform on [0, 1), at the nodes (i, j) of ``rows`` x
+    ``cols`` (node (i, j) at (j, i) x half a wavelength from the world's origin): each row its own
+    stream (the seed, ``BUMPS_STREAM``, the row), advanced to the row's first column, so that a node's
+    height is the same whatever the arena (a shorter run, a slower robot: the same ground)."""
+    out = np.empty((len(rows), len(cols)))
+    for k, i in enumerate(rows):
+        bits = np.random.PCG64(np.random.SeedSequence([BUMPS_STREAM, int(seed), i + NODE0]))
+        bits.advance(cols.start + NODE0)
+        out[k] = np.random.Generator(bits).random(len(cols))
+    return out
+
+
 def draw_bumps(bumps: Bumps, arena: tuple[float, float, float, float], start: np.ndarray, seed: int, where: str):
-    """The rough ground of ``bumps`` over ``arena`` for ``seed`` (the module's docstring): its nodes,
-    the constants of its surface (:data:`mlpfac.plants.terrain.BUMPS`), its heights sampled on a grid
-    of the arena (the heightfield) and the grid's (dx, dy)."""
-    from mlpfac.plants.terrain import BUMPS, W_HEAD, W_SCALE, sample_bumps
+    """The rough ground of ``bumps`` over ``arena`` for ``seed`` (the module's docstring): its nodes
+    (:func:`node_heights`, every node the arena's surface needs), the constants of its surface
+    (:data:`mlpfac.plants.terrain.BUMPS`), its heights sampled on a grid of the arena (the
+    heightfield), the grid's (dx, dy) and the digest of the draw (of the nodes about the world's
+    origin, and the wavelength and height: the arena's nodes are the same)."""
+    from mlpfac.plants.terrain import BUMPS, W_HEAD, sample_bumps
 
     x0, y0, x1, y1 = arena
     lam = bumps.wavelength
@@ -278,15 +294,14 @@ def draw_bumps(bumps: Bumps, arena: tuple[float, float, float, float], start: np
         )
     dx, dy = (x1 - x0) / (ncol - 1), (y1 - y0) / (nrow - 1)
     node = 0.5 * lam
-    rng = np.random.default_rng(np.random.SeedSequence([BUMPS_STREAM, int(seed)]))
-    nodes = rng.random((int(math.ceil((y1 - y0) / node)) + 2, int(math.ceil((x1 - x0) / node)) + 2))
-    lo, hi = float(nodes.min()), float(nodes.max())
-    surface = [x0, y0, node, lo, hi - lo, 1.0, float(start[0]), float(start[1]), START_PAD, node]
+    i0, j0 = int(math.floor(y0 / node)), int(math.floor(x0 / node))
+    rows, cols = range(i0, int(math.ceil(y1 / node)) + 2), range(j0, int(math.ceil(x1 / node)) + 2)
+    nodes = node_heights(seed, rows, cols)
+    surface = (j0 * node, i0 * node, node, 0.0, 1.0, bumps.height, float(start[0]), float(start[1]), START_PAD, node)
     w = np.zeros(W_HEAD)
+    w[list(BUMPS)] = surface
     grid = np.empty((nrow, ncol))
-    w[list(BUMPS)] = surface
-    sample_bumps(w, nodes, x0, y0, dx, dy, grid)  # at scale 1: the heightfield's top is bumps.height
-    surface[BUMPS.index(W_SCALE)] = bumps.height / float(grid.max())
-    w[list(BUMPS)] = surface
     sample_bumps(w, nodes, x0, y0, dx, dy, grid)
-    return nodes, tuple(surface), grid, (dx, dy)
+    probe = node_heights(seed, range(-PROBE, PROBE), range(-PROBE, PROBE))
+    digest = hashlib.sha256(probe.tobytes() + np.array([lam, bumps.height]).tobytes()).hexdigest()
+    return nodes, surface, grid, (dx, dy), digest
