@@ -17,7 +17,8 @@ import pytest
 import mlpfac
 from mlpfac.loop.runner import build, run
 from mlpfac.plants import make_plant
-from mlpfac.plants.events import Force, Slope, event_step, force_schedule
+from mlpfac.plants.events import Force, Slope
+from mlpfac.plants.forces import event_step, force_schedule
 from mlpfac.scenario.parse import load, parse
 from mlpfac.scenario.reference import sample
 
@@ -69,11 +70,15 @@ def test_a_robot_held_on_a_slope_by_the_force_that_cancels_gravity_stays_put():
 def test_the_force_applied_is_the_schedule(force):
     scn = _scenario("eight-push", 2.0, **{"events.0.time": 0.5}, **{f"events.0.{k}": v for k, v in force.items()})
     if "duration" not in force:
-        scn = mlpfac.parse({**scn.table, "events": [{k: v for k, v in scn.table["events"][0].items() if k != "duration"}]}, "f")
+        scn = mlpfac.parse(
+            {**scn.table, "events": [{k: v for k, v in scn.table["events"][0].items() if k != "duration"}]}, "f"
+        )
     rec = run(scn)
     sched = force_schedule(scn.events, scn.T, scn.steps, scn.seed)
     c, s = np.cos(rec.pose[:, 2]), np.sin(rec.pose[:, 2])
-    want = np.c_[sched[:, 0] + c * sched[:, 2] - s * sched[:, 3], sched[:, 1] + s * sched[:, 2] + c * sched[:, 3], sched[:, 4]]
+    want = np.c_[
+        sched[:, 0] + c * sched[:, 2] - s * sched[:, 3], sched[:, 1] + s * sched[:, 2] + c * sched[:, 3], sched[:, 4]
+    ]
     np.testing.assert_allclose(rec.plant["force"], want, rtol=0, atol=1e-12)
     k0 = event_step(0.5, scn.T)
     assert not np.any(rec.plant["force"][:k0]) and np.any(rec.plant["force"][k0 : k0 + 2])  # (a sine starts at 0)

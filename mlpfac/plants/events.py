@@ -31,7 +31,6 @@ DELAY_STEPS_MAX = 10_000  # control steps of sensor delay (100 s at T = 0.01 s)
 SLOPE_DEG_MAX = 30.0  # a floor tilted at most this much: steeper, no wheeled robot of ours stands on it
 FORCE_MAX = 1e4  # N (and N m) of a force (or its noise's standard deviation) on the robot, at most
 FORCE_S_MAX = 1e4  # s: a push's duration or a periodic force's period, at most
-FORCE_STREAM = 0x666F7263  # tags the streams of the forces' noise apart from every other stream of a run
 
 
 @dataclass(frozen=True)
@@ -245,65 +244,6 @@ class Force(Event):
         """Control steps it acts for (a push: its duration in whole control steps, at least one),
         None when it stays."""
         return None if self.duration is None else max(1, int(round(self.duration / T)))
-
-    def schedule(self, index: int, T: float, steps: int, seed) -> np.ndarray:
-        """What it applies at each of a run's ``steps`` control steps (steps, 5): (fx, fy) in the
-        world's axes, (fx, fy) in the robot's, torque_z; zero before its step and after a push.
-        ``index``: its place among the scenario's events, which with the run's ``seed`` names the
-        stream of its noise (so the plant and an oracle told it draw the same)."""
-        from mlpfac.elementary import sin
-
-        out = np.zeros((steps, 5))
-        k0 = event_step(self.time, T)
-        k1 = steps if self.steps(T) is None else min(steps, k0 + self.steps(T))
-        if k0 >= k1:
-            return out
-        n = k1 - k0
-        f = np.array([self.fx or 0.0, self.fy or 0.0, self.torque_z or 0.0])
-        rows = np.tile(f, (n, 1))
-        if self.std:
-            rng = np.random.default_rng(np.random.SeedSequence([FORCE_STREAM, index, *_entropy(seed)]))
-            rows[:, :2] += self.std * rng.standard_normal((n, 2))
-        elif self.period is not None:
-            w = 2.0 * math.pi / self.period
-            rows *= np.array([[sin(w * (j * T))] for j in range(n)])
-        cols = [0, 1] if self.frame in (None, "world") else [2, 3]
-        out[k0:k1, cols] = rows[:, :2]
-        out[k0:k1, 4] = rows[:, 2]
-        return out
-
-
-def _entropy(seed) -> list[int]:
-    """A seed (a whole number or a list of them, a SeedSequence's entropy) as a list of whole numbers."""
-    return [int(x) for x in seed] if isinstance(seed, list | tuple) else [int(seed)]
-
-
-def run_seed(rng: np.random.Generator):
-    """The seed a run's Generator was made from (the entropy of its seed sequence: the scenario's
-    seed for the runner's streams, :func:`mlpfac.loop.closed_loop.seeded_generators`)."""
-    return rng.bit_generator.seed_seq.entropy
-
-
-def event_step(time: float, T: float) -> int:
-    """The control step at which the runner applies an event at ``time`` s: the first k with
-    time <= k T (within 1e-9 s)."""
-    k = max(0, int(math.ceil((time - 1e-9) / T)))
-    while k > 0 and time <= (k - 1) * T + 1e-9:
-        k -= 1
-    while time > k * T + 1e-9:
-        k += 1
-    return k
-
-
-def force_schedule(events, T: float, steps: int, seed) -> np.ndarray | None:
-    """The sum of the ``force`` events' schedules (:meth:`Force.schedule`) over a run, or None when
-    there is none."""
-    rows = [ev.schedule(i, T, steps, seed) for i, ev in enumerate(events) if isinstance(ev, Force)]
-    if not rows:
-        return None
-    for more in rows[1:]:  # in the events' order
-        rows[0] += more
-    return rows[0]
 
 
 EVENTS: dict[str, type[Event]] = {

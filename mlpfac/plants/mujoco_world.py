@@ -13,7 +13,7 @@ the forces of ``force`` events. :class:`MujocoWorld` is the part of
   two frictions; a patch a millimetre proud of the floor would be a step.
 - **Slope**: gravity turned in the floor's frame at the event (the robot settled on the flat floor
   first: a scene tilted from the start fails the settle check); the viewer draws the floor tilted.
-- **Forces**: a schedule per control step (:meth:`mlpfac.plants.events.Force.schedule`, made at
+- **Forces**: a schedule per control step (:func:`mlpfac.plants.forces.force_schedule`, made at
   reset from the run's seed) that the compiled step writes into ``xfrc_applied`` of the root body
   every control step (MuJoCo keeps it across physics steps), turned into the world's axes when it
   is the robot's (:func:`mlpfac.plants.terrain.push`); telemetry ``force`` says what was applied.
@@ -33,7 +33,8 @@ import numpy as np
 
 from mlpfac.exceptions import ConfigError
 from mlpfac.plants import terrain as W  # noqa: N812 - the packed world's layout, W.W_STEP ...
-from mlpfac.plants.events import Force, Slope, force_schedule, run_seed
+from mlpfac.plants.events import Force, Slope
+from mlpfac.plants.forces import force_schedule, run_seed
 from mlpfac.plants.mjcf.wheels import floor_priority
 from mlpfac.plants.world import CURVATURE
 
@@ -204,6 +205,24 @@ class MujocoWorld:
         how = f" for {event.steps(self.T) * self.T:g} s" if event.duration is not None else " from now on"
         wave = f", sinusoidal of period {event.period:g} s" if event.period is not None else ""
         return f"force {what} in the {event.frame or 'world'}'s axes on the robot{wave}{how}"
+
+    def world_said(self) -> str:
+        """What the terrain is built of on this robot, in words (its ``[provenance] world``)."""
+        t, m, parts = self.terrain, self.model, []
+        if t.ramps:
+            parts.append(f"{len(t.ramps)} ramp{'s' * (len(t.ramps) > 1)} (convex meshes)")
+        if t.grid is not None:
+            tiles = int(self._wld[W.W_NTILE])
+            hfield = (
+                f"a heightfield of {m.hfield_nrow[0]} x {m.hfield_ncol[0]} points" if m.nhfield else "no heightfield"
+            )
+            parts.append(f"rough ground under {tiles} contact tiles, {hfield} for the rest of the robot")
+        if t.patches:
+            parts.append(f"{len(t.patches)} floor patch{'es' * (len(t.patches) > 1)} (the tyres' friction switched)")
+        sprung = [g for g in range(m.ngeom) if m.geom_solref[g, 0] == SPRUNG_S]
+        if sprung:
+            parts.append(f"{len(sprung)} casters sprung (contact time constant {SPRUNG_S:g} s)")
+        return f"{'; '.join(parts)}; the floor at z = {float(self._wld[W.W_Z0]):.4g} m"
 
     def terrain_record(self) -> dict:
         """What a recording draws of the terrain (:meth:`mlpfac.plants.world.Terrain.as_dict`; {} without)."""

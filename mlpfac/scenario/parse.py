@@ -27,12 +27,12 @@ from mlpfac.exceptions import ConfigError
 from mlpfac.model import pose_from_error
 from mlpfac.plants.events import Event, parse_event
 from mlpfac.plants.world import Terrain, World, parse_world
-from mlpfac.plants.world import resolve as resolve_world
 from mlpfac.scenario import provenance
 from mlpfac.scenario.draws import put as put_value
 from mlpfac.scenario.draws import resolve as draw_values
 from mlpfac.scenario.draws import restore as restore_draws
-from mlpfac.scenario.reference import make_reference, sample
+from mlpfac.scenario.reference import make_reference
+from mlpfac.scenario.world import ground, recorded, recorded_bumps
 from mlpfac.tables import (  # noqa: F401 (mlpfac.scenario.parse.to_toml)
     FOLDER_NAME,
     build,
@@ -64,7 +64,6 @@ TOP_KEYS = {
     "provenance",
     "drawn",
 }
-BUMPS_DRAWN = "world.bumps"  # [drawn]: the digest of the rough ground drawn for the seed (mlpfac.plants.world)
 CONTROLLER_KEYS = {"name", "lambdas", "v_max", "omega_max", "adaptive", "kanayama", "params"}
 NETWORK_KEYS = {f.name for f in dataclasses.fields(Networks)}
 ADAPTIVE_KEYS = {f.name for f in dataclasses.fields(AdaptiveConfig)} - {"networks"} | NETWORK_KEYS
@@ -280,7 +279,7 @@ def parse(table: dict, source: str = "<scenario>", check_model: bool = True) -> 
     seed = table.get("seed", 0)
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise ConfigError(f"{source} seed", f"expected a whole number >= 0, got {seed!r}")
-    table, bumps_drawn = _recorded_bumps(table, source)
+    table, bumps_drawn = recorded_bumps(table, source)
     table, draws = draw_values(table, seed, source)  # each distribution replaced by its draw for this seed
     T = number(table, "T", 0.01, source)
     duration = number(table, "duration", 25.0, source)
@@ -373,26 +372,8 @@ def parse(table: dict, source: str = "<scenario>", check_model: bool = True) -> 
     events.sort(key=lambda ev: ev.time)
 
     world = parse_world(table.get("world", {}), f"{source} [world]")
-    terrain = None
-    if world:
-        if plant_kind != "mujoco":
-            raise ConfigError(
-                f"{source} [world]",
-                'the kinematic model drives on no ground: [world] needs a robot ([plant] kind = "mujoco")',
-            )
-        ref = sample(reference, np.arange(steps + 1) * T)  # the reference over the whole run
-        start = pose_from_error(np.array(e0, dtype=float), ref[0])
-        terrain = resolve_world(world, ref, start, seed, f"{source} [world]")
-    out = restore_draws(table, draws)
-    if terrain is not None and terrain.digest:  # what was drawn, recorded, checked when its config.toml runs again
-        digest = f"sha256:{terrain.digest}"
-        if bumps_drawn is not None and bumps_drawn != digest:
-            raise ConfigError(
-                f"{source} [drawn] {BUMPS_DRAWN}",
-                f"{bumps_drawn!r} is not the rough ground seed {seed} draws ({digest}): another mlpfac or numpy draws "
-                "it otherwise; remove the line to run the ground drawn now",
-            )
-        out = {**out, "drawn": {**out.get("drawn", {}), BUMPS_DRAWN: digest}}
+    terrain = ground(world, plant_kind, reference, steps, T, e0, seed, source)
+    out = recorded(restore_draws(table, draws), terrain, bumps_drawn, seed, source)
 
     return Scenario(
         name=name,
@@ -418,19 +399,6 @@ def parse(table: dict, source: str = "<scenario>", check_model: bool = True) -> 
         world=world,
         terrain=terrain,
     )
-
-
-def _recorded_bumps(table: dict, source: str) -> tuple[dict, str | None]:
-    """The table without its ``[drawn]`` digest of the rough ground (not a distribution's draw), and that digest."""
-    drawn = table.get("drawn")
-    if not isinstance(drawn, dict) or BUMPS_DRAWN not in drawn:
-        return table, None
-    rest = {k: v for k, v in drawn.items() if k != BUMPS_DRAWN}
-    out = {k: v for k, v in table.items() if k != "drawn"} | ({"drawn": rest} if rest else {})
-    value = drawn[BUMPS_DRAWN]
-    if not isinstance(value, str):
-        raise ConfigError(f"{source} [drawn] {BUMPS_DRAWN}", f"expected the digest of the rough ground, got {value!r}")
-    return out, value
 
 
 def torque_drive(name: str, plant_kind: str, actuator: str | None, source: str) -> None:
