@@ -181,6 +181,7 @@ BAD_FILES: dict[str, tuple[str | bytes, str]] = {
     "force on the kinematic plant": (MINIMAL + EV.format("force", "fx = 1.0"), "kinematic plant cannot apply a 'force'"),
     "world a string": ('world = "rough"\n' + ROBOT, "[world]: expected a table"),
     "world unknown key": (ROBOT + "[world]\nhills = 1\n", "[world] hills: unknown key"),
+    "world laid out over no time": (ROBOT + "[world]\nover = 0.0\npatches = []\n", "[world] over: expected seconds of the reference"),
     "world on the kinematic plant": (MINIMAL + "[world]\nbumps = { height = 0.01, wavelength = 0.3 }\n", "[world]: the kinematic model drives on no ground"),
     "ramps a table": (ROBOT + "[world]\nramps = { at = 0.5, height = 0.01, length = 1.0 }\n", "[world] ramps: expected a list of tables"),
     "ramp at the start": (ROBOT + "[world]\nramps = [{ at = 0.0, height = 0.01, length = 1.0 }]\n", "[world] ramps #1 at: a share of the path's length"),

@@ -97,7 +97,7 @@ def test_the_rough_ground_is_drawn_per_seed():
     assert a.table["drawn"]["world.bumps"] == f"sha256:{a.terrain.digest}"
     grid = a.terrain.grid
     assert grid.min() == 0.0 and 0.8 * 0.01 < grid.max() < 0.01  # heights in [0, height)
-    shorter = load("eight-bumps", build=False).with_overrides(duration=8.0)  # a smaller arena, the same ground
+    shorter = load("eight-bumps", build=False, values={"world.over": 8.0})  # a smaller arena, the same ground
     assert shorter.terrain.digest == a.terrain.digest and shorter.terrain.grid.shape != grid.shape
     p = np.array(shorter.terrain.arena[:2]) + 0.7
     assert shorter.terrain.height(*p) == a.terrain.height(*p)
@@ -209,3 +209,12 @@ def test_the_recording_holds_the_terrain_and_the_force(tmp_path, rrd_contents):
     run(scn, sink=log.make_sink(save=tmp_path / "bumps.rrd", recording_id="bumps"))
     mesh = rrd_contents(tmp_path / "bumps.rrd")["/world/terrain/bumps"].static
     assert len(mesh["Mesh3D:vertex_positions"].to_pylist()[0]) == scn.terrain.grid.size
+
+
+def test_a_shorter_run_drives_into_the_same_world():
+    """--duration keeps the world laid out along the file's run (its config.toml says so)."""
+    full = load("eight-ramp", build=False)
+    short = full.with_overrides(duration=0.3)
+    assert short.table["world"]["over"] == 25.0
+    assert [vars(r) for r in short.terrain.ramps] == [vars(r) for r in full.terrain.ramps]
+    assert short.terrain.arena == full.terrain.arena

@@ -335,6 +335,10 @@ def scenario_page() -> str:
         "robot before anything runs: a ramp its wheels cannot climb or that lies under them at the start, rough "
         "ground too fine for its tyres, a patch outside the arena (the reference's bounding box and 1 m around it).",
         "",
+        "`over` (s, > 0; default: the run's `duration`): the seconds of the reference the world is laid out along "
+        "(its arena, where the ramps' `at` falls); `--duration` writes the file's into `config.toml`, so that a "
+        "shorter run drives into the same world.",
+        "",
         "`ramps`: a list of tables, ramps across the path (up, a flat top, down, each a third of `length`):",
         "",
         *_dataclass_rows(Ramp, "[world] ramps", base={"at": 0.5, "height": 0.01, "length": 1.0}),

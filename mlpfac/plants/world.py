@@ -38,6 +38,7 @@ RAMP_WIDTH = 1.2  # m across the path, where a ramp does not say
 ARENA_MARGIN = 1.0  # m: the arena is the reference's bounding box and this much around it (the viewer's floor)
 START_PAD = 0.5  # m: the rough ground is flat within this of the robot's start
 GRID_POINTS_MAX = 4_000_000  # points of a heightfield, at most
+OVER_MAX = 1e5  # s of the reference a world is laid out along, at most
 POINTS_PER_WAVE = 8  # heightfield points a wavelength
 BUMPS_STREAM = 0x62756D70  # tags the rough ground's streams apart from every other stream of a run
 NODE0 = 2**31  # a node's row and column counted from here (the streams take whole numbers >= 0)
@@ -101,11 +102,15 @@ class Patch:
 
 @dataclass(frozen=True)
 class World:
-    """A scenario's ``[world]`` table: ``ramps``, ``bumps``, ``patches``."""
+    """A scenario's ``[world]`` table: ``ramps``, ``bumps``, ``patches``, and ``over``: the seconds of
+    the reference it is laid out along (its arena, where its ramps lie), the run's duration where it
+    says none; ``--duration`` keeps the file's (written into config.toml), so that a shorter run
+    drives into the same world."""
 
     ramps: tuple[Ramp, ...] = ()
     bumps: Bumps | None = None
     patches: tuple[Patch, ...] = ()
+    over: float | None = None  # s of the reference it is laid out along (the arena, the ramps' `at`); none: the run's
 
     def __bool__(self) -> bool:
         return bool(self.ramps or self.bumps or self.patches)
@@ -118,8 +123,15 @@ def parse_world(table, where: str) -> World:
     """The ``[world]`` table (``where`` names it in errors) as a :class:`World`, every key checked."""
     if not isinstance(table, dict):
         raise ConfigError(where, f"expected a table ([world]), got {table!r}")
-    check_keys(table, set(KEYS), where)
+    check_keys(table, {*KEYS, "over"}, where)
     out: dict = {}
+    if "over" in table:
+        over = table["over"]
+        if isinstance(over, bool) or not isinstance(over, int | float) or not 0 < over <= OVER_MAX:
+            raise ConfigError(
+                f"{where} over", f"expected seconds of the reference, > 0 and <= {OVER_MAX:g}, got {over!r}"
+            )
+        out["over"] = float(over)
     for key, cls in KEYS.items():
         if key not in table:
             continue

@@ -151,6 +151,8 @@ class Scenario:
             dropped = tuple(ev["time"] for ev in events if ev not in kept)
             table["events"] = kept
         table["duration"] = duration
+        if isinstance(table.get("world"), dict) and self.world:  # the world stays laid out as the file's run
+            table["world"] = {"over": self.world.over or self.duration} | table["world"]
         try:
             scn = parse(table, self.source, check_model=False)
         except ConfigError as err:
@@ -372,7 +374,7 @@ def parse(table: dict, source: str = "<scenario>", check_model: bool = True) -> 
     events.sort(key=lambda ev: ev.time)
 
     world = parse_world(table.get("world", {}), f"{source} [world]")
-    terrain = ground(world, plant_kind, reference, steps, T, e0, seed, source)
+    terrain = ground(world, plant_kind, reference, world.over or duration, T, e0, seed, source)
     out = recorded(restore_draws(table, draws), terrain, bumps_drawn, seed, source)
 
     return Scenario(

@@ -17,10 +17,11 @@ BUMPS_DRAWN = "world.bumps"  # [drawn]: the digest of the rough ground drawn for
 
 
 def ground(
-    world: World, plant_kind: str, reference, steps: int, T: float, e0, seed: int, source: str
+    world: World, plant_kind: str, reference, span: float, T: float, e0, seed: int, source: str
 ) -> Terrain | None:
-    """The terrain of ``world`` for a run of ``steps`` control steps of ``reference`` from the initial
-    error ``e0``, for ``seed`` (None for an empty world); the kinematic model is refused one."""
+    """The terrain of ``world`` laid out along ``span`` s of ``reference`` (the run's duration, or the
+    file's under ``--duration``: ``[world] over``) from the initial error ``e0``, for ``seed`` (None
+    for an empty world); the kinematic model is refused one."""
     if not world:
         return None
     if plant_kind != "mujoco":
@@ -28,7 +29,7 @@ def ground(
             f"{source} [world]",
             'the kinematic model drives on no ground: [world] needs a robot ([plant] kind = "mujoco")',
         )
-    ref = sample(reference, np.arange(steps + 1) * T)  # the reference over the whole run
+    ref = sample(reference, np.arange(int(round(span / T)) + 1) * T)
     start = pose_from_error(np.array(e0, dtype=float), ref[0])
     return resolve(world, ref, start, seed, f"{source} [world]")
 
