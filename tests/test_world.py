@@ -218,3 +218,15 @@ def test_a_shorter_run_drives_into_the_same_world():
     assert short.table["world"]["over"] == 25.0
     assert [vars(r) for r in short.terrain.ramps] == [vars(r) for r in full.terrain.ramps]
     assert short.terrain.arena == full.terrain.arena
+
+
+@pytest.mark.parametrize(("name", "axis"), [("eight-tow", "events.0.fx=-40:0:3"), ("eight-slope", "events.0.angle_deg=0:30:3")])
+def test_the_slope_and_the_force_are_axes_with_breaking_points(tmp_path, name, axis):
+    import json
+
+    mlpfac.sweep([name], ["kanayama"], seeds="0", duration=16.0, vary=[axis], out=tmp_path, workers=1)
+    points = json.loads((tmp_path / "robustness.json").read_text())["breaking_points"]
+    key, _ = axis.split("=")
+    (point,) = [p for p in points if p["axis"] == key]
+    assert point["below"]["fails_at"] == -40.0 if name == "eight-tow" else point["above"]["fails_at"] == 30.0
+    assert (tmp_path / "robustness.png").is_file() and (tmp_path / "robustness.md").is_file()

@@ -4,8 +4,13 @@ the forces of ``force`` events. :class:`MujocoWorld` is the part of
 :class:`~mlpfac.plants.mujoco.MujocoPlant` that does it.
 
 - **Ramps**: one convex mesh each (a trapezoid prism: up, top, down), a static geom of the world.
-- **Rough ground**: a MuJoCo heightfield over the arena at the floor's height, its heights those
-  drawn for the run (:mod:`mlpfac.plants.world`).
+- **Rough ground**: the wheels and casters (the geoms the robot stands on at rest) touch it
+  through a contact tile each, the surface's tangent plane under the geom moved before every
+  physics step (:func:`mlpfac.plants.terrain.place_tiles`: MuJoCo's sphere-on-heightfield test
+  would cost a step 2.5x over); a MuJoCo heightfield of the heights drawn for the run
+  (:mod:`mlpfac.plants.world`) is there for the rest of the robot, where it reaches that low.
+- **Sprung casters**: a robot on more than three points gets its casters' contacts soft on
+  terrain (a rigid chassis on four points lifts a drive wheel off uneven ground).
 - **Patches**: flush with the floor, so no geom: each control step, the compiled step sets each
   tyre's sliding friction to the patch's under its centre, or to its own off the patches
   (:func:`mlpfac.plants.terrain.patches`). A flush geom with a contact priority would touch the
@@ -19,9 +24,10 @@ the forces of ``force`` events. :class:`MujocoWorld` is the part of
   is the robot's (:func:`mlpfac.plants.terrain.push`); telemetry ``force`` says what was applied.
 
 The new geoms take the floor's friction and contact priority, so the tyres' friction stays the
-contact's, as on the floor. A robot reset at a pose over the terrain is lifted onto it (the
-highest ground under its footprint); at a run's start it stands on the flat pad the rough ground
-leaves there and on no ramp, as it settled.
+contact's, as on the floor, and sit at the floor's height (read from the robot's contacts at rest:
+a Menagerie scene's floor is not always at 0). A robot reset at a pose over the terrain is lifted
+onto it (the highest ground under its wheels and casters); at a run's start it stands on the flat
+pad the rough ground leaves there and on no ramp, as it settled.
 """
 
 from __future__ import annotations
