@@ -220,7 +220,9 @@ def test_a_shorter_run_drives_into_the_same_world():
     assert short.terrain.arena == full.terrain.arena
 
 
-@pytest.mark.parametrize(("name", "axis"), [("eight-tow", "events.0.fx=-40:0:3"), ("eight-slope", "events.0.angle_deg=0:30:3")])
+@pytest.mark.parametrize(
+    ("name", "axis"), [("eight-tow", "events.0.fx=-40:0:3"), ("eight-slope", "events.0.angle_deg=0:30:3")]
+)
 def test_the_slope_and_the_force_are_axes_with_breaking_points(tmp_path, name, axis):
     import json
 
