@@ -1,11 +1,13 @@
 """The differential drive's dynamic model with the centre of mass off the axle (Fierro & Lewis 1997;
-Dhaouadi & Hatab 2013), written once: M vdot + V(v) v + F(v) = B tau in the body's velocities
+Dhaouadi & Hatab 2013), written once: M vdot + V(v) v + F(v) = B tau + f_e in the body's velocities
 v = (v, omega) of the axle midpoint, the wheels rolling without slip (docs/equations.md)::
 
     M = diag(m + 2 I_w / r^2,  I + 2 b^2 I_w / r^2)        b = track / 2
     V(v) v = (-m d omega^2,  m d omega v)                 d: centre of mass ahead of the axle
     F(v) = (2 c v / r^2,  2 c b^2 omega / r^2)            c: each wheel's joint damping
     B tau = ((tau_l + tau_r) / r,  b (tau_r - tau_l) / r)
+    f_e = (F . h,  tau_z + d F . n)                       an external force F at the centre of mass (h the
+                                                          heading, n its left normal; gravity's m g on a slope)
 
 ``m`` is the robot's mass (wheels included), ``I`` its yaw inertia about the vertical through the
 axle midpoint, ``I_w`` a wheel's inertia about its axle (its rotor's armature included), ``tau``
@@ -26,9 +28,12 @@ import numpy as np
 from mlpfac.exceptions import ConfigError
 from mlpfac.jit import kernel
 
-# packed model (RobotModel.packed): the constants the kernels read, by index
+# packed model (RobotModel.packed): the constants the kernels read, by index; P_FV, P_FW the
+# external generalized force f_e on (v, omega) (0 in the nominal model; an oracle told a slope or a
+# force sets them, mlpfac.control.dynamic)
 P_M11, P_M22, P_MD, P_R, P_B, P_C, P_TMAX = range(7)
-N_P = 7
+P_FV, P_FW = 7, 8
+N_P = 9
 
 
 @dataclass(frozen=True)
@@ -70,6 +75,7 @@ class RobotModel:
         p[P_M22] = self.yaw_inertia_kg_m2 + 2.0 * b * b * iw / (r * r)
         p[P_MD] = self.mass_kg * self.com_offset_m
         p[P_R], p[P_B], p[P_C], p[P_TMAX] = r, b, self.wheel_damping_Nm_s, self.torque_limit_Nm
+        p[P_FV], p[P_FW] = 0.0, 0.0
         return p
 
     def accelerations(self, twist: np.ndarray, tau: np.ndarray) -> np.ndarray:
@@ -96,19 +102,19 @@ def _rows(x) -> np.ndarray:
 
 @kernel()
 def accel_of(p, v, w, tl, tr):
-    """M^-1 (B tau - V(v) v - F(v)): (vdot, omegadot) of one robot."""
+    """M^-1 (B tau + f_e - V(v) v - F(v)): (vdot, omegadot) of one robot."""
     r, b, c = p[P_R], p[P_B], p[P_C]
-    fv = (tl + tr) / r + p[P_MD] * w * w - 2.0 * c * v / (r * r)
-    fw = b * (tr - tl) / r - p[P_MD] * w * v - 2.0 * c * b * b * w / (r * r)
+    fv = (tl + tr) / r + p[P_MD] * w * w - 2.0 * c * v / (r * r) + p[P_FV]
+    fw = b * (tr - tl) / r - p[P_MD] * w * v - 2.0 * c * b * b * w / (r * r) + p[P_FW]
     return fv / p[P_M11], fw / p[P_M22]
 
 
 @kernel()
 def torque_of(p, v, w, a, alpha):
-    """B^-1 (M vdot + V(v) v + F(v)): the wheel torques (tau_l, tau_r) for (vdot, omegadot) = (a, alpha)."""
+    """B^-1 (M vdot + V(v) v + F(v) - f_e): the wheel torques (tau_l, tau_r) for (vdot, omegadot) = (a, alpha)."""
     r, b, c = p[P_R], p[P_B], p[P_C]
-    sv = p[P_M11] * a - p[P_MD] * w * w + 2.0 * c * v / (r * r)  # (tau_l + tau_r) / r
-    sw = p[P_M22] * alpha + p[P_MD] * w * v + 2.0 * c * b * b * w / (r * r)  # b (tau_r - tau_l) / r
+    sv = p[P_M11] * a - p[P_MD] * w * w + 2.0 * c * v / (r * r) - p[P_FV]  # (tau_l + tau_r) / r
+    sw = p[P_M22] * alpha + p[P_MD] * w * v + 2.0 * c * b * b * w / (r * r) - p[P_FW]  # b (tau_r - tau_l) / r
     total, diff = sv * r, sw * r / b
     return 0.5 * (total - diff), 0.5 * (total + diff)
 

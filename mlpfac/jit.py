@@ -57,6 +57,7 @@ MODULES = {  # the modules whose kernels each extension holds
         "mlpfac.plants.events",
         "mlpfac.plants.ik",
         "mlpfac.plants.odometry",
+        "mlpfac.plants.terrain",
     ),
     "mujoco": ("mlpfac.plants.compiled", "mlpfac.loop.compiled"),
 }

@@ -66,8 +66,8 @@ ROOT = HERE.parent
 
 # (scenario, controllers, duration, --vary): short runs that reach every controller (None: every
 # shipped one, on FALLBACK those the kinematic model cannot run), our robot, the
-# cart, torque motors, an event (moved early by a --vary point), a drawn plant, paths, and a pose
-# from odometry and from odometry fused with delayed fixes
+# cart, torque motors, an event (moved early by a --vary point), a drawn plant, paths, a pose
+# from odometry and from odometry fused with delayed fixes, rough ground and a force of noise
 RUNS = [
     ("paper", None, 3.0, ["events.0.time=2.5"]),
     ("eight-payload", ("corradini", "kanayama", "adaptive", "adaptive-ukf", "oracle"), 1.0, ["events.0.time=0.6"]),
@@ -80,6 +80,8 @@ RUNS = [
     ("route@diffdrive-torque", ("fierro-lewis",), 0.6, []),  # a path's own rates, to a torque-level law
     ("eight-wheel-radius-odometry", ("kanayama", "adaptive"), 1.0, ["events.0.time=0.5"]),
     ("eight-wheel-radius-fused", ("kanayama", "adaptive"), 1.0, ["events.0.time=0.5", "plant.fix_latency_s=0.05"]),
+    ("eight-bumps", ("kanayama",), 1.0, []),  # rough ground drawn per seed, carried by contact tiles
+    ("eight-push", ("corradini",), 1.0, ["events.0.time=0.3", "events.0.std=5.0", "events.0.duration=0.5"]),  # noise
 ]
 FALLBACK = "eight-torque"  # where a shipped controller runs that the kinematic model cannot (torque level)
 MENAGERIE = [("tiago-friction", ("corradini", "adaptive"), 1.0, ["events.0.time=0.5"])]

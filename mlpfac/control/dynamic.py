@@ -27,7 +27,12 @@ held c T); a sensor delay the pose predicted over it as ``oracle`` predicts it, 
 twist, as old as the pose, moved forward through the torques sent since on its model (one Euler
 step a control period): the velocity loop, closing ``VELOCITY_SHARE`` of its error a step, is
 unstable on a twist 3 steps old (PAL TIAGo on torque motors left the floor on every seed, told the
-pose alone, as ``fierro-lewis`` told nothing did).
+pose alone, as ``fierro-lewis`` told nothing did). Told a ``slope`` or a ``force``
+(:class:`Told`), its model carries the load they put on the robot, f_e of :mod:`mlpfac.dynamics`:
+gravity's pull along the tilted floor, m g_floor, and the force the robot meets at each step (the
+run's own schedule: a push, a tow, a periodic force, the noise drawn for its seed), both at the
+centre of mass, turned to the heading measured, so that computed torque cancels them. It is told
+nothing of the terrain (ramps, rough ground, patches).
 """
 
 from __future__ import annotations
@@ -39,10 +44,11 @@ import numpy as np
 
 from mlpfac.control.baselines import Stepped
 from mlpfac.control.oracle import Oracle
-from mlpfac.dynamics import P_TMAX, accelerations, torque_of
+from mlpfac.dynamics import P_FV, P_FW, P_TMAX, accelerations, torque_of
 from mlpfac.elementary import cos, sin
 from mlpfac.jit import kernel, seeds
 from mlpfac.plants.events import DelayLine
+from mlpfac.plants.forces import force_schedule, run_seed
 
 VELOCITY_SHARE = 0.5  # Kv T: the velocity error's share closed each control step
 # Kanayama's gains (Kx, Ky, Ktheta) of the outer law where the scenario sets none ([controller.kanayama]):
@@ -117,9 +123,12 @@ class OracleDynamic(FierroLewis):
 
     name = "oracle-dynamic"
 
-    def __init__(self, robot, T: float, gains, limits, changes: list[tuple[float, str, float, object]]) -> None:
+    def __init__(
+        self, robot, T: float, gains, limits, changes: list[tuple[float, str, float, object]], world: Told | None = None
+    ) -> None:
         super().__init__(robot, T, gains, limits)
         self.changes = sorted(changes, key=lambda c: c[0])
+        self.world = world  # the slopes and forces it is told (the world's load f_e on its model)
         self._depth = max([int(n) for _, kind, n, _ in changes if kind == "sensor_delay"], default=0)
         self._pred = Oracle(_NoLaw(limits), T, [], False, gains)  # its unicycle predictor, over the velocities asked
 
@@ -130,6 +139,9 @@ class OracleDynamic(FierroLewis):
         self.pose_step = DelayLine(0)  # which step's pose the measurement is
         self.sent: deque = deque(maxlen=max(self._depth, 1))  # (velocities asked, torques sent (B, 2), seconds)
         self._pred.reset(rng)
+        self.model = self.robot
+        if self.world is not None:
+            self.world.reset(seeds(rng)[0], self.T)
 
     def step(self, obs) -> np.ndarray:
         k, T = self.k, self.T
@@ -138,7 +150,7 @@ class OracleDynamic(FierroLewis):
         while self.pending and self.pending[0][0] <= k * T + 1e-9:  # the runner's rule for an event's step
             _, kind, number, model = self.pending.pop(0)
             if model is not None:
-                self.p = model.packed()
+                self.p, self.model = model.packed(), model
             if kind == "control_period":  # the robot moves c T per step: the path at 1/c of the speed
                 self.hold = number
                 self._g[G_KX], self._g[G_KV] = self.g[G_KX] / number, self.g[G_KV] / number
@@ -156,7 +168,14 @@ class OracleDynamic(FierroLewis):
             c = self.hold
             r = np.array([r[0], r[1], r[2], r[3] / c, r[4] / c])
             r_dot = r_dot / (c * c)
-        fierro_lewis_step(e, r, r_dot, tw, self.p, self._g, self._tau, self._vc)
+        if self.world is None:
+            fierro_lewis_step(e, r, r_dot, tw, self.p, self._g, self._tau, self._vc)
+        else:  # each seed's model with the load it is under now
+            for b, load in enumerate(self.world.loads(k, _rows(obs.pose, 3), self.model)):
+                p = self.p.copy()
+                p[P_FV], p[P_FW] = load
+                fierro_lewis_step(e[b : b + 1], r, r_dot, tw[b : b + 1], p, self._g, self._tau[b : b + 1],
+                                  self._vc[b : b + 1])  # fmt: skip
         if self._depth:
             self.sent.append((self._vc.copy(), self._tau.copy(), self.hold * T))
         return self._tau[0].copy() if self.single else self._tau
@@ -170,6 +189,38 @@ def twist_ahead(p: np.ndarray, twist: np.ndarray, sent: list[tuple[np.ndarray, f
         accelerations(p, tw, tau, rate)
         tw += dt * rate
     return tw
+
+
+class Told:
+    """The world ``oracle-dynamic`` is told: the slopes (time, and gravity's (g_x, g_y) along the floor
+    after it) and the ``force`` events among a run's ``events`` of ``steps`` control steps, whose
+    schedule it meets (:func:`mlpfac.plants.forces.force_schedule`, the same stream as the plant's)."""
+
+    def __init__(self, slopes: list[tuple[float, float, float]], events, steps: int) -> None:
+        self.slopes, self.events, self.steps = sorted(slopes), tuple(events), int(steps)
+
+    def reset(self, rngs: list[np.random.Generator], T: float) -> None:
+        self.T, self.pending, self.g = T, list(self.slopes), (0.0, 0.0)
+        self.schedules = [force_schedule(self.events, T, self.steps, run_seed(rng)) for rng in rngs]
+
+    def loads(self, k: int, pose: np.ndarray, model) -> list[tuple[float, float]]:
+        """Each seed's external generalized force f_e on (v, omega) at step k (:mod:`mlpfac.dynamics`):
+        gravity's pull along the floor and the force, at the centre of mass ``model.com_offset_m``
+        ahead of the axle, for its heading ``pose[:, 2]`` as measured."""
+        while self.pending and self.pending[0][0] <= k * self.T + 1e-9:  # the runner's rule for an event's step
+            self.g = self.pending.pop(0)[1:]
+        m, d = model.mass_kg, model.com_offset_m
+        out = []
+        for b, sched in enumerate(self.schedules):
+            c, s = cos(float(pose[b, 2])), sin(float(pose[b, 2]))
+            fx, fy, tz = m * self.g[0], m * self.g[1], 0.0
+            if sched is not None and k < len(sched):
+                row = sched[k]
+                fx += row[0] + c * row[2] - s * row[3]
+                fy += row[1] + s * row[2] + c * row[3]
+                tz = row[4]
+            out.append((fx * c + fy * s, tz + d * (-fx * s + fy * c)))
+        return out
 
 
 class _NoLaw:

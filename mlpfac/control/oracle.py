@@ -25,8 +25,11 @@ only what the nominal design would need to be redone for the changed robot:
   event); it is moved forward through the commands actually sent over those steps, each held for its
   period at the velocity it produces, and (35) acts on the error of the predicted pose. On the
   kinematic plant (7), an Euler map, the unicycle is exact to O(T^2) per step.
-- **payload, friction, weak actuator**: nothing. The law (35) has no parameter that mass, friction
-  or actuator strength change; the oracle is the nominal law, bit for bit Corradini's. Its
+- **payload, friction, weak actuator, slope, force, terrain**: nothing. The law (35) has no
+  parameter that mass, friction, actuator strength or a load (a slope's pull, a push, a tow, a
+  ramp, rough ground) change: a velocity law told a load would send the same velocities, which
+  the drive carries; the oracle is the nominal law, bit for bit Corradini's (``oracle-dynamic``,
+  which sends torques, is told the slope and the force). Its
   post-event error in the same run is the bound (the same law on the robot changed from t = 0
   measures the same over that window within noise: ``sims/oracle_from_start.py``,
   docs/results-beyond.md).

@@ -37,6 +37,7 @@ from mlpfac.log.sinks import (
     start_web_viewer,
 )
 from mlpfac.loop.metrics import RunMetrics
+from mlpfac.loop.record import force_windows
 from mlpfac.plots.colors import NAMES, controller_colors
 
 COMPARE_REF_COLOR: RGB = (110, 110, 110)  # the reference, when the runs' colours include orange
@@ -277,4 +278,8 @@ def _about(files: list[tuple[Path, RunMetrics | None]], labels: list[str], color
     events = {(ev.get("time"), ev.get("text")) for _, m in files if m for ev in m.events if isinstance(ev, dict)}
     for t, text in sorted(events, key=str):
         lines.append(f"\n**event at {t:g} s**: {text} (dark-red diamonds on every plot)")
+    ends = [float(m.steps) * float(m.T) for _, m in files if m]
+    spans = {w for _, m in files if m for w in force_windows(m.events, max(ends, default=0.0))}
+    for t0, t1 in sorted(spans):
+        lines.append(f"\n**a force acts from {t0:g} to {t1:g} s** (the arrow on each robot; forces/* for its size)")
     return "\n".join(lines) + "\n"

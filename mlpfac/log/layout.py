@@ -35,6 +35,7 @@ VIEWS = (
     ("speeds", "v [m/s]", "/controls/v", True),
     ("speeds", "omega [rad/s]", "/controls/omega", True),
     ("speeds", "wheel speeds [rad/s]", "/wheels", True),
+    ("speeds", "force on the robot [N, N m]", "/forces", True),
     ("learning", "weights: RMS change per layer", "/weight_change", True),
     ("learning", "all weights", "/weights", False),
     ("ekf", "log10 trace(P)", "/ekf/log10_trace_P", True),

@@ -23,6 +23,7 @@ from mlpfac.log.layout import ABOUT, blueprint, marked_origins
 from mlpfac.log.scene import PATH_STRIDE, POSE_STRIDE, send_poses, send_static_scene, strided
 from mlpfac.log.schema import EVENT_COLOR
 from mlpfac.log.series import Series, ns, plan_series, send_series, style_series, time_index
+from mlpfac.log.terrain import send_terrain, send_tilts, style_force
 from mlpfac.loop.record import RunRecord
 
 APPLICATION_ID = "mlpfac"
@@ -108,6 +109,8 @@ class RerunSink:
         self.ref_path = ref[np.all(np.isfinite(ref[:, :2]), axis=1), :2]
         send_static_scene(self.rec, self.ref_path, geometry)
         send_belief_static(self.rec, record)  # a pose that was estimated (mlpfac.log.belief)
+        send_terrain(self.rec, record.world)  # the ground driven on, the force's arrows (mlpfac.log.terrain)
+        style_force(self.rec)
         self._send_about(record, ended=False)
 
     def flush(self, record: RunRecord, upto: int | None = None, force: bool = False) -> None:
@@ -197,6 +200,7 @@ class RerunSink:
         if not new:
             return
         self.events_sent = len(record.events)
+        send_tilts(self.rec, record, new)  # a slope tilts the floor's frame from its time on
         times = np.array([float(ev["time"]) for ev in new])
         steps = np.round(times / record.T).astype(np.int64)
         self.rec.send_columns(

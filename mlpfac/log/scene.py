@@ -16,6 +16,7 @@ import rerun as rr
 from mlpfac.log import meshes
 from mlpfac.log.schema import PATH_COLOR, REF_COLOR, ROBOT_COLOR, entity_part
 from mlpfac.log.series import time_index
+from mlpfac.log.terrain import robot_pose, send_forces, tilts
 from mlpfac.loop.record import RunRecord
 
 POSE_STRIDE = 5  # robot transform, reference arrow, top-view markers: every 5th step
@@ -78,14 +79,16 @@ def send_poses(rec: rr.RecordingStream, record: RunRecord, rows: np.ndarray, pat
         x, y, th = record.pose[rows].T
         zeros = np.zeros_like(x)
         idx = time_index(record, rows)
+        if record.world or tilts(record):  # on the ground under it, in the floor's tilted frame (mlpfac.log.terrain)
+            translation, quaternion = robot_pose(record, rows)
+        else:
+            translation, quaternion = np.c_[x, y, zeros], np.c_[zeros, zeros, np.sin(th / 2), np.cos(th / 2)]
         rec.send_columns(
             "world/robot",
             indexes=idx,
-            columns=rr.Transform3D.columns(
-                translation=np.c_[x, y, zeros],
-                quaternion=np.c_[zeros, zeros, np.sin(th / 2), np.cos(th / 2)],
-            ),
+            columns=rr.Transform3D.columns(translation=translation, quaternion=quaternion),
         )
+        send_forces(rec, record, rows, idx)
         r = record.ref[rows]
         heading = 0.3 * np.c_[np.cos(r[:, 2]), np.sin(r[:, 2])]
         rec.send_columns(

@@ -45,6 +45,7 @@ WHEEL_MEAS_COLORS: tuple[RGB, ...] = ((120, 180, 255), (255, 170, 90))  # ... pa
 REFSPEED_COLOR: RGB = (150, 150, 150)
 TRUE_COLOR: RGB = (150, 150, 150)
 P_COLOR: RGB = (240, 200, 80)
+FORCE_COLORS: tuple[RGB, ...] = ((235, 60, 170), (150, 60, 235), (90, 90, 90))  # fx, fy, torque_z
 OTHER_COLOR: RGB = (200, 200, 200)
 ESTIMATE_COLORS: tuple[RGB, ...] = ((60, 220, 200), (40, 150, 140))  # the estimate's error: teal, as its path
 WEIGHT_COLORS: dict[str, RGB] = {  # one hue per network and layer
@@ -135,6 +136,10 @@ SCHEMA: tuple[Row, ...] = (
         "{name} std", ERROR_COLORS[:3]),
     Row("odometry_scale", "plant", LINES, "sensors/wheel_scale/{name}", "", _LR, "{name} wheel's scale",
         WHEEL_MEAS_COLORS),
+    # The force of a force event on the robot, the world's axes: its lines, and its arrow (mlpfac.log.terrain).
+    Row("force", "plant", LINES, "forces/{name}", "N, N, N m", ("fx", "fy", "torque_z"), "{name} applied",
+        FORCE_COLORS),
+    Row("force", "plant", SCENE, "world/force", "N", colors=(FORCE_COLORS[0],)),
     # Controller telemetry.
     Row("z", "ctrl", LAYERS, "weights/{layer}", colors=WEIGHT_COLORS, width=1.0, labels="z", prefix="w"),
     Row("z", "ctrl", CHANGE, "weight_change/{layer}", colors=WEIGHT_COLORS, width=2.0, labels="z", prefix="w"),

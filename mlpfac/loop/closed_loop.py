@@ -130,6 +130,8 @@ class ClosedLoop:
         plant.reset(q0, [p for _, p in gens], u0)
         self.pose, self.pose_meas, self.e, self.e_true, self.u = (np.full((B, N, d), np.nan) for d in (3, 3, 3, 3, 2))
         self.recs = [self._record(b, s) for b, s in enumerate(scns)]
+        for b, rec in enumerate(self.recs):  # the terrain each seed's robot drives on (its own rough ground)
+            rec.world = (plant.plants[b] if self.listed else plant).terrain_record()
         self.ctrl_store: dict[str, np.ndarray] = {}
         self.plant_store: dict[str, np.ndarray] = {}
         self._e, self._et = np.zeros((B, 3)), np.zeros((B, 3))  # step k's errors (2), measured and true

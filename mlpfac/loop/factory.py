@@ -18,10 +18,11 @@ import numpy as np
 from mlpfac.control.adaptive.controller import VARIANTS, Adaptive
 from mlpfac.control.adaptive.dynamic_level import AdaptiveDynamic
 from mlpfac.control.baselines import Corradini, Kanayama, PluginController, Stepped
-from mlpfac.control.dynamic import OUTER_GAINS, FierroLewis, OracleDynamic
+from mlpfac.control.dynamic import OUTER_GAINS, FierroLewis, OracleDynamic, Told
 from mlpfac.control.oracle import TOLD, TURNING, Oracle, told
 from mlpfac.control.torque import TorquePluginController
 from mlpfac.plants import make_plant  # noqa: F401 (the plant half of the factory, as mlpfac.loop.factory.make_plant)
+from mlpfac.plants.events import Force, Slope
 from mlpfac.scenario.on_robot import peak_wheel_speed
 from mlpfac.scenario.parse import Scenario
 from mlpfac.scenario.reference import sample
@@ -111,4 +112,15 @@ def _torque_level(scn: Scenario, instance: object | None, plant) -> Stepped:
             changed.apply(ev)
             dynamic = ev.kind in ("payload", "actuator", "wheel_radius")
             changes.append((*told(ev), changed.true_dynamics() if dynamic else None))
-    return OracleDynamic(robot, scn.T, gains, limits, changes)
+    return OracleDynamic(robot, scn.T, gains, limits, changes, _world_told(scn, plant))
+
+
+def _world_told(scn: Scenario, plant) -> Told | None:
+    """The slopes and forces ``oracle-dynamic`` is told (None: none): gravity along the floor after
+    each slope, of the robot's own magnitude, and the force events whose schedule it meets."""
+    g0 = plant.robot.model.opt.gravity
+    g = float(np.sqrt(np.sum(g0 * g0)))
+    slopes = [(ev.time, *ev.gravity(g)[:2]) for ev in scn.events if isinstance(ev, Slope)]
+    if not slopes and not any(isinstance(ev, Force) for ev in scn.events):
+        return None
+    return Told(slopes, scn.events, scn.steps)

@@ -39,6 +39,7 @@ class RunRecord:
     sim_time_s: float = 0.0  # physical time simulated by the plant
     wall_time_s: float = 0.0
     pose_source: str = "truth"  # where pose_meas came from ([plant] pose_source): "truth", "odometry", "fused"
+    world: dict = field(default_factory=dict)  # the terrain driven on, as drawn (mlpfac.plants.world.Terrain.as_dict)
 
     @property
     def estimate_error(self) -> np.ndarray | None:
@@ -49,7 +50,7 @@ class RunRecord:
         from mlpfac.model import wrap
 
         d = self.pose_meas - self.pose
-        return np.c_[np.sqrt(d[:, 0] ** 2 + d[:, 1] ** 2), wrap(d[:, 2])]
+        return np.c_[np.sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1]), wrap(d[:, 2])]
 
     @classmethod
     def allocate(cls, scenario: str, controller: str, seed: int, T: float, N: int) -> RunRecord:
@@ -67,3 +68,14 @@ class RunRecord:
             e_true=nan((N, 3), np.nan),
             u=nan((N, 2), np.nan),
         )
+
+
+def force_windows(events, end: float) -> list[tuple[float, float]]:
+    """When a ``force`` event of ``events`` (a record's or a metrics.json's) acts: (start, stop) in
+    s, a push for its duration, a force that stays until ``end``."""
+    out = []
+    for ev in events:
+        if isinstance(ev, dict) and ev.get("kind") == "force":
+            t, d = float(ev["time"]), (ev.get("params") or {}).get("duration")
+            out.append((t, min(end, t + float(d)) if d is not None else end))
+    return out

@@ -38,6 +38,7 @@ TOP = {
     "plant": ("", "the robot: [below](#plant)"),
     "controller": ("", "the controller and its options: [below](#controller)"),
     "events": ("", "changes of the robot mid-run, never told to the controller: [below](#events)"),
+    "world": ("", "the ground around the robot from the start: ramps, rough ground, floor patches: [below](#world)"),
     "provenance": ("", "written by mlpfac into a run's `config.toml` (what was simulated); not for a file of yours"),
     "drawn": (
         "",
@@ -218,7 +219,8 @@ def _cell(text: str) -> str:
     return text.replace("|", "\\|").replace("\n", " ")
 
 
-def _dataclass_rows(cls, where: str, skip: frozenset = frozenset()) -> list[str]:
+def _dataclass_rows(cls, where: str, skip: frozenset = frozenset(), base: dict | None = None) -> list[str]:
+    """One row a field of ``cls``; ``base``: values of its required fields, beside the one probed."""
     hints, notes = typing.get_type_hints(cls), _comments(cls)
     rows = ["| key | type | default | range | meaning |", "| --- | --- | --- | --- | --- |"]
     for f in dataclasses.fields(cls):
@@ -226,7 +228,7 @@ def _dataclass_rows(cls, where: str, skip: frozenset = frozenset()) -> list[str]
             continue
 
         def make(v, key=f.name):
-            return build(cls, CONTEXT.get(key, {}) | {key: v}, where)
+            return build(cls, (base or {}) | CONTEXT.get(key, {}) | {key: v}, where)
 
         cells = (f"`{f.name}`", _type(hints[f.name]), _default(f), _range(make, f.name, hints[f.name]))
         rows.append("| " + " | ".join(_cell(c) for c in (*cells, notes.get(f.name, ""))) + " |")
@@ -288,6 +290,7 @@ def scenario_page() -> str:
     from mlpfac.plants.config import MujocoConfig
     from mlpfac.plants.events import EVENTS
     from mlpfac.plants.kinematic import KinematicConfig, KinematicPlant
+    from mlpfac.plants.world import Bumps, Patch, Ramp
     from mlpfac.scenario.reference import REFERENCES
 
     out = [
@@ -386,6 +389,31 @@ def scenario_page() -> str:
         "v = v_r cos e3 + Kx e1, ω = ω_r + v_r (Ky e2 + Kθ sin e3).",
         "",
         *_dataclass_rows(KanayamaGains, "[controller.kanayama]"),
+    ]
+    out += [
+        "",
+        "## `[world]`",
+        "",
+        "The ground around a MuJoCo robot, present from the start (the kinematic model drives on none), built into the "
+        "scene the plant compiles ([Scenarios](scenarios.md#the-world-around-the-robot)). Each is checked against the "
+        "robot before anything runs: a ramp its wheels cannot climb or that lies under them at the start, rough "
+        "ground too fine for its tyres, a patch outside the arena (the reference's bounding box and 1 m around it).",
+        "",
+        "`over` (s, > 0; default: the run's `duration`): the seconds of the reference the world is laid out along "
+        "(its arena, where the ramps' `at` falls); `--duration` writes the file's into `config.toml`, so that a "
+        "shorter run drives into the same world.",
+        "",
+        "`ramps`: a list of tables, ramps across the path (up, a flat top, down, each a third of `length`):",
+        "",
+        *_dataclass_rows(Ramp, "[world] ramps", base={"at": 0.5, "height": 0.01, "length": 1.0}),
+        "",
+        "`bumps`: a table, rough ground over the arena: a heightfield drawn per seed (its digest in `[drawn]`):",
+        "",
+        *_dataclass_rows(Bumps, "[world] bumps", base={"height": 0.01, "wavelength": 0.3}),
+        "",
+        "`patches`: a list of tables, floor patches of their own friction, flush with the floor:",
+        "",
+        *_dataclass_rows(Patch, "[world] patches", base={"x": 0.0, "y": 0.0, "radius": 0.1, "mu": 0.5}),
     ]
     kin = KinematicPlant.supported_events
     out += [

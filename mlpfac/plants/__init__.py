@@ -25,6 +25,7 @@ class PlantSpec(Protocol):
     controller: str
     level: str  # "torque": the controller commands the wheels' torques
     steps: int  # control steps of a run
+    terrain: object  # the world resolved for the run (mlpfac.plants.world.Terrain), or None
 
 
 def make_plant(scn: PlantSpec, ref: np.ndarray):
@@ -52,6 +53,8 @@ def make_plant(scn: PlantSpec, ref: np.ndarray):
         plant.check_event(ev, f"{scn.source} [[events]] #{i + 1}")
     if robot is not None:
         _check_size(scn, robot)
+        if scn.terrain is not None or any(ev.kind == "force" for ev in scn.events):  # mlpfac.plants.mujoco_world
+            robot.set_world(scn.terrain, scn.events, scn.steps, f"{scn.source} [world]")
     return plant
 
 

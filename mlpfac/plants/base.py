@@ -70,6 +70,10 @@ class Plant(Protocol):
     def found(self) -> dict:
         """The ``[plant]`` keys the scenario left unset and the plant found in its model ({}: none)."""
 
+    def terrain_record(self) -> dict:
+        """The terrain it drives on, as a recording draws it (:meth:`mlpfac.plants.world.Terrain.as_dict`;
+        {} without one)."""
+
     def geometry(self) -> list[dict]:
         """Static shapes of the robot for the 3D view, relative to the measured frame.
 

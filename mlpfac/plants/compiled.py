@@ -36,6 +36,7 @@ from mlpfac.jit import SALT, WHY, built, kernel
 from mlpfac.plants.events import delay_push
 from mlpfac.plants.ik import body_velocity_vw, wheel_speeds_lr
 from mlpfac.plants.odometry import O_GADR, O_GYRO, O_QL, O_QR, O_X, sense_step
+from mlpfac.plants.terrain import W_NPATCH, W_NTILE, ground_at, patches, place_tiles, push
 
 # ints: I_AL2, I_AR2 a second wheel's actuator on each side (skid-steer; -1: none), I_MIX 1 for two
 # motors on tendons over both wheels (a (v, omega) drive; I_AL, I_AR are those motors), I_CLAMP 1 for
@@ -44,7 +45,8 @@ from mlpfac.plants.odometry import O_GADR, O_GYRO, O_QL, O_QR, O_X, sense_step
 # torque-level controller: the torque drive without its PI loop)
 I_AL, I_AR, I_DL, I_DR, I_SITE, I_NSUB, I_TORQUE, I_NOISE, I_AL2, I_AR2, I_MIX, I_CLAMP, I_DL2, I_DR2 = range(14)
 I_TAU = 14
-N_INTS = 15
+I_ROOT = 15  # the robot's root body (where a force event pushes)
+N_INTS = 16
 # fl
 F_CL, F_CR, F_SL, F_SR, F_IK_R, F_IK_TRACK, F_WMAX, F_DT, F_KP, F_KI, F_TLMAX, F_TRMAX, F_RADIUS, F_ZREST = range(14)
 F_STD = 14  # three pose-noise standard deviations
@@ -91,6 +93,17 @@ class Robot(NamedTuple):
     vel: np.ndarray  # (6,) mj_objectVelocity's output
     sense: np.ndarray  # the pose source's estimator (mlpfac.plants.odometry's layout); empty: the truth
     sensordata: np.ndarray  # MjData.sensordata (the gyro's reading)
+    # the world (mlpfac.plants.mujoco_world, mlpfac.plants.terrain): the data's xfrc_applied, geom_xpos,
+    # mocap_pos, mocap_quat and the model's geom_friction (flat), the packed world ((0,): none), the
+    # rough ground's nodes, the force schedule (steps, 5)
+    xfrc: np.ndarray
+    geom_xpos: np.ndarray
+    mocap_pos: np.ndarray
+    mocap_quat: np.ndarray
+    geom_friction: np.ndarray
+    world: np.ndarray
+    nodes: np.ndarray
+    push: np.ndarray
 
 
 def _library() -> str:
@@ -136,7 +149,8 @@ def with_robot(signature: str, *more):
 
     args, ret = normalize_signature(signature)
     f1, i1 = types.float64[::1], types.int64[::1]
-    fields = (types.int64, types.int64, *[f1] * 7, i1, f1, f1, types.float64[:, ::1], i1, f1, f1, f1)
+    f2 = types.float64[:, ::1]
+    fields = (types.int64, types.int64, *[f1] * 7, i1, f1, f1, f2, i1, f1, f1, f1, *[f1] * 6, f2, f2)
     assert len(fields) == len(Robot._fields), "with_robot names a type for each field of Robot, in order"
     return ret(*args, *more, types.NamedTuple(fields, Robot))
 
@@ -182,15 +196,18 @@ def yaw(xmat: np.ndarray) -> float:
 
 
 @kernel()
-def _physics(mp, dp, ctrl, qvel, ints, fl, st, wl, wr):
+def _physics(mp, dp, ctrl, qvel, ints, fl, st, wl, wr, robot):
     """One control period: the wheel commands held for n physics steps, each ``mj_step2`` (actuation,
     integration) then ``mj_step1`` (the new state's positions, velocities, sensors). The velocity
     servos are MuJoCo's (with ``I_CLAMP`` their controls kept within their force limits, :func:`_within`,
     every physics step); the torque drive is a discrete wheel-speed PI loop evaluated every physics
     step: tau = kp e + ki I, clamped to the torque limit, I integrating e only while tau is not
     clamped (no wind-up). With ``I_TAU`` (wl, wr) are the wheels' torques themselves, clamped to
-    the limit and held."""
+    the limit and held. On rough ground the contact tiles are placed before each physics step's
+    collisions (:func:`mlpfac.plants.terrain.place_tiles`)."""
     n, al, ar, dl, dr = ints[I_NSUB], ints[I_AL], ints[I_AR], ints[I_DL], ints[I_DR]
+    w = robot.world
+    tiles = w.shape[0] > 0 and w[W_NTILE] > 0
     cl, cr = fl[F_CL], fl[F_CR]
     al2, ar2 = ints[I_AL2], ints[I_AR2]
     if ints[I_TORQUE] == 0 and ints[I_CLAMP]:
@@ -203,6 +220,8 @@ def _physics(mp, dp, ctrl, qvel, ints, fl, st, wl, wr):
             if ar2 >= 0:
                 ctrl[ar2] = _within(fl[F_CR2] * wr, qvel[dr2], fl, 3)
             mj_step2(mp, dp)
+            if tiles:
+                place_tiles(w, robot.nodes, robot.geom_xpos, robot.mocap_pos, robot.mocap_quat)
             mj_step1(mp, dp)
     elif ints[I_TORQUE] == 0:
         ctrl[al] = cl * wl
@@ -213,7 +232,11 @@ def _physics(mp, dp, ctrl, qvel, ints, fl, st, wl, wr):
             ctrl[ar2] = fl[F_CR2] * wr
         mj_step2(mp, dp)
         for _ in range(n - 1):
+            if tiles:
+                place_tiles(w, robot.nodes, robot.geom_xpos, robot.mocap_pos, robot.mocap_quat)
             mj_step(mp, dp)
+        if tiles:
+            place_tiles(w, robot.nodes, robot.geom_xpos, robot.mocap_pos, robot.mocap_quat)
         mj_step1(mp, dp)
     else:
         sl, sr, kp, ki, dt = fl[F_SL], fl[F_SR], fl[F_KP], fl[F_KI], fl[F_DT]
@@ -230,6 +253,8 @@ def _physics(mp, dp, ctrl, qvel, ints, fl, st, wl, wr):
             if ints[I_MIX]:
                 il, ir = _mix(ctrl, al, ar, fl, tl, tr, il, ir, el * dt, er * dt)
                 mj_step2(mp, dp)
+                if tiles:
+                    place_tiles(w, robot.nodes, robot.geom_xpos, robot.mocap_pos, robot.mocap_quat)
                 mj_step1(mp, dp)
                 continue
             if -tl_max <= tl <= tl_max:
@@ -247,6 +272,8 @@ def _physics(mp, dp, ctrl, qvel, ints, fl, st, wl, wr):
             if ar2 >= 0:
                 ctrl[ar2] = tr / fl[F_CR2]
             mj_step2(mp, dp)
+            if tiles:
+                place_tiles(w, robot.nodes, robot.geom_xpos, robot.mocap_pos, robot.mocap_quat)
             mj_step1(mp, dp)
         st[S_IL], st[S_IR] = il, ir
     st[S_TIME] += n * fl[F_DT]
@@ -301,11 +328,12 @@ def measure(ints, fl, st, draw, hist, fill):
 def sense(draw, tele, robot):
     """The pose the robot estimates (:func:`mlpfac.plants.odometry.sense_step`: its encoders, the
     driven wheels' hinge angles forward; its gyro; the fixes of its true pose) into the delay line,
-    its telemetry after the plant's (``tele[N_TELE:]``)."""
+    its telemetry after the plant's and the force's (``tele[N_TELE + 3:]`` where a force is applied)."""
     s, fl, st = robot.sense, robot.fl, robot.st
+    o = N_TELE + 3 if robot.push.shape[0] else N_TELE
     phl, phr = fl[F_SL] * robot.qpos[int(s[O_QL])], fl[F_SR] * robot.qpos[int(s[O_QR])]
     rate = robot.sensordata[int(s[O_GADR])] if s[O_GYRO] else 0.0
-    sense_step(s, phl, phr, rate, st[S_TIME], st[S_POSE], st[S_POSE + 1], st[S_POSE + 2], draw, tele, N_TELE)
+    sense_step(s, phl, phr, rate, st[S_TIME], st[S_POSE], st[S_POSE + 1], st[S_POSE + 2], draw, tele, o)
     m = np.empty(3)
     for j in range(3):
         m[j] = s[O_X + j]
@@ -331,7 +359,10 @@ def diverged(robot):
         s += x
     if not math.isfinite(s):
         return NOT_FINITE
-    if robot.site_xpos[2] - fl[F_ZREST] > 0.5 * fl[F_RADIUS]:
+    z = robot.site_xpos[2]
+    if robot.world.shape[0]:  # above the ground under it (mlpfac.plants.terrain)
+        z -= ground_at(robot.world, robot.nodes, robot.site_xpos[0], robot.site_xpos[1])
+    if z - fl[F_ZREST] > 0.5 * fl[F_RADIUS]:
         return LIFTED
     if robot.root_xmat[8] < 0.5:
         return TIPPED
@@ -350,7 +381,13 @@ def plant_step(u0, u1, draw, tele, robot):
         wl, wr = u0, u1
     else:
         wl, wr = wheel_speeds_lr(u0, u1, fl[F_IK_R], fl[F_IK_TRACK], fl[F_WMAX])
-    _physics(robot.mp, robot.dp, robot.ctrl, qvel, ints, fl, st, wl, wr)
+    w = robot.world
+    if w.shape[0]:  # the floor patches under the tyres, the force of this step (mlpfac.plants.terrain)
+        if w[W_NPATCH] > 0:
+            patches(w, robot.geom_friction, robot.geom_xpos)
+        if robot.push.shape[0]:
+            push(w, robot.push, robot.xfrc, ints[I_ROOT], st[S_THETA], tele[N_TELE : N_TELE + 3])
+    _physics(robot.mp, robot.dp, robot.ctrl, qvel, ints, fl, st, wl, wr, robot)
     read_pose(robot.site_xpos, robot.site_xmat, st)
     if robot.sense.shape[0]:  # a pose source other than the truth (mlpfac.plants.sensors)
         sense(draw, tele, robot)

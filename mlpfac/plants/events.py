@@ -28,6 +28,9 @@ MU_MIN, MU_MAX = 1e-4, 10.0  # sliding friction coefficient
 RADIUS_SCALE_MIN, RADIUS_SCALE_MAX = 0.1, 10.0  # a real wheel a tenth to ten times the nominal one
 PERIOD_FACTOR_MIN, PERIOD_FACTOR_MAX = 1e-3, 100.0  # the command held 0.001 T to 100 T
 DELAY_STEPS_MAX = 10_000  # control steps of sensor delay (100 s at T = 0.01 s)
+SLOPE_DEG_MAX = 30.0  # a floor tilted at most this much: steeper, no wheeled robot of ours stands on it
+FORCE_MAX = 1e4  # N (and N m) of a force (or its noise's standard deviation) on the robot, at most
+FORCE_S_MAX = 1e4  # s: a push's duration or a periodic force's period, at most
 
 
 @dataclass(frozen=True)
@@ -59,10 +62,22 @@ class Param:
         return value
 
 
-def _param(kind: type, required: bool = True, **limits):
+def param(kind: type, required: bool = True, **limits):
     """A dataclass field checked by ``Param(kind, required, **limits)`` when the event is made."""
     p = Param(kind, required, **limits)
     return field(metadata={"param": p}) if required else field(default=None, metadata={"param": p})
+
+
+def check_params(obj) -> None:
+    """Check each field of the frozen dataclass ``obj`` made by :func:`param` (its type and range;
+    a ConfigError naming the field), a whole number given for a float kept as a float."""
+    for f in dataclasses.fields(obj):
+        p = f.metadata.get("param")
+        value = getattr(obj, f.name)
+        if p is None or value is None:
+            continue
+        value = p.check(value, f.name)
+        object.__setattr__(obj, f.name, float(value) if p.kind is float else value)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -79,13 +94,7 @@ class Event:
         t = self.time
         if isinstance(t, bool) or not isinstance(t, int | float) or not math.isfinite(t) or t < 0:
             raise ConfigError("time", f"an event needs a finite time >= 0 s, got {t!r}")
-        for f in dataclasses.fields(self):
-            p = f.metadata.get("param")
-            value = getattr(self, f.name)
-            if p is None or value is None:
-                continue
-            value = p.check(value, f.name)
-            object.__setattr__(self, f.name, float(value) if p.kind is float else value)
+        check_params(self)
         self.validate()
 
     def validate(self) -> None:
@@ -115,11 +124,11 @@ class Payload(Event):
     two together)."""
 
     kind: ClassVar[str] = "payload"
-    mass_scale: float | None = _param(float, required=False, minimum=SCALE_MIN, maximum=SCALE_MAX)
-    mass_kg: float | None = _param(float, required=False, positive=True, maximum=MASS_KG_MAX)
-    body: str | None = _param(str, required=False)
-    offset: float | None = _param(float, required=False, minimum=-OFFSET_MAX, maximum=OFFSET_MAX)
-    lateral: float | None = _param(float, required=False, minimum=-OFFSET_MAX, maximum=OFFSET_MAX)
+    mass_scale: float | None = param(float, required=False, minimum=SCALE_MIN, maximum=SCALE_MAX)
+    mass_kg: float | None = param(float, required=False, positive=True, maximum=MASS_KG_MAX)
+    body: str | None = param(str, required=False)
+    offset: float | None = param(float, required=False, minimum=-OFFSET_MAX, maximum=OFFSET_MAX)
+    lateral: float | None = param(float, required=False, minimum=-OFFSET_MAX, maximum=OFFSET_MAX)
 
     def validate(self) -> None:
         if (self.mass_scale is None) == (self.mass_kg is None):
@@ -141,7 +150,7 @@ class Friction(Event):
     """Tyre/floor sliding friction set to ``mu``."""
 
     kind: ClassVar[str] = "friction"
-    mu: float = _param(float, minimum=MU_MIN, maximum=MU_MAX)
+    mu: float = param(float, minimum=MU_MIN, maximum=MU_MAX)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -149,7 +158,7 @@ class WheelRadius(Event):
     """Real wheel radius scaled by ``scale`` while the IK keeps the nominal one."""
 
     kind: ClassVar[str] = "wheel_radius"
-    scale: float = _param(float, minimum=RADIUS_SCALE_MIN, maximum=RADIUS_SCALE_MAX)
+    scale: float = param(float, minimum=RADIUS_SCALE_MIN, maximum=RADIUS_SCALE_MAX)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -157,8 +166,8 @@ class Actuator(Event):
     """Wheel drive weakened: servo gain (``kv_scale``) and/or torque limit (``force_scale``) scaled."""
 
     kind: ClassVar[str] = "actuator"
-    kv_scale: float | None = _param(float, required=False, minimum=SCALE_MIN, maximum=SCALE_MAX)
-    force_scale: float | None = _param(float, required=False, minimum=SCALE_MIN, maximum=SCALE_MAX)
+    kv_scale: float | None = param(float, required=False, minimum=SCALE_MIN, maximum=SCALE_MAX)
+    force_scale: float | None = param(float, required=False, minimum=SCALE_MIN, maximum=SCALE_MAX)
 
     def validate(self) -> None:
         if self.kv_scale is None and self.force_scale is None:
@@ -170,7 +179,7 @@ class ControlPeriod(Event):
     """The plant holds each command ``factor`` T."""
 
     kind: ClassVar[str] = "control_period"
-    factor: float = _param(float, minimum=PERIOD_FACTOR_MIN, maximum=PERIOD_FACTOR_MAX)
+    factor: float = param(float, minimum=PERIOD_FACTOR_MIN, maximum=PERIOD_FACTOR_MAX)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -178,11 +187,67 @@ class SensorDelay(Event):
     """The measured pose is ``steps`` control steps old."""
 
     kind: ClassVar[str] = "sensor_delay"
-    steps: int = _param(int, minimum=0, maximum=DELAY_STEPS_MAX)
+    steps: int = param(int, minimum=0, maximum=DELAY_STEPS_MAX)
+
+
+@dataclass(frozen=True, kw_only=True)
+class Slope(Event):
+    """The floor tilted by ``angle_deg`` from the horizontal, uphill towards ``heading_deg`` (in the
+    world's frame, counter-clockwise from x): gravity turned in the floor's frame (its component
+    g sin(angle) pulls downhill). An angle of 0 levels the floor again."""
+
+    kind: ClassVar[str] = "slope"
+    angle_deg: float = param(float, minimum=0.0, maximum=SLOPE_DEG_MAX)
+    heading_deg: float | None = param(float, required=False, minimum=-360.0, maximum=360.0)
+
+    def gravity(self, g: float) -> tuple[float, float, float]:
+        """Gravity of magnitude ``g`` in the floor's frame (x, y along the floor, z its normal)."""
+        from mlpfac.elementary import cos, sin
+
+        a, h = self.angle_deg * (math.pi / 180.0), (self.heading_deg or 0.0) * (math.pi / 180.0)
+        return -g * sin(a) * cos(h), -g * sin(a) * sin(h), -g * cos(a)
+
+
+FRAMES = ("world", "robot")
+
+
+@dataclass(frozen=True, kw_only=True)
+class Force(Event):
+    """A force (``fx``, ``fy`` in N) and a torque about the vertical (``torque_z``, N m) on the robot's
+    root body, at its centre of mass, in the world's axes or the robot's (``frame``: x forward, y
+    left, turned with the robot every control step). From ``time`` on for ``duration`` s (a push;
+    omitted: it stays, a tow or a wind); with ``period`` a sinusoid of amplitude (fx, fy, torque_z)
+    starting at zero; with ``std`` white noise of that standard deviation (N) on fx and fy, drawn
+    for each control step from a stream of its own (the run's seed and the event's place), held for
+    the step, added to (fx, fy)."""
+
+    kind: ClassVar[str] = "force"
+    fx: float | None = param(float, required=False, minimum=-FORCE_MAX, maximum=FORCE_MAX)
+    fy: float | None = param(float, required=False, minimum=-FORCE_MAX, maximum=FORCE_MAX)
+    torque_z: float | None = param(float, required=False, minimum=-FORCE_MAX, maximum=FORCE_MAX)
+    frame: str | None = param(str, required=False)
+    duration: float | None = param(float, required=False, positive=True, maximum=FORCE_S_MAX)
+    period: float | None = param(float, required=False, positive=True, maximum=FORCE_S_MAX)
+    std: float | None = param(float, required=False, minimum=0.0, maximum=FORCE_MAX)
+
+    def validate(self) -> None:
+        if self.frame is not None and self.frame not in FRAMES:
+            raise ConfigError("frame", f"choose 'world' or 'robot', got {self.frame!r}")
+        if all(x is None for x in (self.fx, self.fy, self.torque_z, self.std)):
+            raise ConfigError(
+                "", "a force event needs 'fx', 'fy', 'torque_z' or 'std' (0 is no force: a point of an axis)"
+            )
+        if self.period is not None and self.std is not None:
+            raise ConfigError("period", "a force is periodic or noise ('std'), not both")
+
+    def steps(self, T: float) -> int | None:
+        """Control steps it acts for (a push: its duration in whole control steps, at least one),
+        None when it stays."""
+        return None if self.duration is None else max(1, int(round(self.duration / T)))
 
 
 EVENTS: dict[str, type[Event]] = {
-    cls.kind: cls for cls in (Payload, Friction, WheelRadius, Actuator, ControlPeriod, SensorDelay)
+    cls.kind: cls for cls in (Payload, Friction, WheelRadius, Actuator, ControlPeriod, SensorDelay, Slope, Force)
 }
 EVENT_KINDS = tuple(EVENTS)
 

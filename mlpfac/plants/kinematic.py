@@ -94,6 +94,10 @@ class KinematicPlant:
         self.k = k + 1
         self.history.push(pose)
 
+    def terrain_record(self) -> dict:
+        """No terrain: the kinematic model drives on no ground."""
+        return {}
+
     def check_event(self, event: Event, where: str) -> None:
         if event.kind not in self.supported_events:
             raise ConfigError(

@@ -49,6 +49,7 @@ from mlpfac.plants.mjcf.settle import turning
 from mlpfac.plants.mujoco_events import MujocoEvents
 from mlpfac.plants.mujoco_report import MujocoReport
 from mlpfac.plants.mujoco_torque import TorqueDrive
+from mlpfac.plants.mujoco_world import MujocoWorld
 from mlpfac.plants.sensors import SensingPlant
 
 
@@ -65,7 +66,7 @@ class _Kept:
         getattr(plant, self.array)[self.index] = value
 
 
-class MujocoPlant(MujocoEvents, TorqueDrive, MujocoReport, SensingPlant):
+class MujocoPlant(MujocoEvents, TorqueDrive, MujocoReport, SensingPlant, MujocoWorld):
     """The MuJoCo robot behind the :class:`~mlpfac.plants.base.Plant` interface.
 
     ``model`` and ``data`` are the current :class:`mujoco.MjModel` / :class:`mujoco.MjData` (an
@@ -134,8 +135,10 @@ class MujocoPlant(MujocoEvents, TorqueDrive, MujocoReport, SensingPlant):
         self._changed = False
         self._motion_std = config.motion_noise_std()
         self._motion: DelayLine | None = None  # (v, omega, wheel_l, wheel_r) as measured: torque_commands()
+        self._no_world()  # the world: set_world (mlpfac.plants.mujoco_world)
         self.ints[[K.I_AL, K.I_AR, K.I_DL, K.I_DR, K.I_SITE]] = (*r.acts, *r.dofs, r.site)
         self.ints[K.I_TORQUE] = self.config.actuator == "torque"
+        self.ints[K.I_ROOT] = r.root
         self.ints[[K.I_AL2, K.I_AR2, K.I_MIX]] = (*r.seconds, r.mix is not None)
         self.ints[K.I_CLAMP] = self.config.servo_limit == "control" and self.config.actuator == "velocity"
         self._servos = [(i, a) for i, a in enumerate((*r.acts, *r.seconds)) if a >= 0 and self.ints[K.I_CLAMP]]
@@ -201,9 +204,10 @@ class MujocoPlant(MujocoEvents, TorqueDrive, MujocoReport, SensingPlant):
             quat,
         )
         mujoco.mj_forward(m, d)
+        self._world_reset(q0, rng)  # on the terrain, not in it; the force schedule (mlpfac.plants.mujoco_world)
         if u0 is not None:
             self._set_velocity(float(u0[0]), float(u0[1]), float(q0[2]))
-        self._z_rest = float(d.site_xpos[self._site, 2])
+        self._z_rest = float(d.site_xpos[self._site, 2]) - self.ground(*d.site_xpos[self._site, :2])
 
         self.rng = rng
         self._n = self.n_substeps
@@ -235,16 +239,23 @@ class MujocoPlant(MujocoEvents, TorqueDrive, MujocoReport, SensingPlant):
         """What the compiled step reads and writes: the current model and data (their addresses and
         views into them, made again when an event replaces them), the robot's arrays, the delay line."""
         self._site_xpos, self._site_xmat = self.data.site_xpos[self._site], self.data.site_xmat[self._site]
-        self.tele = np.zeros(K.N_TELE + self._sensing_width())
+        forces = self._push.shape[0] > 0  # the force applied, telemetry "force" (mlpfac.plants.mujoco_world)
+        self.tele = np.zeros(K.N_TELE + 3 * forces + self._sensing_width())
         self._tele = {key: self.tele[2 * i : 2 * i + 2] for i, key in enumerate(K.TELEMETRY)}
-        self._tele |= self._sensing_telemetry(self.tele, K.N_TELE)
+        if forces:
+            self._tele["force"] = self.tele[K.N_TELE : K.N_TELE + 3]
+        self._tele |= self._sensing_telemetry(self.tele, K.N_TELE + 3 * forces)  # after the force's
         self._pack()
 
     def _pack(self) -> None:
         m, d = self.model, self.data
         self._args = K.Robot(m._address, d._address, d.ctrl, d.qvel, d.qpos, d.qfrc_actuator, self._site_xpos,
                              self._site_xmat, d.xmat[self._root], self.ints, self.fl, self.st, self._history.hist,
-                             self._history.fill, np.empty(6), self._sense, d.sensordata)  # fmt: skip
+                             self._history.fill, np.empty(6), self._sense, d.sensordata,
+                             # the world (mlpfac.plants.mujoco_world): empty without terrain or forces
+                             d.xfrc_applied.reshape(-1), d.geom_xpos.reshape(-1), d.mocap_pos.reshape(-1),
+                             d.mocap_quat.reshape(-1), m.geom_friction.reshape(-1), self._wld, self._nodes,
+                             self._push)  # fmt: skip
 
     def kernel_args(self) -> K.Robot:
         """The robot as :func:`mlpfac.plants.compiled.plant_step` takes it (valid until the next event),

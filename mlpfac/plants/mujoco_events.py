@@ -13,7 +13,17 @@ import mujoco
 import numpy as np
 
 from mlpfac.exceptions import ConfigError
-from mlpfac.plants.events import Actuator, ControlPeriod, Event, Friction, Payload, SensorDelay, WheelRadius
+from mlpfac.plants.events import (
+    Actuator,
+    ControlPeriod,
+    Event,
+    Force,
+    Friction,
+    Payload,
+    SensorDelay,
+    Slope,
+    WheelRadius,
+)
 from mlpfac.plants.mjcf.detect import ROUND
 
 
@@ -27,15 +37,7 @@ class MujocoEvents:
         elif isinstance(event, Payload):
             self._payload_bodies(event, where)
         elif isinstance(event, Friction):
-            m = self.model
-            others = [g for g in range(m.ngeom) if m.body_rootid[m.geom_bodyid[g]] != self._root]
-            floor = max((int(m.geom_priority[g]) for g in others), default=-1)
-            if any(m.geom_priority[g] <= floor for g in self._tyres):
-                raise ConfigError(
-                    where,
-                    f"the tyre geoms need a priority above the floor's ({floor}) for their friction to be the "
-                    'contact\'s: give them one in the model, or set tyre = "sphere" in [plant]',
-                )
+            self._tyres_take_friction(where)
         elif isinstance(event, WheelRadius):
             if any(int(self.model.geom_type[g]) not in ROUND for g in self._tyres):
                 raise ConfigError(
@@ -116,6 +118,10 @@ class MujocoEvents:
         if isinstance(event, ControlPeriod):
             old, self._n = self._n, self._substeps(event.factor * self.T, "factor")
             return f"plant holds each command {old * self._dt:g} -> {self._n * self._dt:g} s ({self._n} physics steps; controller keeps T = {self.T:g} s)"
+        if isinstance(event, Slope):
+            return self._slope(event)
+        if isinstance(event, Force):
+            return self._force_text(event)
         if isinstance(event, SensorDelay):
             text = self._history.delay(event.steps)
             if self._motion is not None:  # the twist and the wheel speeds a torque-level controller sees
@@ -147,6 +153,7 @@ class MujocoEvents:
             for g in self._tyres:
                 spec.geoms[g].friction[0] = event.mu
             self._recompile()
+            self._world_friction(event.mu)
             return f"tyre/floor sliding friction {old:g} -> {event.mu:g}"
         if isinstance(event, WheelRadius):
             k = event.scale

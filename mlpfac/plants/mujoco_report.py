@@ -38,7 +38,7 @@ class MujocoReport:
         if code == K.NOT_FINITE:
             return "non-finite MuJoCo state"
         if code == K.LIFTED:
-            lift = float(self._site_xpos[2]) - self._z_rest
+            lift = float(self._site_xpos[2]) - self.ground(*self._site_xpos[:2]) - self._z_rest  # above the ground
             return f"the robot left the floor (axle {lift * 1e3:.0f} mm above its rest height)"
         if code == K.TIPPED:
             up = float(self.data.xmat[self._root][8])  # world z component of the chassis z axis
@@ -76,4 +76,6 @@ class MujocoReport:
             out |= {"model_file": str(self.config.path), "mujoco_menagerie": menagerie_version()}
         if self.robot.locked:
             out["locked_joints"] = list(self.robot.locked)
+        if self.terrain is not None:
+            out["world"] = self.world_said()
         return out

@@ -12,9 +12,10 @@ from pathlib import Path
 
 import numpy as np
 
-from mlpfac.loop.record import RunRecord
+from mlpfac.loop.record import RunRecord, force_windows
 
 EVENT_COLOR = "firebrick"
+FORCE_SPAN = "mediumvioletred"  # the windows in which a force acts on the robot
 RUN_COLOR = "tab:blue"
 
 
@@ -91,6 +92,9 @@ class Draft:
             for j, ev in enumerate(rec.events):
                 label = f"event: {str(ev.get('text') or ev.get('kind')).split(' (')[0]}" if j == 0 else None
                 ax.axvline(float(ev["time"]), color=EVENT_COLOR, lw=0.9, ls="--", label=label if tag == "a" else None)
+            for j, (t0, t1) in enumerate(force_windows(rec.events, rec.t[-1] + rec.T)):  # while a force acts
+                label = "a force acts" if j == 0 and tag == "a" else None
+                ax.axvspan(t0, t1, color=FORCE_SPAN, alpha=0.18, lw=0, zorder=0, label=label)
         if rec.events and "a" in axes:
             axes["a"].legend(loc="upper right", fontsize=8, framealpha=0.9)
         _paths(paths, rec, warm)

@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from mlpfac.loop.metrics import RunMetrics
+from mlpfac.loop.record import force_windows
 from mlpfac.plots.colors import controller_colors, mpl
 
 STEMS = ("sweep", "compare")
@@ -230,6 +231,12 @@ def _over_time(ax, ctrls: list[str], groups: list[list[RunMetrics]], colors: dic
         ax.axvspan(0, warm, color="0.85", lw=0, zorder=0)
         ax.annotate(
             "warm-up", (warm / 2, 0.02), xycoords=("data", "axes fraction"), ha="center", fontsize=7, color="0.4"
+        )
+    end = max((float(m.steps) * float(m.T) for ms in groups for m in ms), default=0.0)
+    events = next((m.events for ms in groups for m in ms if m.events), ())
+    for j, (t0, t1) in enumerate(force_windows(events, end)):  # while a force acts on the robot
+        ax.axvspan(
+            t0, t1, color="mediumvioletred", alpha=0.15, lw=0, zorder=0, label="a force acts" if j == 0 else None
         )
     if t_event is not None:
         ax.axvline(t_event, color="firebrick", ls="--", lw=1.0)

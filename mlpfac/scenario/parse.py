@@ -27,11 +27,13 @@ from mlpfac.exceptions import ConfigError
 from mlpfac.model import pose_from_error
 from mlpfac.plants import refuse_torque
 from mlpfac.plants.events import Event, parse_event
+from mlpfac.plants.world import Terrain, World, parse_world
 from mlpfac.scenario import provenance
 from mlpfac.scenario.draws import put as put_value
 from mlpfac.scenario.draws import resolve as draw_values
 from mlpfac.scenario.draws import restore as restore_draws
 from mlpfac.scenario.reference import make_reference
+from mlpfac.scenario.world import ground, recorded, recorded_bumps
 from mlpfac.tables import (  # noqa: F401 (mlpfac.scenario.parse.to_toml)
     FOLDER_NAME,
     build,
@@ -59,6 +61,7 @@ TOP_KEYS = {
     "plant",
     "controller",
     "events",
+    "world",
     "provenance",
     "drawn",
 }
@@ -93,6 +96,8 @@ class Scenario:
     dropped_events: tuple[float, ...] = ()  # times of the file's events a shorter --duration left out
     plugin: Plugin | None = None  # a user's controller (mlpfac.control.plugins); None: a shipped one
     plant_from: str = ""  # the robot its [plant] came from (--robot NAME: messages name it); "": the file's own
+    world: World = World()  # the [world] table: ramps, rough ground, floor patches
+    terrain: Terrain | None = None  # ... resolved for this run: where the ramps lie, the ground drawn for its seed
 
     @property
     def drawn(self) -> dict[str, float]:
@@ -148,6 +153,8 @@ class Scenario:
             dropped = tuple(ev["time"] for ev in events if ev not in kept)
             table["events"] = kept
         table["duration"] = duration
+        if isinstance(table.get("world"), dict) and self.world:  # the world stays laid out as the file's run
+            table["world"] = {"over": self.world.over or self.duration} | table["world"]
         try:
             scn = parse(table, self.source, check_model=False, plant_from=self.plant_from)
         except ConfigError as err:
@@ -285,6 +292,7 @@ def parse(table: dict, source: str = "<scenario>", check_model: bool = True, pla
     seed = table.get("seed", 0)
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise ConfigError(f"{source} seed", f"expected a whole number >= 0, got {seed!r}")
+    table, bumps_drawn = recorded_bumps(table, source)
     table, draws = draw_values(table, seed, source)  # each distribution replaced by its draw for this seed
     T = number(table, "T", 0.01, source)
     duration = number(table, "duration", 25.0, source)
@@ -378,6 +386,10 @@ def parse(table: dict, source: str = "<scenario>", check_model: bool = True, pla
     events = [parse_event(ev, duration, f"{source} [[events]] #{i + 1}") for i, ev in enumerate(raw_events)]
     events.sort(key=lambda ev: ev.time)
 
+    world = parse_world(table.get("world", {}), f"{source} [world]")
+    terrain = ground(world, plant_kind, reference, world.over or duration, T, e0, seed, source)
+    out = recorded(restore_draws(table, draws), terrain, bumps_drawn, seed, source)
+
     return Scenario(
         name=name,
         description=description,
@@ -397,9 +409,11 @@ def parse(table: dict, source: str = "<scenario>", check_model: bool = True, pla
         adaptive=adaptive,
         kanayama=kanayama,
         events=tuple(events),
-        table=restore_draws(table, draws),
+        table=out,
         plugin=plugin,
         plant_from=plant_from,
+        world=world,
+        terrain=terrain,
     )
 
 

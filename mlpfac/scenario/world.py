@@ -1,0 +1,63 @@
+"""A scenario's ``[world]`` over its run: the terrain resolved from the reference over the whole
+run and the run's seed (:func:`mlpfac.plants.world.resolve`, once, so that every plant of the run
+and its probes build the same world), and what was drawn of it recorded in the table's ``[drawn]``
+(the rough ground's digest, ``world.bumps``), checked against a fresh draw when a config.toml runs
+again, as a distribution's draw is (:mod:`mlpfac.scenario.draws`)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from mlpfac.exceptions import ConfigError
+from mlpfac.model import pose_from_error
+from mlpfac.plants.world import Terrain, World, resolve
+from mlpfac.scenario.reference import sample
+
+BUMPS_DRAWN = "world.bumps"  # [drawn]: the digest of the rough ground drawn for the seed
+
+
+def ground(
+    world: World, plant_kind: str, reference, span: float, T: float, e0, seed: int, source: str
+) -> Terrain | None:
+    """The terrain of ``world`` laid out along ``span`` s of ``reference`` (the run's duration, or the
+    file's under ``--duration``: ``[world] over``) from the initial error ``e0``, for ``seed`` (None
+    for an empty world); the kinematic model is refused one."""
+    if not world:
+        return None
+    if plant_kind != "mujoco":
+        raise ConfigError(
+            f"{source} [world]",
+            'the kinematic model drives on no ground: [world] needs a robot ([plant] kind = "mujoco")',
+        )
+    ref = sample(reference, np.arange(int(round(span / T)) + 1) * T)
+    start = pose_from_error(np.array(e0, dtype=float), ref[0])
+    return resolve(world, ref, start, seed, f"{source} [world]")
+
+
+def recorded_bumps(table: dict, source: str) -> tuple[dict, str | None]:
+    """The table without its ``[drawn]`` digest of the rough ground (not a distribution's draw, which
+    :func:`mlpfac.scenario.draws.resolve` checks), and that digest (None: none)."""
+    drawn = table.get("drawn")
+    if not isinstance(drawn, dict) or BUMPS_DRAWN not in drawn:
+        return table, None
+    rest = {k: v for k, v in drawn.items() if k != BUMPS_DRAWN}
+    out = {k: v for k, v in table.items() if k != "drawn"} | ({"drawn": rest} if rest else {})
+    value = drawn[BUMPS_DRAWN]
+    if not isinstance(value, str):
+        raise ConfigError(f"{source} [drawn] {BUMPS_DRAWN}", f"expected the digest of the rough ground, got {value!r}")
+    return out, value
+
+
+def recorded(table: dict, terrain: Terrain | None, was: str | None, seed: int, source: str) -> dict:
+    """``table`` with the rough ground drawn recorded in ``[drawn]``; a digest ``was`` recorded before
+    (a config.toml's) that is not this draw's is a ConfigError."""
+    if terrain is None or not terrain.digest:
+        return table
+    digest = f"sha256:{terrain.digest}"
+    if was is not None and was != digest:
+        raise ConfigError(
+            f"{source} [drawn] {BUMPS_DRAWN}",
+            f"{was!r} is not the rough ground seed {seed} draws ({digest}): another mlpfac or numpy draws it "
+            "otherwise; remove the line to run the ground drawn now",
+        )
+    return {**table, "drawn": {**table.get("drawn", {}), BUMPS_DRAWN: digest}}
