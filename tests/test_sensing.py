@@ -8,6 +8,7 @@ from __future__ import annotations
 import copy
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -314,3 +315,16 @@ def test_users_controllers_run_unchanged_on_each_source(source):
     sensed = rec.plant["sensed"][: rec.n]
     q = 2 * math.pi / 2048 / 0.01  # a count a control step, in rad/s
     assert np.allclose(np.round(sensed[:, 2:] / q), sensed[:, 2:] / q, atol=1e-6)  # counted wheel speeds
+
+
+EXAMPLES = Path(__file__).resolve().parent.parent / "examples" / "sensing"
+
+
+@pytest.mark.parametrize("robot", sorted(p.name for p in EXAMPLES.glob("diffdrive*.toml")))
+def test_a_robot_file_brings_its_own_sensors_in_place_of_the_scenarios_pose_noise(robot):
+    """examples/sensing: a robot file that names its pose source replaces the scenario's pose noise
+    (eight-wheel-radius has 1 mm of it), which would be refused beside another source."""
+    scn = load("eight-wheel-radius", robot=str(EXAMPLES / robot))
+    c = scn.plant_config
+    assert c.pose_source == robot.split("-")[-1].removesuffix(".toml") and c.gyro and c.pose_noise_std == 0.0
+    assert load("eight-wheel-radius", robot="diffdrive").plant_config.pose_noise_std == 0.001  # the scenario's, else

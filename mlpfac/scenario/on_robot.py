@@ -206,9 +206,10 @@ def on_robot(table: dict, robot: str) -> dict:
     plant = robot_table(robot)
     from mlpfac.plants.sensors import SENSOR_KEYS
 
-    for key in ("pose_noise_std", *SENSOR_KEYS):  # what the robot senses of its pose goes with the scenario
-        if key in old and key not in plant:
-            plant[key] = old[key]
+    if "pose_source" not in plant:  # what the robot senses of its pose goes with the scenario, but where its file says
+        for key in ("pose_noise_std", *SENSOR_KEYS):
+            if key in old and key not in plant:
+                plant[key] = old[key]
     T = float(out.get("T", 0.01))
     duration = float(out.get("duration", 25.0))
     raw = out.get("events", []) if isinstance(out.get("events"), list) else []
