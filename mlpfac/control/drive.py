@@ -1,0 +1,116 @@
+"""What a wheel drive gives a law of the torque level (:mod:`mlpfac.control.torque`): the wheels' rated
+speed kept and a traction guard, written once. The shipped torque-level laws (``fierro-lewis``,
+``oracle-dynamic``, ``adaptive-dynamic``) step these kernels; a law of one's own calls them through
+:class:`mlpfac.control.torque.Drive`. The plant applies the torques it is sent, as the contract
+says: nothing here is physics.
+
+- **Rated speed.** A velocity command (v_c, omega_c) whose faster wheel, (v_c -+ omega_c b) / r,
+  would pass the rated speed w_max is scaled, both together, to bring it there (:func:`rated`: the
+  IK's rule, :func:`mlpfac.plants.ik.wheel_speeds`, the curvature kept), and its rate with it. The
+  torque that drives a wheel faster falls linearly to zero over the last ``RATED_BAND`` of w_max,
+  so that no torque drives a wheel past it.
+- **Traction.** A wheel turning at w (its encoder) over ground that moves at g = (v -+ omega b) / r
+  (the base's measured twist) slips by w - g. Slip up to ``SLIP_SPEED`` / r + ``SLIP_RATIO``
+  min(|w|, |g|) is rolling (:func:`rolling`); beyond it the torque that drives the slip on falls
+  linearly to zero at twice that, and comes back as the wheel grips again. ``SLIP_RATIO`` = 0.6
+  lets a rolling radius from 1/1.6 to 1.6 times the nominal one pass as rolling (a wrong radius
+  is a gain the laws meet, not a lost grip); ``SLIP_SPEED`` is what the measurements' noise and
+  a tyre's creep give near rest. The threshold grows with the slower of the two speeds, so that a
+  wheel spinning up does not raise its own.
+
+Where neither part acts the torques are the law's to the bit. With no wheel-speed limit
+(w_max = inf) the first part does nothing. (A limit on the torque's rate is not here: one of half
+the torque limit a control step, the velocity loop's own time constant, made every nominal run of
+the three small robots 3-6 % worse and the cart on a wet floor 34 %, and one of the whole limit a
+step helped nowhere: docs/controllers.md.)
+"""
+
+from __future__ import annotations
+
+from mlpfac.dynamics import P_B, P_R, P_TMAX, P_WMAX
+from mlpfac.jit import kernel
+
+RATED_BAND = 0.1  # the torque that drives a wheel faster falls to zero over this share of w_max below it
+SLIP_RATIO = 0.6  # slip, as a share of the slower of the wheel and the ground, that is rolling
+SLIP_SPEED = 0.05  # m/s at the contact: slip that is rolling at any speed (noise, a tyre's creep)
+
+
+@kernel()
+def rated(p, v, w, dv, dw):
+    """(v, omega) and its rate (dv, domega) as the drive takes them: both scaled by s = w_max / the
+    faster wheel's speed where that passes w_max (the curvature kept), the rate the scaled
+    command's own, s ((dv, domega) - (v, omega) dpeak / peak); as given otherwise."""
+    r, b, wmax = p[P_R], p[P_B], p[P_WMAX]
+    wl, wr = (v - w * b) / r, (v + w * b) / r
+    if abs(wl) >= abs(wr):
+        peak, dpeak = abs(wl), (dv - dw * b) / r
+        if wl < 0.0:
+            dpeak = -dpeak
+    else:
+        peak, dpeak = abs(wr), (dv + dw * b) / r
+        if wr < 0.0:
+            dpeak = -dpeak
+    if not peak > wmax:
+        return v, w, dv, dw
+    s, q = wmax / peak, dpeak / peak
+    return s * v, s * w, s * (dv - v * q), s * (dw - w * q)
+
+
+@kernel()
+def rolling(p, w, g):
+    """The largest slip |w - g| (rad/s) with which a wheel turning at ``w`` over ground moving at ``g`` rolls."""
+    return SLIP_SPEED / p[P_R] + SLIP_RATIO * min(abs(w), abs(g))
+
+
+@kernel()
+def _kept(p, tau, w, g):
+    """The share of the torque ``tau`` the drive sends to a wheel turning at ``w`` over ground moving
+    at ``g`` (rad/s): 1 but near the rated speed in the torque's direction or beyond rolling slip."""
+    if tau == 0.0:
+        return 1.0
+    d = 1.0 if tau > 0.0 else -1.0
+    kept = 1.0
+    over = d * w - (1.0 - RATED_BAND) * p[P_WMAX]  # how far into the band below w_max the torque pushes it
+    if over > 0.0:
+        kept = max(1.0 - over / (RATED_BAND * p[P_WMAX]), 0.0)
+    slip, rolls = d * (w - g), rolling(p, w, g)  # the slip the torque drives on, and what rolls
+    if slip > rolls:
+        kept = min(kept, max(2.0 - slip / rolls, 0.0))
+    return kept
+
+
+@kernel()
+def guard(p, v, w, wl, wr, tl, tr):
+    """The wheel torques the drive sends for the law's (tl, tr), each cut near the rated speed and
+    beyond rolling slip (:func:`_kept`), within the torque limit: (v, w) the base's measured
+    twist, (wl, wr) the encoders' wheel speeds."""
+    r, b, tmax = p[P_R], p[P_B], p[P_TMAX]
+    gl, gr = (v - w * b) / r, (v + w * b) / r  # the ground's speed under each wheel, in wheel speed
+    tl = tl * _kept(p, tl, wl, gl)
+    tr = tr * _kept(p, tr, wr, gr)
+    return min(max(tl, -tmax), tmax), min(max(tr, -tmax), tmax)
+
+
+@kernel()
+def slipping(p, v, w, wl, wr):
+    """Whether a wheel slips beyond rolling (:func:`rolling`): (v, w) the base's measured twist,
+    (wl, wr) the encoders' wheel speeds."""
+    r, b = p[P_R], p[P_B]
+    gl, gr = (v - w * b) / r, (v + w * b) / r
+    return abs(wl - gl) > rolling(p, wl, gl) or abs(wr - gr) > rolling(p, wr, gr)
+
+
+@kernel("void(f8[::1], f8[:, ::1], f8[:, ::1], f8[:, ::1])")
+def drive_step(p, twist, wheels, tau):
+    """For B seeds, in place: the torques ``tau`` (B, 2) the law asked become those the drive sends
+    (:func:`guard`), given the measured ``twist`` (B, 2) and the encoders' ``wheels`` (B, 2) rad/s."""
+    for i in range(tau.shape[0]):
+        tau[i, 0], tau[i, 1] = guard(p, twist[i, 0], twist[i, 1], wheels[i, 0], wheels[i, 1], tau[i, 0], tau[i, 1])
+
+
+@kernel("void(f8[::1], f8[:, ::1], f8[:, ::1])")
+def rated_step(p, cmd, rate):
+    """For B seeds, in place: the velocity commands ``cmd`` (B, 2) = (v_c, omega_c) and their rates
+    ``rate`` (B, 2) kept within the rated wheel speed (:func:`rated`)."""
+    for i in range(cmd.shape[0]):
+        cmd[i, 0], cmd[i, 1], rate[i, 0], rate[i, 1] = rated(p, cmd[i, 0], cmd[i, 1], rate[i, 0], rate[i, 1])
