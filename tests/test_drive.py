@@ -72,13 +72,18 @@ def test_the_scaled_commands_rate_is_its_derivative():
 def test_the_traction_guard_cuts_a_spinning_wheel_and_leaves_a_rolling_one():
     """At 0.5 m/s straight on (5 rad/s of ground under each wheel): the left wheel at 5 rad/s keeps
     its torque to the bit, the right one spinning at 20 rad/s loses all the torque that drives it on
-    and keeps the torque that brakes it; a wheel locked under a braking torque loses it; within the
-    rolling slip (0.05 m/s / r + 0.6 min(|w|, |g|)) nothing is cut, at twice that everything."""
+    and keeps the torque that brakes it; a wheel locked under a braking torque keeps it (a skid is
+    not a spin); one spun backwards loses the torque that spins it on and keeps the one that brings
+    it back, going forwards or backwards; within the rolling slip (0.05 m/s / r + 0.6 min(|w|, |g|))
+    nothing is cut, at twice that everything."""
     d = Drive(FREE)
     g = 0.5 / R
     assert d.torques(obs_of([0.5, 0.0], [g, 4 * g]), [1.234, 2.0]).tolist() == [1.234, 0.0]
     assert d.torques(obs_of([0.5, 0.0], [g, 4 * g]), [1.234, -2.0]).tolist() == [1.234, -2.0]
-    assert d.torques(obs_of([0.5, 0.0], [0.0, g]), [-3.0, 1.0]).tolist() == [0.0, 1.0]  # locked, braked
+    assert d.torques(obs_of([0.5, 0.0], [0.0, g]), [-3.0, 1.0]).tolist() == [-3.0, 1.0]  # locked, braked
+    assert d.torques(obs_of([0.5, 0.0], [-4 * g, g]), [-3.0, 3.0]).tolist() == [0.0, 3.0]  # spun backwards
+    assert d.torques(obs_of([0.5, 0.0], [-4 * g, g]), [3.0, 3.0]).tolist() == [3.0, 3.0]
+    assert d.torques(obs_of([-0.5, 0.0], [-4 * g, -g]), [-3.0, 3.0]).tolist() == [0.0, 3.0]  # reversing
     rolls = 0.05 / R + drive.SLIP_RATIO * g
     edge = d.torques(obs_of([0.5, 0.0], [g + rolls, g + 2 * rolls + 1e-9]), [1.0, 1.0])
     assert edge[0] == 1.0 and edge[1] == 0.0

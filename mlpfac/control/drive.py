@@ -11,18 +11,19 @@ says: nothing here is physics.
   so that no torque drives a wheel past it.
 - **Traction.** A wheel turning at w (its encoder) over ground that moves at g = (v -+ omega b) / r
   (the base's measured twist) slips by w - g. Slip up to ``SLIP_SPEED`` / r + ``SLIP_RATIO``
-  min(|w|, |g|) is rolling (:func:`rolling`); beyond it the torque that drives the slip on falls
-  linearly to zero at twice that, and comes back as the wheel grips again. ``SLIP_RATIO`` = 0.6
-  lets a rolling radius from 1/1.6 to 1.6 times the nominal one pass as rolling (a wrong radius
-  is a gain the laws meet, not a lost grip); ``SLIP_SPEED`` is what the measurements' noise and
-  a tyre's creep give near rest. The threshold grows with the slower of the two speeds, so that a
-  wheel spinning up does not raise its own.
+  min(|w|, |g|) is rolling (:func:`rolling`); beyond it the torque that spins the wheel on, faster
+  than the ground in its own direction, falls linearly to zero at twice that, and comes back as
+  the wheel grips again. ``SLIP_RATIO`` = 0.6 lets a wheel turn 1.6 times as fast as the ground
+  before it is taken to spin (a rolling radius down to 1/1.6 of the nominal one is a gain the laws
+  meet, not a lost grip); ``SLIP_SPEED`` is what the measurements' noise and a tyre's creep give
+  near rest. The threshold grows with the slower of the two speeds, so that a spinning wheel does
+  not raise its own. A wheel slower than the ground (braked to a skid) keeps its torque: a locked
+  wheel throws no robot, and cutting its braking (an ABS) cost more where the robot itself skids
+  (the tug after its radius grows) than it gained on a wet floor (docs/controllers.md).
 
 Where neither part acts the torques are the law's to the bit. With no wheel-speed limit
-(w_max = inf) the first part does nothing. (A limit on the torque's rate is not here: one of half
-the torque limit a control step, the velocity loop's own time constant, made every nominal run of
-the three small robots 3-6 % worse and the cart on a wet floor 34 %, and one of the whole limit a
-step helped nowhere: docs/controllers.md.)
+(w_max = inf) the first part does nothing. A limit on the torque's rate is not here: it made the
+runs worse wherever it acted (docs/controllers.md).
 """
 
 from __future__ import annotations
@@ -65,7 +66,8 @@ def rolling(p, w, g):
 @kernel()
 def _kept(p, tau, w, g):
     """The share of the torque ``tau`` the drive sends to a wheel turning at ``w`` over ground moving
-    at ``g`` (rad/s): 1 but near the rated speed in the torque's direction or beyond rolling slip."""
+    at ``g`` (rad/s): 1 but near the rated speed in the torque's direction, or where the torque
+    spins the wheel, in its own direction, faster than the ground beyond rolling."""
     if tau == 0.0:
         return 1.0
     d = 1.0 if tau > 0.0 else -1.0
@@ -74,7 +76,7 @@ def _kept(p, tau, w, g):
     if over > 0.0:
         kept = max(1.0 - over / (RATED_BAND * p[P_WMAX]), 0.0)
     slip, rolls = d * (w - g), rolling(p, w, g)  # the slip the torque drives on, and what rolls
-    if slip > rolls:
+    if slip > rolls and d * w > 0.0:  # spinning on (a wheel braked to a skid keeps its torque)
         kept = min(kept, max(2.0 - slip / rolls, 0.0))
     return kept
 
@@ -82,8 +84,8 @@ def _kept(p, tau, w, g):
 @kernel()
 def guard(p, v, w, wl, wr, tl, tr):
     """The wheel torques the drive sends for the law's (tl, tr), each cut near the rated speed and
-    beyond rolling slip (:func:`_kept`), within the torque limit: (v, w) the base's measured
-    twist, (wl, wr) the encoders' wheel speeds."""
+    where it spins its wheel beyond rolling (:func:`_kept`), within the torque limit: (v, w) the
+    base's measured twist, (wl, wr) the encoders' wheel speeds."""
     r, b, tmax = p[P_R], p[P_B], p[P_TMAX]
     gl, gr = (v - w * b) / r, (v + w * b) / r  # the ground's speed under each wheel, in wheel speed
     tl = tl * _kept(p, tl, wl, gl)
@@ -93,8 +95,8 @@ def guard(p, v, w, wl, wr, tl, tr):
 
 @kernel()
 def slipping(p, v, w, wl, wr):
-    """Whether a wheel slips beyond rolling (:func:`rolling`): (v, w) the base's measured twist,
-    (wl, wr) the encoders' wheel speeds."""
+    """Whether a wheel slips beyond rolling (:func:`rolling`), spinning or skidding: (v, w) the base's
+    measured twist, (wl, wr) the encoders' wheel speeds."""
     r, b = p[P_R], p[P_B]
     gl, gr = (v - w * b) / r, (v + w * b) / r
     return abs(wl - gl) > rolling(p, wl, gl) or abs(wr - gr) > rolling(p, wr, gr)
