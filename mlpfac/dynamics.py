@@ -31,9 +31,9 @@ from mlpfac.jit import kernel
 # packed model (RobotModel.packed): the constants the kernels read, by index; P_FV, P_FW the
 # external generalized force f_e on (v, omega) (0 in the nominal model; an oracle told a slope or a
 # force sets them, mlpfac.control.dynamic)
-P_M11, P_M22, P_MD, P_R, P_B, P_C, P_TMAX = range(7)
-P_FV, P_FW = 7, 8
-N_P = 9
+P_M11, P_M22, P_MD, P_R, P_B, P_C, P_TMAX, P_WMAX = range(8)
+P_FV, P_FW = 8, 9
+N_P = 10
 
 
 @dataclass(frozen=True)
@@ -50,13 +50,15 @@ class RobotModel:
     torque_limit_Nm: float  # noqa: N815 - the unit in the name; each wheel's largest torque (inf: not limited)
     wheel_damping_Nm_s: float = 0.0  # noqa: N815 - each wheel joint's viscous damping, N m per rad/s
     com_lateral_m: float = 0.0  # the centre of mass left of the axle midpoint (the model takes it as 0)
+    wheel_speed_limit_rad_s: float = math.inf  # each wheel's rated speed, the plant's max_wheel_speed (inf: none)
 
     def __post_init__(self) -> None:
         for f in fields(self):
             x = getattr(self, f.name)
             if isinstance(x, bool) or not isinstance(x, int | float) or math.isnan(x):
                 raise ConfigError(f.name, f"expected a number, got {x!r}")
-        for name in ("mass_kg", "yaw_inertia_kg_m2", "wheel_radius_m", "track_m", "torque_limit_Nm"):
+        for name in ("mass_kg", "yaw_inertia_kg_m2", "wheel_radius_m", "track_m", "torque_limit_Nm",
+                     "wheel_speed_limit_rad_s"):  # fmt: skip
             if not getattr(self, name) > 0:
                 raise ConfigError(name, f"must be positive, got {getattr(self, name)!r}")
         if not self.wheel_inertia_kg_m2 >= 0 or not self.wheel_damping_Nm_s >= 0:
@@ -68,13 +70,15 @@ class RobotModel:
         return 0.5 * self.track_m
 
     def packed(self) -> np.ndarray:
-        """The constants of the kernels (P_M11 .. P_TMAX): M's diagonal, m d, r, b, c, the torque limit."""
+        """The constants of the kernels (P_M11 .. P_WMAX): M's diagonal, m d, r, b, c, the torque limit,
+        the wheel-speed limit."""
         r, b, iw = self.wheel_radius_m, self.b, self.wheel_inertia_kg_m2
         p = np.empty(N_P)
         p[P_M11] = self.mass_kg + 2.0 * iw / (r * r)
         p[P_M22] = self.yaw_inertia_kg_m2 + 2.0 * b * b * iw / (r * r)
         p[P_MD] = self.mass_kg * self.com_offset_m
         p[P_R], p[P_B], p[P_C], p[P_TMAX] = r, b, self.wheel_damping_Nm_s, self.torque_limit_Nm
+        p[P_WMAX] = self.wheel_speed_limit_rad_s
         p[P_FV], p[P_FW] = 0.0, 0.0
         return p
 

@@ -45,6 +45,16 @@ def test_parameters_of_the_tug_by_hand():
     assert rm.wheel_damping_Nm_s == pytest.approx(0.05)
 
 
+def test_the_rated_wheel_speed_is_the_plants():
+    """The model a torque-level law is given holds the wheel-speed limit the IK keeps: none on the
+    tug (inf), [plant] max_wheel_speed where the file sets one, and the true model the same."""
+    assert plant(TUG).dynamics().wheel_speed_limit_rad_s == float("inf")
+    p = MujocoPlant(MujocoConfig(model=str(TUG), actuator="torque", max_wheel_speed=12.0), 0.01)
+    assert p.dynamics().wheel_speed_limit_rad_s == 12.0
+    p.reset(np.zeros(3), np.random.default_rng(0))
+    assert p.true_dynamics().wheel_speed_limit_rad_s == 12.0
+
+
 def test_our_robot_by_hand():
     rm = plant(ROBOTS["ours"]).dynamics()
     assert rm.mass_kg == pytest.approx(5.5)
@@ -94,6 +104,7 @@ def test_torques_invert_accelerations():
 
 def test_bad_model_is_refused():
     good = plant(TUG).dynamics().as_dict()
-    for key, bad in (("mass_kg", 0.0), ("track_m", -1.0), ("torque_limit_Nm", float("nan")), ("wheel_radius_m", True)):
+    for key, bad in (("mass_kg", 0.0), ("track_m", -1.0), ("torque_limit_Nm", float("nan")), ("wheel_radius_m", True),
+                     ("wheel_speed_limit_rad_s", 0.0)):  # fmt: skip
         with pytest.raises(ConfigError, match=key):
             RobotModel(**(good | {key: bad}))

@@ -43,6 +43,7 @@ from collections import deque
 import numpy as np
 
 from mlpfac.control.baselines import Stepped
+from mlpfac.control.drive import drive_step, rated
 from mlpfac.control.oracle import Oracle
 from mlpfac.dynamics import P_FV, P_FW, P_TMAX, accelerations, torque_of
 from mlpfac.elementary import cos, sin
@@ -82,6 +83,7 @@ def fierro_lewis_step(e, r, r_dot, twist, p, g, tau, vc):
             v_c, dv_c = math.copysign(g[G_VMAX], v_c), 0.0
         if abs(w_c) > g[G_WMAX]:
             w_c, dw_c = math.copysign(g[G_WMAX], w_c), 0.0
+        v_c, w_c, dv_c, dw_c = rated(p, v_c, w_c, dv_c, dw_c)  # the wheels' rated speed kept
         tl, tr = torque_of(p, v, w, dv_c + kv * (v_c - v), dw_c + kv * (w_c - w))
         tau[i, 0] = min(max(tl, -tmax), tmax)
         tau[i, 1] = min(max(tr, -tmax), tmax)
@@ -107,10 +109,16 @@ class FierroLewis(Stepped):
         self._tele = {"vc": self._vc[0] if self.single else self._vc}
         fierro_lewis_step(np.zeros((0, 3)), np.ones(5), np.zeros(2), np.zeros((0, 2)), self.p, self.g,
                           self._tau[:0], self._vc[:0])  # fmt: skip
+        drive_step(self.p, self._tau[:0], self._tau[:0], self._tau[:0])
 
     def step(self, obs) -> np.ndarray:
         e, tw = _rows(obs.e, 3), _rows(obs.twist, 2)
         fierro_lewis_step(e, _flat(obs.r), _flat(obs.r_dot), tw, self.p, self.g, self._tau, self._vc)
+        return self._sent(obs, tw)
+
+    def _sent(self, obs, tw: np.ndarray) -> np.ndarray:
+        """The torques the drive sends for the law's (:mod:`mlpfac.control.drive`)."""
+        drive_step(self.p, tw, _rows(obs.wheel_speeds, 2), self._tau)
         return self._tau[0].copy() if self.single else self._tau
 
     def telemetry(self) -> dict[str, np.ndarray | float]:
@@ -158,6 +166,7 @@ class OracleDynamic(FierroLewis):
                 self.pose_step.delay(int(number))
         self.k += 1
         e, r, tw = _rows(obs.e, 3), _flat(obs.r), _rows(obs.twist, 2)
+        measured = tw  # the drive's guard reads the twist and the wheel speeds as measured
         age = k - self.pose_step.read()
         if age > 0:  # the pose predicted over the delay through the velocities asked, the twist through the torques
             since = list(self.sent)[-age:]
@@ -176,9 +185,10 @@ class OracleDynamic(FierroLewis):
                 p[P_FV], p[P_FW] = load
                 fierro_lewis_step(e[b : b + 1], r, r_dot, tw[b : b + 1], p, self._g, self._tau[b : b + 1],
                                   self._vc[b : b + 1])  # fmt: skip
+        sent = self._sent(obs, measured)
         if self._depth:
             self.sent.append((self._vc.copy(), self._tau.copy(), self.hold * T))
-        return self._tau[0].copy() if self.single else self._tau
+        return sent
 
 
 def twist_ahead(p: np.ndarray, twist: np.ndarray, sent: list[tuple[np.ndarray, float]]) -> np.ndarray:

@@ -18,8 +18,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from mlpfac.control.baselines import PluginController
+from mlpfac.control.drive import drive_step, rated_step
 from mlpfac.control.plugins import Plugin
 from mlpfac.dynamics import RobotModel
+from mlpfac.jit import as_rows
 
 WHAT = "(tau_left, tau_right)"
 
@@ -66,6 +68,38 @@ def reference_rates(ref: np.ndarray, T: float) -> np.ndarray:
         out[0] = (ref[1, 3:5] - ref[0, 3:5]) / T
         out[-1] = (ref[-1, 3:5] - ref[-2, 3:5]) / T
     return out
+
+
+class Drive:
+    """What a wheel drive gives a torque-level law, for a law of one's own (the shipped ones step the
+    same kernels, :mod:`mlpfac.control.drive`): ``drive = Drive(robot)`` once, then in ``step``
+
+    - ``v_c, omega_c = drive.rated(v_c, omega_c)``: the velocity command scaled, both together, so
+      that neither wheel passes the rated speed ``robot.wheel_speed_limit_rad_s`` (the IK's rule);
+      ``drive.rated(v_c, omega_c, dv_c, domega_c)`` also returns the scaled command's rate;
+    - ``tau = drive.torques(obs, tau)``: the torques cut where they would drive a wheel past its
+      rated speed or spin (or lock) it beyond rolling against the ground the measured twist gives.
+
+    One seed's values or a batch's (B,) / (B, 2) alike; the results are new arrays, as floats.
+    Where nothing is cut the torques come back to the bit.
+    """
+
+    def __init__(self, robot: RobotModel) -> None:
+        self.p = robot.packed()
+
+    def rated(self, v, omega, dv=None, domega=None):
+        one = np.ndim(v) == 0
+        cmd = as_rows(np.stack(np.broadcast_arrays(v, omega), axis=-1), 2).copy()
+        rate = np.zeros_like(cmd) if dv is None else as_rows(np.stack(np.broadcast_arrays(dv, domega), -1), 2).copy()
+        rated_step(self.p, cmd, rate)
+        out = [cmd[:, 0], cmd[:, 1]] + ([] if dv is None else [rate[:, 0], rate[:, 1]])
+        return tuple(float(x[0]) for x in out) if one else tuple(out)
+
+    def torques(self, obs, tau) -> np.ndarray:
+        one = np.ndim(tau) == 1
+        out = as_rows(tau, 2).copy()
+        drive_step(self.p, as_rows(obs.twist, 2), as_rows(obs.wheel_speeds, 2), out)
+        return out[0] if one else out
 
 
 class TorquePluginController(PluginController):

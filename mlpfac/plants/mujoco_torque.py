@@ -7,6 +7,7 @@ read from its MuJoCo model (the nominal one, and as the events changed it).
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import numpy as np
 
@@ -29,10 +30,12 @@ class TorqueDrive:
 
     def dynamics(self):
         """The nominal dynamic model of the robot (:class:`mlpfac.dynamics.RobotModel`), read from its
-        nominal MuJoCo model at rest (:func:`mlpfac.plants.mjcf.dynamics.read_model`)."""
+        nominal MuJoCo model at rest (:func:`mlpfac.plants.mjcf.dynamics.read_model`), with the wheels'
+        rated speed (``max_wheel_speed``, which the IK keeps: the model's or ``[plant]``'s)."""
         from mlpfac.plants.mjcf.dynamics import read_model
 
-        return read_model(self.robot.model, self.robot, self._torque_limits_of(self.robot.model))
+        model = read_model(self.robot.model, self.robot, self._torque_limits_of(self.robot.model))
+        return dataclasses.replace(model, wheel_speed_limit_rad_s=self._rated_speed())
 
     def true_dynamics(self):
         """The dynamic model of the robot as it is now (after events: its wheels' true radius, its
@@ -40,7 +43,12 @@ class TorqueDrive:
         from mlpfac.plants.mjcf.dynamics import read_model
 
         model = read_model(self.model, self.robot, self._torque_max)
-        return dataclasses.replace(model, wheel_radius_m=float(self.real_radius))
+        return dataclasses.replace(
+            model, wheel_radius_m=float(self.real_radius), wheel_speed_limit_rad_s=self._rated_speed()
+        )
+
+    def _rated_speed(self) -> float:
+        return math.inf if self.max_wheel_speed is None else float(self.max_wheel_speed)
 
     def _torque_limits_of(self, m) -> tuple[float, float]:
         if self.robot.mix is not None:

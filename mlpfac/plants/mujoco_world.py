@@ -73,7 +73,9 @@ class MujocoWorld:
             floor = _floor(m0, rest, self._root)
             feet, low = _feet(m0, rest, self._root, floor)
             site = self.robot.site_rest[0]
-            self._reach = max(math.sqrt((x - site[0]) * (x - site[0]) + (y - site[1]) * (y - site[1])) + r for _, x, y, r in feet)
+            self._reach = max(
+                math.sqrt((x - site[0]) * (x - site[0]) + (y - site[1]) * (y - site[1])) + r for _, x, y, r in feet
+            )
             self._check_terrain(terrain, where)
             spec = self._spec_nominal.copy()
             tiles = _build(spec, terrain, m0, self._root, floor, feet, low, self._tyres, where)

@@ -28,6 +28,7 @@ import numpy as np
 
 from mlpfac.control.adaptive.kernels import _ekf, _f_G, _hidden, _jacobian
 from mlpfac.control.baselines import Stepped
+from mlpfac.control.drive import guard, slipping
 from mlpfac.control.dynamic import fierro_lewis_step
 from mlpfac.dynamics import P_B, P_M11, P_M22, P_R, P_TMAX, accel_of
 from mlpfac.jit import kernel, seeds
@@ -39,17 +40,18 @@ INPUT_SCALE = 1.0  # x = (c v, c omega, 1)
 HIDDEN_STD = 0.3  # initial hidden weights N(0, 0.3^2); the output weights start at 0
 P0, R, FORGETTING, P_MAX = 1e-4, 1e-6, 0.999, 1e-4  # EKF: initial P, measurement noise ((m/s)^2), lambda, cap
 GAIN_SHARE = 0.5  # the learned input gain NN_G within +-50 % of the nominal T Bm, entry by entry (the law)
-N_S = NF + 3 + LF + LG + 6  # per seed: x_f, x_G, phi_f, phi_G, tau_{k-1}, v_{k-1}, 1 once stepped
+N_S = NF + 3 + LF + LG + 6  # per seed: x_f, x_G, phi_f, phi_G, tau_{k-1}, v_{k-1}, 1 once stepped, 1 if it slipped
 
 
 @kernel(
-    "void(f8[:, ::1], f8[::1], f8[::1], f8[:, ::1], f8[::1], f8[::1], f8, f8[:, ::1], f8[:, :, ::1], f8[:, ::1], "
-    "f8[:, :, ::1], f8[:, ::1], f8[:, ::1], f8[:, ::1], f8[::1])"
+    "void(f8[:, ::1], f8[::1], f8[::1], f8[:, ::1], f8[:, ::1], f8[::1], f8[::1], f8, f8[:, ::1], f8[:, :, ::1], "
+    "f8[:, ::1], f8[:, :, ::1], f8[:, ::1], f8[:, ::1], f8[:, ::1], f8[::1])"
 )
-def adaptive_dynamic_step(e, r, r_dot, twist, p, g, T, z, P, S, H, tau, vc, innov, ekf):
+def adaptive_dynamic_step(e, r, r_dot, twist, wheels, p, g, T, z, P, S, H, tau, vc, innov, ekf):
     """One step for B seeds: the EKF update on the change of the twist since the last step, then
-    the law. State per seed (in place): z (B, alpha), P (B, alpha, alpha), S (B, N_S); out: tau, vc
-    (the velocities Kanayama's law asked) and innov (B, 3); ekf = (R, forgetting, P_max)."""
+    the law, then the drive (:func:`mlpfac.control.drive.guard`, the encoders' ``wheels`` (B, 2)).
+    State per seed (in place): z (B, alpha), P (B, alpha, alpha), S (B, N_S); out: tau (the torques
+    sent), vc (the velocities Kanayama's law asked) and innov (B, 3); ekf = (R, forgetting, P_max)."""
     B, a = z.shape
     PHt, W = np.empty((3, a)), np.empty((3, a))
     f, G = np.empty(3), np.empty((3, 2))
@@ -63,7 +65,8 @@ def adaptive_dynamic_step(e, r, r_dot, twist, p, g, T, z, P, S, H, tau, vc, inno
         zb, Sb = z[b], S[b]
         xf, xG, phif, phiG = Sb[0:NF], Sb[NF : NF + 3], Sb[NF + 3 : NF + 3 + LF], Sb[NF + 3 + LF : o]
         v, w = twist[b, 0], twist[b, 1]
-        if Sb[o + 4] != 0.0:  # (32) on the twist's change, less the nominal model's
+        slips = slipping(p, v, w, wheels[b, 0], wheels[b, 1])
+        if Sb[o + 4] != 0.0 and not slips and Sb[o + 5] == 0.0:  # (32) on the twist's change, less the nominal model's
             t0, t1, v0, w0 = Sb[o], Sb[o + 1], Sb[o + 2], Sb[o + 3]
             a0, a1 = accel_of(p, v0, w0, t0, t1)
             _f_G(zb, LF, LG, NF, phif, phiG, f, G)
@@ -73,6 +76,8 @@ def adaptive_dynamic_step(e, r, r_dot, twist, p, g, T, z, P, S, H, tau, vc, inno
             innov[b, 2] = 0.0 - (f[2] + (G[2, 0] * t0 + G[2, 1] * t1))
             _jacobian(zb, LF, LG, xf, xG, phif, phiG, Sb[o : o + 2], H[b])
             _ekf(zb, P[b], innov[b], H[b], Rm, ekf[1], Q, False, ekf[2], PHt, W)
+        elif Sb[o + 4] != 0.0:  # a wheel slipped: the rolling model's error is not there to learn
+            innov[b, 0], innov[b, 1], innov[b, 2] = 0.0, 0.0, 0.0
         xf[0], xf[1], xf[2] = INPUT_SCALE * v, INPUT_SCALE * w, 1.0
         xG[0], xG[1], xG[2] = xf[0], xf[1], 1.0
         _hidden(zb, LF, LG, xf, xG, phif, phiG)
@@ -97,7 +102,9 @@ def adaptive_dynamic_step(e, r, r_dot, twist, p, g, T, z, P, S, H, tau, vc, inno
             tmax = p[P_TMAX]
             tau[b, 0] = min(max(tl, -tmax), tmax)
             tau[b, 1] = min(max(tr, -tmax), tmax)
+        tau[b, 0], tau[b, 1] = guard(p, v, w, wheels[b, 0], wheels[b, 1], tau[b, 0], tau[b, 1])  # the drive's
         Sb[o], Sb[o + 1], Sb[o + 2], Sb[o + 3], Sb[o + 4] = tau[b, 0], tau[b, 1], v, w, 1.0
+        Sb[o + 5] = 1.0 if slips else 0.0
 
 
 class AdaptiveDynamic(Stepped):
@@ -136,6 +143,7 @@ class AdaptiveDynamic(Stepped):
             np.ones(5),
             np.zeros(2),
             np.zeros((0, 2)),
+            np.zeros((0, 2)),
             self.p,
             self.g,
             self.T,
@@ -152,10 +160,11 @@ class AdaptiveDynamic(Stepped):
     def step(self, obs) -> np.ndarray:
         e = np.ascontiguousarray(obs.e, dtype=float).reshape(-1, 3)
         tw = np.ascontiguousarray(obs.twist, dtype=float).reshape(-1, 2)
+        wheels = np.ascontiguousarray(obs.wheel_speeds, dtype=float).reshape(-1, 2)
         r = np.ascontiguousarray(obs.r, dtype=float).reshape(-1)
         r_dot = np.ascontiguousarray(obs.r_dot, dtype=float).reshape(-1)
-        adaptive_dynamic_step(e, r, r_dot, tw, self.p, self.g, self.T, self.z, self.P, self.S, self.H, self._tau,
-                              self._vc, self._innov, self.ekf)  # fmt: skip
+        adaptive_dynamic_step(e, r, r_dot, tw, wheels, self.p, self.g, self.T, self.z, self.P, self.S, self.H,
+                              self._tau, self._vc, self._innov, self.ekf)  # fmt: skip
         return self._tau[0].copy() if self.single else self._tau
 
     def telemetry(self) -> dict[str, np.ndarray | float]:
