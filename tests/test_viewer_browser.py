@@ -38,10 +38,41 @@ MIN_PIXELS = 50
 WIDTH, HEIGHT = 1600, 1000
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+def _free_ports(n: int) -> list[int]:
+    """``n`` distinct free ports (each held until all are found, so none is given twice)."""
+    socks = [socket.socket() for _ in range(n)]
+    try:
+        for s in socks:
+            s.bind(("127.0.0.1", 0))
+        return [s.getsockname()[1] for s in socks]
+    finally:
+        for s in socks:
+            s.close()
+
+
+def _serve_web(rrd: Path, tmp_path: Path, tries: int = 3) -> tuple[subprocess.Popen, int, int]:
+    """rerun's web viewer serving ``rrd``, listening: (process, web port, gRPC port). A port taken
+    by another process between its choice and rerun's bind makes rerun exit at once: it is tried
+    again on other ports, and its last words are in the failure."""
+    from mlpfac.log import rerun_executable
+
+    for attempt in range(tries):
+        web_port, grpc_port = _free_ports(2)
+        err = tmp_path / f"rerun-{attempt}.err"
+        with err.open("wb") as f:
+            p = subprocess.Popen(
+                [rerun_executable(), "--serve-web", "--bind", "127.0.0.1", "--web-viewer-port", str(web_port),
+                 "--port", str(grpc_port), str(rrd)],
+                start_new_session=True, stdout=subprocess.DEVNULL, stderr=f,
+            )  # fmt: skip
+        try:
+            _wait("the rerun web viewer", lambda w=web_port, g=grpc_port: _listening(w) and _listening(g), procs=(p,))
+            return p, web_port, grpc_port
+        except AssertionError:
+            _stop(p)
+            if attempt == tries - 1:
+                raise AssertionError(f"the rerun web viewer did not serve: {err.read_text()[-600:]}") from None
+    raise AssertionError("unreachable")
 
 
 def _wait(what: str, ready, timeout: float = 120.0, procs: tuple[subprocess.Popen, ...] = ()):
@@ -149,18 +180,11 @@ def render(rrd: Path, tmp_path: Path, ready) -> bytes:
     (a dict of pixel counts) has every count at least MIN_PIXELS and the picture settles; the PNG."""
     ws_client = pytest.importorskip("websockets.sync.client")
     pytest.importorskip("PIL")
-    from mlpfac.log import rerun_executable
-
-    web_port, grpc_port, devtools_port = _free_port(), _free_port(), _free_port()
     procs: list[subprocess.Popen] = []
     try:
-        procs.append(
-            subprocess.Popen(
-                [rerun_executable(), "--serve-web", "--bind", "127.0.0.1", "--web-viewer-port", str(web_port),
-                 "--port", str(grpc_port), str(rrd)],
-                start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-            )
-        )  # fmt: skip
+        viewer_proc, web_port, grpc_port = _serve_web(rrd, tmp_path)
+        procs.append(viewer_proc)
+        (devtools_port,) = _free_ports(1)
         procs.append(
             subprocess.Popen(
                 [CHROMIUM, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
@@ -170,7 +194,6 @@ def render(rrd: Path, tmp_path: Path, ready) -> bytes:
                 start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
             )
         )  # fmt: skip
-        _wait("the rerun web viewer", lambda: _listening(web_port) and _listening(grpc_port), procs=procs[:1])
 
         def page_ws() -> str | None:
             with urllib.request.urlopen(f"http://127.0.0.1:{devtools_port}/json/list", timeout=2) as r:
