@@ -28,7 +28,6 @@ for _k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ[_k] = "1"
 
 import argparse  # noqa: E402
-import statistics  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
@@ -37,7 +36,7 @@ import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from perf_floor import PhysicsFloor  # noqa: E402
+from perf_floor import PhysicsFloor, interleaved  # noqa: E402
 
 from mlpfac.loop.closed_loop import seeded_generators  # noqa: E402
 from mlpfac.loop.factory import make_plant  # noqa: E402
@@ -82,27 +81,15 @@ def main() -> int:
             sys.exit(f"the replay left the run's path ({np.linalg.norm(end - final):.3f} m apart)")
         return dt
 
-    def floor_step() -> float:
-        floor.reset()
-        c0 = time.process_time()
-        floor.steps_nstep(N) if floor.has_nstep else floor.steps_loop(N)
-        return (time.process_time() - c0) / N
-
     def whole_run() -> float:
         c0 = time.process_time()
         r = run(scn)
         assert r.n == N
         return (time.process_time() - c0) / N
 
-    fns = {"floor": floor_step, "replay": replay, "run": whole_run}
-    vals: dict[str, list[float]] = {k: [] for k in fns}
-    names = list(fns)
-    for i in range(args.rounds):
-        for name in names[i % 3 :] + names[: i % 3]:  # order rotated from round to round
-            vals[name].append(fns[name]())
-    best = {k: min(v) * 1e6 for k, v in vals.items()}
-    med = {k: statistics.median(v) * 1e6 for k, v in vals.items()}
-    for k in names:
+    fns = {"floor": lambda: floor.per_step(N), "replay": replay, "run": whole_run}
+    best, med = interleaved(fns, args.rounds)
+    for k in fns:
         print(f"  {k:<8} {best[k]:7.1f} us/step (median {med[k]:.1f})")
     f = best["floor"]
     print(f"  run / floor            {best['run'] / f:5.2f}   (target <= 1.5)")

@@ -19,13 +19,12 @@ for _k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 
 import argparse  # noqa: E402
 import copy  # noqa: E402
-import statistics  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from perf_floor import PhysicsFloor  # noqa: E402
+from perf_floor import PhysicsFloor, interleaved  # noqa: E402
 
 from mlpfac.loop.factory import make_plant  # noqa: E402
 from mlpfac.loop.runner import run  # noqa: E402
@@ -73,12 +72,6 @@ def main() -> int:
     for scn in runs.values():
         run(scn)  # the kernels loaded
 
-    def floor_step() -> float:
-        floor.reset()
-        c0 = time.process_time()
-        floor.steps_nstep(N) if floor.has_nstep else floor.steps_loop(N)
-        return (time.process_time() - c0) / N
-
     def whole(scn):
         def go() -> float:
             c0 = time.process_time()
@@ -88,16 +81,10 @@ def main() -> int:
 
         return go
 
-    fns = {"floor": floor_step} | {k: whole(s) for k, s in runs.items()}
-    names = list(fns)
-    vals: dict[str, list[float]] = {k: [] for k in names}
-    for i in range(args.rounds):
-        for name in names[i % len(names) :] + names[: i % len(names)]:  # order rotated from round to round
-            vals[name].append(fns[name]())
-    best = {k: min(v) * 1e6 for k, v in vals.items()}
-    med = {k: statistics.median(v) * 1e6 for k, v in vals.items()}
+    fns = {"floor": lambda: floor.per_step(N)} | {k: whole(s) for k, s in runs.items()}
+    best, med = interleaved(fns, args.rounds)
     f = best["floor"]
-    for k in names:
+    for k in fns:
         print(f"  {k:<24} {best[k]:7.1f} us/step (median {med[k]:6.1f})  / floor {best[k] / f:5.2f}")
     for ctrl in args.controllers.split(","):
         truth = best[f"{ctrl} truth"]

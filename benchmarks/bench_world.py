@@ -18,13 +18,12 @@ for _k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ[_k] = "1"
 
 import argparse  # noqa: E402
-import statistics  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from perf_floor import PhysicsFloor  # noqa: E402
+from perf_floor import PhysicsFloor, interleaved  # noqa: E402
 
 from mlpfac.loop.factory import make_plant  # noqa: E402
 from mlpfac.loop.runner import run  # noqa: E402
@@ -44,12 +43,6 @@ def main() -> int:
     floor = PhysicsFloor(nominal.plant_config.model, plant.n_substeps)
     steps = {}
 
-    def floor_step() -> float:
-        floor.reset()
-        c0 = time.process_time()
-        floor.steps_nstep(nominal.steps) if floor.has_nstep else floor.steps_loop(nominal.steps)
-        return (time.process_time() - c0) / nominal.steps
-
     def whole(scn):
         def timed() -> float:
             c0 = time.process_time()
@@ -59,17 +52,11 @@ def main() -> int:
 
         return timed
 
-    fns = {"floor": floor_step, "nominal": whole(nominal), "world": whole(world)}
+    fns = {"floor": lambda: floor.per_step(nominal.steps), "nominal": whole(nominal), "world": whole(world)}
     for fn in fns.values():  # the kernels loaded, the robots read
         fn()
-    vals: dict[str, list[float]] = {k: [] for k in fns}
-    names = list(fns)
-    for i in range(args.rounds):
-        for name in names[i % 3 :] + names[: i % 3]:  # order rotated from round to round
-            vals[name].append(fns[name]())
-    best = {k: min(v) * 1e6 for k, v in vals.items()}
-    med = {k: statistics.median(v) * 1e6 for k, v in vals.items()}
-    for k in names:
+    best, med = interleaved(fns, args.rounds)
+    for k in fns:
         print(f"  {k:<8} {best[k]:7.1f} us/step (median {med[k]:.1f})")
     f = best["floor"]
     print(f"  nominal / floor        {best['nominal'] / f:5.2f}")
