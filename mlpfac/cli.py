@@ -345,7 +345,11 @@ def cmd_run(args: argparse.Namespace) -> int:
 
     scn = load(args.scenario, robot=args.robot).with_overrides(args.controller, args.seed, args.duration)
     found = scn.table.get("provenance", {})
-    for key in ("reference_warning", "torque_warning"):  # a reference its wheels or motors cannot drive: said first
+    for key in (
+        "reference_warning",
+        "torque_warning",
+        "world_warning",
+    ):  # what its wheels or motors cannot do: said first
         if found.get(key):
             print(f"warning: {found[key]}")
     if found.get("found") or found.get("reference_fit") or found.get("reference_torque"):  # the model's answers

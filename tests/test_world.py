@@ -18,7 +18,7 @@ import mlpfac
 from mlpfac.loop.runner import build, run
 from mlpfac.plants import make_plant
 from mlpfac.plants.events import Force, Slope
-from mlpfac.plants.forces import event_step, force_schedule
+from mlpfac.plants.forces import event_step, force_schedule, in_newtons_all
 from mlpfac.scenario.parse import load, parse
 from mlpfac.scenario.reference import sample
 
@@ -65,16 +65,26 @@ def test_a_robot_held_on_a_slope_by_the_force_that_cancels_gravity_stays_put():
         {"fy": 4.0, "torque_z": 0.5, "frame": "robot"},
         {"fx": 3.0, "fy": -2.0, "period": 0.5},
         {"fy": 1.0, "std": 6.0, "frame": "robot"},
+        {"fx_mg": 0.1, "frame": "robot"},
+        {"dv_y": 0.5, "fx": 1.0, "duration": 0.3, "frame": "robot"},
+        {"std_mg": 0.05, "tau_s": 0.5},
     ],
 )
 def test_the_force_applied_is_the_schedule(force):
-    scn = _scenario("eight-push", 2.0, **{"events.0.time": 0.5}, **{f"events.0.{k}": v for k, v in force.items()})
-    if "duration" not in force:
-        scn = mlpfac.parse(
-            {**scn.table, "events": [{k: v for k, v in scn.table["events"][0].items() if k != "duration"}]}, "f"
-        )
+    """What the plant applies is the schedule of the force in newtons: a share of the weight times
+    m g (m the mass config.toml records, g 9.81), a push's velocity change times m over its duration."""
+    scn = _scenario("eight-push", 2.0)
+    scn = mlpfac.parse({**scn.table, "events": [{"time": 0.5, "kind": "force", **force}]}, "f")
     rec = run(scn)
-    sched = force_schedule(scn.events, scn.T, scn.steps, scn.seed)
+    m, g = scn.table["provenance"]["mass_kg"], 9.81
+    newtons = {
+        "fx": force.get("fx", force.get("fx_mg", 0.0) * m * g),
+        "fy": force.get("fy", force.get("dv_y", 0.0) * m / 0.3),
+        "std": force.get("std", force.get("std_mg", 0.0) * m * g),
+    }
+    (told,) = in_newtons_all(scn.events, m, g, scn.T)
+    assert [told.fx or 0.0, told.fy or 0.0, told.std or 0.0] == [pytest.approx(v, rel=1e-15) for v in newtons.values()]
+    sched = force_schedule((told,), scn.T, scn.steps, scn.seed)
     c, s = np.cos(rec.pose[:, 2]), np.sin(rec.pose[:, 2])
     want = np.c_[
         sched[:, 0] + c * sched[:, 2] - s * sched[:, 3], sched[:, 1] + s * sched[:, 2] + c * sched[:, 3], sched[:, 4]
@@ -83,11 +93,28 @@ def test_the_force_applied_is_the_schedule(force):
     k0 = event_step(0.5, scn.T)
     assert not np.any(rec.plant["force"][:k0]) and np.any(rec.plant["force"][k0 : k0 + 2])  # (a sine starts at 0)
     if "duration" in force:  # a push ends
-        assert not np.any(rec.plant["force"][k0 + 30 :]) and np.all(rec.plant["force"][k0 : k0 + 30, 0] == 7.0)
+        assert not np.any(rec.plant["force"][k0 + 30 :]) and np.all(rec.plant["force"][k0 : k0 + 30, 0] != 0.0)
     if "std" in force:  # noise of its own stream: the seed's, the same again
         assert np.std(sched[k0:, 3]) == pytest.approx(6.0, rel=0.15)
         np.testing.assert_array_equal(sched, force_schedule(scn.events, scn.T, scn.steps, scn.seed))
         assert not np.array_equal(sched, force_schedule(scn.events, scn.T, scn.steps, scn.seed + 1))
+
+
+def test_a_gust_is_a_gauss_markov_process_of_the_white_noises_draws():
+    """With tau_s, the same standard normals (the force's own stream) drive x' = a x + std sqrt(1 - a^2) w
+    from x_0 = std w_0: its first step is the white noise's, each next one that recursion; its lag-j
+    autocorrelation is a^j and its standard deviation std (10 000 s of it)."""
+    T, n, std, tau = 0.01, 1_000_000, 3.0, 0.5
+    white = force_schedule((Force(time=0.0, std=std),), T, n, 7)[:, :2]
+    gust = force_schedule((Force(time=0.0, std=std, tau_s=tau),), T, n, 7)[:, :2]
+    a = math.exp(-T / tau)
+    assert np.array_equal(gust[0], white[0])
+    np.testing.assert_allclose(gust[1:50], a * gust[:49] + math.sqrt(1 - a * a) * white[1:50], rtol=0, atol=1e-13)
+    assert np.std(gust) == pytest.approx(std, rel=0.03)
+    for j in (1, 10, 50):
+        r = np.mean(gust[j:] * gust[:-j]) / np.mean(gust * gust)
+        assert r == pytest.approx(a**j, abs=0.02)
+    assert abs(np.mean(white[1:] * white[:-1])) / np.mean(white * white) < 0.01  # white: no memory
 
 
 def test_the_rough_ground_is_drawn_per_seed():
@@ -221,7 +248,7 @@ def test_a_shorter_run_drives_into_the_same_world():
 
 
 @pytest.mark.parametrize(
-    ("name", "axis"), [("eight-tow", "events.0.fx=-40:0:3"), ("eight-slope", "events.0.angle_deg=0:30:3")]
+    ("name", "axis"), [("eight-tow", "events.0.fx_mg=-0.8:0:3"), ("eight-slope", "events.0.angle_deg=0:30:3")]
 )
 def test_the_slope_and_the_force_are_axes_with_breaking_points(tmp_path, name, axis):
     import json
@@ -230,5 +257,5 @@ def test_the_slope_and_the_force_are_axes_with_breaking_points(tmp_path, name, a
     points = json.loads((tmp_path / "robustness.json").read_text())["breaking_points"]
     key, _ = axis.split("=")
     (point,) = [p for p in points if p["axis"] == key]
-    assert point["below"]["fails_at"] == -40.0 if name == "eight-tow" else point["above"]["fails_at"] == 30.0
+    assert point["below"]["fails_at"] == -0.8 if name == "eight-tow" else point["above"]["fails_at"] == 30.0
     assert (tmp_path / "robustness.png").is_file() and (tmp_path / "robustness.md").is_file()

@@ -1,5 +1,5 @@
 """The world a run drove in, as the recording shows it: the terrain as meshes (the rough ground's
-heightfield, the ramps, the floor patches in their own colour) under ``world/terrain``, the floor
+heightfield, the ramps, the kerbs, the floor patches in their own colour) under ``world/terrain``, the floor
 tilted from a ``slope`` event on, the robot drawn at the ground's height under it, and the force of
 a ``force`` event as an arrow on the robot while it acts (``world/force``).
 
@@ -32,6 +32,11 @@ FLOOR_FRAME = (
 )
 LOW_COLOR, HIGH_COLOR = np.array([105, 92, 72]), np.array([196, 178, 140])  # the rough ground, by height
 RAMP_COLOR = (150, 128, 96)
+KERB_COLOR = (170, 170, 165)  # a kerb: concrete grey
+# a ramp's prism (PlacedRamp.corners: its profile's points 0-3 along it, 2 i + side): each side's
+# profile, the slope up, the top, the slope down, the bottom; a closed surface, each edge in two triangles
+PRISM = np.array([[0, 2, 4], [0, 4, 6], [1, 5, 3], [1, 7, 5], [0, 1, 2], [1, 3, 2], [2, 3, 4], [3, 5, 4],
+                  [4, 5, 6], [5, 7, 6], [0, 6, 1], [1, 6, 7]], dtype=np.uint32)  # fmt: skip
 PATCH_COLOR = (50, 120, 230, 170)  # a wet patch: blue, half see-through
 PATCH_LIFT = 0.003  # m: a patch drawn this far above the ground under it (it is flush with the floor)
 FORCE_COLOR = FORCE_COLORS[0]
@@ -46,12 +51,12 @@ def send_terrain(rec: rr.RecordingStream, world: dict) -> None:
     grid = world.get("grid")
     if grid is not None:
         rec.log("world/terrain/bumps", _heightfield(world), static=True)
-    tri = np.array([[0, 2, 4], [2, 6, 4], [1, 5, 3], [3, 5, 7], [0, 1, 2], [1, 3, 2], [2, 3, 4], [3, 5, 4],
-                    [4, 5, 6], [5, 7, 6], [0, 4, 1], [1, 4, 5]], dtype=np.uint32)  # fmt: skip
-    for i, corners in enumerate(world.get("ramps", [])):
-        v = np.asarray(corners, dtype=np.float32)
-        rec.log(f"world/terrain/ramp_{i}", rr.Mesh3D(vertex_positions=v, triangle_indices=tri, albedo_factor=RAMP_COLOR),
-                static=True)  # fmt: skip
+    tri = PRISM
+    for key, color in (("ramps", RAMP_COLOR), ("kerbs", KERB_COLOR)):  # a kerb: a ramp of vertical slopes
+        for i, corners in enumerate(world.get(key, [])):
+            v = np.asarray(corners, dtype=np.float32)
+            rec.log(f"world/terrain/{key[:-1]}_{i}", rr.Mesh3D(vertex_positions=v, triangle_indices=tri,
+                    albedo_factor=color), static=True)  # fmt: skip
     for i, p in enumerate(world.get("patches", [])):
         rec.log(f"world/terrain/patch_{i}", _disc(world, p), static=True)
 

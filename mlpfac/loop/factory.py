@@ -117,10 +117,11 @@ def _torque_level(scn: Scenario, instance: object | None, plant) -> Stepped:
 
 def _world_told(scn: Scenario, plant) -> Told | None:
     """The slopes and forces ``oracle-dynamic`` is told (None: none): gravity along the floor after
-    each slope, of the robot's own magnitude, and the force events whose schedule it meets."""
+    each slope, of the robot's own magnitude, and the force events whose schedule it meets, in the
+    newtons the plant applies (a force given relative to the robot: the plant's own)."""
     g0 = plant.robot.model.opt.gravity
     g = float(np.sqrt(np.sum(g0 * g0)))
     slopes = [(ev.time, *ev.gravity(g)[:2]) for ev in scn.events if isinstance(ev, Slope)]
     if not slopes and not any(isinstance(ev, Force) for ev in scn.events):
         return None
-    return Told(slopes, scn.events, scn.steps)
+    return Told(slopes, plant.forces, scn.steps)

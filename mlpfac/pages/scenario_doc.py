@@ -90,6 +90,7 @@ OWN = {
     "params": ("", "keyword arguments of your own reference class (`Class(**params)`): `[reference.params]`"),
     "speed": ("x", "the same reference traversed this many times as fast (default 1, at most 100)"),
 }
+PLACED = {k: {"x": 0.0, "y": 0.0, "height": 0.005, "length": 0.3} for k in ("x", "y", "heading_deg")}  # (x, y), not at
 # keys whose checks depend on another key: probed with that one set
 CONTEXT = {"detect_mean": {"detect": 1.0}, "input_P_alarm": {"detect": 1.0, "detect_mean": 1.0}}
 
@@ -119,8 +120,9 @@ def _rejects(make, key: str, value) -> str | None:
     return None
 
 
-def _range(make, key: str, hint) -> str:
-    """The values accepted, probed: bounds at -1, 0 or 1 (open or closed), inf, or the validator's choices."""
+def _range(make, key: str, hint, bounds: tuple[float, ...] = ()) -> str:
+    """The values accepted, probed: bounds at -1, 0 or 1 (or at ``bounds``, a field's declared ones;
+    open or closed), inf, or the validator's choices."""
     union = typing.get_origin(hint) in (typing.Union, types.UnionType)
     base = typing.get_args(hint) if union else (hint,)
     if str in base and float not in base:
@@ -148,12 +150,12 @@ def _range(make, key: str, hint) -> str:
         return f"{lo}-{hi}"
     eps, lower, upper = 1e-9, "", ""
     if not ok(-1e9):
-        for t in (-1.0, 0.0, 1.0):
+        for t in (-1.0, 0.0, 1.0, *bounds):
             if not ok(t - eps) and ok(t + eps):
                 lower = ("[" if ok(t) else "(") + f"{t:g}"
                 break
     if not ok(1e9):
-        for t in (1.0, 0.0, -1.0):
+        for t in (1.0, 0.0, -1.0, *bounds):
             if ok(t - eps) and not ok(t + eps):
                 upper = f"{t:g}" + ("]" if ok(t) else ")")
                 break
@@ -219,8 +221,11 @@ def _cell(text: str) -> str:
     return text.replace("|", "\\|").replace("\n", " ")
 
 
-def _dataclass_rows(cls, where: str, skip: frozenset = frozenset(), base: dict | None = None) -> list[str]:
-    """One row a field of ``cls``; ``base``: values of its required fields, beside the one probed."""
+def _dataclass_rows(
+    cls, where: str, skip: frozenset = frozenset(), base: dict | None = None, apart: dict | None = None
+) -> list[str]:
+    """One row a field of ``cls``; ``base``: values of its required fields, beside the one probed;
+    ``apart``: another base for the keys it names (where the base's own keys exclude them)."""
     hints, notes = typing.get_type_hints(cls), _comments(cls)
     rows = ["| key | type | default | range | meaning |", "| --- | --- | --- | --- | --- |"]
     for f in dataclasses.fields(cls):
@@ -228,9 +233,11 @@ def _dataclass_rows(cls, where: str, skip: frozenset = frozenset(), base: dict |
             continue
 
         def make(v, key=f.name):
-            return build(cls, (base or {}) | CONTEXT.get(key, {}) | {key: v}, where)
+            return build(cls, (apart or {}).get(key, base or {}) | CONTEXT.get(key, {}) | {key: v}, where)
 
-        cells = (f"`{f.name}`", _type(hints[f.name]), _default(f), _range(make, f.name, hints[f.name]))
+        p = f.metadata.get("param")
+        bounds = () if p is None else tuple(b for b in (p.minimum, p.maximum) if b is not None)
+        cells = (f"`{f.name}`", _type(hints[f.name]), _default(f), _range(make, f.name, hints[f.name], bounds))
         rows.append("| " + " | ".join(_cell(c) for c in (*cells, notes.get(f.name, ""))) + " |")
     return rows
 
@@ -282,15 +289,28 @@ def _initial_probe(key: str) -> tuple[str, str]:
     return ("true" if scn.start_moving else "false"), ""
 
 
+def _rules(cls) -> str:
+    """The rules between an event's parameters that its validator enforces (``APART``: at most one of
+    them; ``NEEDS``: one needs another), in words for the page."""
+    apart = [f"{', '.join(f'`{k}`' for k in keys)} ({why})" for keys, why in getattr(cls, "APART", ())]
+    needs = [
+        f"`{key}` needs {' or '.join(f'`{o}`' for o in others)} ({why})"
+        for key, others, why in getattr(cls, "NEEDS", ())
+    ]
+    out = f" At most one of each: {'; '.join(apart)}." if apart else ""
+    return out + (f" {'; '.join(needs)}." if needs else "")
+
+
 def scenario_page() -> str:
     from mlpfac.control.adaptive.config import AdaptiveConfig
     from mlpfac.control.adaptive.networks import Networks
     from mlpfac.control.baselines import KanayamaGains
     from mlpfac.control.law import Law
     from mlpfac.plants.config import MujocoConfig
-    from mlpfac.plants.events import EVENTS
+    from mlpfac.plants.events import EVENTS, MU_MAX
     from mlpfac.plants.kinematic import KinematicConfig, KinematicPlant
-    from mlpfac.plants.world import Bumps, Patch, Ramp
+    from mlpfac.plants.mujoco_holds import STEP_SHARE
+    from mlpfac.plants.world import FEATURES_MAX, Bumps, Kerb, Patch, Ramp
     from mlpfac.scenario.reference import REFERENCES
 
     out = [
@@ -396,16 +416,32 @@ def scenario_page() -> str:
         "",
         "The ground around a MuJoCo robot, present from the start (the kinematic model drives on none), built into the "
         "scene the plant compiles ([Scenarios](scenarios.md#the-world-around-the-robot)). Each is checked against the "
-        "robot before anything runs: a ramp its wheels cannot climb or that lies under them at the start, rough "
-        "ground too fine for its tyres, a patch outside the arena (the reference's bounding box and 1 m around it).",
+        "robot before anything runs: a ramp its wheels cannot climb or that lies under them at the start, a kerb "
+        "too high for its wheels or casters, rough ground too fine for its tyres, a patch, ramp or kerb placed outside the "
+        f"arena (the reference's bounding box and 1 m around it). At most {FEATURES_MAX} ramps, {FEATURES_MAX} "
+        f"kerbs and {FEATURES_MAX} patches.",
         "",
         "`over` (s, > 0; default: the run's `duration`): the seconds of the reference the world is laid out along "
-        "(its arena, where the ramps' `at` falls); `--duration` writes the file's into `config.toml`, so that a "
-        "shorter run drives into the same world.",
+        "(its arena, where the ramps' and kerbs' `at` falls), its samples within the memory available as a run's "
+        "steps are; `--duration` writes the file's into `config.toml`, so that a shorter run drives into the same "
+        "world.",
         "",
-        "`ramps`: a list of tables, ramps across the path (up, a flat top, down, each a third of `length`):",
+        "`ramps`: a list of tables, ramps (up, a flat top, down, each a third of `length`), across the path at "
+        "`at` of it, or placed at (`x`, `y`) as patches are, heading `heading_deg`:",
         "",
-        *_dataclass_rows(Ramp, "[world] ramps", base={"at": 0.5, "height": 0.01, "length": 1.0}),
+        *_dataclass_rows(Ramp, "[world] ramps", base={"at": 0.5, "height": 0.01, "length": 1.0}, apart=PLACED),
+        "",
+        "`kerbs`: a list of tables, kerbs: slabs with vertical edges, a step up where the path meets one and a "
+        "step down `length` further on, placed as ramps are. Each at most "
+        f"{STEP_SHARE:.2f} of the radius of the robot's smallest wheel or caster (higher, the step's edge pushes "
+        f"it back more than {MU_MAX:g} times as hard as up: a tyre would need a friction beyond the most a scenario "
+        "takes; at the axle's height the step is a wall); what the motors need to climb each "
+        "from rest, a driven wheel carrying W at its edge: W sqrt(2 r h - h²) about its axle, W tan(a) a caster "
+        "pushed up it, tan(a) = sqrt(2 r h - h²) / (r - h) (r its radius, h the step's height), said in the run's "
+        "`[provenance] world`, and on its first line where the motors, the tyres' friction or the chassis' "
+        "clearance fall short:",
+        "",
+        *_dataclass_rows(Kerb, "[world] kerbs", base={"at": 0.5, "height": 0.005, "length": 0.3}, apart=PLACED),
         "",
         "`bumps`: a table, rough ground over the arena: a heightfield drawn per seed (its digest in `[drawn]`):",
         "",
@@ -428,7 +464,7 @@ def scenario_page() -> str:
         "| --- | --- | --- |",
     ]
     for kind, cls in EVENTS.items():
-        doc = _cell(" ".join(inspect.cleandoc(cls.__doc__ or "").split()).replace("``", "`"))
+        doc = _cell(" ".join(inspect.cleandoc(cls.__doc__ or "").split()).replace("``", "`") + _rules(cls))
         params = []
         for f in dataclasses.fields(cls):
             p = f.metadata.get("param")

@@ -54,7 +54,7 @@ def make_plant(scn: PlantSpec, ref: np.ndarray):
     if robot is not None:
         _check_size(scn, robot)
         if scn.terrain is not None or any(ev.kind == "force" for ev in scn.events):  # mlpfac.plants.mujoco_world
-            robot.set_world(scn.terrain, scn.events, scn.steps, f"{scn.source} [world]")
+            robot.set_world(scn.terrain, scn.events, scn.steps, f"{scn.source} [world]", f"{scn.source} [[events]]")
     return plant
 
 

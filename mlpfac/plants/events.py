@@ -209,36 +209,80 @@ class Slope(Event):
 
 
 FRAMES = ("world", "robot")
+SHARE_MAX = 10.0  # a force given as a share of the robot's weight m g: at most ten times it
+DV_MAX = 100.0  # m/s: the velocity change of a push, at most
+TAU_MAX = 1e4  # s: a gust's correlation time, at most
 
 
 @dataclass(frozen=True, kw_only=True)
 class Force(Event):
     """A force (``fx``, ``fy`` in N) and a torque about the vertical (``torque_z``, N m) on the robot's
     root body, at its centre of mass, in the world's axes or the robot's (``frame``: x forward, y
-    left, turned with the robot every control step). From ``time`` on for ``duration`` s (a push;
-    omitted: it stays, a tow or a wind); with ``period`` a sinusoid of amplitude (fx, fy, torque_z)
-    starting at zero; with ``std`` white noise of that standard deviation (N) on fx and fy, drawn
-    for each control step from a stream of its own (the run's seed and the event's place), held for
-    the step, added to (fx, fy)."""
+    left, turned with the robot every control step). A force that fits any robot is given relative
+    to it: ``fx_mg``, ``fy_mg`` as shares of its weight m g (m its mass at the start, as
+    config.toml's ``[provenance] mass_kg`` says), or, for a push, ``dv_x``, ``dv_y``: the velocity
+    change (m/s) it gives, an impulse m dv spread over its ``duration``. From ``time`` on for
+    ``duration`` s (a push; omitted: it stays, a tow or a wind); with ``period`` a sinusoid of
+    amplitude (fx, fy, torque_z) starting at zero; with ``std`` (N, or ``std_mg`` of the weight) noise
+    of that standard deviation on fx and fy, drawn for each control step from a stream of its own
+    (the run's seed and the event's place), added to (fx, fy): white (each step's drawn afresh,
+    held for the step) or, with ``tau_s``, a gust of that correlation time (a first-order
+    Gauss-Markov process, discretised exactly per control step: x' = a x + std sqrt(1 - a^2) w,
+    a = exp(-T / tau_s), from a draw of its stationary law)."""
 
     kind: ClassVar[str] = "force"
     fx: float | None = param(float, required=False, minimum=-FORCE_MAX, maximum=FORCE_MAX)
     fy: float | None = param(float, required=False, minimum=-FORCE_MAX, maximum=FORCE_MAX)
+    fx_mg: float | None = param(float, required=False, minimum=-SHARE_MAX, maximum=SHARE_MAX)
+    fy_mg: float | None = param(float, required=False, minimum=-SHARE_MAX, maximum=SHARE_MAX)
+    dv_x: float | None = param(float, required=False, minimum=-DV_MAX, maximum=DV_MAX)
+    dv_y: float | None = param(float, required=False, minimum=-DV_MAX, maximum=DV_MAX)
     torque_z: float | None = param(float, required=False, minimum=-FORCE_MAX, maximum=FORCE_MAX)
     frame: str | None = param(str, required=False)
     duration: float | None = param(float, required=False, positive=True, maximum=FORCE_S_MAX)
     period: float | None = param(float, required=False, positive=True, maximum=FORCE_S_MAX)
     std: float | None = param(float, required=False, minimum=0.0, maximum=FORCE_MAX)
+    std_mg: float | None = param(float, required=False, minimum=0.0, maximum=SHARE_MAX)
+    tau_s: float | None = param(float, required=False, positive=True, maximum=TAU_MAX)
+
+    # the parameters of which at most one may be given, and why (checked here, listed by docs/scenario-file.md)
+    APART: ClassVar[tuple[tuple[tuple[str, ...], str], ...]] = (
+        (("fx", "fx_mg", "dv_x"), "one way of giving the force along x"),
+        (("fy", "fy_mg", "dv_y"), "one way of giving the force along y"),
+        (("std", "std_mg"), "one way of giving the noise's standard deviation"),
+        (("period", "std", "std_mg"), "a force is periodic or noise, not both"),
+        (("period", "dv_x", "dv_y"), "a push given by its velocity change is not periodic"),
+        (("std", "std_mg", "dv_x", "dv_y"), "a push given by its velocity change is not noise"),
+    )
+    # a parameter that needs one of others, and why
+    NEEDS: ClassVar[tuple[tuple[str, tuple[str, ...], str], ...]] = (
+        ("dv_x", ("duration",), "the push's impulse m dv is spread over its duration"),
+        ("dv_y", ("duration",), "the push's impulse m dv is spread over its duration"),
+        ("tau_s", ("std", "std_mg"), "the correlation time of the force's noise"),
+    )
 
     def validate(self) -> None:
         if self.frame is not None and self.frame not in FRAMES:
             raise ConfigError("frame", f"choose 'world' or 'robot', got {self.frame!r}")
-        if all(x is None for x in (self.fx, self.fy, self.torque_z, self.std)):
+        given = set(self.params)
+        for keys, why in self.APART:
+            both = [k for k in keys if k in given]
+            if len(both) > 1:
+                raise ConfigError(both[0], f"not with {both[1]!r}: {why}")
+        for key, others, why in self.NEEDS:
+            if key in given and not given & set(others):
+                raise ConfigError(key, f"needs {' or '.join(map(repr, others))}: {why}")
+        if not given & {"fx", "fy", "fx_mg", "fy_mg", "dv_x", "dv_y", "torque_z", "std", "std_mg"}:
             raise ConfigError(
-                "", "a force event needs 'fx', 'fy', 'torque_z' or 'std' (0 is no force: a point of an axis)"
+                "",
+                "a force event needs 'fx', 'fy', 'torque_z' or 'std', or 'fx_mg', 'fy_mg', 'dv_x', 'dv_y' or "
+                "'std_mg' relative to the robot (0 is no force: a point of an axis)",
             )
-        if self.period is not None and self.std is not None:
-            raise ConfigError("period", "a force is periodic or noise ('std'), not both")
+
+    @property
+    def relative(self) -> bool:
+        """Given relative to the robot (a share of its weight, a velocity change): its newtons are the robot's."""
+        return any(v is not None for v in (self.fx_mg, self.fy_mg, self.dv_x, self.dv_y, self.std_mg))
 
     def steps(self, T: float) -> int | None:
         """Control steps it acts for (a push: its duration in whole control steps, at least one),

@@ -78,4 +78,7 @@ class MujocoReport:
             out["locked_joints"] = list(self.robot.locked)
         if self.terrain is not None:
             out["world"] = self.world_said()
+        warning = self.world_warning()
+        if warning:  # said first by `mlpfac run`
+            out["world_warning"] = warning
         return out

@@ -3,7 +3,9 @@ plant compiles (the robot's files are never edited), the floor tilted by a ``slo
 the forces of ``force`` events. :class:`MujocoWorld` is the part of
 :class:`~mlpfac.plants.mujoco.MujocoPlant` that does it.
 
-- **Ramps**: one convex mesh each (a trapezoid prism: up, top, down), a static geom of the world.
+- **Ramps and kerbs**: one convex mesh each (a trapezoid prism: up, top, down; a kerb's a box, its
+  steps vertical), a static geom of the world. What the robot can climb and hold is
+  :mod:`mlpfac.plants.mujoco_holds`'s.
 - **Rough ground**: the wheels and casters (the geoms the robot stands on at rest) touch it
   through a contact tile each, the surface's tangent plane under the geom moved before every
   physics step (:func:`mlpfac.plants.terrain.place_tiles`: MuJoCo's sphere-on-heightfield test
@@ -18,8 +20,9 @@ the forces of ``force`` events. :class:`MujocoWorld` is the part of
   two frictions; a patch a millimetre proud of the floor would be a step.
 - **Slope**: gravity turned in the floor's frame at the event (the robot settled on the flat floor
   first: a scene tilted from the start fails the settle check); the viewer draws the floor tilted.
-- **Forces**: a schedule per control step (:func:`mlpfac.plants.forces.force_schedule`, made at
-  reset from the run's seed) that the compiled step writes into ``xfrc_applied`` of the root body
+- **Forces**: in newtons for this robot (a force given relative to it:
+  :func:`mlpfac.plants.forces.in_newtons`), a schedule per control step
+  (:func:`mlpfac.plants.forces.force_schedule`, made at reset from the run's seed) that the compiled step writes into ``xfrc_applied`` of the root body
   every control step (MuJoCo keeps it across physics steps), turned into the world's axes when it
   is the robot's (:func:`mlpfac.plants.terrain.push`); telemetry ``force`` says what was applied.
 
@@ -40,9 +43,9 @@ import numpy as np
 from mlpfac.exceptions import ConfigError
 from mlpfac.plants import terrain as W  # noqa: N812 - the packed world's layout, W.W_STEP ...
 from mlpfac.plants.events import Force, Slope
-from mlpfac.plants.forces import force_schedule, run_seed
+from mlpfac.plants.forces import RELATIVE, force_schedule, in_newtons_all, run_seed
 from mlpfac.plants.mjcf.wheels import floor_priority
-from mlpfac.plants.world import CURVATURE
+from mlpfac.plants.mujoco_holds import MujocoHolds, carried, feet_at_rest, floor_height
 
 FORCE_COLUMNS = 5  # a force schedule's row: world (fx, fy), robot (fx, fy), torque_z
 HFIELD_BASE = 0.05  # m of the heightfield's base below the floor (MuJoCo's size[3])
@@ -51,27 +54,33 @@ CLEARANCE = 1.5  # the heightfield collides where the robot's other geoms reach 
 SPRUNG_S = 0.2  # s: the time constant of a sprung caster's contact (MuJoCo's is 0.02 s: rigid)
 
 
-class MujocoWorld:
+class MujocoWorld(MujocoHolds):
     """set_world, the terrain's checks, the slope and the forces of the MuJoCo plant (its attributes
     are :class:`~mlpfac.plants.mujoco.MujocoPlant`'s)."""
 
     def _no_world(self) -> None:
         """No terrain, no force: nothing packed, nothing done in the step (the bits of a run without them)."""
-        self.terrain, self._forces, self._steps = None, (), 0
+        self.terrain, self._forces, self._given, self._steps = None, (), (), 0
         self._wld, self._nodes = np.zeros(0), np.zeros((0, 0))
         self._push, self._force_now = np.zeros((0, FORCE_COLUMNS)), np.zeros(3)
-        self._reach = 0.0
+        self._reach, self._footing, self._low = 0.0, [], math.inf  # how far the robot reaches; its feet at rest
 
-    def set_world(self, terrain, events=(), steps: int = 0, where: str = "[world]") -> None:
+    def set_world(
+        self, terrain, events=(), steps: int = 0, where: str = "[world]", events_where: str = "[[events]]"
+    ) -> None:
         """Build ``terrain`` (a :class:`~mlpfac.plants.world.Terrain`, or None) into the robot's scene,
         checked against the robot first, and apply the ``force`` events of ``events`` over a run of
-        ``steps`` control steps from each reset on."""
-        self._forces, self._steps = tuple(events), int(steps)
+        ``steps`` control steps from each reset on, in newtons for this robot (a force given relative
+        to it: :func:`mlpfac.plants.forces.in_newtons`; ``events_where`` names them in errors)."""
+        self._given = tuple(events)
+        self._forces, self._steps = in_newtons_all(events, *self.weight(), self.T, events_where), int(steps)
         tiles, floor = (), 0.0
         if terrain is not None:
             m0, rest = self.robot.model, self.robot.qpos_rest
-            floor = _floor(m0, rest, self._root)
-            feet, low = _feet(m0, rest, self._root, floor)
+            floor = floor_height(m0, rest, self._root)
+            feet, low = feet_at_rest(m0, rest, self._root, floor)
+            loads = carried(m0, rest, [g for g, *_ in feet])
+            self._footing, self._low = [(g, reach, loads[g]) for g, _, _, reach in feet], low
             site = self.robot.site_rest[0]
             self._reach = max(
                 math.sqrt((x - site[0]) * (x - site[0]) + (y - site[1]) * (y - site[1])) + r for _, x, y, r in feet
@@ -90,64 +99,6 @@ class MujocoWorld:
             mus = [float(self.model.geom_friction[g, 0]) for g in self._tyres]
             self._wld, self._nodes = W.pack(terrain, self._tyres, mus, tiles, floor)
         self._changed = True  # the next reset starts from the nominal scene, with the world
-
-    def _check_terrain(self, terrain, where: str) -> None:
-        """What the robot needs of ``terrain``: tyres that can touch the bottom of the rough ground's
-        troughs, wheels that can climb each ramp, tyres whose friction is the contact's (patches)."""
-        r = float(self.robot.real_radius)
-        if terrain.bumps is not None and terrain.bumps.curvature * r > 1.0:
-            b = terrain.bumps
-            need = math.sqrt(CURVATURE * b.height * r)
-            raise ConfigError(
-                f"{where} bumps wavelength",
-                f"a heightfield too fine for the tyre: its troughs curve at up to {b.curvature:.3g} 1/m, tighter than "
-                f"the tyre's radius of {r:g} m; lengthen the wavelength to at least {need:.3g} m or lower the height",
-            )
-        if terrain.patches:
-            self._tyres_take_friction(f"{where} patches")
-        for i, ramp in enumerate(terrain.ramps):
-            if ramp.near(*terrain.start) < self._reach:
-                raise ConfigError(
-                    f"{where} ramps #{i + 1} at",
-                    f"the ramp lies under the robot's wheels or casters at its start (within {self._reach:.2g} m of it; "
-                    "a run starts on the flat floor, where the robot settled): place it further along the path",
-                )
-        m0, (tl, tr) = self.robot.model, self._torque_max
-        mass = float(m0.body_subtreemass[self._root])
-        g = float(np.sqrt(np.sum(m0.opt.gravity * m0.opt.gravity)))
-        share, mu = (
-            _on_wheels(m0, self.robot.qpos_rest, self._tyres, mass * g),
-            float(m0.geom_friction[self._tyres[0], 0]),
-        )
-        drive = (tl + tr) * (len(self._tyres) // 2) / r
-        for i, ramp in enumerate(terrain.ramps):
-            tan = ramp.height / ramp.up
-            sin = tan / math.sqrt(1.0 + tan * tan)
-            pull = mass * g * sin
-            if pull > drive or tan > mu * share:
-                why = (
-                    f"its wheels' torque gives {drive:.3g} N"
-                    if pull > drive
-                    else f"the tyres' friction {mu:g} on the {share:.0%} of its weight its wheels carry holds a slope of "
-                    f"at most {math.degrees(math.atan(mu * share)):.3g} deg"
-                )
-                raise ConfigError(
-                    f"{where} ramps #{i + 1}",
-                    f"the wheels cannot climb it: a slope of {math.degrees(math.atan(tan)):.3g} deg pulls the "
-                    f"{mass:.3g} kg robot back with {pull:.3g} N, and {why}; lower it or lengthen it",
-                )
-
-    def _tyres_take_friction(self, where: str) -> None:
-        """A ConfigError unless the tyres' contact priority is above the floor's (their friction is the contact's)."""
-        m = self.model
-        others = [g for g in range(m.ngeom) if m.body_rootid[m.geom_bodyid[g]] != self._root]
-        floor = max((int(m.geom_priority[g]) for g in others), default=-1)
-        if any(m.geom_priority[g] <= floor for g in self._tyres):
-            raise ConfigError(
-                where,
-                f"the tyre geoms need a priority above the floor's ({floor}) for their friction to be the "
-                'contact\'s: give them one in the model, or set tyre = "sphere" in [plant]',
-            )
 
     def _world_reset(self, q0: np.ndarray, rng: np.random.Generator) -> None:
         """At a reset: the robot lifted onto the terrain under its footprint (not into it), the tyres'
@@ -204,12 +155,25 @@ class MujocoWorld:
         toward = f" uphill towards {event.heading_deg or 0.0:g} deg" if event.angle_deg else " (level)"
         return f"floor tilted {event.angle_deg:g} deg{toward}: gravity pulls {math.sqrt(gx * gx + gy * gy):.3g} m/s^2 downhill"
 
+    @property
+    def forces(self) -> tuple:
+        """The run's events, each ``force`` among them in the newtons this robot is given (in their places)."""
+        return self._forces
+
     def _force_text(self, event: Force) -> str:
-        parts = [f"{k} {v:g}" for k, v in (("fx", event.fx), ("fy", event.fy)) if v]
-        parts += [f"torque_z {event.torque_z:g} N m"] if event.torque_z else []
-        what = ", ".join(parts) + (" N" if parts and not event.torque_z else "")
-        if event.std:
-            what = (what + " + " if what else "") + f"noise of {event.std:g} N std a control step"
+        f = in_newtons_all((event,), *self.weight(), self.T)[0]  # in newtons, as the plant applies it
+        unit = {"fx_mg": " m g", "fy_mg": " m g", "std_mg": " m g", "dv_x": " m/s", "dv_y": " m/s"}
+
+        def said(key: str) -> str:
+            rel = [k for k in RELATIVE[key] if getattr(event, k) is not None]
+            return f" ({rel[0]} {getattr(event, rel[0]):g}{unit[rel[0]]})" if rel else ""
+
+        parts = [f"{k} {v:.4g} N{said(k)}" for k, v in (("fx", f.fx), ("fy", f.fy)) if v]
+        parts += [f"torque_z {f.torque_z:g} N m"] if f.torque_z else []
+        what = ", ".join(parts)
+        if f.std:
+            gust = "a control step" if f.tau_s is None else f"a gust of correlation time {f.tau_s:g} s"
+            what = (what + " + " if what else "") + f"noise of {f.std:.4g} N std{said('std')}, {gust}"
         how = f" for {event.steps(self.T) * self.T:g} s" if event.duration is not None else " from now on"
         wave = f", sinusoidal of period {event.period:g} s" if event.period is not None else ""
         return f"force {what} in the {event.frame or 'world'}'s axes on the robot{wave}{how}"
@@ -219,6 +183,11 @@ class MujocoWorld:
         t, m, parts = self.terrain, self.model, []
         if t.ramps:
             parts.append(f"{len(t.ramps)} ramp{'s' * (len(t.ramps) > 1)} (convex meshes)")
+        if t.kerbs:
+            limit = self.each_wheel()
+            of = f", of the {limit:.3g} N m a wheel the motors give" if math.isfinite(limit) else ""
+            said = ", ".join(self._kerb_said(i, k.height) for i, k in enumerate(t.kerbs))
+            parts.append(f"{len(t.kerbs)} kerb{'s' * (len(t.kerbs) > 1)} (convex meshes; {said}{of})")
         if t.grid is not None:
             tiles = int(self._wld[W.W_NTILE])
             hfield = (
@@ -280,9 +249,9 @@ def _build(
         )
     ramp_bit = free[-1] if feet else 0
     hfield = terrain.grid is not None and low < CLEARANCE * terrain.bumps.height
-    ground = spec.worldbody.add_body(name="mlpfac_ground", pos=[0.0, 0.0, z0]) if terrain.ramps or hfield else None
-    for i, r in enumerate(terrain.ramps):
-        name = f"mlpfac_ramp_{i}"
+    ground = spec.worldbody.add_body(name="mlpfac_ground", pos=[0.0, 0.0, z0]) if terrain.raised or hfield else None
+    for i, r in enumerate(terrain.raised):
+        name = f"mlpfac_kerb_{i - len(terrain.ramps)}" if r.kerb else f"mlpfac_ramp_{i}"
         spec.add_mesh(name=name, uservert=r.corners().ravel().tolist())
         ground.add_geom(name=name, type=mujoco.mjtGeom.mjGEOM_MESH, meshname=name, contype=ct, conaffinity=ca | ramp_bit,
                         **look)  # fmt: skip
@@ -302,51 +271,3 @@ def _build(
         spec.geoms[g].contype, spec.geoms[g].conaffinity = free[i] | ramp_bit, 0
         out.append((g, f"mlpfac_tile_{i}", reach))
     return out
-
-
-def _floor(m: mujoco.MjModel, qpos: np.ndarray, root: int) -> float:
-    """The floor's height under the robot at rest: where its contacts with the scene are (m)."""
-    d = _at_rest(m, qpos)
-    mine = {g for g in range(m.ngeom) if m.body_rootid[m.geom_bodyid[g]] == root}
-    z = [float(c.pos[2]) for c in d.contact[: d.ncon] if (int(c.geom1) in mine) != (int(c.geom2) in mine)]
-    return sum(z) / len(z) if z else 0.0
-
-
-def _at_rest(m: mujoco.MjModel, qpos: np.ndarray) -> mujoco.MjData:
-    d = mujoco.MjData(m)
-    d.qpos[:] = qpos
-    mujoco.mj_forward(m, d)
-    return d
-
-
-def _feet(
-    m: mujoco.MjModel, qpos: np.ndarray, root: int, floor: float
-) -> tuple[list[tuple[int, float, float, float]], float]:
-    """The robot's geoms that touch the floor at rest (its tyres, casters, skids), each with where it
-    is: (x, y) and the height of its centre above the floor (its reach below it); and how high above
-    the floor the lowest point of its other colliding geoms is at rest (m)."""
-    d = _at_rest(m, qpos)
-    mine = [g for g in range(m.ngeom) if m.body_rootid[m.geom_bodyid[g]] == root]
-    feet = sorted({int(g) for c in d.contact[: d.ncon] for g in (c.geom1, c.geom2) if int(g) in mine})
-    low = np.inf
-    for g in mine:
-        if g not in feet and (m.geom_contype[g] or m.geom_conaffinity[g]):
-            R = d.geom_xmat[g].reshape(3, 3)
-            c, h = m.geom_aabb[g, :3], m.geom_aabb[g, 3:]
-            z = d.geom_xpos[g, 2] + sum(R[2, k] * c[k] for k in range(3)) - sum(abs(R[2, k]) * h[k] for k in range(3))
-            low = min(low, float(z) - floor)
-    x = d.geom_xpos
-    return [(g, float(x[g, 0]), float(x[g, 1]), float(x[g, 2]) - floor) for g in feet], low
-
-
-def _on_wheels(m: mujoco.MjModel, qpos: np.ndarray, tyres, weight: float) -> float:
-    """The share of the robot's weight its tyres carry at rest (the rest of it on casters and skids)."""
-    d = mujoco.MjData(m)
-    d.qpos[:] = qpos
-    mujoco.mj_forward(m, d)
-    f, carried = np.zeros(6), 0.0
-    for i in range(d.ncon):
-        if int(d.contact[i].geom1) in tyres or int(d.contact[i].geom2) in tyres:
-            mujoco.mj_contactForce(m, d, i, f)
-            carried += abs(float(f[0]))
-    return min(1.0, carried / weight) if weight > 0 else 1.0

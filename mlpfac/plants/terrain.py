@@ -44,7 +44,7 @@ def pack(terrain=None, tyres=(), mus=(), tiles=(), floor: float = 0.0) -> tuple[
     """The packed world of a :class:`~mlpfac.plants.world.Terrain` (or None), the tyres' geom ids and
     friction off the patches, the contact tiles (geom, mocap index, reach) and the floor's height;
     and the rough ground's nodes ((0, 0) without bumps)."""
-    ramps = () if terrain is None else terrain.ramps
+    ramps = () if terrain is None else terrain.raised  # a kerb: a ramp of vertical slopes (up = down = 0)
     patches = () if terrain is None else terrain.patches
     w = np.zeros(W_HEAD + W_RAMP * len(ramps) + W_PATCH * len(patches) + W_TYRE * len(tyres) + W_TILE * len(tiles))
     w[[W_NRAMP, W_NPATCH, W_NTYRE, W_NTILE, W_Z0]] = len(ramps), len(patches), len(tyres), len(tiles), floor
@@ -130,7 +130,7 @@ def sample_bumps(w, nodes, x0, y0, dx, dy, out):
 @kernel()
 def ground_at(w, nodes, x, y):
     """The ground's height at (x, y) above the floor (m): the rough ground and the ramps (up, top,
-    down across their width), the highest of them."""
+    down across their width; a kerb's top all of it), the highest of them."""
     h = 0.0
     if w[W_BUMPS] != 0.0:
         h = bumps_at(w, nodes, x, y)[0]

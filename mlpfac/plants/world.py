@@ -30,8 +30,14 @@ from mlpfac.exceptions import ConfigError
 from mlpfac.plants.events import MU_MAX, MU_MIN, check_params, param
 from mlpfac.tables import build, check_keys
 
-RAMP_HEIGHT_MAX = 0.5  # m: a ramp up to half a metre high (a kerb, a loading ramp)
+RAMP_HEIGHT_MAX = 0.5  # m: a ramp up to half a metre high (a loading ramp), a kerb too
+# m: a ramp's or a kerb's height, at least: lower, it is within the give of MuJoCo's soft contacts
+# (a tyre sinks about 0.1 mm into the floor under the robot's weight) and its mesh is too flat for
+# MuJoCo's convex hull (qhull: coplanar points, or pages of warnings)
+HEIGHT_MIN = 1e-3
+SIZE_MIN = 1e-3  # m: a ramp's or a kerb's length and width, at least
 LENGTH_MAX = 50.0  # m: a ramp's length and width, a patch's radius, at most
+FEATURES_MAX = 100  # ramps, kerbs and patches each, at most: each is a geom of the scene, a mesh in the recording, and looked up every step
 BUMPS_HEIGHT_MAX = 0.2  # m of rough ground, top to bottom, at most
 WAVELENGTH_MIN, WAVELENGTH_MAX = 0.01, 10.0  # m between crests of the rough ground
 RAMP_WIDTH = 1.2  # m across the path, where a ramp does not say
@@ -48,25 +54,78 @@ PROBE = 8  # the digest of a draw: the nodes within this many of the world's ori
 CURVATURE = 33.0
 
 
+def _placed(feature) -> None:
+    """A ramp's or a kerb's place checked: ``at`` (a share of the path) or ``x`` and ``y`` (and then
+    ``heading_deg``), not both."""
+    check_params(feature)
+    here = [k for k in ("x", "y", "heading_deg") if getattr(feature, k) is not None]
+    if feature.at is not None and here:
+        raise ConfigError(here[0], "not with 'at': a feature lies at a share of the path or at (x, y), not both")
+    if feature.at is None and (feature.x is None or feature.y is None):
+        raise ConfigError(
+            "y" if feature.x is not None else "x" if feature.y is not None else "at",
+            "give 'at' (a share of the path's length) or 'x' and 'y' (its centre in the world)",
+        )
+    if feature.at is not None and not 0.0 < feature.at < 1.0:
+        raise ConfigError("at", f"a share of the path's length between 0 and 1 (not either), got {feature.at!r}")
+
+
 @dataclass(frozen=True, kw_only=True)
 class Ramp:
-    """A ramp across the path: up, a flat top, down, each a third of ``length``, its foot where the
-    reference has gone ``at`` of its length over the run, at right angles to it."""
+    """A ramp: up, a flat top, down, each a third of ``length``; across the path where the reference
+    has gone ``at`` of its length, or at (``x``, ``y``), uphill towards ``heading_deg``."""
 
-    at: float = param(float, minimum=0.0, maximum=1.0)  # where its foot is: a share of the path's length over the run
-    height: float = param(float, positive=True, maximum=RAMP_HEIGHT_MAX)  # m, of its flat top
-    length: float = param(float, positive=True, maximum=LENGTH_MAX)  # m along the path: up, top and down
-    width: float | None = param(float, required=False, positive=True, maximum=LENGTH_MAX)  # m across it (none: 1.2 m)
+    at: float | None = param(
+        float, required=False, minimum=0.0, maximum=1.0
+    )  # where its foot is: a share of the path's length over the run
+    x: float | None = param(
+        float, required=False, minimum=-1e6, maximum=1e6
+    )  # m: or its centre in the world (inside the arena)
+    y: float | None = param(float, required=False, minimum=-1e6, maximum=1e6)  # m
+    heading_deg: float | None = param(
+        float, required=False, minimum=-360.0, maximum=360.0
+    )  # placed at (x, y): uphill towards this heading, counter-clockwise from x (none: 0)
+    height: float = param(float, minimum=HEIGHT_MIN, maximum=RAMP_HEIGHT_MAX)  # m, of its flat top
+    length: float = param(float, minimum=SIZE_MIN, maximum=LENGTH_MAX)  # m along it: up, top and down
+    width: float | None = param(
+        float, required=False, minimum=SIZE_MIN, maximum=LENGTH_MAX
+    )  # m across it (none: 1.2 m)
 
     def __post_init__(self) -> None:
-        check_params(self)
-        if not 0.0 < self.at < 1.0:
-            raise ConfigError("at", f"a share of the path's length between 0 and 1 (not either), got {self.at!r}")
+        _placed(self)
 
     @property
     def slope(self) -> float:
         """The tangent of its slopes' angle from the floor."""
         return 3.0 * self.height / self.length
+
+
+@dataclass(frozen=True, kw_only=True)
+class Kerb:
+    """A kerb: a slab with vertical edges, a step up of ``height`` where the path meets it and a step
+    down ``length`` further on, where it leaves it; across the path where the reference has gone
+    ``at`` of its length, or at (``x``, ``y``), its step up facing ``heading_deg``."""
+
+    at: float | None = param(
+        float, required=False, minimum=0.0, maximum=1.0
+    )  # where its step up is: a share of the path's length over the run
+    x: float | None = param(
+        float, required=False, minimum=-1e6, maximum=1e6
+    )  # m: or its centre in the world (inside the arena)
+    y: float | None = param(float, required=False, minimum=-1e6, maximum=1e6)  # m
+    heading_deg: float | None = param(
+        float, required=False, minimum=-360.0, maximum=360.0
+    )  # placed at (x, y): the way across it, up then down, counter-clockwise from x (none: 0)
+    height: float = param(
+        float, minimum=HEIGHT_MIN, maximum=RAMP_HEIGHT_MAX
+    )  # m of each step; below a wheel's radius (the robot's check)
+    length: float = param(float, minimum=SIZE_MIN, maximum=LENGTH_MAX)  # m along it, from the step up to the step down
+    width: float | None = param(
+        float, required=False, minimum=SIZE_MIN, maximum=LENGTH_MAX
+    )  # m across it (none: 1.2 m)
+
+    def __post_init__(self) -> None:
+        _placed(self)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -102,21 +161,22 @@ class Patch:
 
 @dataclass(frozen=True)
 class World:
-    """A scenario's ``[world]`` table: ``ramps``, ``bumps``, ``patches``, and ``over``: the seconds of
-    the reference it is laid out along (its arena, where its ramps lie), the run's duration where it
-    says none; ``--duration`` keeps the file's (written into config.toml), so that a shorter run
-    drives into the same world."""
+    """A scenario's ``[world]`` table: ``ramps``, ``kerbs``, ``bumps``, ``patches``, and ``over``: the
+    seconds of the reference it is laid out along (its arena, where its ramps and kerbs lie), the
+    run's duration where it says none; ``--duration`` keeps the file's (written into config.toml),
+    so that a shorter run drives into the same world."""
 
     ramps: tuple[Ramp, ...] = ()
+    kerbs: tuple[Kerb, ...] = ()
     bumps: Bumps | None = None
     patches: tuple[Patch, ...] = ()
     over: float | None = None  # s of the reference it is laid out along (the arena, the ramps' `at`); none: the run's
 
     def __bool__(self) -> bool:
-        return bool(self.ramps or self.bumps or self.patches)
+        return bool(self.ramps or self.kerbs or self.bumps or self.patches)
 
 
-KEYS = {"ramps": Ramp, "bumps": Bumps, "patches": Patch}
+KEYS = {"ramps": Ramp, "kerbs": Kerb, "bumps": Bumps, "patches": Patch}
 
 
 def parse_world(table, where: str) -> World:
@@ -143,14 +203,21 @@ def parse_world(table, where: str) -> World:
             continue
         if not isinstance(value, list) or not all(isinstance(x, dict) for x in value):
             raise ConfigError(f"{where} {key}", f"expected a list of tables ({key} = [{{...}}, ...]), got {value!r}")
+        if len(value) > FEATURES_MAX:
+            raise ConfigError(
+                f"{where} {key}",
+                f"{len(value)} of them; the limit is {FEATURES_MAX} (each is a geom of the scene, a mesh of the "
+                "recording, and looked up every step)",
+            )
         out[key] = tuple(build(cls, x, f"{where} {key} #{i + 1}") for i, x in enumerate(value))
     return World(**out)
 
 
 @dataclass(frozen=True)
 class PlacedRamp:
-    """A ramp where it lies: its foot's middle (x, y) on the path, the heading up it (its cosine and
-    sine), the lengths of its three parts along it, its height and width (m)."""
+    """A ramp or a kerb where it lies: its foot's middle (x, y), the heading up it (its cosine and
+    sine), the lengths of its three parts along it (a kerb's slopes none: its top all of it), its
+    height and width (m)."""
 
     x: float
     y: float
@@ -161,6 +228,7 @@ class PlacedRamp:
     down: float
     height: float
     width: float
+    placed: str = "at"  # the key that placed it: "at" (a share of the path) or "x" (its centre)
 
     def corners(self) -> np.ndarray:
         """Its prism's 8 corners (8, 3), above the floor: its foot, the top's two edges and its end
@@ -177,6 +245,11 @@ class PlacedRamp:
                 out.append([self.x + along * self.c - across * self.s, self.y + along * self.s + across * self.c, z])
         return np.array(out)
 
+    @property
+    def kerb(self) -> bool:
+        """A kerb: vertical steps (no slopes), its top all of its length."""
+        return self.up == 0.0
+
     def near(self, x: float, y: float) -> float:
         """How far (x, y) is from its footprint (m; 0 on it)."""
         u = (x - self.x) * self.c + (y - self.y) * self.s
@@ -189,7 +262,7 @@ class PlacedRamp:
 @dataclass(frozen=True, eq=False)
 class Terrain:
     """The ground a run drives on (:func:`resolve`): the arena (x0, y0, x1, y1), where the robot
-    starts, its ramps where they lie, the patches, and the rough ground: its random ``nodes`` (rows along y, columns along x)
+    starts, its ramps and kerbs where they lie, the patches, and the rough ground: its random ``nodes`` (rows along y, columns along x)
     and the constants of its surface (:data:`mlpfac.plants.terrain.BUMPS`), its heights sampled on
     the arena (``grid`` (rows, columns): row i at y = y0 + i dy, column j at x = x0 + j dx, the
     heightfield), the digest of what was drawn; None without bumps."""
@@ -204,6 +277,12 @@ class Terrain:
     grid: np.ndarray | None = None
     cell: tuple[float, float] = (0.0, 0.0)  # (dx, dy) of the grid
     digest: str = ""  # sha256 of the draw (draw_bumps; "" without bumps)
+    kerbs: tuple[PlacedRamp, ...] = ()
+
+    @property
+    def raised(self) -> tuple[PlacedRamp, ...]:
+        """Its ramps, then its kerbs: what stands on the floor (each a convex mesh of the scene)."""
+        return self.ramps + self.kerbs
 
     def packed(self) -> tuple[np.ndarray, np.ndarray]:
         """Its packed form (:func:`mlpfac.plants.terrain.pack`): the world array and the nodes."""
@@ -212,7 +291,7 @@ class Terrain:
         return pack(self)
 
     def height(self, x: float, y: float) -> float:
-        """The ground's height at (x, y) (m): the rough ground and the ramps, the higher of them."""
+        """The ground's height at (x, y) (m): the rough ground, the ramps and the kerbs, the highest of them."""
         from mlpfac.plants.terrain import ground_height
 
         return float(ground_height(*self.packed(), float(x), float(y)))
@@ -222,6 +301,7 @@ class Terrain:
         return {
             "arena": list(self.arena),
             "ramps": [r.corners() for r in self.ramps],
+            "kerbs": [r.corners() for r in self.kerbs],
             "patches": [{"x": p.x, "y": p.y, "radius": p.radius, "mu": p.mu} for p in self.patches],
             "grid": None if self.grid is None else self.grid.astype(np.float32),
             "cell": list(self.cell),
@@ -231,46 +311,58 @@ class Terrain:
 
 def resolve(world: World, ref: np.ndarray, start: np.ndarray, seed: int, where: str) -> Terrain | None:
     """The terrain of ``world`` for a run: ``ref`` (N + 1, 5) the reference over the whole run,
-    ``start`` the robot's start (x, y), ``seed`` the run's. None for an empty world. A patch outside
-    the arena is a ConfigError naming it (``where``: ``[world]``; a ramp under the robot's start is
-    the plant's, which knows how far the robot reaches)."""
+    ``start`` the robot's start (x, y), ``seed`` the run's. None for an empty world. A patch, a ramp
+    or a kerb placed outside the arena is a ConfigError naming it (``where``: ``[world]``; one under
+    the robot's start is the plant's, which knows how far the robot reaches)."""
     if not world:
         return None
     xy = ref[:, :2]
     lo, hi = xy.min(axis=0) - ARENA_MARGIN, xy.max(axis=0) + ARENA_MARGIN
     arena = (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]))
-    for i, p in enumerate(world.patches):
-        if not (arena[0] <= p.x <= arena[2] and arena[1] <= p.y <= arena[3]):
-            raise ConfigError(
-                f"{where} patches #{i + 1}",
-                f"({p.x:g}, {p.y:g}) lies outside the arena x {arena[0]:.3g} .. {arena[2]:.3g}, y {arena[1]:.3g} .. "
-                f"{arena[3]:.3g} m (the reference's bounding box and {ARENA_MARGIN:g} m around it)",
-            )
-    ramps = tuple(_place(r, ref) for r in world.ramps)
+    for key in ("patches", "ramps", "kerbs"):
+        for i, p in enumerate(getattr(world, key)):
+            if p.x is not None and not (arena[0] <= p.x <= arena[2] and arena[1] <= p.y <= arena[3]):
+                raise ConfigError(
+                    f"{where} {key} #{i + 1}",
+                    f"({p.x:g}, {p.y:g}) lies outside the arena x {arena[0]:.3g} .. {arena[2]:.3g}, y {arena[1]:.3g} "
+                    f".. {arena[3]:.3g} m (the reference's bounding box and {ARENA_MARGIN:g} m around it)",
+                )
+    ramps, kerbs = tuple(_place(r, ref) for r in world.ramps), tuple(_place(k, ref) for k in world.kerbs)
     at = (float(start[0]), float(start[1]))
     if world.bumps is None:
-        return Terrain(arena, at, ramps, world.patches)
+        return Terrain(arena, at, ramps, world.patches, kerbs=kerbs)
     nodes, surface, grid, cell, digest = draw_bumps(world.bumps, arena, start, seed, f"{where} bumps")
-    return Terrain(arena, at, ramps, world.patches, world.bumps, nodes, surface, grid, cell, digest)
+    return Terrain(arena, at, ramps, world.patches, world.bumps, nodes, surface, grid, cell, digest, kerbs)
 
 
-def _place(ramp: Ramp, ref: np.ndarray) -> PlacedRamp:
-    """Where ``ramp`` lies on the reference ``ref`` (N + 1, 5): its foot where the path has gone ``at``
-    of its length (linear between samples), heading along the path there."""
+def _place(feature: Ramp | Kerb, ref: np.ndarray) -> PlacedRamp:
+    """Where a ramp or a kerb lies: at (x, y), its centre, uphill towards its heading; or on the
+    reference ``ref`` (N + 1, 5), its foot where the path has gone ``at`` of its length (linear
+    between samples), heading along the path there. A ramp's slopes are each a third of its length;
+    a kerb's none (vertical steps)."""
     from mlpfac.elementary import cos, sin
 
+    if isinstance(feature, Kerb):
+        up, top, down = 0.0, feature.length, 0.0
+    else:
+        third = feature.length / 3.0
+        up, top, down = third, third, feature.length - 2.0 * third
+    width = RAMP_WIDTH if feature.width is None else feature.width
+    if feature.at is None:
+        th = (feature.heading_deg or 0.0) * (math.pi / 180.0)
+        c, s = cos(th), sin(th)
+        half = 0.5 * feature.length
+        return PlacedRamp(feature.x - half * c, feature.y - half * s, c, s, up, top, down, feature.height, width, "x")
     d = np.diff(ref[:, :2], axis=0)
     ds = np.sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1])
     s = np.concatenate([[0.0], np.cumsum(ds)])
-    goal = ramp.at * float(s[-1])
+    goal = feature.at * float(s[-1])
     j = min(max(int(np.searchsorted(s, goal)), 1), len(s) - 1)
     t = 0.0 if ds[j - 1] == 0 else (goal - float(s[j - 1])) / float(ds[j - 1])
     x = float(ref[j - 1, 0]) + t * float(d[j - 1, 0])
     y = float(ref[j - 1, 1]) + t * float(d[j - 1, 1])
     th = float(ref[j - 1, 2]) + t * (float(ref[j, 2]) - float(ref[j - 1, 2]))
-    third = ramp.length / 3.0
-    width = RAMP_WIDTH if ramp.width is None else ramp.width
-    return PlacedRamp(x, y, cos(th), sin(th), third, third, ramp.length - 2.0 * third, ramp.height, width)
+    return PlacedRamp(x, y, cos(th), sin(th), up, top, down, feature.height, width)
 
 
 def node_heights(seed: int, rows: range, cols: range) -> np.ndarray:

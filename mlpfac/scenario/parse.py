@@ -33,7 +33,7 @@ from mlpfac.scenario.draws import put as put_value
 from mlpfac.scenario.draws import resolve as draw_values
 from mlpfac.scenario.draws import restore as restore_draws
 from mlpfac.scenario.reference import make_reference
-from mlpfac.scenario.world import ground, recorded, recorded_bumps
+from mlpfac.scenario.world import SAMPLE_BYTES, ground, recorded, recorded_bumps
 from mlpfac.tables import (  # noqa: F401 (mlpfac.scenario.parse.to_toml)
     FOLDER_NAME,
     build,
@@ -387,6 +387,14 @@ def parse(table: dict, source: str = "<scenario>", check_model: bool = True, pla
     events.sort(key=lambda ev: ev.time)
 
     world = parse_world(table.get("world", {}), f"{source} [world]")
+    samples = int(round((world.over or duration) / T)) + 1 if world else 0  # the reference it is laid out along
+    if SAMPLE_BYTES * samples > MEMORY_SHARE * have:
+        raise ConfigError(
+            f"{source} [world] over" if world.over else f"{source} duration",
+            f"the world is laid out along {samples} samples of the reference, about "
+            f"{SAMPLE_BYTES * samples / 2**30:.3g} GiB; {have / 2**30:.3g} GiB of memory is available: shorten it or "
+            "lengthen T",
+        )
     terrain = ground(world, plant_kind, reference, world.over or duration, T, e0, seed, source)
     out = recorded(restore_draws(table, draws), terrain, bumps_drawn, seed, source)
 

@@ -14,6 +14,9 @@ from mlpfac.plants.world import Terrain, World, resolve
 from mlpfac.scenario.reference import sample
 
 BUMPS_DRAWN = "world.bumps"  # [drawn]: the digest of the rough ground drawn for the seed
+SAMPLE_BYTES = (
+    128  # bytes a sample of the reference takes while the world is laid out (measured: 16 floats at the peak)
+)
 
 
 def ground(
