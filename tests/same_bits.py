@@ -67,7 +67,8 @@ ROOT = HERE.parent
 # (scenario, controllers, duration, --vary): short runs that reach every controller (None: every
 # shipped one, on FALLBACK those the kinematic model cannot run), our robot, the
 # cart, torque motors, an event (moved early by a --vary point), a drawn plant, paths, a pose
-# from odometry and from odometry fused with delayed fixes, rough ground and a force of noise
+# from odometry and from odometry fused with delayed fixes, rough ground, and a tow of a share of the
+# weight with a gust of noise
 RUNS = [
     ("paper", None, 3.0, ["events.0.time=2.5"]),
     ("eight-payload", ("corradini", "kanayama", "adaptive", "adaptive-ukf", "oracle"), 1.0, ["events.0.time=0.6"]),
@@ -81,7 +82,7 @@ RUNS = [
     ("eight-wheel-radius-odometry", ("kanayama", "adaptive"), 1.0, ["events.0.time=0.5"]),
     ("eight-wheel-radius-fused", ("kanayama", "adaptive"), 1.0, ["events.0.time=0.5", "plant.fix_latency_s=0.05"]),
     ("eight-bumps", ("kanayama",), 1.0, []),  # rough ground drawn per seed, carried by contact tiles
-    ("eight-push", ("corradini",), 1.0, ["events.0.time=0.3", "events.0.std=5.0", "events.0.duration=0.5"]),  # noise
+    ("eight-tow", ("corradini",), 1.0, ["events.0.time=0.3", "events.0.std_mg=0.1", "events.0.tau_s=0.2"]),  # a gust
 ]
 FALLBACK = "eight-torque"  # where a shipped controller runs that the kinematic model cannot (torque level)
 MENAGERIE = [("tiago-friction", ("corradini", "adaptive"), 1.0, ["events.0.time=0.5"])]

@@ -447,6 +447,10 @@ def test_the_scenario_reference_gives_the_validators_ranges():
         "| `T` | s | 0.01 | > 0 |",
         "| `estimator` | string | \"ekf\" | choose 'ekf' or 'ukf' |",
         "| `sensor_delay` | `steps` (integer >= 0) |",
+        "`period`, `std`, `std_mg` (a force is periodic or noise, not both)",  # a rule between parameters
+        "`tau_s` needs `std` or `std_mg`",
+        "| `height` | number | required | [0.001, 0.5] | m, of its flat top |",
+        "| `wavelength` | number | required | [0.01, 10] | m between crests |",
     ):
         assert row in text, row
 

@@ -685,6 +685,7 @@ def test_the_eight_scenarios_are_shipped():
         "eight-wheel-radius-fused",  # ... and a localizer's fixes
         "eight-slope",
         "eight-ramp",
+        "eight-kerb",
         "eight-bumps",
         "eight-wet-patch",
         "eight-push",

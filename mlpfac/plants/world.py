@@ -1,11 +1,12 @@
-"""The world around the robot, a scenario's ``[world]`` table: ramps across the path, rough ground
-(a heightfield drawn per seed) and floor patches of their own friction, present from the start.
+"""The world around the robot, a scenario's ``[world]`` table: ramps and kerbs (slabs with vertical
+steps), across the path or placed at (x, y), rough ground (a heightfield drawn per seed) and floor
+patches of their own friction, present from the start.
 
 :class:`World` is the table as plain, validated data (each key typed and ranged when it is made,
 as an event's are: :func:`mlpfac.plants.events.param`). :func:`resolve` turns it into the
 :class:`Terrain` a run drives on, once, from the reference over the whole run and the run's seed:
-where each ramp lies (``at``, a share of the path's length), the heights of the rough ground, the
-arena. Every plant of a run, and the probes a run builds, is given that one terrain, so they all
+where each ramp and kerb lies (``at``, a share of the path's length, or its centre at (``x``,
+``y``)), the heights of the rough ground, the arena. Every plant of a run, and the probes a run builds, is given that one terrain, so they all
 build the same world (:mod:`mlpfac.plants.mujoco_world` builds it into the robot's scene). What is
 drawn is recorded by its digest (:attr:`Terrain.digest`, the scenario's ``[drawn]``).
 

@@ -15,8 +15,9 @@ controller put on another robot, by one rule (docs/robots.md):
   code) where it leaves the reference's speed unset, and a warning in numbers where it sets one
   the wheels cannot drive (:func:`on_its_robot`);
 - events mean the same physical change: relative ones as they are (wheel radius x1.5 is x1.5 of
-  this robot's wheel, mass x3 of its base), absolute ones too (a 5 kg payload, a floor of friction
-  0.2, a 40 ms delay); a payload on a body of the other robot goes on this one's base.
+  this robot's wheel, mass x3 of its base, a force of a tenth of its weight, a push that changes
+  its velocity by 1 m/s), absolute ones too (a 5 kg payload, a floor of friction 0.2, a 40 ms
+  delay, a 5 N force); a payload on a body of the other robot goes on this one's base.
 """
 
 from __future__ import annotations
