@@ -181,7 +181,15 @@ def _type(hint) -> str:
 
 
 def _comments(cls) -> dict[str, str]:
-    """field name -> the comment written beside it in the class's source (``# noqa: X --`` dropped)."""
+    """field name -> the comment written beside it in the source of the class or of the dataclass it
+    builds on (``# noqa: X --`` dropped)."""
+    bases = [b for b in cls.__mro__[1:] if dataclasses.is_dataclass(b)]
+    out = {k: v for b in reversed(bases) for k, v in _own_comments(b).items()}
+    return out | _own_comments(cls)
+
+
+def _own_comments(cls) -> dict[str, str]:
+    """field name -> the comment beside it in ``cls``'s own source."""
     src = textwrap.dedent(inspect.getsource(cls))
     notes: dict[int, str] = {}
     for tok in tokenize.generate_tokens(io.StringIO(src).readline):

@@ -102,6 +102,8 @@ def schedule(force: Force, index: int, T: float, steps: int, seed) -> np.ndarray
     from mlpfac.elementary import sin
     from mlpfac.normal import standard_normal
 
+    if force.relative:  # its newtons are the robot's: a plant's or an oracle's schedule is made from those
+        raise ValueError(f"{force.describe()} is given relative to the robot: put it in newtons first (in_newtons)")
     out = np.zeros((steps, 5))
     k0 = event_step(force.time, T)
     k1 = steps if force.steps(T) is None else min(steps, k0 + force.steps(T))

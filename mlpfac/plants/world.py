@@ -55,45 +55,44 @@ PROBE = 8  # the digest of a draw: the nodes within this many of the world's ori
 CURVATURE = 33.0
 
 
-def _placed(feature) -> None:
-    """A ramp's or a kerb's place checked: ``at`` (a share of the path) or ``x`` and ``y`` (and then
-    ``heading_deg``), not both."""
-    check_params(feature)
-    here = [k for k in ("x", "y", "heading_deg") if getattr(feature, k) is not None]
-    if feature.at is not None and here:
-        raise ConfigError(here[0], "not with 'at': a feature lies at a share of the path or at (x, y), not both")
-    if feature.at is None and (feature.x is None or feature.y is None):
-        raise ConfigError(
-            "y" if feature.x is not None else "x" if feature.y is not None else "at",
-            "give 'at' (a share of the path's length) or 'x' and 'y' (its centre in the world)",
-        )
-    if feature.at is not None and not 0.0 < feature.at < 1.0:
-        raise ConfigError("at", f"a share of the path's length between 0 and 1 (not either), got {feature.at!r}")
+SHARE = {"required": False, "minimum": 0.0, "maximum": 1.0}  # a share of the path's length
+PLACE = {"required": False, "minimum": -1e6, "maximum": 1e6}  # m, a place in the world
+SIZE = {"minimum": SIZE_MIN, "maximum": LENGTH_MAX}  # m, a feature's length or width
+TURN = {"required": False, "minimum": -360.0, "maximum": 360.0}  # deg, a heading
+RISE = {"minimum": HEIGHT_MIN, "maximum": RAMP_HEIGHT_MAX}  # m, a ramp's or a kerb's height
 
 
 @dataclass(frozen=True, kw_only=True)
-class Ramp:
-    """A ramp: up, a flat top, down, each a third of ``length``; across the path where the reference
-    has gone ``at`` of its length, or at (``x``, ``y``), uphill towards ``heading_deg``."""
+class Placed:
+    """Where a ramp or a kerb lies: across the path where the reference has gone ``at`` of its length
+    over the run (heading along it there), or at (``x``, ``y``), its centre, heading ``heading_deg``."""
 
-    at: float | None = param(
-        float, required=False, minimum=0.0, maximum=1.0
-    )  # where its foot is: a share of the path's length over the run
-    x: float | None = param(
-        float, required=False, minimum=-1e6, maximum=1e6
-    )  # m: or its centre in the world (inside the arena)
-    y: float | None = param(float, required=False, minimum=-1e6, maximum=1e6)  # m
-    heading_deg: float | None = param(
-        float, required=False, minimum=-360.0, maximum=360.0
-    )  # placed at (x, y): uphill towards this heading, counter-clockwise from x (none: 0)
-    height: float = param(float, minimum=HEIGHT_MIN, maximum=RAMP_HEIGHT_MAX)  # m, of its flat top
-    length: float = param(float, minimum=SIZE_MIN, maximum=LENGTH_MAX)  # m along it: up, top and down
-    width: float | None = param(
-        float, required=False, minimum=SIZE_MIN, maximum=LENGTH_MAX
-    )  # m across it (none: 1.2 m)
+    at: float | None = param(float, **SHARE)  # where it begins: a share of the path's length over the run
+    x: float | None = param(float, **PLACE)  # m: or its centre in the world (inside the arena)
+    y: float | None = param(float, **PLACE)  # m
+    heading_deg: float | None = param(float, **TURN)  # at (x, y): the way across it, from x, anticlockwise (none: 0)
 
     def __post_init__(self) -> None:
-        _placed(self)
+        check_params(self)
+        here = [k for k in ("x", "y", "heading_deg") if getattr(self, k) is not None]
+        if self.at is not None and here:
+            raise ConfigError(here[0], "not with 'at': a feature lies at a share of the path or at (x, y), not both")
+        if self.at is None and (self.x is None or self.y is None):
+            raise ConfigError(
+                "y" if self.x is not None else "x" if self.y is not None else "at",
+                "give 'at' (a share of the path's length) or 'x' and 'y' (its centre in the world)",
+            )
+        if self.at is not None and not 0.0 < self.at < 1.0:
+            raise ConfigError("at", f"a share of the path's length between 0 and 1 (not either), got {self.at!r}")
+
+
+@dataclass(frozen=True, kw_only=True)
+class Ramp(Placed):
+    """A ramp: up, a flat top, down, each a third of ``length``, placed (:class:`Placed`) uphill."""
+
+    height: float = param(float, **RISE)  # m, of its flat top
+    length: float = param(float, **SIZE)  # m along it: up, top and down
+    width: float | None = param(float, required=False, **SIZE)  # m across it (none: 1.2 m)
 
     @property
     def slope(self) -> float:
@@ -102,31 +101,13 @@ class Ramp:
 
 
 @dataclass(frozen=True, kw_only=True)
-class Kerb:
+class Kerb(Placed):
     """A kerb: a slab with vertical edges, a step up of ``height`` where the path meets it and a step
-    down ``length`` further on, where it leaves it; across the path where the reference has gone
-    ``at`` of its length, or at (``x``, ``y``), its step up facing ``heading_deg``."""
+    down ``length`` further on, where it leaves it; placed (:class:`Placed`) step up first."""
 
-    at: float | None = param(
-        float, required=False, minimum=0.0, maximum=1.0
-    )  # where its step up is: a share of the path's length over the run
-    x: float | None = param(
-        float, required=False, minimum=-1e6, maximum=1e6
-    )  # m: or its centre in the world (inside the arena)
-    y: float | None = param(float, required=False, minimum=-1e6, maximum=1e6)  # m
-    heading_deg: float | None = param(
-        float, required=False, minimum=-360.0, maximum=360.0
-    )  # placed at (x, y): the way across it, up then down, counter-clockwise from x (none: 0)
-    height: float = param(
-        float, minimum=HEIGHT_MIN, maximum=RAMP_HEIGHT_MAX
-    )  # m of each step; below a wheel's radius (the robot's check)
-    length: float = param(float, minimum=SIZE_MIN, maximum=LENGTH_MAX)  # m along it, from the step up to the step down
-    width: float | None = param(
-        float, required=False, minimum=SIZE_MIN, maximum=LENGTH_MAX
-    )  # m across it (none: 1.2 m)
-
-    def __post_init__(self) -> None:
-        _placed(self)
+    height: float = param(float, **RISE)  # m of each step; within the robot's wheels' reach
+    length: float = param(float, **SIZE)  # m along it, from the step up to the step down
+    width: float | None = param(float, required=False, **SIZE)  # m across it (none: 1.2 m)
 
 
 @dataclass(frozen=True, kw_only=True)
