@@ -318,7 +318,7 @@ def scenario_page() -> str:
     from mlpfac.plants.events import EVENTS, MU_MAX
     from mlpfac.plants.kinematic import KinematicConfig, KinematicPlant
     from mlpfac.plants.mujoco_holds import STEP_SHARE
-    from mlpfac.plants.world import FEATURES_MAX, Bumps, Kerb, Patch, Ramp
+    from mlpfac.plants.world_table import FEATURES_MAX, Bumps, Kerb, Patch, Ramp
     from mlpfac.scenario.reference import REFERENCES
 
     out = [

@@ -15,7 +15,7 @@ import numpy as np
 
 from mlpfac.exceptions import ConfigError
 from mlpfac.plants.events import MU_MAX, Force
-from mlpfac.plants.world import CURVATURE
+from mlpfac.plants.world_table import CURVATURE
 
 # The highest step a wheel of radius r climbs is STEP_SHARE r: there the step's edge leans its force
 # MU_MAX to 1 from the vertical (:func:`climb`): a driven wheel would need a tyre friction of MU_MAX, the

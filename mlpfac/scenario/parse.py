@@ -27,7 +27,8 @@ from mlpfac.exceptions import ConfigError
 from mlpfac.model import pose_from_error
 from mlpfac.plants import refuse_torque
 from mlpfac.plants.events import Event, parse_event
-from mlpfac.plants.world import Terrain, World, parse_world
+from mlpfac.plants.world import Terrain
+from mlpfac.plants.world_table import World, parse_world
 from mlpfac.scenario import provenance
 from mlpfac.scenario.draws import put as put_value
 from mlpfac.scenario.draws import resolve as draw_values

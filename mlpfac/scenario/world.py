@@ -10,7 +10,8 @@ import numpy as np
 
 from mlpfac.exceptions import ConfigError
 from mlpfac.model import pose_from_error
-from mlpfac.plants.world import Terrain, World, resolve
+from mlpfac.plants.world import Terrain, resolve
+from mlpfac.plants.world_table import World
 from mlpfac.scenario.reference import sample
 
 BUMPS_DRAWN = "world.bumps"  # [drawn]: the digest of the rough ground drawn for the seed
