@@ -242,3 +242,19 @@ def test_what_the_pages_say_of_forces_and_kerbs_is_what_the_code_gives():
     assert f"in its own axes: {-tow.forces[0].fx:.2g} N on this robot)" in page
     for name, newtons in (("eight-tow", f"{-tow.forces[0].fx:.2g} N"), ("eight-push", f"{ours[3]} N")):
         assert f"{newtons} on the shipped {tow.weight()[0]:g} kg robot" in load(name, build=False).description
+    given = {}  # the newtons of Results 9's robots on velocity servos
+    for robot in ("cart", "pal_tiago"):
+        push, pull = (
+            build(load(n, robot=robot).with_overrides(controller="kanayama")).plant.forces[0]
+            for n in ("eight-push", "eight-tow")
+        )
+        given[robot] = (f"{push.fy:.3g}", f"{-pull.fx:.2g}")
+    results = " ".join((DOCS / "results-world.md").read_text().split())
+    assert (
+        f"(`eight-push`: {ours[3]} N on our robot, {given['cart'][0]} N on the cart, {given['pal_tiago'][0]} N on TIAGo)"
+        in results
+    )
+    assert (
+        f"(`eight-tow`: {-tow.forces[0].fx:.2g} N on ours, {given['cart'][1]} N on the cart, {given['pal_tiago'][1]} N "
+        "on TIAGo)" in results
+    )
