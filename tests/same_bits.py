@@ -82,7 +82,7 @@ RUNS = [
     ("eight-wheel-radius-odometry", ("kanayama", "adaptive"), 1.0, ["events.0.time=0.5"]),
     ("eight-wheel-radius-fused", ("kanayama", "adaptive"), 1.0, ["events.0.time=0.5", "plant.fix_latency_s=0.05"]),
     ("eight-bumps", ("kanayama",), 1.0, []),  # rough ground drawn per seed, carried by contact tiles
-    ("eight-tow", ("corradini",), 1.0, ["events.0.time=0.3", "events.0.std_mg=0.1", "events.0.tau_s=0.2"]),  # a gust
+    ("tests/data/eight-gust.toml", ("corradini",), 1.0, []),  # a tow of a share of the weight, and a gust
 ]
 FALLBACK = "eight-torque"  # where a shipped controller runs that the kinematic model cannot (torque level)
 MENAGERIE = [("tiago-friction", ("corradini", "adaptive"), 1.0, ["events.0.time=0.5"])]

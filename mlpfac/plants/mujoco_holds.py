@@ -159,8 +159,9 @@ class MujocoHolds:
             if not isinstance(f, Force):
                 continue
             noise = 3.0 * (f.std or 0.0)
-            size = math.sqrt((f.fx or 0.0) ** 2 + (f.fy or 0.0) ** 2) + noise
-            along = size if f.frame in (None, "world") else abs(f.fx or 0.0) + noise  # what the motors meet
+            fx, fy = f.fx or 0.0, f.fy or 0.0
+            size = math.sqrt(fx * fx + fy * fy) + noise
+            along = size if f.frame in (None, "world") else abs(fx) + noise  # what the motors meet
             beyond = [
                 f"the tyres' traction ({mu:g} x {share:.0%} of the {mass * g:.4g} N weight on the driven wheels: "
                 f"{traction:.3g} N)"
