@@ -193,25 +193,27 @@ def _at_rest(m: mujoco.MjModel, qpos: np.ndarray) -> mujoco.MjData:
 
 def feet_at_rest(
     m: mujoco.MjModel, qpos: np.ndarray, root: int, floor: float
-) -> tuple[list[tuple[int, float, float, float]], float]:
+) -> tuple[list[tuple[int, float, float, float]], float, float]:
     """The robot's geoms that touch the floor at rest (its tyres, casters, skids), each with where it
     is: (x, y) and the height of its centre above the floor (its reach below it); and how high above
-    the floor the lowest point of its other colliding geoms is at rest (m)."""
+    the floor the lowest point of its other colliding geoms is at rest (m): a bound (each geom's
+    bounding box: the rough ground's heightfield is built where the robot may reach it) and the
+    lowest point itself (a mesh's lowest vertex: the clearance a kerb is measured against)."""
     d = _at_rest(m, qpos)
     mine = [g for g in range(m.ngeom) if m.body_rootid[m.geom_bodyid[g]] == root]
     feet = sorted({int(g) for c in d.contact[: d.ncon] for g in (c.geom1, c.geom2) if int(g) in mine})
-    low = np.inf
+    bound, low = np.inf, np.inf
     for g in mine:
         if g not in feet and (m.geom_contype[g] or m.geom_conaffinity[g]):
-            low = min(low, _lowest(m, d, g) - floor)
+            bound, low = min(bound, _lowest(m, d, g, False) - floor), min(low, _lowest(m, d, g, True) - floor)
     x = d.geom_xpos
-    return [(g, float(x[g, 0]), float(x[g, 1]), float(x[g, 2]) - floor) for g in feet], low
+    return [(g, float(x[g, 0]), float(x[g, 1]), float(x[g, 2]) - floor) for g in feet], bound, low
 
 
-def _lowest(m: mujoco.MjModel, d: mujoco.MjData, g: int) -> float:
-    """The lowest point of geom ``g`` (z, m): a mesh's lowest vertex, another's bounding box's."""
+def _lowest(m: mujoco.MjModel, d: mujoco.MjData, g: int, exact: bool) -> float:
+    """The lowest point of geom ``g`` (z, m): its bounding box's, or (``exact``) a mesh's lowest vertex."""
     R = d.geom_xmat[g].reshape(3, 3)
-    if int(m.geom_type[g]) == mujoco.mjtGeom.mjGEOM_MESH and m.geom_dataid[g] >= 0:
+    if exact and int(m.geom_type[g]) == mujoco.mjtGeom.mjGEOM_MESH and m.geom_dataid[g] >= 0:
         mesh = int(m.geom_dataid[g])
         v = m.mesh_vert[m.mesh_vertadr[mesh] : m.mesh_vertadr[mesh] + m.mesh_vertnum[mesh]]
         return float(d.geom_xpos[g, 2]) + min(float(R[2, 0] * x + R[2, 1] * y + R[2, 2] * z) for x, y, z in v)

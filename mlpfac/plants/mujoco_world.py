@@ -78,9 +78,9 @@ class MujocoWorld(MujocoHolds):
         if terrain is not None:
             m0, rest = self.robot.model, self.robot.qpos_rest
             floor = floor_height(m0, rest, self._root)
-            feet, low = feet_at_rest(m0, rest, self._root, floor)
+            feet, low, clear = feet_at_rest(m0, rest, self._root, floor)
             loads = carried(m0, rest, [g for g, *_ in feet])
-            self._footing, self._low = [(g, reach, loads[g]) for g, _, _, reach in feet], low
+            self._footing, self._low = [(g, reach, loads[g]) for g, _, _, reach in feet], clear
             site = self.robot.site_rest[0]
             self._reach = max(
                 math.sqrt((x - site[0]) * (x - site[0]) + (y - site[1]) * (y - site[1])) + r for _, x, y, r in feet
