@@ -26,7 +26,7 @@ def fitted_path(ref: dict, r, ctrl, robot: bool) -> tuple[dict, dict, str]:
 
     rr, b = float(r.real_radius), float(r.real_track)
     w_max = wheel_speed_limit(r)
-    law_v, law_omega = _law_limits(ctrl)
+    law_v, law_omega = law_limits(ctrl)
     w = w_max if w_max is not None else law_v / rr
     torque = wheel_accel_limit(r)
     wdot = min(w / ACCEL_TIME, torque) if torque is not None else w / ACCEL_TIME
@@ -49,7 +49,7 @@ def fitted_path(ref: dict, r, ctrl, robot: bool) -> tuple[dict, dict, str]:
     return out, limits, said
 
 
-def _law_limits(ctrl) -> tuple[float, float]:
+def law_limits(ctrl) -> tuple[float, float]:
     """The controller table's (v_max, omega_max), the law's defaults where it leaves them unset or unlimited."""
     import dataclasses
 

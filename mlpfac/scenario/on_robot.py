@@ -28,7 +28,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 from mlpfac.exceptions import ConfigError
-from mlpfac.scenario.limits import SHARE, fitted_path
+from mlpfac.scenario.limits import SHARE, fitted_path, law_limits
 
 MENAGERIE_BASES = (
     "pal_tiago",
@@ -194,6 +194,13 @@ def robot_name(robot: str) -> str:
 
 def on_robot(table: dict, robot: str) -> dict:
     """The scenario ``table`` (as read from its file) put on ``robot`` by the module's rule."""
+    return on_robot_fit(table, robot)[0]
+
+
+def on_robot_fit(table: dict, robot: str) -> tuple[dict, str]:
+    """:func:`on_robot`, and what it did to the reference in words ("" where nothing): the speed
+    factor and what the run's seconds now cover, or a path's new timing (``[provenance] reference_fit``,
+    said under the run's outcome)."""
     from mlpfac.plants.config import MujocoConfig
     from mlpfac.plants.events import ControlPeriod, parse_event
     from mlpfac.plants.mujoco import robot_of
@@ -225,17 +232,43 @@ def on_robot(table: dict, robot: str) -> dict:
     kind = ref.get("kind", "eight")
     curve = make_reference(kind, {k: v for k, v in ref.items() if k != "kind"}) if kind in SPEEDS else None
     fit = fitted_path(ref, r, out.get("controller"), True) if kind == "path" else fitted(ref, curve, duration, r)
+    said = ""
     if fit is not None:
         out["reference"], limits, said = fit
+        if kind == "path":
+            said += _path_durations(ref, out["reference"], out.get("controller"))
         out.setdefault("controller", {}).update(limits)
         said += _limits_said(limits) if limits else ""
-        out["description"] = f"{out.get('description', '')} On {robot}: {said}.".strip()
+        out["description"] = sentences(out.get("description", ""), f"On {robot}: {said}.")
     out["plant"] = plant
     out["events"] = [_same_change(ev) for ev in raw]
     if not out["events"]:
         del out["events"]
     out["name"] = f"{out.get('name', 'scenario')}+{robot_name(robot)}"
-    return out
+    return out, said
+
+
+def sentences(text: str, more: str) -> str:
+    """``text`` and the sentence ``more`` after it, with the stop between them that ``text`` may lack."""
+    text = text.strip()
+    if text and text[-1] not in ".!?":
+        text += "."
+    return f"{text} {more}".strip()
+
+
+def _path_durations(ref: dict, timed: dict, ctrl) -> str:
+    """A path's time once along it as timed for the robot, beside its time as the file times it."""
+    from mlpfac.scenario.reference import make_reference
+
+    def once(table: dict) -> float:
+        law = law_limits(ctrl)
+        return make_reference("path", {k: v for k, v in table.items() if k != "kind"}, limits=law).duration
+
+    try:
+        new, old = once(timed), once(ref)
+    except ConfigError:  # said by the scenario's own checks, where it is read
+        return ""
+    return f": once along it takes {new:.4g} s ({old:.4g} s as the file times it)"
 
 
 def peak_wheel_speed(curve, duration: float, r) -> float:
@@ -269,6 +302,8 @@ def fitted(ref: dict, curve, duration: float, r) -> tuple[dict, dict, str] | Non
     said = f"reference x{k:.3g} in speed (peak wheel speed {k * peak:.3g} of {w_max:.3g} rad/s)"
     if speed != 1.0:
         said += f", then x{speed:g} as [reference] speed asks"
+    if k < 1.0:
+        said += f": what the file's {duration:g} s drive of it now takes {duration / k:.4g} s"
     ref = dict(ref)
     if k < 1.0:
         for key, default in zip(SPEEDS[kind], DEFAULT_SPEEDS[kind], strict=True):
@@ -281,7 +316,7 @@ def fitted(ref: dict, curve, duration: float, r) -> tuple[dict, dict, str] | Non
 
 
 def _limits_said(ctrl: dict) -> str:
-    return f", v_max {ctrl['v_max']:g} m/s, omega_max {ctrl['omega_max']:g} rad/s"
+    return f"; the controller's v_max {ctrl['v_max']:g} m/s, omega_max {ctrl['omega_max']:g} rad/s"
 
 
 def on_its_robot(table: dict, scn) -> tuple[dict, dict]:
@@ -315,7 +350,7 @@ def on_its_robot(table: dict, scn) -> tuple[dict, dict]:
         ctrl |= {k: v for k, v in limits.items() if k not in ctrl}
         said += _limits_said(ctrl) + " (the rule of --robot)"
         out = table | {"reference": ref, "controller": ctrl}
-        out["description"] = f"{table.get('description', '')} Fitted to the robot: {said}.".strip()
+        out["description"] = sentences(table.get("description", ""), f"Fitted to the robot: {said}.")
         return out, {"reference_fit": said}
     from mlpfac.plants.mjcf.wheels import wheel_speed_limit
 

@@ -26,6 +26,7 @@ from mlpfac.exceptions import ConfigError
 OWN_KEYS = ("params", "speed")
 WHAT = "(x, y, theta, v, omega, dv, domega)"
 FACTOR_MAX = 100.0  # the largest speed factor, as for every kind
+STILL_M, STILL_SAMPLES = 1e-9, 101  # a reference whose (x, y) spans at most this over the run stands still
 
 
 @dataclass(frozen=True)
@@ -58,6 +59,13 @@ class OwnReference:
         out[:, 3:5] *= k
         out[:, 5:7] *= k * k
         return out
+
+    def stands_still(self, duration: float, samples: int = STILL_SAMPLES) -> bool:
+        """Whether its (x, y) stays within STILL_M over ``duration`` s (``samples`` times, the finite
+        ones): no path whose size a lost threshold can be a share of."""
+        rows = self.rows(np.linspace(0.0, duration, samples))[:, :2]
+        rows = rows[np.all(np.isfinite(rows), axis=1)]
+        return bool(len(rows)) and float(np.max(np.max(rows, axis=0) - np.min(rows, axis=0))) <= STILL_M
 
     def why(self, t: float) -> str:
         """Why the sample at time ``t`` ended the run."""
