@@ -260,7 +260,9 @@ def test_the_odometry_run_of_the_issue_is_lost_and_says_so(tmp_path, capsys):
     lines = capsys.readouterr().out.splitlines()
     m = json.loads((out / "metrics.json").read_text())
     assert code == 0 and m["outcome"] == "lost" and m["estimate"]["believed_outcome"] == "tracking"
-    assert lines[0].startswith("eight-wheel-radius-odometry / kanayama / seed 0: lost: the position RMS after the event")
+    assert lines[0].startswith(
+        "eight-wheel-radius-odometry / kanayama / seed 0: lost: the position RMS after the event"
+    )
     assert lines[1].startswith("  lost: the truth is lost, while the robot believed it tracked")
     assert lines[2].startswith("  pose from odometry: the estimate's error")
     est = m["estimate"]
