@@ -245,6 +245,24 @@ def test_views_and_options(tmp_path: Path):
         report.render(folder, {"view": "sweep"})
 
 
+def test_a_summary_divides_by_the_bound_it_names_or_by_none():
+    """``bound=none``: the medians alone (no law of the table is a bound); ``bound=NAME``: the median
+    ratio to that law on the same seed, from runs.json (with the oracle, the same as x oracle)."""
+    from mlpfac.sweeps.paired import bound_ratios
+
+    folder = DOCS / "data" / "world-torque"
+    plain = report.render(folder, {"bound": "none", "scenarios": "eight-ramp+tug"})
+    assert "x)" not in plain and "| `oracle` | 1.50 |" in plain, plain
+    told = report.render(folder, {"bound": "oracle-dynamic", "scenarios": "eight-ramp+tug"})
+    assert "| `oracle-dynamic` | 1.10 |" in told and "| `corradini` | 1.50 (1.3x) |" in told, told
+    runs = json.loads((folder / "runs.json").read_text())["runs"]
+    rows = json.loads((folder / "paired.json").read_text())["rows"]
+    ratios = bound_ratios(runs, "oracle")
+    assert all(ratios[(r["scenario"], r["controller"])] == r["x_oracle_median"] for r in rows)
+    with pytest.raises(ConfigError, match="bound=nosuch: no run of nosuch"):
+        report.render(folder, {"bound": "nosuch"})
+
+
 def test_collect_keeps_the_command_and_stamps_the_version_and_date(tmp_path: Path):
     docs = _copy(tmp_path)
     results = tmp_path / "runs" / "compare"
