@@ -291,7 +291,8 @@ BAD_BESIDE: dict[str, tuple[str, dict[str, str | bytes], str]] = {
     "own reference constructor raises": (OWN.format("R") + "[reference.params]\nk = -1.0\n", {"route.py": GOOD.format("(0.0,) * 7").replace("self.k = k", "assert k > 0, 'k > 0'")}, "[reference] params: R(**[reference.params]) raised AssertionError: k > 0"),
     "own reference six numbers": (OWN.format("R"), {"route.py": GOOD.format("(0.0,) * 6")}, "sample(0) returned 6 numbers, not 7"),
     "own reference nan at 0": (OWN.format("R"), {"route.py": GOOD.format("(float('nan'),) * 7")}, "sample(0) returned a value that is not finite"),
-    "own reference a word": (OWN.format("R"), {"route.py": GOOD.format("'seven'")}, "sample(0) raised ValueError"),
+    "own reference a word": (OWN.format("R"), {"route.py": GOOD.format("'seven'")}, "sample(0) returned 'seven', not seven numbers"),
+    "own reference standing still": (OWN.format("R"), {"route.py": GOOD.format("(1.0, 2.0, 0.0, 0.0, 0.0, 0.0, 0.0)")}, "[reference] kind: R stands still over the run"),
     "own reference sample raises": (OWN.format("R"), {"route.py": GOOD.format("1 / t")}, "sample(0) raised ZeroDivisionError"),
 }  # fmt: skip
 

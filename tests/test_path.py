@@ -214,7 +214,7 @@ class Late:
         if t >= self.when:
             if self.how == "raise":
                 raise ValueError("off the map")
-            return (float("nan"),) * 7
+            return ("seven", "words") if self.how == "words" else (float("nan"),) * 7
         return (0.5 * t, 0.0, 0.0, 0.5, 0.0, 0.0, 0.0)
 '''
 
@@ -254,12 +254,20 @@ def test_a_reference_class_runs_in_run_and_sweep_batched_or_not(tmp_path):
     assert [r["pos_rms_m_mean"] for r in rows[0]] == [r["pos_rms_m_mean"] for r in rows[1]]  # batched: the same bits
 
 
-@pytest.mark.parametrize("how, says", [("nan", "not finite"), ("raise", "raised ValueError: off the map")])
+@pytest.mark.parametrize(
+    "how, says",
+    [
+        ("nan", "late.py:Late: sample(1) returned a value that is not finite"),
+        ("raise", "late.py:Late: sample(1) raised ValueError: off the map (late.py, line"),
+        ("words", "late.py:Late: sample(1) returned ('seven', 'words'), not seven numbers"),
+    ],
+)
 def test_a_reference_that_stops_being_finite_ends_the_run_there(tmp_path, how, says):
     f = _own(tmp_path, "late.py:Late", f'how = "{how}"')
     for controller in ("kanayama", "corradini"):
         rec = mlpfac.run(load(f).with_overrides(controller=controller))
         assert rec.status == "diverged" and says in rec.reason and rec.reason.endswith("at t = 1.00 s")
+        assert "own_reference.py" not in rec.reason and ("raised" in rec.reason) == (how == "raise")  # their file
         assert rec.n == 100 and np.all(np.isfinite(rec.pose[:100]))
     mlpfac.sweep([str(f)], ["kanayama"], seeds="0-1", batched=True, out=tmp_path / "sw")
     found = [json.loads(m.read_text()) for m in sorted((tmp_path / "sw").glob("own/kanayama/seed-*/metrics.json"))]

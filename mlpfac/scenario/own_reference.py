@@ -79,9 +79,13 @@ def _row(obj, t: float) -> tuple[float, ...] | str:
 
     try:
         got = obj.sample(t)
-        row = tuple(float(x) for x in got)
-    except Exception as err:  # a value of theirs that is no number is the same fault as their code raising
+    except Exception as err:  # their code raised: where, in their file
         return f"sample({t:g}) raised {one_line(err)}"
+    try:
+        row = tuple(float(x) for x in got)
+    except Exception:  # it returned what is not seven numbers (their __float__ may raise anything): what it returned
+        text = repr(got)
+        return f"sample({t:g}) returned {text[:80] + '...' if len(text) > 80 else text}, not seven numbers {WHAT}"
     if len(row) != 7:
         return f"sample({t:g}) returned {len(row)} numbers, not 7 {WHAT}"
     if not all(math.isfinite(x) for x in row):
