@@ -278,6 +278,11 @@ GOOD = "class R:\n    def __init__(self, k=1.0):\n        self.k = k\n\n    def 
 BAD_BESIDE: dict[str, tuple[str, dict[str, str | bytes], str]] = {
     "csv line not a number": (ROUTE, {"route.csv": "x,y\n0,0\n1,abc\n"}, "route.csv line 3: expected numbers"),
     "csv header without y": (ROUTE, {"route.csv": "x,z\n0,0\n1,0\n"}, "line 1: a header line must name the columns x and y"),
+    "csv a yaw column": (ROUTE, {"route.csv": "x,y,yaw\n0,0,0\n1,0,0\n"}, "route.csv line 1: column 'yaw': a path takes no heading at its waypoints"),
+    "csv a time column": (ROUTE, {"route.csv": "t,x,y\n0,0,0\n1,1,0\n"}, "route.csv line 1: column 't': a path is timed within its limits"),
+    "csv a decimal comma": (ROUTE, {"route.csv": "x,y\n0,0\n2,5,0\n"}, "route.csv line 3: 3 values where the header on line 1 names 2 columns ('x,y'), got '2,5,0' (a decimal comma?"),
+    "csv a row short of the header": (ROUTE, {"route.csv": "x,y,id\n0,0,a\n1,0\n"}, "route.csv line 3: 2 values where the header on line 1 names 3 columns"),
+    "csv /dev/zero": ('[reference]\nkind = "path"\nfile = "/dev/zero"\n', {}, "[reference] file: /dev/zero: is a character device, not a regular file"),
     "csv three columns bare": (ROUTE, {"route.csv": "0,0,0\n1,0,0\n"}, "more columns: name them in a header line"),
     "csv binary": (ROUTE, {"route.csv": b"\xff\xfe\x00\x01"}, "route.csv: not a text file"),
     "csv empty": (ROUTE, {"route.csv": "x,y\n"}, "[reference] file: an open path needs at least 2 waypoints, got 0"),
@@ -651,3 +656,53 @@ def test_bad_input_is_one_line_in_the_commands_own_process(tmp_path, case):
     err = [ln for ln in proc.stderr.splitlines() if not ln.startswith("mlpfac: planning")]
     assert proc.returncode == 2 and len(err) == 1 and err[0].startswith(needle), proc.stderr
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("what", ["waypoints", "scenario"])
+def test_a_fifo_without_a_writer_is_refused_in_one_line_not_waited_for(tmp_path, what):
+    """A FIFO named as a path's CSV file or as the scenario file: one line, at once (never a read
+    that waits for a writer), exit 2; a file larger than allowed is refused before it is read."""
+    fifo = tmp_path / ("route.csv" if what == "waypoints" else "fifo.toml")
+    os.mkfifo(fifo)
+    scenario = tmp_path / "s.toml"
+    scenario.write_text(MINIMAL + '[reference]\nkind = "path"\nfile = "route.csv"\n')
+    target = scenario if what == "waypoints" else fifo
+    proc = subprocess.run(
+        [sys.executable, "-m", "mlpfac.cli", "run", str(target), "--no-log", "--out", str(tmp_path / "o")],
+        capture_output=True, text=True, timeout=60,
+    )  # fmt: skip
+    assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1, proc.stderr
+    assert f"{fifo}: is a FIFO, not a regular file" in proc.stderr, proc.stderr
+    from mlpfac.files import NotAFile, read_regular
+
+    big = tmp_path / "big.csv"
+    big.write_bytes(b"0,0\n" * 1000)
+    with pytest.raises(NotAFile, match="MiB is more than"):
+        read_regular(big, 100)
+    assert read_regular(big, 4000) == b"0,0\n" * 1000
+
+
+# A path's absurd limit: one line naming the key (no numpy warning, no 300-digit count), run as a user
+# runs it, its whole stderr read. (the [reference] line, the one line's start after the file's name)
+PATH_LIMITS = {
+    "v_max = 1e-300": "[reference] v_max: the path cannot be timed within its limits",
+    "omega_max = 1e-300": "[reference] omega_max: the path cannot be timed within its limits",
+    "radius = 1e-300": "[reference] radius: must be 0 (from the limits) or at least 0.001 m",
+    "speed = 1e-300": "[reference] speed: the path takes 1.44e+301 s to drive once",
+    "alpha_max = 1e-300": "[reference] alpha_max: the path takes",
+}
+
+
+@pytest.mark.parametrize("line", sorted(PATH_LIMITS))
+def test_a_paths_absurd_limit_is_one_line_naming_its_key(tmp_path, line):
+    path = tmp_path / "p.toml"
+    path.write_text(f'{MINIMAL.replace("duration = 0.5", "")}[reference]\nkind = "path"\nclosed = true\n'
+                    f"points = [[0, 0], [3, 0], [3, 3], [0, 3]]\n{line}\n")  # fmt: skip
+    proc = subprocess.run(
+        [sys.executable, "-m", "mlpfac.cli", "run", str(path), "--no-log", "--out", str(tmp_path / "o")],
+        capture_output=True, text=True, timeout=120,
+    )  # fmt: skip
+    err = proc.stderr.strip().splitlines()
+    assert proc.returncode == 2 and len(err) == 1, proc.stderr
+    assert err[0].startswith(f"mlpfac: error: {path} {PATH_LIMITS[line]}"), err[0]
+    assert not any(len(w) > 40 for w in err[0].split() if "/" not in w), err[0]  # no count of hundreds of digits

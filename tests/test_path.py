@@ -129,7 +129,7 @@ def test_unset_limits_are_a_share_of_the_controllers():
     [
         "0,0\n2,0\n2,1\n",
         "x,y\n0,0\n2,0\n2,1\n",
-        "# a route\n\nt, y, x\n0, 0, 0\n1, 0, 2\n2, 1, 2\n",
+        "# a route\n\nid, y, x\n0, 0, 0\n1, 0, 2\n2, 1, 2\n",
         "0 0\n2 0\n2 1\n",
         '\ufeff"x";"y"\n0;0\n2;0\n2;1\n',
     ],

@@ -197,10 +197,10 @@ def on_robot(table: dict, robot: str) -> dict:
     return on_robot_fit(table, robot)[0]
 
 
-def on_robot_fit(table: dict, robot: str) -> tuple[dict, str]:
-    """:func:`on_robot`, and what it did to the reference in words ("" where nothing): the speed
-    factor and what the run's seconds now cover, or a path's new timing (``[provenance] reference_fit``,
-    said under the run's outcome)."""
+def on_robot_fit(table: dict, robot: str) -> tuple[dict, dict]:
+    """:func:`on_robot`, and what it did to the reference in words (``[provenance] reference_fit``,
+    said under the run's outcome): the speed factor and how long what the file drove now takes, or
+    a path's new timing; ``reference_warning`` where a path's ``speed`` asks more than the wheels give."""
     from mlpfac.plants.config import MujocoConfig
     from mlpfac.plants.events import ControlPeriod, parse_event
     from mlpfac.plants.mujoco import robot_of
@@ -231,7 +231,11 @@ def on_robot_fit(table: dict, robot: str) -> tuple[dict, str]:
     ref = dict(out.get("reference", {"kind": "eight"}))
     kind = ref.get("kind", "eight")
     curve = make_reference(kind, {k: v for k, v in ref.items() if k != "kind"}) if kind in SPEEDS else None
-    fit = fitted_path(ref, r, out.get("controller"), True) if kind == "path" else fitted(ref, curve, duration, r)
+    warning = ""
+    if kind == "path":
+        *fit, warning = fitted_path(ref, r, out.get("controller"), True)
+    else:
+        fit = fitted(ref, curve, duration, r)
     said = ""
     if fit is not None:
         out["reference"], limits, said = fit
@@ -245,7 +249,7 @@ def on_robot_fit(table: dict, robot: str) -> tuple[dict, str]:
     if not out["events"]:
         del out["events"]
     out["name"] = f"{out.get('name', 'scenario')}+{robot_name(robot)}"
-    return out, said
+    return out, {k: v for k, v in (("reference_fit", said), ("reference_warning", warning)) if v}
 
 
 def sentences(text: str, more: str) -> str:
@@ -256,8 +260,9 @@ def sentences(text: str, more: str) -> str:
     return f"{text} {more}".strip()
 
 
-def _path_durations(ref: dict, timed: dict, ctrl) -> str:
-    """A path's time once along it as timed for the robot, beside its time as the file times it."""
+def _path_durations(ref: dict, timed: dict, ctrl, other: bool = True) -> str:
+    """A path's time once along it as timed for the robot, beside its time as the file times it
+    (``other``: another robot's timing than the file's)."""
     from mlpfac.scenario.reference import make_reference
 
     def once(table: dict) -> float:
@@ -265,10 +270,10 @@ def _path_durations(ref: dict, timed: dict, ctrl) -> str:
         return make_reference("path", {k: v for k, v in table.items() if k != "kind"}, limits=law).duration
 
     try:
-        new, old = once(timed), once(ref)
+        new, old = once(timed), once(ref) if other else None
     except ConfigError:  # said by the scenario's own checks, where it is read
         return ""
-    return f": once along it takes {new:.4g} s ({old:.4g} s as the file times it)"
+    return f": once along it takes {new:.4g} s" + (f" ({old:.4g} s as the file times it)" if other else "")
 
 
 def peak_wheel_speed(curve, duration: float, r) -> float:
@@ -336,11 +341,13 @@ def on_its_robot(table: dict, scn) -> tuple[dict, dict]:
         return table, {}
     r = make_plant(scn, sample(scn.reference, np.arange(2) * scn.T)).robot  # every check made; its read cached
     if kind == "path":
-        ref, limits, said = fitted_path(ref, r, table.get("controller"), False)
+        ref, limits, said, warning = fitted_path(ref, r, table.get("controller"), False)
         ctrl = dict(table.get("controller", {}))
         ctrl |= {k: v for k, v in limits.items() if k not in ctrl}
         out = table | {"reference": ref, "controller": ctrl}
-        return out, {"reference_fit": said + (_limits_said(ctrl) if limits else "")}
+        said += _path_durations(ref, ref, ctrl, False)
+        fit = {"reference_fit": said + (_limits_said(ctrl) if limits else "")}
+        return out, fit | ({"reference_warning": warning} if warning else {})
     if not any(key in ref for key in (*SPEEDS[kind], "speed")):
         fit = fitted(ref, scn.reference, scn.duration, r)
         if fit is None:

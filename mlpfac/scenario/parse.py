@@ -255,8 +255,7 @@ def load(
         from mlpfac.scenario.on_robot import on_robot_fit, robot_where
 
         parse(table, str(path), check_model=False)  # the file's own errors first, named as its own
-        (table, fit), plant_from = on_robot_fit(table, robot), robot_where(robot)
-        said = {"reference_fit": fit} if fit else {}
+        (table, said), plant_from = on_robot_fit(table, robot), robot_where(robot)
         for key, value in (values or {}).items():  # a limit asked for wins over the robot's (--vary controller.v_max)
             if key.startswith("controller."):
                 put_value(table, key, value)
@@ -391,11 +390,21 @@ def parse(table: dict, source: str = "<scenario>", check_model: bool = True, pla
     alpha = nets.alpha if name_c in VARIANTS else 0
     need, have = memory_needed(steps, alpha, adaptive.estimator), _memory_available()
     if need > MEMORY_SHARE * have:
-        raise ConfigError(
-            f"{source} duration",
-            f"{steps} steps of {alpha} weights need about {need / 2**30:.3g} GiB; {have / 2**30:.3g} GiB of memory "
-            "is available: shorten the duration, lengthen T or shrink the networks",
-        )
+        said = f"{_count(steps)} steps of {alpha} weights need about {need / 2**30:.3g} GiB; {have / 2**30:.3g} GiB of memory is available"
+        if "duration" not in table and hasattr(reference, "duration"):  # the path's time once along it: its key
+            from mlpfac.scenario.waypoints import slowest
+
+            def fits(s: float) -> bool:
+                return memory_needed(int(round(s / T)), alpha, adaptive.estimator) <= MEMORY_SHARE * have
+
+            key = slowest(ref_table, f"{source} [reference]", (law.v_max, law.omega_max), fits)
+            raise ConfigError(
+                f"{source} [reference]{' ' + key if key else ''}",
+                f"the path takes {duration:.3g} s to drive once, the run's duration: {said}; "
+                + (f"raise {key}" if key else "raise its limits")
+                + " or set the run's duration",
+            )
+        raise ConfigError(f"{source} duration", f"{said}: shorten the duration, lengthen T or shrink the networks")
 
     raw_events = table.get("events", [])
     if not isinstance(raw_events, list):
@@ -441,6 +450,11 @@ def parse(table: dict, source: str = "<scenario>", check_model: bool = True, pla
         world=world,
         terrain=terrain,
     )
+
+
+def _count(n: int) -> str:
+    """A count in words a line can hold: 1200000240, or 3.48e+305 beyond a billion."""
+    return f"{n}" if n < 10**10 else f"{n:.3g}"
 
 
 def _plugin(ctrl: dict, T: float, where: str, source: str) -> Plugin:
