@@ -160,7 +160,7 @@ TOML_MAX = 16 * 2**20  # bytes of a TOML file (a scenario, a budget, a robot), a
 def read_toml(path: Path, kind: str) -> dict:
     """The TOML file at ``path`` (a ``kind``, e.g. "scenario file"); a ConfigError naming it when it
     cannot be read or is not UTF-8 TOML."""
-    from mlpfac.files import NotAFile, read_regular
+    from mlpfac.files import NotAFileError, read_regular
 
     try:
         return tomllib.loads(read_regular(path, TOML_MAX).decode("utf-8"))
@@ -168,7 +168,7 @@ def read_toml(path: Path, kind: str) -> dict:
         raise ConfigError(str(path), f"{kind} not found") from None
     except IsADirectoryError:
         raise ConfigError(str(path), f"is a folder, not a {kind}") from None
-    except NotAFile as err:
+    except NotAFileError as err:
         if str(err).startswith("is a folder"):
             raise ConfigError(str(path), f"is a folder, not a {kind}") from None
         raise ConfigError(str(path), f"{err} (a {kind})") from None

@@ -673,11 +673,11 @@ def test_a_fifo_without_a_writer_is_refused_in_one_line_not_waited_for(tmp_path,
     )  # fmt: skip
     assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1, proc.stderr
     assert f"{fifo}: is a FIFO, not a regular file" in proc.stderr, proc.stderr
-    from mlpfac.files import NotAFile, read_regular
+    from mlpfac.files import NotAFileError, read_regular
 
     big = tmp_path / "big.csv"
     big.write_bytes(b"0,0\n" * 1000)
-    with pytest.raises(NotAFile, match="MiB is more than"):
+    with pytest.raises(NotAFileError, match="MiB is more than"):
         read_regular(big, 100)
     assert read_regular(big, 4000) == b"0,0\n" * 1000
 

@@ -143,13 +143,13 @@ def _points(params: dict, where: str) -> tuple[list, list[str], str, str]:
 def read_csv(path: FilePath, where: str) -> tuple[list[tuple[float, float]], list[str], str]:
     """A CSV file's waypoints, each one's ``file line N``, and the file's sha256; a ConfigError
     naming the file (and the line) for a file that cannot be read or a line that is not x, y."""
-    from mlpfac.files import NotAFile, read_regular
+    from mlpfac.files import NotAFileError, read_regular
 
     try:
         data = read_regular(path, CSV_MAX)
     except FileNotFoundError:
         raise ConfigError(where, f"{path}: no such file") from None
-    except NotAFile as err:
+    except NotAFileError as err:
         raise ConfigError(where, f"{path}: {err} (a CSV file of waypoints)") from None
     except OSError as err:
         raise ConfigError(where, f"{path}: cannot read ({err.strerror or err})") from None
