@@ -175,7 +175,8 @@ def main(argv: list[str] | None = None) -> int:
             ):
                 from mlpfac.scenario.parse import load
 
-                scn = load(args.scenario, build=False)  # a bad name or file fails here (the children are ended)
+                scn = load(args.scenario, build=False, ends=False)  # a bad name or file fails here (the children
+                # are ended); its distributions' ends are checked with the robot built, by cmd_run
                 if args.robot is not None:
                     from mlpfac.scenario.on_robot import model_of
 

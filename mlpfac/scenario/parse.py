@@ -203,7 +203,11 @@ def scenario_names() -> list[str]:
 
 
 def load(
-    name_or_path: str | Path, build: bool = True, robot: str | None = None, values: dict | None = None
+    name_or_path: str | Path,
+    build: bool = True,
+    robot: str | None = None,
+    values: dict | None = None,
+    ends: bool = True,
 ) -> Scenario:
     """A scenario by name (``paper`` -> the shipped paper.toml) or by path to a TOML file.
 
@@ -220,6 +224,8 @@ def load(
     on torque motors, what the reference asks of them is said, and warned beyond their limit
     (``reference_torque``, ``torque_warning``: :func:`mlpfac.scenario.on_robot.torque_need`). ``values`` sets numbers of the file by
     their dotted keys (:mod:`mlpfac.scenario.draws`) before it is checked, as if written in it.
+    Every distribution of the file is checked at both ends of what it can draw (``ends``; a sweep's
+    grid checks them itself), so that no seed's draw fails where another's ran.
     """
     if not isinstance(name_or_path, str | os.PathLike) or not str(name_or_path):
         raise ConfigError("scenario", f"expected a shipped scenario's name or a .toml file, got {name_or_path!r}")
@@ -250,6 +256,36 @@ def load(
         and not plant["model"].startswith("menagerie:")
     ):
         plant["model"] = str((path.parent / Path(plant["model"]).expanduser()).resolve())
+    if ends:
+        _check_ends(table, path, build, robot, values)
+    return _built(table, path, build, robot, values)
+
+
+def _check_ends(table: dict, path: Path, build: bool, robot: str | None, values: dict | None) -> None:
+    """Each distribution of the file at both ends of what it can draw, loaded as the file is (the
+    plant built too where ``build``), so that a seed whose draw lands out of range is found before
+    anything runs, whatever seed runs first (a sweep checks them so too: :func:`mlpfac.sweeps.vary.grid`);
+    a ConfigError naming the distribution and its end."""
+    from mlpfac.scenario.draws import distribution, is_distribution, leaves
+
+    for key, spec in leaves(table).items():
+        if not is_distribution(spec):
+            continue
+        dist = distribution(spec, f"{path} {key}")
+        for end in dist.support():
+            at_end = copy.deepcopy(table)
+            put_value(at_end, key, end)
+            drawn = at_end.get("drawn")
+            if isinstance(drawn, dict) and key in drawn:  # a config.toml's record of the draw: this end instead
+                at_end["drawn"] = {k: v for k, v in drawn.items() if k != key}
+            try:
+                _built(at_end, path, build, robot, values)
+            except ConfigError as err:
+                raise ConfigError(f"{path} {key} = {dist} (its end {end:g})", f"{err.what} ({err.where})") from None
+
+
+def _built(table: dict, path: Path, build: bool, robot: str | None, values: dict | None) -> Scenario:
+    """:func:`load`'s scenario from the file's table as read (its values set, its paths resolved)."""
     plant_from, said = "", {}
     if robot is not None:
         from mlpfac.scenario.on_robot import on_robot_fit, robot_where

@@ -79,7 +79,7 @@ def nominal(job: Job, key: str, metrics: RunMetrics | None = None):
                 if found:
                     return float(found[1])
     try:
-        value = get(load(job.source, build=False).table, key)
+        value = get(load(job.source, build=False, ends=False).table, key)
     except (KeyError, ConfigError):
         return None
     return value if isinstance(value, int | float) and not isinstance(value, bool) else None
