@@ -307,3 +307,21 @@ def test_a_paths_numbers_vary_and_are_drawn_as_any_other(tmp_path):
     radii = [d.reference.radius for d in drawn]
     assert radii[0] != radii[1] and all(0.1 <= r <= 0.4 for r in radii)
     assert drawn[0].table["drawn"]["reference.radius"] == radii[0]
+
+
+def test_a_path_put_on_a_robot_says_its_new_timing_after_the_files_words_with_their_stop(tmp_path, capsys):
+    """--robot retimes a path: the run says so under its outcome (the path's time once along it, and as
+    the file times it), and the description joins the robot's sentence to the file's with its stop."""
+    from mlpfac.cli import main
+
+    f = tmp_path / "mine.toml"
+    f.write_text('description = "A corridor from 5 s"\nduration = 3.0\n[reference]\nkind = "path"\n'
+                 "points = [[0, 0], [4, 0], [4, 3]]\n[plant]\nkind = \"kinematic\"\n")  # fmt: skip
+    scn = load(f, robot="cart")
+    assert scn.description.startswith("A corridor from 5 s. On cart: path timed within 0.5 of the wheels' limits")
+    fit = scn.table["provenance"]["reference_fit"]
+    assert ": once along it takes " in fit and " s as the file times it)" in fit
+    assert main(["run", str(f), "--robot", "cart", "--controller", "kanayama", "--no-log", "--no-plot",
+                 "--out", str(tmp_path / "o")]) == 0  # fmt: skip
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0].startswith("mine+cart / kanayama / seed 0: ") and f"  reference: {fit}" in lines
