@@ -160,6 +160,8 @@ BAD_FILES: dict[str, tuple[str | bytes, str]] = {
     "uniform of text": (MINIMAL + EVENT.replace("1.5", '{ uniform = ["a", 2.0] }'), "events.0.factor: uniform takes two"),
     "normal sd zero": (MINIMAL + EVENT.replace("1.5", "{ normal = [1.5, 0.0] }"), "standard deviation > 0"),
     "distribution unknown": (MINIMAL + EVENT.replace("1.5", "{ lognormal = [1.5, 0.1] }"), "factor"),
+    "lost_threshold_m zero": ("lost_threshold_m = 0.0\n", "lost_threshold_m: must be a number of metres above 0"),
+    "lost_threshold_m a word": ('lost_threshold_m = "far"\n', "lost_threshold_m: expected a number of metres"),
     "drawn without a distribution": (MINIMAL + "[drawn]\nduration = 0.5\n", "[drawn] duration: no distribution"),
     "a distribution's low end out of range": (ROBOT + "[world]\npatches = [{ x = 1.0, y = 1.73, radius = 0.4, mu = { uniform = [-1.0, 0.5] } }]\n", "world.patches.0.mu = uniform(-1, 0.5) (its end -1): must be positive"),
     "a distribution's ends out of range": (ROBOT + 'pose_source = "odometry"\ngyro = true\ngyro_bias = { uniform = [-20, 20] }\n', "plant.gyro_bias = uniform(-20, 20) (its end -20)"),
@@ -415,6 +417,8 @@ BAD_FLAGS = {
     "--grpc-port without --serve": (["paper", "--grpc-port", "9100"], "--grpc-port means nothing without --serve"),
     "--bind without a viewer": (["paper", "--bind", "0.0.0.0"], "--bind means nothing without --serve or --spawn"),
     "--baseline with --no-plot": (["paper", "--baseline", "kanayama", "--no-plot"], "not allowed with argument --baseline"),
+    "lost threshold zero": (["paper", "--lost-threshold", "0"], "--lost-threshold: must be a number of metres above 0"),
+    "lost threshold huge": (["paper", "--lost-threshold", "1e308"], "--lost-threshold: must be a number of metres above 0 and at most 10000"),
 }  # fmt: skip
 
 
@@ -465,6 +469,7 @@ BAD_VIEW_PLOT = {
     "report --command of two --collect": (["report", "D", "--collect", "a=D", "--collect", "b=D", "--command", "c"], "--command: is the command of one --collect"),
     "sweep --threshold without --vary": (["sweep", "paper", "--threshold", "0.1"], "--threshold means nothing without --vary"),
     "sweep --threshold with a draw only": (["sweep", "paper", "--vary", "T=uniform:0.01:0.02", "--threshold", "0.1"], "--threshold: means nothing without an axis"),
+    "sweep --lost-threshold -1": (["sweep", "paper", "--lost-threshold", "-1"], "--lost-threshold: must be a number of metres above 0"),
     "sweep --threshold 1e308": (["sweep", "paper", "--vary", "T=0.01,0.02", "--threshold", "1e308"], "--threshold: must be a number of metres above 0 and at most 10000"),
     "sweep --batch-size without --batched": (["sweep", "paper", "--batch-size", "8"], "--batch-size means nothing without --batched"),
     "compare --scheduler-timeout without --scheduler": (["compare", "paper", "--scheduler-timeout", "3"], "--scheduler-timeout means nothing without --scheduler"),

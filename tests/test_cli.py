@@ -279,3 +279,19 @@ def test_mujoco_sets_up_no_gl_context_when_only_shipped_code_runs(tmp_path, monk
     )
     proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, env=env, timeout=300)
     assert proc.stdout.splitlines()[-1] == "0 True False", proc.stdout + proc.stderr
+
+
+def test_the_lost_threshold_flag_sets_every_run_of_a_sweep_and_a_check(tmp_path, capsys):
+    import mlpfac
+
+    rows = mlpfac.sweep(["paper"], ["kanayama"], seeds="0-1", duration=3.0, workers=1, lost_threshold=1e-9)
+    assert rows[0]["lost"] == 2 and rows[0]["tracking"] == 0
+    budget = tmp_path / "b.toml"
+    budget.write_text('scenarios = ["paper"]\ncontrollers = ["kanayama"]\nduration = 3.0\n[[budget]]\nlost = 0\n')
+    argv = ["check", str(budget), "--workers", "1"]
+    assert main([*argv, "--out", str(tmp_path / "a")]) == 0
+    assert main([*argv, "--out", str(tmp_path / "b"), "--lost-threshold", "1e-9"]) == 1
+    budget.write_text(budget.read_text().replace("duration = 3.0", "duration = 3.0\nlost_threshold_m = 1e-9"))
+    assert main([*argv, "--out", str(tmp_path / "c")]) == 1
+    meta = json.loads((tmp_path / "c" / "sweep.json").read_text())["meta"]
+    assert meta["lost_threshold_m"] == 1e-9

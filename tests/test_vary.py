@@ -94,6 +94,10 @@ BAD_VARY = {  # --vary: the text the one line must hold
         ["plant.zz=1,2", "BARE"],
         "bare.toml that can vary; it sets no number; a key",
     ),
+    "a point --duration makes wrong": (
+        ["plant.fix_latency_s=0,5", "--duration", "2", "FUSED"],
+        "--vary plant.fix_latency_s=5.0 with --duration 2: 5 s is not shorter than the run (2 s)",
+    ),
     "a bad value": (["events.0.factor=1,-2"], "--vary events.0.factor=-2"),
     "not a number": (["events.0.factor=1,x"], "'x' is not a number"),
     "a range's count": (["events.0.factor=1:2:1"], "COUNT >= 2"),
@@ -129,6 +133,9 @@ def test_bad_vary_is_one_line_and_nothing_runs(tmp_path, capsys, case):
     if flags == ["FILE"]:  # a distribution of the file whose support leaves the key's range
         (tmp_path / "drawn.toml").write_text(DRAWN.replace("[1.0, 2.0]", "[-1.0, 2.0]"))
         argv[1], flags = str(tmp_path / "drawn.toml"), []
+    if flags[-1:] == ["FUSED"]:  # the fused pose's scenario, its fix latency an axis
+        argv[1], flags = "eight-wheel-radius-fused", flags[:-1]
+        argv = [a for i, a in enumerate(argv) if a != "--duration" and (i == 0 or argv[i - 1] != "--duration")]
     if flags[-1:] in (["OWN"], ["BARE"]):  # a file of a reference class that sets no [reference.params]
         (tmp_path / "c.py").write_text(OWN_CLASS)
         name = "own.toml" if flags[-1] == "OWN" else "bare.toml"
