@@ -224,6 +224,10 @@ def sweep_folder(
     workers = check_execution_flags(workers, batch_size, scheduler, scheduler_timeout)
     axes = parse_vary(vary)
     threshold = check_threshold(threshold)
+    if lost_threshold is not None:
+        from mlpfac.scenario.parse import lost_threshold_m
+
+        lost_threshold = lost_threshold_m(lost_threshold, "--lost-threshold")
     if threshold is not None and not axes.axes:
         raise ConfigError("--threshold", NO_AXIS.replace("vary", "--vary"))
     scenarios = list(dict.fromkeys(scenarios))
