@@ -29,6 +29,7 @@ from mlpfac.plants import refuse_torque
 from mlpfac.plants.events import Event, parse_event
 from mlpfac.plants.world import Terrain, World, parse_world
 from mlpfac.scenario import provenance
+from mlpfac.scenario.draws import check_ends
 from mlpfac.scenario.draws import put as put_value
 from mlpfac.scenario.draws import resolve as draw_values
 from mlpfac.scenario.draws import restore as restore_draws
@@ -256,32 +257,9 @@ def load(
         and not plant["model"].startswith("menagerie:")
     ):
         plant["model"] = str((path.parent / Path(plant["model"]).expanduser()).resolve())
-    if ends:
-        _check_ends(table, path, build, robot, values)
+    if ends:  # each distribution at both ends of what it can draw, loaded as the file is
+        check_ends(table, str(path), lambda at_end: _built(at_end, path, build, robot, values))
     return _built(table, path, build, robot, values)
-
-
-def _check_ends(table: dict, path: Path, build: bool, robot: str | None, values: dict | None) -> None:
-    """Each distribution of the file at both ends of what it can draw, loaded as the file is (the
-    plant built too where ``build``), so that a seed whose draw lands out of range is found before
-    anything runs, whatever seed runs first (a sweep checks them so too: :func:`mlpfac.sweeps.vary.grid`);
-    a ConfigError naming the distribution and its end."""
-    from mlpfac.scenario.draws import distribution, is_distribution, leaves
-
-    for key, spec in leaves(table).items():
-        if not is_distribution(spec):
-            continue
-        dist = distribution(spec, f"{path} {key}")
-        for end in dist.support():
-            at_end = copy.deepcopy(table)
-            put_value(at_end, key, end)
-            drawn = at_end.get("drawn")
-            if isinstance(drawn, dict) and key in drawn:  # a config.toml's record of the draw: this end instead
-                at_end["drawn"] = {k: v for k, v in drawn.items() if k != key}
-            try:
-                _built(at_end, path, build, robot, values)
-            except ConfigError as err:
-                raise ConfigError(f"{path} {key} = {dist} (its end {end:g})", f"{err.what} ({err.where})") from None
 
 
 def _built(table: dict, path: Path, build: bool, robot: str | None, values: dict | None) -> Scenario:
