@@ -51,7 +51,7 @@ WORDS = {  # a metrics.json's outcome, threshold, phases: the sentence the first
                             "rms_position_error_m": 1.8, "phases": {"before": {"start_s": 2, "end_s": 2,
                                                                                "rms_position_error_m": None}}},
                            "lost: the whole run's position RMS 1.8 m is beyond 0.0839 m (5 % of the path's 1.68 m size); "
-                           "it ends within its 2 s warm-up, so the warm-up is judged too"),
+                           "the run ends within its warm-up, so the warm-up is judged too"),
     "diverged": ({"outcome": "diverged", "status": "diverged", "reason": "position error 5.01 m beyond 5 m"},
                  "diverged (position error 5.01 m beyond 5 m)"),
 }  # fmt: skip

@@ -173,7 +173,7 @@ def outcome_words(m: dict) -> str:
         rms = m.get("rms_position_error_m")
         where = f"the whole run's position RMS {_mm(rms)}"
         side = "beyond" if how == "lost" else "within"
-        why = f"; it ends within its {m['excluded_s'][1]:g} s warm-up, so the warm-up is judged too"
+        why = "; the run ends within its warm-up, so the warm-up is judged too"
         return f"{how}: {where} is {side} {limit}{why}"
     phases = {k: p["rms_position_error_m"] for k, p in m["phases"].items() if p["rms_position_error_m"] is not None}
     if how == "lost":
