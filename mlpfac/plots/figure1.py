@@ -53,15 +53,17 @@ class Draft:
         warm = min(rec.warmup_s, t[-1] if n else 0.0)
         entries = legend_entries(rec, warm > 0)
         lines = -(-len(entries) // LEGEND_COLUMNS)
-        top = TITLE_IN + LEGEND_LINE_IN * lines + 0.3  # the title, the legend under it, the panels' titles
+        heading = _title(rec)  # the run and its outcome, a line each (the outcome wrapped where long)
+        title_in = TITLE_LINE_IN * heading.count("\n") + TITLE_IN
+        top = title_in + LEGEND_LINE_IN * lines + 0.3  # the title, the legend under it, the panels' titles
         height = 2.9 * rows + 0.2 + top
         self.fig = fig = Figure(figsize=(12, height), dpi=DPI)  # no pyplot: nothing global, nothing to close
         FigureCanvasAgg(fig)
         grid = fig.add_gridspec(rows, 2, **_layout(height, top))
         if title:  # the outcome metrics.json records, in its words; the legend of every panel under it
-            fig.suptitle(_title(rec), fontsize=11, y=1 - 0.06 / height, va="top")
+            fig.suptitle(heading, fontsize=11, y=1 - 0.06 / height, va="top")
             fig.legend(handles=entries, loc="upper center", ncol=min(len(entries), LEGEND_COLUMNS), fontsize=8,
-                       bbox_to_anchor=(0.5, 1 - TITLE_IN / height), frameon=False)  # fmt: skip
+                       bbox_to_anchor=(0.5, 1 - title_in / height), frameon=False)  # fmt: skip
         self.axes = axes = {}
         self.paths = paths = {}
         drawn = (0, 1) if column is None else (column,)
@@ -188,7 +190,9 @@ def _time_panels(rec: RunRecord, h: bool) -> list[str]:
 
 
 DPI = 90
-TITLE_IN, LEGEND_LINE_IN, LEGEND_COLUMNS = 0.35, 0.22, 5  # inches above the panels: the title, a line of the legend
+TITLE_IN, TITLE_LINE_IN = 0.35, 0.2  # inches above the panels: the title's first line, each line more
+LEGEND_LINE_IN, LEGEND_COLUMNS = 0.22, 5  # ... a line of the legend, of this many entries
+TITLE_WIDTH = 130  # characters of the outcome a line of the title holds
 
 
 def _outcome(rec: RunRecord) -> dict:
@@ -200,9 +204,12 @@ def _outcome(rec: RunRecord) -> dict:
 
 def _title(rec: RunRecord) -> str:
     """The figure's title: the run, and its outcome in the words of its first line."""
+    import textwrap
+
     from mlpfac.loop.metrics import outcome_words
 
-    return f"{rec.scenario} / {rec.controller} / seed {rec.seed}: {outcome_words(_outcome(rec))}"
+    words = textwrap.wrap(outcome_words(_outcome(rec)), TITLE_WIDTH)
+    return "\n".join([f"{rec.scenario} / {rec.controller} / seed {rec.seed}", *words])
 
 
 def write_png(pixels: np.ndarray, path: Path) -> None:
