@@ -7,14 +7,17 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from mlpfac.flags import needs
+from mlpfac.flags import needs, not_with
 from mlpfac.targets import cli_path
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """The arguments of ``mlpfac report`` (here, so that the command line's parser imports none of
     the report's code)."""
-    p.description = "Write every marked table of DOCS/*.md from the data folder it names (mlpfac/report/results.py)."
+    p.description = (
+        "Write every marked table of DOCS/*.md from the data folder it names (mlpfac/report/results.py); "
+        "--check also checks every figure of the pages against its sources (mlpfac/report/figures.py)."
+    )
     p.add_argument("docs", nargs="?", type=cli_path, default=Path("docs"), help="the folder of pages (default docs)")
     p.add_argument("--check", action="store_true", help="write nothing; exit 1 if a table differs from its data")
     p.add_argument(
@@ -42,6 +45,19 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--strict", action="store_true", help="with --verify: a dataset that cannot run here (its robot) is an error"
     )
+    p.add_argument(
+        "--remake",
+        nargs="?",
+        const="",
+        metavar="NAMES",
+        help="make the datasets named (a,b; default every one but the bench-* timings) again from their "
+        "recorded commands, then write the tables",
+    )
+    p.add_argument(
+        "--sources", action="store_true", help="list every page's parts, their sources and their count of figures"
+    )
     needs(p, "--strict", "--verify")
     needs(p, "--command", "--collect")
     needs(p, "--code-version", "--collect")
+    not_with(p, "--remake", "--collect", "--verify", "--check", "--sources")
+    not_with(p, "--sources", "--collect", "--verify", "--check")

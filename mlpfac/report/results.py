@@ -49,7 +49,7 @@ DATA_FILES = ("sweep.json", "compare.json", "paired.json", "robustness.json")
 OPTIONS = ("view", "scenarios", "controllers", "labels")
 ROW_TEXTS: dict[str, tuple[type, ...]] = {  # the fields of a sweep's rows that are no number
     "scenario": (str,), "controller": (str,), "phase": (str,), "worst_status": (str,), "no_event_twin": (str, type(None)),
-    "vary": (dict,),
+    "vary": (dict,), "draws": (list,),
 }  # fmt: skip
 DATA_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]*")  # a data folder's name (--collect NAME=...)
 
@@ -118,7 +118,15 @@ def _check_rows(rows: list[dict], path: Path) -> None:
         for key, v in r.items():
             want = ROW_TEXTS.get(key, (int, float, type(None)))
             if not isinstance(v, want) or (isinstance(v, bool) and bool not in want):
-                kind = "a text" if str in want else "a table" if dict in want else "a number or null"
+                kind = (
+                    "a text"
+                    if str in want
+                    else "a table"
+                    if dict in want
+                    else "a list"
+                    if list in want
+                    else "a number or null"
+                )
                 raise ConfigError(f"{path} rows[{i}].{key}", f"expected {kind}, got {v!r}")
 
 
@@ -213,6 +221,20 @@ def code_version() -> str:
     return out.stdout.strip()
 
 
+def machine() -> str:
+    """The machine collecting a dataset: its processor and cores (a benchmark's timings are this
+    machine's; a run's bits depend on it only as docs/reproducibility.md says)."""
+    import os
+    import platform
+
+    try:
+        lines = Path("/proc/cpuinfo").read_text().splitlines()
+    except OSError:
+        lines = []
+    cpu = next((line.split(":", 1)[1].strip() for line in lines if line.startswith("model name")), None)
+    return f"{cpu or platform.processor() or platform.machine()}, {os.cpu_count()} CPUs"
+
+
 def collect(folder: Path, results: Path, command: str | None = None, version: str | None = None) -> Path:
     """Copy a finished results folder (or a script's printed table, a file) into a data folder and
     write its meta.json: the command (kept from the earlier meta.json unless given), the code
@@ -223,8 +245,8 @@ def collect(folder: Path, results: Path, command: str | None = None, version: st
     if not command:
         raise ConfigError("--command", f"{folder} has no meta.json yet: give the command that made {results}")
     runs = None
-    if results.is_file():
-        sources = {"table.md": results}
+    if results.is_file():  # a printed Markdown table (a .md file), else a command's printed output
+        sources = {"table.md" if results.suffix == ".md" else "output.txt": results}
     else:
         sources = {n: results / n for n in DATA_FILES if (results / n).is_file()}
         if "paired.json" not in sources:
@@ -241,6 +263,9 @@ def collect(folder: Path, results: Path, command: str | None = None, version: st
             write_atomic(folder / RUNS_FILE, f'{{"runs": [\n{lines}\n]}}\n')
         elif runs is not None and (folder / RUNS_FILE).is_file():  # they were of other results
             (folder / RUNS_FILE).unlink()
+        for name in {"table.md", "output.txt"} - set(sources):  # a script's text of another kind, before
+            if results.is_file() and (folder / name).is_file():
+                (folder / name).unlink()
         made = max(src.stat().st_mtime for src in sources.values())
     except OSError as err:
         raise ConfigError(str(err.filename or folder), f"cannot copy the results ({err.strerror or err})") from None
@@ -248,6 +273,7 @@ def collect(folder: Path, results: Path, command: str | None = None, version: st
         "command": command,
         "code_version": version or code_version(),
         "date": datetime.fromtimestamp(made, UTC).strftime("%Y-%m-%dT%H:%M:%SZ"),
+        "machine": machine(),
     }
     try:
         write_atomic(old, json.dumps(meta, indent=2) + "\n")
@@ -276,6 +302,18 @@ def run_cli(args: argparse.Namespace) -> int:
         )
     for name, results in collects:
         print(f"{results} -> {collect(args.docs / 'data' / name, Path(results), args.made_by, args.code_version)}")
+    if args.remake is not None:
+        from mlpfac.report.remake import run_cli as remake
+
+        code = remake(args.docs, args.remake)
+        for page, n, changed in write(args.docs):
+            print(f"{page}: {n} tables, {'written' if changed else 'unchanged'}")
+        return code
+    if args.sources:
+        from mlpfac.report.figures import sources
+
+        print(sources(args.docs), end="")
+        return 0
     code = 0
     if args.verify is not None:
         from mlpfac.report.verify import run_cli as verify
@@ -287,7 +325,17 @@ def run_cli(args: argparse.Namespace) -> int:
             print(
                 f"mlpfac: {page}: a table differs from its data; `mlpfac report {args.docs}` writes it", file=sys.stderr
             )
-        code = max(code, 1 if old else 0)
+        from mlpfac.report.figures import check
+
+        figures = check(args.docs)
+        for line in figures:
+            print(f"mlpfac: {line}", file=sys.stderr)
+        if figures:
+            print(
+                f"mlpfac: {len(figures)} figures of the pages are in none of their sources (docs/development.md)",
+                file=sys.stderr,
+            )
+        code = max(code, 1 if old or figures else 0)
     if args.verify is not None or args.check:
         return code
     for page, n, changed in write(args.docs):
