@@ -5,7 +5,6 @@ from __future__ import annotations
 import json
 import re
 import shutil
-from decimal import ROUND_HALF_EVEN, ROUND_HALF_UP, Decimal
 from pathlib import Path
 
 import pytest
@@ -104,12 +103,16 @@ def test_every_table_in_the_docs_is_what_its_data_gives():
 
 def test_every_data_folder_says_how_it_was_made_and_is_shown():
     """meta.json holds the command, the code version and the date; the command is written in a page
-    (above its table) and a table shows the folder."""
-    prose = " ".join(" ".join(p.read_text().replace("\\\n", " ") for p in report.pages(DOCS)).split())
-    shown = {
-        report.parse_spec(m["spec"], p.name)[0]
-        for p in report.pages(DOCS)
-        for m in report.MARKER.finditer(p.read_text())
+    (above its table), and a table shows the folder or a page names it as the source of its figures
+    (the folder, or a file in it)."""
+    pages = figures.pages(DOCS)
+    prose = " ".join(" ".join(p.read_text().replace("\\\n", " ") for p in pages).split())
+    shown = {report.parse_spec(m["spec"], p.name)[0] for p in pages for m in report.MARKER.finditer(p.read_text())}
+    named = {
+        "/".join(Path(source).parts[-2:] if (p.parent / source).is_dir() else Path(source).parts[-3:-1])
+        for p in pages
+        for part in figures.parts(p.read_text(), p.name)
+        for source in part.sources
     }
     folders = sorted(p for p in (DOCS / "data").iterdir() if p.is_dir())
     assert len(folders) >= 6
@@ -118,7 +121,7 @@ def test_every_data_folder_says_how_it_was_made_and_is_shown():
         assert re.fullmatch(r"[0-9a-f]{40}", meta["code_version"]), folder.name
         assert re.fullmatch(DATE, meta["date"]), folder.name
         assert " ".join(meta["command"].split()) in prose, f"{folder.name}: its command is in no page"
-        assert f"data/{folder.name}" in shown, f"{folder.name}: no table shows it"
+        assert f"data/{folder.name}" in shown | named, f"{folder.name}: no table shows it, no page names it"
 
 
 def test_every_figure_of_the_docs_is_in_its_sources():
@@ -177,6 +180,7 @@ FIGURE_CASES = {
     ),
     "a sentence's end, a ratio, a percent": ("It is 4.86. Then 73x, and 16% or 5 %.", ["4.86", "73", "16", "5"]),
     "not a bare integer, a version, a year, a seed": ("seeds 0-4, numpy 2.4.6, in 2004, Results 7", []),
+    "a number in groups of three": ("at most 100 000 runs, a 2,000-run map, (1, 2)", ["100000", "2000"]),
     "not in code or links": ('`T = 0.01` and [x](a-1.5.md) <img src="b-2.5.png">', []),
     "not in a command, but in printed output": ("```sh\nrun --duration 2.5\n```\n\n```\nrms 0.25 m\n```\n", ["0.25"]),
     "not in a given phrase": ('<!-- figures: "at 12.5 s" -->\nat 12.5 s, then 12.5 s', ["12.5"]),
@@ -190,9 +194,10 @@ def test_what_a_figure_is(case: str):
 
 
 def test_a_figure_matches_its_source_rounded_to_its_digits():
-    keys = figures.printed("| 1.345 | 0.0013421 | 121.84 | 2.5 |")
-    assert all(figures.shown(x, keys) for x in ("1.34", "1.35", "1.3", "1", "1.3421", "1.342", "122", "121.8", "2.5"))
-    assert not any(figures.shown(x, keys) for x in ("1.36", "1.3450", "2.50", "1.4", "121.9", "0.00135"))
+    keys = figures.printed("| 1.345 | 0.0013421 | 121.84 | 2.5 | 0.05 |")
+    assert all(keys.shows(x) for x in ("1.34", "1.35", "1.3", "1", "1.3421", "1.342", "122", "121.8", "2.5"))
+    assert not any(keys.shows(x) for x in ("1.36", "1.3450", "2.50", "1.4", "121.9", "0.00135", "5"))
+    assert keys.shows("5", percent=True) and not keys.shows("6", percent=True)
 
 
 def test_a_given_phrase_no_longer_on_its_part_fails_and_a_bad_marker_is_bad_input(tmp_path: Path):
@@ -287,10 +292,63 @@ def test_collect_keeps_the_command_and_stamps_the_version_and_date(tmp_path: Pat
         report.collect(docs / "data" / "new", results)
     with pytest.raises(ConfigError, match="not a finished results folder"):
         report.collect(target, tmp_path, command="x")
-    script = tmp_path / "table.out"
+    script = tmp_path / "table.md"
     script.write_text("| a |\n|---|\n| 1 |\n")
     report.collect(docs / "data" / "script", script, command="python script.py")
     assert report.render(docs / "data" / "script", {"view": "text"}) == script.read_text()
+
+
+def _dataset(docs: Path, name: str, command: str, **files: str) -> Path:
+    folder = docs / "data" / name
+    folder.mkdir(parents=True)
+    meta = {"command": command, "code_version": "0" * 40, "date": "2026-01-01T00:00:00Z"}
+    (folder / "meta.json").write_text(json.dumps(meta))
+    for file, text in files.items():
+        (folder / file.replace("_", ".")).write_text(text)
+    return folder
+
+
+def test_a_commands_printed_output_is_run_again_by_verify_and_a_record_is_not(tmp_path: Path, capsys):
+    docs = tmp_path / "docs"
+    _dataset(docs, "printed", "python -c 'print(1.5); print(2)'", output_txt="1.5\n2\n")
+    _dataset(docs, "bench-timing", "python -c 'import sys; sys.exit(3)'", output_txt="3.2 s\n")
+    _dataset(docs, "history-tried", "python -c 'import sys; sys.exit(3)'", output_txt="9 mm\n")
+    assert main(["report", str(docs), "--verify", "2", "--strict"]) == 0
+    out = capsys.readouterr().out
+    assert "printed: its printed output as recorded" in out
+    assert "bench-timing: not verified: a benchmark's timings, a record" in out
+    assert "history-tried: not verified: figures of earlier code" in out
+    (docs / "data" / "printed" / "output.txt").write_text("1.5\n3\n")
+    assert main(["report", str(docs), "--verify", "2"]) == 1
+    assert "printed: its printed output differs: line 2: 2" in capsys.readouterr().out
+
+
+def test_collect_keeps_a_printed_output_beside_a_table_and_stamps_the_machine(tmp_path: Path):
+    docs = tmp_path / "docs"
+    printed = tmp_path / "out.txt"
+    printed.write_text("robot: 1.09 m\n")
+    folder = report.collect(docs / "data" / "lines", printed, command="mlpfac run x | head -1")
+    assert (folder / "output.txt").read_text() == printed.read_text() and not (folder / "table.md").exists()
+    assert json.loads((folder / "meta.json").read_text())["machine"].endswith("CPUs")
+    table = tmp_path / "t.md"
+    table.write_text("| a |\n|---|\n| 1 |\n")
+    report.collect(folder, table)  # the same dataset, now a table: the output it held is gone
+    assert (folder / "table.md").is_file() and not (folder / "output.txt").exists()
+
+
+def test_remake_runs_each_recorded_command_again_and_refuses_to_resume_a_sweep(tmp_path: Path, capsys):
+    docs = tmp_path / "docs"
+    sweep = "mlpfac compare paper --controllers corradini --seeds 0 --duration 1 --workers 1 --out runs/tiny"
+    _dataset(docs, "tiny", sweep)
+    _dataset(docs, "lines", "python -c 'print(0.25)'", output_txt="0.5\n")
+    _dataset(docs, "bench-timing", "python -c 'import sys; sys.exit(3)'", output_txt="3.2 s\n")
+    assert main(["report", str(docs), "--remake"]) == 0
+    assert (docs / "data" / "lines" / "output.txt").read_text() == "0.25\n"
+    assert (docs / "data" / "tiny" / "runs.json").is_file()
+    assert (docs / "data" / "bench-timing" / "output.txt").read_text() == "3.2 s\n"  # a record: not made
+    assert main(["report", str(docs), "--remake", "tiny"]) == 1  # runs/tiny is there: a sweep would resume it
+    assert "runs/tiny: exists" in capsys.readouterr().err
+    assert main(["report", str(docs), "--remake", "nosuch"]) == 2
 
 
 # name: (what to break in a copy of the docs, text the one line holds)

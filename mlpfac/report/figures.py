@@ -11,8 +11,8 @@ data (:mod:`mlpfac.report.results`). Each figure, rounded to the digits the page
 
       <!-- figures: data/route-robots ../sims/route.toml "2.9° slopes" -->
 
-  a data folder (every view of its tables, the text a command printed: ``table.md``,
-  ``output.txt``) or a file (a dataset's ``runs.json``: every run's figures; a scenario, a robot's
+  a data folder (every view of its tables, its count of runs, the text a command printed:
+  ``table.md``, ``output.txt``) or a file (a dataset's ``runs.json``: every run's figures; a scenario, a robot's
   model, a module: its settings as written), each path from the page's folder (``*`` for any
   name: ``../sims/*.toml``); a number printed in m or s counts in mm
   or ms too; a phrase in quotes is given as it is (a setting, a quotation, a figure derived in
@@ -25,6 +25,9 @@ A page whose figure is none of these fails the check, naming the page, the line 
 
 from __future__ import annotations
 
+import bisect
+import functools
+import operator
 import re
 from dataclasses import dataclass, field
 from decimal import ROUND_HALF_EVEN, ROUND_HALF_UP, Decimal
@@ -42,22 +45,27 @@ CODE = re.compile(r"`[^`\n]*`")
 TARGET = re.compile(r"\]\([^)]*\)|<[^>\n]*>")  # a link's target, an HTML tag
 UNITS = r"mm|cm|m|km|ms|µs|us|ns|s|min|h|x|×|%|Hz|kHz|N|kg|mrad|rad|GiB|MiB|KiB|GB|MB|kB|runs"
 FIGURE = re.compile(
-    r"(?<![\w.])(?P<a>\d+) of (?P<b>\d+)(?![\w.])"  # a count
+    r"(?<![\w.,])(?P<t>\d{1,3}(?:[ ,]\d{3})+)(?![\w.]|,\d)"  # a whole number in groups of three: 100 000, 2,000
+    r"|(?<![\w.])(?P<a>\d+) of (?P<b>\d+)(?![\w.])"  # a count
     r"|(?<![\w.])(?P<d>\d+\.\d+(?:e[-+]?\d+)?|\d+e[-+]?\d+)(?!\w|\.\d)"  # a decimal
     rf"|(?<![\w.])(?P<u>\d+)(?=\s?(?:{UNITS})(?!\w))"  # a whole number with its unit
 )
-NUMBER = re.compile(r"\d+(?:\.\d+)?(?:e[-+]?\d+)?")  # in a source: any number
+NUMBER = re.compile(r"\d+(?:_\d{3})*(?:\.\d+)?(?:e[-+]?\d+)?")  # in a source: any number (100_000 in code)
+PERCENT = re.compile(r"\s?%")
+GROUPED = re.compile(r"(?<![\w.,])\d{1,3}(?:[ ,]\d{3})+(?![\w.]|,\d)")  # in a source: 2,000
 SCALE = 3  # a number printed in m or s counts in mm or ms (x 10^3)
 WRITTEN = "<!-- Written by `python -m mlpfac.pages"  # a page written from the code (mlpfac.pages)
 
 
 @dataclass(frozen=True)
 class Figure:
-    """A figure of a page: its line (from 1), the numbers as written and the line's text."""
+    """A figure of a page: its line (from 1), the numbers as written and the line's text; a
+    percentage is a source's fraction too (5 % of 0.05)."""
 
     line: int
     numbers: tuple[str, ...]
     text: str
+    percent: bool = False
 
 
 @dataclass
@@ -72,12 +80,17 @@ class Part:
 
 
 def parts(text: str, where: str) -> list[Part]:
-    """The page cut at its ``figures:`` markers, each part with its sources and given phrases."""
+    """The page cut at its ``figures:`` markers (not those quoted in code), each part with its
+    sources and given phrases."""
     out = [Part(0, len(text), 1)]
-    for m in MARK.finditer(text):
+    uncoded = text
+    for pattern in (FENCE, CODE):
+        for m in pattern.finditer(uncoded):
+            uncoded = _blank(uncoded, m.start(), m.end())
+    for m in MARK.finditer(uncoded):
         out[-1].end = m.start()
         part = Part(m.end(), len(text), text.count("\n", 0, m.start()) + 1)
-        for w in WORD.finditer(m["spec"]):
+        for w in WORD.finditer(text[m.start("spec") : m.end("spec")]):
             (part.given if w["phrase"] is not None else part.sources).append(w["phrase"] or w["path"])
         if not part.sources and not part.given:
             raise ConfigError(f"{where}:{part.line}", "a figures marker names no source")
@@ -137,46 +150,67 @@ def figures(text: str, pairs: list[Part] | None = None) -> list[tuple[int, Figur
     lines = text.splitlines()
     out = []
     for m in FIGURE.finditer(plain):
-        numbers = (m["a"], m["b"]) if m["a"] else (m["d"] or m["u"],)
+        numbers = (m["a"], m["b"]) if m["a"] else (m["d"] or m["u"] or re.sub("[ ,]", "", m["t"]),)
         line = plain.count("\n", 0, m.start()) + 1
-        out.append((m.start(), Figure(line, numbers, lines[line - 1].strip())))
+        percent = PERCENT.match(plain, m.end()) is not None
+        out.append((m.start(), Figure(line, numbers, lines[line - 1].strip(), percent)))
     return out
 
 
-def _keys(number: str) -> set[tuple[int, Decimal]]:
-    """Every way a page may write ``number`` (as it is, or x 10^3): (exponent, value) rounded to
-    each exponent from its own up to 0, half up or half even."""
-    try:
-        exact = Decimal(number)
-        both = (exact, exact.scaleb(SCALE))
-    except ArithmeticError:  # (InvalidOperation, Overflow)
-        return set()
-    out = set()
-    for value in both:
-        low = value.as_tuple().exponent
-        if not isinstance(low, int):
-            continue
-        for e in range(low, max(low, 0) + 1):
+class Printed:
+    """The numbers a source prints (each as written, and x 10^3), sorted: a page's figure is one of
+    them rounded to its digits (:meth:`shows`), found by bisection."""
+
+    def __init__(self, numbers: list[tuple[Decimal, int]]) -> None:
+        self.numbers = sorted(numbers)
+        self.values = [v for v, _ in self.numbers]
+
+    @classmethod
+    def of(cls, text: str) -> Printed:
+        out = []
+        grouped = [re.sub("[ ,]", "", g) for g in GROUPED.findall(text)]  # 2,000 and 100 000 as one number
+        for n in NUMBER.findall(text) + grouped:
+            try:
+                exact = Decimal(n.replace("_", ""))
+                for value in (exact, exact.scaleb(SCALE)):
+                    if isinstance(value.as_tuple().exponent, int) and abs(value.adjusted()) <= 30:
+                        out.append((value, value.as_tuple().exponent))
+            except ArithmeticError:  # (InvalidOperation, Overflow): no number a page writes
+                continue
+        return cls(out)
+
+    def __or__(self, other: Printed) -> Printed:
+        return Printed(self.numbers + other.numbers)
+
+    def shows(self, number: str, percent: bool = False) -> bool:
+        """``number`` (as a page writes it) is a number printed here rounded to its digits, half up
+        or half even, the printed one with at least as many (a percentage: or its fraction)."""
+        for value in (Decimal(number), Decimal(number).scaleb(-2)) if percent else (Decimal(number),):
+            e = value.as_tuple().exponent
             q = Decimal(1).scaleb(e)
-            out |= {(e, value.quantize(q, mode)) for mode in (ROUND_HALF_UP, ROUND_HALF_EVEN)}
-    return out
+            half = Decimal(5).scaleb(e - 1)
+            lo = bisect.bisect_left(self.values, value - half)
+            hi = bisect.bisect_right(self.values, value + half)
+            for v, ev in self.numbers[lo:hi]:
+                if ev <= e and value in (v.quantize(q, ROUND_HALF_UP), v.quantize(q, ROUND_HALF_EVEN)):
+                    return True
+        return False
 
 
-def printed(text: str) -> frozenset[tuple[int, Decimal]]:
-    """What a page may quote of a source's text: every number in it, as :func:`_keys` writes it."""
-    return frozenset(k for n in NUMBER.findall(text) for k in _keys(n))
+NOTHING = Printed([])
 
 
-def shown(number: str, keys: frozenset[tuple[int, Decimal]]) -> bool:
-    """``number`` (as a page writes it) is a number of the source rounded to its digits."""
-    value = Decimal(number)
-    return (value.as_tuple().exponent, value) in keys
+@cache
+def printed(text: str) -> Printed:
+    """What a page may quote of a source's text: every number in it."""
+    return Printed.of(text)
 
 
 @cache
 def _folder_text(folder: Path, stamp: tuple) -> str:
     """Every view of a data folder's tables, and the text kept in it, as one text."""
     from mlpfac.report.results import render
+    from mlpfac.report.verify import read_json
 
     files = {
         "sweep": "sweep.json",
@@ -186,9 +220,13 @@ def _folder_text(folder: Path, stamp: tuple) -> str:
         "text": "table.md",
     }
     views = [v for v, f in files.items() if (folder / f).is_file()]
-    texts = [render(folder, {"view": v}) for v in views + (["summary"] if "paired" in views else [])]
+    texts = [render(folder, {"view": v}) for v in views + (["summary", "untold"] if "paired" in views else [])]
     if (folder / "output.txt").is_file():
         texts.append((folder / "output.txt").read_text())
+    for name in ("sweep.json", "compare.json"):  # how many runs the command made
+        if (folder / name).is_file():
+            runs = (read_json(folder, name).get("meta") or {}).get("runs")
+            texts.append(f"{runs} runs" if isinstance(runs, int) else "")
     return "\n".join(texts)
 
 
@@ -197,14 +235,16 @@ def _file_text(path: Path, stamp: tuple) -> str:
     return path.read_text()
 
 
-def source_keys(page: Path, source: str, where: str) -> frozenset[tuple[int, Decimal]]:
+def source_keys(page: Path, source: str, where: str) -> Printed:
     """The numbers a source, named from ``page``'s folder, prints."""
     path = page.parent / source
     if "*" in source:  # files by a pattern: the shipped scenarios, the robots
         found = sorted(page.parent.glob(source))
         if not found:
             raise ConfigError(where, f"figures marker: {source} names no file")
-        return frozenset().union(*(source_keys(page, str(f.relative_to(page.parent)), where) for f in found))
+        return functools.reduce(
+            operator.or_, (source_keys(page, str(f.relative_to(page.parent)), where) for f in found)
+        )
     try:
         stamp = tuple(sorted((f.name, f.stat().st_mtime_ns) for f in path.iterdir())) if path.is_dir() else ()
         if path.is_dir():
@@ -225,22 +265,26 @@ def unsupported(page: Path, text: str | None = None) -> list[tuple[Figure, str]]
     if WRITTEN in text:  # written from the code, and checked against it (tests/test_docs.py)
         return []
     pairs = parts(text, str(page))
-    tables = frozenset().union(
-        *(source_keys(page, parse_spec(m["spec"], str(page))[0], str(page)) for m in MARKER.finditer(text))
+    tables = functools.reduce(
+        operator.or_,
+        (source_keys(page, parse_spec(m["spec"], str(page))[0], str(page)) for m in MARKER.finditer(text)),
+        NOTHING,
     )
     outputs = cheap_outputs(text)
     found = figures(text, pairs)
     bad = []
     for part in pairs:
         where = f"{page}:{part.line}"
-        keys = tables.union(*(source_keys(page, s, where) for s in part.sources))
-        keys |= frozenset().union(*(printed(out) for _, out, start, _ in outputs if part.start <= start < part.end))
+        keys = functools.reduce(operator.or_, (source_keys(page, s, where) for s in part.sources), tables)
+        keys = functools.reduce(
+            operator.or_, (printed(out) for _, out, start, _ in outputs if part.start <= start < part.end), keys
+        )
         for phrase in part.given:
             if phrase not in text[part.start : part.end]:
                 bad.append((Figure(part.line, (), phrase), "a given phrase no longer on its part of the page"))
         names = ", ".join(part.sources) or "none but the page's tables"
         for f in (f for at, f in found if part.start <= at < part.end):
-            missing = [n for n in f.numbers if not shown(n, keys)]
+            missing = [n for n in f.numbers if not keys.shows(n, f.percent)]
             if missing:
                 bad.append((f, f"{' and '.join(missing)} is in none of its sources ({names})"))
     return bad

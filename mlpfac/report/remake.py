@@ -6,23 +6,23 @@ collects what it wrote (:func:`mlpfac.report.results.collect`): a sweep's or com
 folder (its ``--out``, which must not exist yet: a sweep would resume the runs already there, made
 by other code), or what a script printed (``table.md``, ``output.txt``). Sweeps run first, since a
 script may read a sweep's folder (``python -m mlpfac.sweeps.bound runs/NAME``). A ``bench-*``
-dataset is a benchmark's timings, a record of the machine that measured them: it is made again
-only when named. ``NAME=VALUE`` words before the command (``MENAGERIE_ROOT=/path/to/...``) say
+dataset (a benchmark's timings) or a ``history-*`` one (figures of earlier code) is a record of what
+was measured once: it is made again only when named. ``NAME=VALUE`` words before the command (``MENAGERIE_ROOT=/path/to/...``) say
 what the reader sets; the environment's own value is used.
 """
 
 from __future__ import annotations
 
 import os
-import shlex
+import re
 import subprocess
 import sys
 from pathlib import Path
 
 from mlpfac.exceptions import ConfigError
-from mlpfac.report.verify import _words, read_json
+from mlpfac.report.verify import OUTPUT, Planned, Verdict, _words, read_data, read_json, record
 
-RECORD = "bench-"  # a dataset of timings: a record of its machine, never made again unasked
+ASSIGNMENTS = re.compile(r"\s*(?:[A-Za-z_]\w*=\S+\s+)*")  # MENAGERIE_ROOT=... before a command
 
 
 def datasets(docs: Path, names: str) -> list[Path]:
@@ -36,7 +36,7 @@ def datasets(docs: Path, names: str) -> list[Path]:
             raise ConfigError(f"--remake {names}", f"no such dataset: {', '.join(unknown)} (in {data})")
         chosen = [data / n for n in wanted]
     else:
-        chosen = [f for f in every if not f.name.startswith(RECORD)]
+        chosen = [f for f in every if not record(f)]
     return sorted(chosen, key=lambda f: (_results(f, docs) is None, f.name))
 
 
@@ -56,6 +56,19 @@ def _env() -> dict[str, str]:
     return env
 
 
+def printed(folder: Path, docs: Path) -> subprocess.CompletedProcess:
+    """A script's recorded command run again by bash from the repository's root, as written but for
+    a ``NAME=VALUE`` before it whose NAME the environment sets (the reader's own value is used):
+    what it printed."""
+    command = read_json(folder, "meta.json")["command"]
+    _words(command, str(folder / "meta.json command"))  # a command line, or bad input
+    prefix = ASSIGNMENTS.match(command)
+    env = _env()
+    kept = [w for w in prefix[0].split() if w.partition("=")[0] not in env]
+    line = " ".join([*kept, command[prefix.end() :]])
+    return subprocess.run(["bash", "-c", line], cwd=docs.resolve().parent, env=env, capture_output=True, text=True)
+
+
 def remake(folder: Path, docs: Path) -> Path:
     """Run a dataset's command again and collect it into its folder; ConfigError when it fails."""
     from mlpfac.report.results import collect
@@ -63,7 +76,6 @@ def remake(folder: Path, docs: Path) -> Path:
     command = read_json(folder, "meta.json")["command"]
     words, cd = _words(command, str(folder / "meta.json command"))
     root = docs.resolve().parent
-    where = root / (cd or ".")
     out = _results(folder, docs)
     if out is not None and out.exists():
         raise ConfigError(
@@ -72,19 +84,37 @@ def remake(folder: Path, docs: Path) -> Path:
     print(f"{folder.name}: {command}", flush=True)
     if out is not None:
         mlpfac = Path(sys.executable).parent / "mlpfac"  # this venv's, as its PATH would find it
+        where = root / (cd or ".")
         done = subprocess.run([str(mlpfac) if mlpfac.is_file() else "mlpfac", *words[1:]], cwd=where, env=_env())
         if done.returncode != 0:
             raise ConfigError(folder.name, f"its command exited with {done.returncode}")
         return collect(folder, out)
-    done = subprocess.run(["bash", "-c", shlex.join(words)], cwd=where, env=_env(), capture_output=True, text=True)
+    done = printed(folder, docs)
     if done.returncode != 0:
         tail = " / ".join(done.stderr.strip().splitlines()[-2:])
         raise ConfigError(folder.name, f"its command exited with {done.returncode}: {tail}")
     name = "table.md" if (folder / "table.md").is_file() else "output.txt"
-    printed = root / "runs" / "remade" / folder.name / name
-    printed.parent.mkdir(parents=True, exist_ok=True)
-    printed.write_text(done.stdout)
-    return collect(folder, printed)
+    text = root / "runs" / "remade" / folder.name / name
+    text.parent.mkdir(parents=True, exist_ok=True)
+    text.write_text(done.stdout)
+    return collect(folder, text)
+
+
+def verify_output(p: Planned, folder: Path) -> Verdict:
+    """Run a command's printed output again (the whole command) and compare it, line by line."""
+    v = p.verdict
+    done = printed(folder, folder.parent.parent)
+    if done.returncode != 0 and "not available here" in done.stderr:
+        v.skipped = f"not available here: {done.stderr.strip().splitlines()[-1]}"
+        return v
+    v.checked, v.printed, kept = 1, True, read_data(folder, OUTPUT).splitlines()
+    new = done.stdout.splitlines() if done.returncode == 0 else [f"(exit {done.returncode}) {done.stderr.strip()}"]
+    if new == kept:
+        v.identical = 1
+        return v
+    i = next((i for i, (a, b) in enumerate(zip(kept, new, strict=False)) if a != b), min(len(kept), len(new)))
+    v.worst, v.worst_run = float("inf"), f"line {i + 1}: {(new[i] if i < len(new) else '(none)')[:120]}"
+    return v
 
 
 def run_cli(docs: Path, names: str) -> int:

@@ -16,6 +16,7 @@ each drawn by the table code the sweep itself uses (:mod:`mlpfac.sweeps.tables`,
 - ``sweep``: the full per-phase table (``sweep.json``), ``compare``: the shorter one (``compare.json``);
 - ``paired``: per seed against Corradini's law and the oracle (``paired.json``);
 - ``summary``: controllers x scenarios, median position RMS and x oracle (``paired.json``);
+- ``untold``: each law told the change against itself told nothing, per scenario (``paired.json``);
 - ``robustness``: each controller's breaking points along a ``--vary`` axis (``robustness.json``,
   :mod:`mlpfac.sweeps.robustness`);
 - ``text``: ``table.md`` as it is.
@@ -44,7 +45,7 @@ from mlpfac.files import write_atomic
 from mlpfac.report.verify import read_data, read_json
 
 MARKER = re.compile(r"^<!-- table: (?P<spec>.+?) -->\n(?P<body>.*?)^<!-- /table -->$", re.M | re.S)
-VIEWS = ("sweep", "compare", "paired", "summary", "robustness", "text")
+VIEWS = ("sweep", "compare", "paired", "summary", "untold", "robustness", "text")
 DATA_FILES = ("sweep.json", "compare.json", "paired.json", "robustness.json")
 OPTIONS = ("view", "scenarios", "controllers", "labels")
 ROW_TEXTS: dict[str, tuple[type, ...]] = {  # the fields of a sweep's rows that are no number
@@ -146,12 +147,26 @@ def _render(folder: Path, view: str, opts: dict[str, str], data: dict, rows: lis
         rows = [r | {"scenario": labels[kept.index(r["scenario"])]} for r in rows]
     if view == "summary":
         return summary(rows)
+    if view == "untold":
+        return untold(rows)
     if view == "robustness":
         from mlpfac.sweeps.robustness import markdown as breaking_markdown
 
         return breaking_markdown(rows, (data.get("meta") or {}).get("threshold_m"), data.get("curves"))
     columns = {"sweep": SWEEP_COLUMNS, "compare": COMPARE_COLUMNS, "paired": PAIRED_COLUMNS}[view]
     return markdown(rows, columns)
+
+
+def untold(rows: list[dict]) -> str:
+    """Each law told the change against itself told nothing: the median over seeds of the per-seed
+    ratio of their position RMS (``x_untold_median`` of paired.json), where both ran."""
+    lines = ["| scenario | told | x itself untold |", "| --- | --- | ---: |"]
+    lines += [
+        f"| {r['scenario']} | {r['controller']} | {r['x_untold_median']:.2f} |"
+        for r in rows
+        if isinstance(r.get("x_untold_median"), float)
+    ]
+    return "\n".join(lines) + "\n"
 
 
 def rewrite(page: Path) -> tuple[str, int]:

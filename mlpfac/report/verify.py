@@ -25,6 +25,18 @@ from mlpfac.exceptions import ConfigError, MlpfacError, UnavailableError
 from mlpfac.flags import Parser
 
 RUNS_FILE = "runs.json"
+OUTPUT = "output.txt"  # a command's printed output: run again by --verify, compared line by line
+RECORDS = {  # datasets that are records of what was measured once, never run again: why, by their names' start
+    "bench-": "a benchmark's timings, a record of the machine that measured them",
+    "history-": "figures of earlier code, a record of what was measured on it",
+}
+
+
+def record(folder: Path) -> str:
+    """Why a dataset is a record, never run again (``bench-*``, ``history-*``), or ""."""
+    return next((why for start, why in RECORDS.items() if folder.name.startswith(start)), "")
+
+
 UNTIMED = ("wall_time_s", "rrd")  # what differs between two runs of the same bits: time, and the recording's bytes
 FIGURES = ("rms_position_error_m", "max_position_error_m", "rms_heading_error_rad")
 
@@ -103,12 +115,16 @@ class Verdict:
     flipped: list[str] = field(default_factory=list)  # outcome or status changed
     skipped: str = ""  # why the dataset could not be verified here
     unverified: str = ""  # why the dataset has nothing to verify
+    printed: bool = False  # a command's printed output, run again whole (checked 1: its output)
 
     def line(self) -> str:
         if self.skipped:
             return f"{self.name}: skipped: {self.skipped}"
         if self.unverified:
             return f"{self.name}: not verified: {self.unverified}"
+        if self.printed:
+            what = "as recorded" if self.identical else f"differs: {self.worst_run}"
+            return f"{self.name}: its printed output {what}"
         if self.identical == self.checked:
             return f"{self.name}: {self.checked} of {self.checked} runs bit-identical"
         out = (
@@ -237,6 +253,7 @@ class Planned:
     kept: dict = field(default_factory=dict)
     jobs: list = field(default_factory=list)
     where: Path | None = None
+    output: bool = False  # a command's printed output (output.txt), run again whole
 
 
 def prepare(folder: Path, root: Path) -> Planned:
@@ -254,6 +271,10 @@ def prepare(folder: Path, root: Path) -> Planned:
     p = Planned(Verdict(folder.name, command if isinstance(command, str) else ""))
     _words(command, f"{meta} command")  # a command that is no command line is bad input, even for a script's table
     if not (folder / RUNS_FILE).is_file():
+        if (folder / OUTPUT).is_file():  # a command's printed output: run again and compared, or a record
+            p.verdict.unverified = record(folder)
+            p.output = not p.verdict.unverified
+            return p
         table = (folder / "table.md").is_file()
         p.verdict.unverified = "a script's table: run its command again to check it" if table else ""
         p.verdict.unverified = (
@@ -335,8 +356,11 @@ def verify(docs: Path, n: int) -> Iterator[Verdict]:
     if not data.is_dir():
         raise ConfigError(str(data), "no data folder: nothing to verify")
     root = docs.resolve().parent
-    planned = [prepare(f, root) for f in sorted(data.iterdir()) if (f / "meta.json").is_file()]
-    return (verify_dataset(p, n) for p in planned)
+    folders = [f for f in sorted(data.iterdir()) if (f / "meta.json").is_file()]
+    planned = [(prepare(f, root), f) for f in folders]
+    from mlpfac.report.remake import verify_output
+
+    return (verify_output(p, f) if p.output else verify_dataset(p, n) for p, f in planned)
 
 
 def run_cli(docs: Path, n: int, strict: bool = False) -> int:
