@@ -180,7 +180,7 @@ class Printed:
         return cls(out)
 
     def __or__(self, other: Printed) -> Printed:
-        return Printed(self.numbers + other.numbers)
+        return Sources([self, other])
 
     def shows(self, number: str, percent: bool = False) -> bool:
         """``number`` (as a page writes it) is a number printed here rounded to its digits, half up
@@ -195,6 +195,16 @@ class Printed:
                 if ev <= e and value in (v.quantize(q, ROUND_HALF_UP), v.quantize(q, ROUND_HALF_EVEN)):
                     return True
         return False
+
+
+class Sources(Printed):
+    """Several sources: a figure is shown when one of them shows it (none copied or sorted again)."""
+
+    def __init__(self, parts: list[Printed]) -> None:
+        self.parts = [q for p in parts for q in (p.parts if isinstance(p, Sources) else [p])]
+
+    def shows(self, number: str, percent: bool = False) -> bool:
+        return any(p.shows(number, percent) for p in self.parts)
 
 
 NOTHING = Printed([])
@@ -239,12 +249,15 @@ def source_keys(page: Path, source: str, where: str) -> Printed:
     """The numbers a source, named from ``page``'s folder, prints."""
     path = page.parent / source
     if "*" in source:  # files by a pattern: the shipped scenarios, the robots
-        found = sorted(page.parent.glob(source))
+        found = sorted(f for f in page.parent.glob(source) if f.is_file())
         if not found:
             raise ConfigError(where, f"figures marker: {source} names no file")
-        return functools.reduce(
-            operator.or_, (source_keys(page, str(f.relative_to(page.parent)), where) for f in found)
-        )
+        try:
+            return printed("\n".join(_file_text(f.resolve(), (f.stat().st_mtime_ns,)) for f in found))
+        except (OSError, UnicodeDecodeError) as err:
+            raise ConfigError(
+                f"{where} {source}", f"cannot read it ({getattr(err, 'strerror', None) or err})"
+            ) from None
     try:
         stamp = tuple(sorted((f.name, f.stat().st_mtime_ns) for f in path.iterdir())) if path.is_dir() else ()
         if path.is_dir():
