@@ -7,20 +7,22 @@ commands, code, scenario files or link targets (what a reader types), nor the ta
 data (:mod:`mlpfac.report.results`). Each figure, rounded to the digits the page gives it, is
 
 - printed by the data a marked table on the page shows (``<!-- table: data/NAME ... -->``), or
-- printed by a source named for its part of the page, from a marker to the next one::
+- printed by a source named for its part of the page, from a marker to the next one (a marker
+  naming nothing, ``<!-- figures: -->``, ends a part)::
 
-      <!-- figures: data/route-robots ../sims/route.toml "2.9° slopes" -->
+      <!-- figures: data/route-robots ../sims/*.toml "2.9° slopes" -->
 
   a data folder (every view of its tables, its count of runs, the text a command printed:
-  ``table.md``, ``output.txt``) or a file (a dataset's ``runs.json``: every run's figures; a scenario, a robot's
-  model, a module: its settings as written), each path from the page's folder (``*`` for any
-  name: ``../sims/*.toml``); a number printed in m or s counts in mm
-  or ms too; a phrase in quotes is given as it is (a setting, a quotation, a figure derived in
-  words), and must stay on its part of the page; or
+  ``table.md``, ``output.txt``) or a file (a dataset's ``runs.json``: every run's figures; a
+  scenario, a robot's model, a module: its settings as written), each path from the page's folder,
+  ``*`` for any name; a number printed in m or s counts in mm or ms too, a percentage may be a
+  fraction; a phrase in quotes is given as it is (a setting of a model outside the repository, a
+  quotation, a figure derived in words), and must stay on its part of the page; or
 - shown as the output of a ``sh cheap`` command block right above it, which ``tests/test_docs.py``
   runs and compares (:func:`matches`), in the same part of the page.
 
-A page whose figure is none of these fails the check, naming the page, the line and the figure.
+A figure that is none of these fails the check, naming the page, the line and the figure. A page
+written from the code (:mod:`mlpfac.pages`) is checked against the code instead.
 """
 
 from __future__ import annotations
@@ -31,7 +33,6 @@ import operator
 import re
 from dataclasses import dataclass, field
 from decimal import ROUND_HALF_EVEN, ROUND_HALF_UP, Decimal
-from functools import cache
 from pathlib import Path
 
 from mlpfac.exceptions import ConfigError
@@ -66,6 +67,7 @@ class Figure:
     numbers: tuple[str, ...]
     text: str
     percent: bool = False
+    written: str = ""  # the figure as the page writes it (8 of 12, 2,000)
 
 
 @dataclass
@@ -92,9 +94,7 @@ def parts(text: str, where: str) -> list[Part]:
         part = Part(m.end(), len(text), text.count("\n", 0, m.start()) + 1)
         for w in WORD.finditer(text[m.start("spec") : m.end("spec")]):
             (part.given if w["phrase"] is not None else part.sources).append(w["phrase"] or w["path"])
-        if not part.sources and not part.given:
-            raise ConfigError(f"{where}:{part.line}", "a figures marker names no source")
-        out.append(part)
+        out.append(part)  # (naming nothing: from here, the page's tables alone)
     return out
 
 
@@ -153,7 +153,7 @@ def figures(text: str, pairs: list[Part] | None = None) -> list[tuple[int, Figur
         numbers = (m["a"], m["b"]) if m["a"] else (m["d"] or m["u"] or re.sub("[ ,]", "", m["t"]),)
         line = plain.count("\n", 0, m.start()) + 1
         percent = PERCENT.match(plain, m.end()) is not None
-        out.append((m.start(), Figure(line, numbers, lines[line - 1].strip(), percent)))
+        out.append((m.start(), Figure(line, numbers, lines[line - 1].strip(), percent, m[0])))
     return out
 
 
@@ -210,13 +210,13 @@ class Sources(Printed):
 NOTHING = Printed([])
 
 
-@cache
+@functools.cache
 def printed(text: str) -> Printed:
     """What a page may quote of a source's text: every number in it."""
     return Printed.of(text)
 
 
-@cache
+@functools.cache
 def _folder_text(folder: Path, stamp: tuple) -> str:
     """Every view of a data folder's tables, and the text kept in it, as one text."""
     from mlpfac.report.results import render
@@ -240,7 +240,7 @@ def _folder_text(folder: Path, stamp: tuple) -> str:
     return "\n".join(texts)
 
 
-@cache
+@functools.cache
 def _file_text(path: Path, stamp: tuple) -> str:
     return path.read_text()
 
@@ -297,9 +297,8 @@ def unsupported(page: Path, text: str | None = None) -> list[tuple[Figure, str]]
                 bad.append((Figure(part.line, (), phrase), "a given phrase no longer on its part of the page"))
         names = ", ".join(part.sources) or "none but the page's tables"
         for f in (f for at, f in found if part.start <= at < part.end):
-            missing = [n for n in f.numbers if not keys.shows(n, f.percent)]
-            if missing:
-                bad.append((f, f"{' and '.join(missing)} is in none of its sources ({names})"))
+            if any(not keys.shows(n, f.percent) for n in f.numbers):
+                bad.append((f, f"{f.written} is in none of its sources ({names})"))
     return bad
 
 

@@ -347,7 +347,8 @@ def run_cli(args: argparse.Namespace) -> int:
             print(f"mlpfac: {line}", file=sys.stderr)
         if figures:
             print(
-                f"mlpfac: {len(figures)} figures of the pages are in none of their sources (docs/development.md)",
+                f"mlpfac: {len(figures)} figure{'s' if len(figures) > 1 else ''} of the pages in none of their"
+                " sources (docs/development.md)",
                 file=sys.stderr,
             )
         code = max(code, 1 if old or figures else 0)
