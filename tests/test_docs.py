@@ -206,6 +206,15 @@ def test_a_given_phrase_no_longer_on_its_part_fails_and_a_bad_marker_is_bad_inpu
         figures.unsupported(page)
 
 
+def test_a_figures_marker_naming_no_such_source_is_one_line_and_exit_2(tmp_path: Path, capsys):
+    docs = tmp_path / "docs"
+    docs.mkdir()
+    (docs / "page.md").write_text("# A page\n\n<!-- figures: data/nosuch -->\n\n1.5 mm\n")
+    assert main(["report", str(docs), "--check"]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "page.md:3: figures marker: data/nosuch is neither" in err, err
+
+
 def test_a_part_takes_its_own_sources(tmp_path: Path):
     (tmp_path / "a.txt").write_text("rms 0.0252 m\n")
     page = tmp_path / "p.md"

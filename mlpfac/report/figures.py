@@ -219,8 +219,8 @@ def printed(text: str) -> Printed:
 @functools.cache
 def _folder_text(folder: Path, stamp: tuple) -> str:
     """Every view of a data folder's tables, and the text kept in it, as one text."""
+    from mlpfac.report.data import read_json
     from mlpfac.report.results import render
-    from mlpfac.report.verify import read_json
 
     files = {
         "sweep": "sweep.json",

@@ -31,18 +31,16 @@ the data and the tables.
 
 from __future__ import annotations
 
-import argparse
 import json
 import re
 import shlex
 import subprocess
-import sys
 from datetime import UTC, datetime
 from pathlib import Path
 
 from mlpfac.exceptions import ConfigError
 from mlpfac.files import write_atomic
-from mlpfac.report.verify import read_data, read_json
+from mlpfac.report.data import read_data, read_json
 
 MARKER = re.compile(r"^<!-- table: (?P<spec>.+?) -->\n(?P<body>.*?)^<!-- /table -->$", re.M | re.S)
 VIEWS = ("sweep", "compare", "paired", "summary", "untold", "robustness", "text")
@@ -305,55 +303,3 @@ def _collect_item(item: str) -> tuple[str, str]:
     if not DATA_NAME.fullmatch(name):  # not a path: ../x, a/b, . or /abs would write outside DOCS/data
         raise ConfigError(f"--collect {item}", f"NAME is one data folder's name (letters, digits, - _ .), got {name!r}")
     return name, results
-
-
-def run_cli(args: argparse.Namespace) -> int:
-    """``mlpfac report``: collect, then verify the data (``--verify``) and check the tables
-    (``--check``), both when both are given (exit 1 if a run or a table differs), or write the tables."""
-    collects = [_collect_item(item) for item in args.collect]  # every one checked before any is copied
-    if args.made_by is not None and len(collects) > 1:
-        raise ConfigError(
-            "--command", f"is the command of one --collect; {len(collects)} were given: collect each apart"
-        )
-    for name, results in collects:
-        print(f"{results} -> {collect(args.docs / 'data' / name, Path(results), args.made_by, args.code_version)}")
-    if args.remake is not None:
-        from mlpfac.report.remake import run_cli as remake
-
-        code = remake(args.docs, args.remake)
-        for page, n, changed in write(args.docs):
-            print(f"{page}: {n} tables, {'written' if changed else 'unchanged'}")
-        return code
-    if args.sources:
-        from mlpfac.report.figures import sources
-
-        print(sources(args.docs), end="")
-        return 0
-    code = 0
-    if args.verify is not None:
-        from mlpfac.report.verify import run_cli as verify
-
-        code = verify(args.docs, args.verify, args.strict)  # a line per dataset as it is done
-    if args.check:
-        old = stale(args.docs)
-        for page in old:
-            print(
-                f"mlpfac: {page}: a table differs from its data; `mlpfac report {args.docs}` writes it", file=sys.stderr
-            )
-        from mlpfac.report.figures import check
-
-        figures = check(args.docs)
-        for line in figures:
-            print(f"mlpfac: {line}", file=sys.stderr)
-        if figures:
-            print(
-                f"mlpfac: {len(figures)} figure{'s' if len(figures) > 1 else ''} of the pages in none of their"
-                " sources (docs/development.md)",
-                file=sys.stderr,
-            )
-        code = max(code, 1 if old or figures else 0)
-    if args.verify is not None or args.check:
-        return code
-    for page, n, changed in write(args.docs):
-        print(f"{page}: {n} tables, {'written' if changed else 'unchanged'}")
-    return 0

@@ -17,51 +17,17 @@ import json
 import random
 import shlex
 import sys
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from mlpfac.exceptions import ConfigError, MlpfacError, UnavailableError
 from mlpfac.flags import Parser
+from mlpfac.report.data import OUTPUT, read_json, record
 
 RUNS_FILE = "runs.json"
-OUTPUT = "output.txt"  # a command's printed output: run again by --verify, compared line by line
-RECORDS = {  # datasets that are records of what was measured once, never run again: why, by their names' start
-    "bench-": "a benchmark's timings, a record of the machine that measured them",
-    "history-": "figures of earlier code, a record of what was measured on it",
-}
-
-
-def record(folder: Path) -> str:
-    """Why a dataset is a record, never run again (``bench-*``, ``history-*``), or ""."""
-    return next((why for start, why in RECORDS.items() if folder.name.startswith(start)), "")
-
-
 UNTIMED = ("wall_time_s", "rrd")  # what differs between two runs of the same bits: time, and the recording's bytes
 FIGURES = ("rms_position_error_m", "max_position_error_m", "rms_heading_error_rad")
-
-
-def read_data(folder: Path, name: str) -> str:
-    """A data file's text; ConfigError naming it when it is missing or cannot be read."""
-    path = folder / name
-    if not path.is_file():
-        raise ConfigError(str(path), "missing: the data folder holds no such file")
-    try:
-        return path.read_text()
-    except (OSError, UnicodeDecodeError) as err:
-        raise ConfigError(str(path), f"cannot read: {err}") from None
-
-
-def read_json(folder: Path, name: str) -> dict:
-    """A data file's JSON; ConfigError naming it when it is not what a sweep writes."""
-    text = read_data(folder, name)
-    try:
-        data = json.loads(text)
-    except (ValueError, RecursionError) as err:
-        raise ConfigError(str(folder / name), f"not valid JSON: {err}") from None
-    if not isinstance(data, dict):
-        raise ConfigError(str(folder / name), "expected a JSON object")
-    return data
 
 
 def digest(metrics: dict) -> str:
@@ -346,10 +312,12 @@ def verify_dataset(p: Planned, n: int) -> Verdict:
     return v
 
 
-def verify(docs: Path, n: int) -> Iterator[Verdict]:
+def verify(docs: Path, n: int, output: Callable[[Planned, Path], Verdict] | None = None) -> Iterator[Verdict]:
     """Every dataset of ``docs/data`` checked by :func:`verify_dataset`, one after the other, from
-    the repository root (the folder above ``docs``, where the recorded commands run). Every
-    dataset is read and planned first: bad input raises ConfigError before the first run."""
+    the repository root (the folder above ``docs``, where the recorded commands run); a command's
+    printed output by ``output`` (:func:`mlpfac.report.remake.verify_output`: its command run
+    again; without it, left unverified). Every dataset is read and planned first: bad input raises
+    ConfigError before the first run."""
     if n < 1:
         raise ConfigError("--verify", f"must be a number of runs >= 1, got {n}")
     data = docs / "data"
@@ -358,16 +326,17 @@ def verify(docs: Path, n: int) -> Iterator[Verdict]:
     root = docs.resolve().parent
     folders = [f for f in sorted(data.iterdir()) if (f / "meta.json").is_file()]
     planned = [(prepare(f, root), f) for f in folders]
-    from mlpfac.report.remake import verify_output
+    for p, _ in planned:
+        if p.output and output is None:
+            p.verdict.unverified, p.output = "a command's printed output: run its command again to check it", False
+    return (output(p, f) if p.output else verify_dataset(p, n) for p, f in planned)
 
-    return (verify_output(p, f) if p.output else verify_dataset(p, n) for p, f in planned)
 
-
-def run_cli(docs: Path, n: int, strict: bool = False) -> int:
+def run_cli(docs: Path, n: int, strict: bool = False, output: Callable[[Planned, Path], Verdict] | None = None) -> int:
     """``mlpfac report DOCS --verify N [--strict]``: a line per dataset as it is done; exit 1 if a
     run differs (or, with ``strict``, if a dataset was skipped), else 0."""
     differs, skipped = False, []
-    for v in verify(docs, n):
+    for v in verify(docs, n, output):
         print(v.line(), flush=True)
         differs |= v.differs
         skipped += [v.name] if v.skipped else []
