@@ -505,30 +505,6 @@ def test_every_cheap_command_block_runs_as_written(tmp_path: Path, page: Path, b
         assert figures.matches(shown, r.stdout), f"{page.name}: {block}\nshown:\n{shown}\nprinted:\n{r.stdout[-3000:]}"
 
 
-OUTPUT = re.compile(r"^<!-- output: (?P<cmd>.+?) -->\n```\n(?P<body>.*?)^```$", re.M | re.S)
-OUTPUTS = [(page, m["cmd"], m["body"]) for page in PAGES for m in OUTPUT.finditer(page.read_text())]
-
-
-def test_there_is_a_printed_output_to_compare():
-    assert any(cmd.startswith("mlpfac run ") for _, cmd, _ in OUTPUTS)
-
-
-@pytest.mark.parametrize(("page", "command", "shown"), OUTPUTS, ids=[f"{p.name}:{c[:60]}" for p, c, _ in OUTPUTS])
-def test_every_printed_output_on_a_page_is_what_its_command_prints(tmp_path: Path, page: Path, command: str, shown):
-    """A block marked ``<!-- output: COMMAND -->`` is what COMMAND prints, line for line (the wall
-    time a run took aside)."""
-    import subprocess
-
-    work, env = _workspace(tmp_path)
-    r = subprocess.run(["bash", "-c", command], cwd=work, env=env, capture_output=True, text=True, timeout=600)
-    assert r.returncode == 0, r.stderr
-
-    def steady(text: str) -> list[str]:
-        return [re.sub(r"in \d+\.\d+ s wall", "in - s wall", line) for line in text.splitlines()]
-
-    assert steady(r.stdout) == steady(shown), f"{page.name}: {command}\n{r.stdout}"
-
-
 @pytest.mark.slow
 @pytest.mark.parametrize(("page", "snippet"), SNIPPETS, ids=_ids(SNIPPETS))
 def test_every_python_snippet_runs_as_written(tmp_path: Path, page: Path, snippet: str):
