@@ -181,6 +181,15 @@ def _features(e1, e2, e3, v_r, omega_r, v_prev, omega_prev, v_max, omega_max, sc
         x[i] = min(max(f[i] / scale[i], -clip), clip)
 
 
+@kernel("void(f8[:, ::1], f8[:, ::1], f8[:, ::1], f8, f8, f8[::1], f8, f8[:, ::1])")
+def features(E, R, U_prev, v_max, omega_max, scale, clip, X):
+    """The scaled inputs X (B, N_IN) of a batch whose rows have their own reference R (B, 2) =
+    (v_r, omega_r): what a policy is given, for training one (``examples/policy/train_policy.py``)."""
+    for b in range(E.shape[0]):
+        _features(E[b, 0], E[b, 1], E[b, 2], R[b, 0], R[b, 1], U_prev[b, 0], U_prev[b, 1], v_max, omega_max, scale,
+                  clip, X[b])  # fmt: skip
+
+
 @kernel()
 def mlp(sizes, params, x, work, out):
     """The MLP's output (sizes[-1],) for the input x: tanh hidden layers, a linear last one, each

@@ -36,5 +36,6 @@ def randomized_source(
             )
         ((_, scn),) = grid(src, vary, duration, robot)
     except ConfigError as err:
-        raise type(err)(err.where.replace(FLAG, WHERE, 1), err.what.replace(FLAG, WHERE)) from None
+        where, what = (x.replace(FLAG, WHERE).replace("--duration", "duration") for x in (err.where, err.what))
+        raise type(err)(where, what) from None
     return scn, tuple(vary.draws)

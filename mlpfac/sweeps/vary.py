@@ -253,7 +253,8 @@ def _check_duration(vary: Vary, numbers: dict, duration: float) -> None:
             raise ConfigError(f"{FLAG} {key}={late!r}", f"the event would be left out by --duration {duration:g}")
     for key in [a.key for a in vary.axes] + list(vary.draws):
         parts = key.split(".")
-        if parts[0] != "events" or len(parts) < 3 or f"events.{parts[1]}.time" in times:
+        when = f"events.{parts[1]}.time" if len(parts) >= 3 else ""
+        if parts[0] != "events" or len(parts) < 3 or when in times or when in vary.draws:  # its time varies too
             continue
         t = numbers.get(f"events.{parts[1]}.time")
         if isinstance(t, int | float) and t >= duration:
