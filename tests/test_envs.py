@@ -81,7 +81,7 @@ def test_reset_starts_the_run_of_that_seed():
 
 
 def test_gymnasium_env_checker_passes():
-    check_env(TrackEnv("eight-nominal", duration=0.5), skip_render_check=True)
+    check_env(TrackEnv("eight-nominal", duration=0.5, render_mode="rgb_array"))
     check_env(TrackEnv("eight-torque", level="torque", duration=0.3, rescale_actions=True), skip_render_check=True)
 
 
@@ -136,7 +136,7 @@ BAD_ARGUMENTS = {
     "randomize out of range": ({"randomize": {"events.0.scale": "uniform:1:100"}}, "randomize events.0.scale"),
     "randomize not a table": ({"randomize": ["events.0.scale"]}, "randomize"),
     "reward": ({"reward": 3}, "reward"),
-    "render mode": ({"render_mode": "rgb_array"}, "render_mode"),
+    "render mode": ({"render_mode": "rgb"}, "render_mode"),
     "rescale": ({"rescale_actions": "yes"}, "rescale_actions"),
 }
 

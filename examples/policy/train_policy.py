@@ -10,8 +10,8 @@ wheel radius, payload, floor friction, control period and sensor delay each chan
 per episode. The policy is residual: it commands the reference's (v_r, omega_r) plus a correction
 (mlpfac/control/policy.py), from the errors (2), the reference's speeds and its last command, each
 scaled by the robot's limits. Writes OUT.npz (the weights and scaling), OUT.json (the command,
-seed, versions and the training curve) and OUT.png (the curve). Stops at --timesteps or when the
-process has used --cpu-minutes of CPU, whichever comes first.
+seed, versions and the training curve) and OUT.png (the curve). Stops at --timesteps, when the
+process has used --cpu-minutes of CPU, or at SIGTERM, whichever comes first, and writes what it learnt.
 """
 
 from __future__ import annotations
@@ -23,6 +23,7 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")  # a shared machine: one thread fo
 import argparse  # noqa: E402
 import json  # noqa: E402
 import shlex  # noqa: E402
+import signal  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
@@ -157,8 +158,15 @@ def main() -> int:
                 print(json.dumps(row), flush=True)
 
         def _on_step(self) -> bool:
-            return time.process_time() - cpu0 < 60.0 * args.cpu_minutes
+            return time.process_time() - cpu0 < 60.0 * args.cpu_minutes and not stopped
 
+    stopped = False
+
+    def stop(signum, frame) -> None:  # SIGTERM: end the training where it is, and write what it learnt
+        nonlocal stopped
+        stopped = True
+
+    signal.signal(signal.SIGTERM, stop)
     model.learn(total_timesteps=args.timesteps, callback=Progress())
     cpu = time.process_time() - cpu0
 

@@ -29,7 +29,7 @@ from mlpfac.exceptions import ConfigError
 from mlpfac.scenario.parse import Scenario
 
 LEVELS = ("velocity", "torque")
-RENDER_MODES = ("human",)  # the episode streamed to a rerun viewer started for it
+RENDER_MODES = ("human", "rgb_array")  # a rerun viewer started for the episode; a top view as an image
 SEED_MAX = 2**31 - 1  # an episode's seed drawn by the environment: in [0, SEED_MAX)
 
 
@@ -63,7 +63,7 @@ class Setup:
 
     def sink(self, scn: Scenario, count: int):
         """The episode's recording (:mod:`mlpfac.log`): a file in ``record``, a viewer for "human"; None: neither."""
-        if self.record is None and self.render_mode is None:
+        if self.record is None and self.render_mode != "human":
             return None
         from mlpfac.log import make_sink  # only mlpfac.log imports rerun
 
@@ -98,7 +98,9 @@ def configure(
     if not isinstance(rescale_actions, bool):
         raise ConfigError("rescale_actions", f"expected true or false, got {rescale_actions!r}")
     if render_mode is not None and render_mode not in RENDER_MODES:
-        raise ConfigError("render_mode", f"expected None or 'human' (a rerun viewer), got {render_mode!r}")
+        raise ConfigError(
+            "render_mode", f"expected None, 'human' (a rerun viewer) or 'rgb_array' (a top view), got {render_mode!r}"
+        )
     reward = Reward() if reward is None else reward
     if not isinstance(reward, Reward) and not callable(reward):
         raise ConfigError("reward", f"expected a callable reward(e_true, u, info) -> float, got {reward!r}")
@@ -216,9 +218,16 @@ class TrackEnv(gym.Env):
         o = ep.inputs[0].seed(0)
         return out | {"e": o.e, "r": o.r, "obs": o}
 
-    def render(self) -> None:
-        """The "human" mode streams each episode to a rerun viewer as it runs: nothing to do here."""
-        return None
+    def render(self) -> np.ndarray | None:
+        """"rgb_array": the episode's top view (:mod:`mlpfac.envs.picture`); "human" streams each
+        episode to a rerun viewer as it runs (nothing to do here)."""
+        if self.render_mode != "rgb_array" or self.episode is None:
+            return None
+        from mlpfac.envs.picture import top_view
+
+        ep = self.episode
+        n = ep.rec.n
+        return top_view(ep.ref[:, :2], ep.loop.pose[0, :n, :2], ep.loop._q[0])
 
     def close(self) -> None:
         if self.episode is not None:
