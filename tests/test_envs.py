@@ -196,6 +196,27 @@ def test_policy_dr_runs_on_a_robot_it_was_not_trained_on():
     assert rec.status == "ok" and m["outcome"] in ("tracking", "lost")
 
 
+def test_a_policy_runs_by_name_and_by_path_in_sweep_check_and_on_other_robots(tmp_path):
+    """policy-dr by name, a copy of it by path (its folders named by its stem), on the cart and TIAGo's
+    names beside our robot; a budget naming the file beside it."""
+    import shutil
+
+    from mlpfac.control.policy import policy_file
+
+    mine = tmp_path / "mine.npz"
+    shutil.copy(policy_file("policy-dr"), mine)
+    rows = mlpfac.sweep(["eight-nominal"], ["policy-dr", str(mine)], seeds="0", duration=0.5, robots=["diffdrive", "cart"],
+                        workers=1, out=tmp_path / "sweep")  # fmt: skip
+    assert {(r["scenario"], r["controller"]) for r in rows} >= {("eight-nominal+cart", "mine"), ("eight-nominal+diffdrive", "policy-dr")}
+    assert not rows.errors
+    (tmp_path / "budget.toml").write_text(
+        'scenarios = ["eight-nominal"]\ncontrollers = ["mine.npz", "policy-dr"]\nseeds = "0"\nduration = 0.5\n'
+        "[[budget]]\nname = \"finishes\"\ndiverged = 0\n"
+    )
+    result = mlpfac.check(tmp_path / "budget.toml", out=tmp_path / "check", workers=1)
+    assert result.code == 0
+
+
 def test_a_policy_is_its_formula(tmp_path):
     """Known answer: a one-layer policy's command is ff + act_scale * clip(W x + b) * limits, with x
     the scaled, clipped inputs of mlpfac.control.policy; a zero policy is the feed-forward alone."""

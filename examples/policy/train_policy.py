@@ -33,7 +33,7 @@ import numpy as np  # noqa: E402
 
 import mlpfac  # noqa: E402
 import mlpfac.envs  # noqa: E402, F401 (registers mlpfac/Track-v0)
-from mlpfac.control.policy import N_IN, features, save  # noqa: E402
+from mlpfac.control.policy import N_IN, features, policy_file, save  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 OBS_SCALE = np.array([0.05, 0.05, 0.1, 0.01, 0.5, 0.2, 0.5, 0.2])  # e1, e2 (m), sin e3, 1 - cos e3, speeds / limits
@@ -182,6 +182,7 @@ def main() -> int:
         "algorithm": "PPO (stable-baselines3), 64-64 tanh, residual on (v_r, omega_r)",
         "timesteps": int(model.num_timesteps),
         "cpu_s": round(cpu, 1),
+        "stopped": "by SIGTERM" if stopped else "at --cpu-minutes" if cpu >= 60.0 * args.cpu_minutes else "at --timesteps",
         "versions": {
             "mlpfac": mlpfac.__version__,
             "stable_baselines3": __import__("stable_baselines3").__version__,
@@ -193,7 +194,9 @@ def main() -> int:
     out.with_suffix(".json").write_text(json.dumps(about | {"curve": curve}, indent=1) + "\n")
     plot(curve, out.with_suffix(".png"))
     print(f"{policy.path}: {model.num_timesteps} timesteps in {cpu / 60:.1f} min of CPU")
-    rec = mlpfac.run("eight-nominal", controller=str(out.with_suffix(".npz")), seed=0)
+    shipped = policy_file(out.name)  # a shipped policy's file is run by its name
+    name = out.name if shipped.exists() and shipped.resolve() == out.with_suffix(".npz").resolve() else policy.path
+    rec = mlpfac.run("eight-nominal", controller=name, seed=0)
     print("eight-nominal, seed 0:", mlpfac.metrics(rec)["phases"])
     return 0
 
