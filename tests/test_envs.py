@@ -207,11 +207,14 @@ def test_a_policy_runs_by_name_and_by_path_in_sweep_check_and_on_other_robots(tm
     shutil.copy(policy_file("policy-dr"), mine)
     rows = mlpfac.sweep(["eight-nominal"], ["policy-dr", str(mine)], seeds="0", duration=0.5, robots=["diffdrive", "cart"],
                         workers=1, out=tmp_path / "sweep")  # fmt: skip
-    assert {(r["scenario"], r["controller"]) for r in rows} >= {("eight-nominal+cart", "mine"), ("eight-nominal+diffdrive", "policy-dr")}
+    assert {(r["scenario"], r["controller"]) for r in rows} >= {
+        ("eight-nominal+cart", "mine"),
+        ("eight-nominal+diffdrive", "policy-dr"),
+    }
     assert not rows.errors
     (tmp_path / "budget.toml").write_text(
         'scenarios = ["eight-nominal"]\ncontrollers = ["mine.npz", "policy-dr"]\nseeds = "0"\nduration = 0.5\n'
-        "[[budget]]\nname = \"finishes\"\ndiverged = 0\n"
+        '[[budget]]\nname = "finishes"\ndiverged = 0\n'
     )
     result = mlpfac.check(tmp_path / "budget.toml", out=tmp_path / "check", workers=1)
     assert result.code == 0

@@ -182,7 +182,11 @@ def main() -> int:
         "algorithm": "PPO (stable-baselines3), 64-64 tanh, residual on (v_r, omega_r)",
         "timesteps": int(model.num_timesteps),
         "cpu_s": round(cpu, 1),
-        "stopped": "by SIGTERM" if stopped else "at --cpu-minutes" if cpu >= 60.0 * args.cpu_minutes else "at --timesteps",
+        "stopped": "by SIGTERM"
+        if stopped
+        else "at --cpu-minutes"
+        if cpu >= 60 * args.cpu_minutes
+        else "at --timesteps",
         "versions": {
             "mlpfac": mlpfac.__version__,
             "stable_baselines3": __import__("stable_baselines3").__version__,

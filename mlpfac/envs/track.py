@@ -219,8 +219,8 @@ class TrackEnv(gym.Env):
         return out | {"e": o.e, "r": o.r, "obs": o}
 
     def render(self) -> np.ndarray | None:
-        """"rgb_array": the episode's top view (:mod:`mlpfac.envs.picture`); "human" streams each
-        episode to a rerun viewer as it runs (nothing to do here)."""
+        """The episode's top view with ``render_mode="rgb_array"`` (:mod:`mlpfac.envs.picture`); "human"
+        streams each episode to a rerun viewer as it runs (nothing to do here)."""
         if self.render_mode != "rgb_array" or self.episode is None:
             return None
         from mlpfac.envs.picture import top_view
