@@ -112,6 +112,24 @@ def test_the_vector_env_is_the_single_env_with_the_same_seed():
     assert ended >= 4
 
 
+def test_same_step_autoreset_gives_the_ended_episode_and_starts_the_next():
+    from gymnasium.vector import AutoresetMode
+
+    kw = {"scenario": "eight-nominal", "duration": 0.05}
+    venv = gymnasium.make_vec(ID, num_envs=2, vectorization_mode="vector_entry_point",
+                              autoreset_mode=AutoresetMode.SAME_STEP, **kw)  # fmt: skip
+    env = gymnasium.make(ID, **kw)
+    obs, _ = venv.reset(seed=3)
+    env.reset(seed=3)
+    for k in range(5):
+        o, _, _, truncated, one = env.step(obs[0, 6:8])
+        obs, _, _, trunc, info = venv.step(obs[:, 6:8])
+    assert truncated and trunc.all() and info["_final_obs"].all()
+    assert np.array_equal(info["final_obs"][0], o)
+    assert info["final_info"]["metrics"][0]["phases"] == one["metrics"]["phases"]
+    assert np.array_equal(obs[0], env.reset()[0])  # the next episode, seeded as the single env's reset()
+
+
 def test_randomized_numbers_are_drawn_per_episode_seed_and_named():
     key = "events.0.scale"
     env = gymnasium.make(ID, scenario="eight-wheel-radius", duration=13.0, randomize={key: "uniform:1.2:1.8"})

@@ -49,7 +49,7 @@ DATA_FILES = ("sweep.json", "compare.json", "paired.json", "robustness.json")
 OPTIONS = ("view", "scenarios", "controllers", "labels")
 ROW_TEXTS: dict[str, tuple[type, ...]] = {  # the fields of a sweep's rows that are no number
     "scenario": (str,), "controller": (str,), "phase": (str,), "worst_status": (str,), "no_event_twin": (str, type(None)),
-    "vary": (dict,),
+    "vary": (dict,), "draws": (list,),
 }  # fmt: skip
 DATA_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]*")  # a data folder's name (--collect NAME=...)
 
@@ -118,7 +118,15 @@ def _check_rows(rows: list[dict], path: Path) -> None:
         for key, v in r.items():
             want = ROW_TEXTS.get(key, (int, float, type(None)))
             if not isinstance(v, want) or (isinstance(v, bool) and bool not in want):
-                kind = "a text" if str in want else "a table" if dict in want else "a number or null"
+                kind = (
+                    "a text"
+                    if str in want
+                    else "a table"
+                    if dict in want
+                    else "a list"
+                    if list in want
+                    else "a number or null"
+                )
                 raise ConfigError(f"{path} rows[{i}].{key}", f"expected {kind}, got {v!r}")
 
 
