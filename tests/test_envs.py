@@ -121,7 +121,7 @@ def test_same_step_autoreset_gives_the_ended_episode_and_starts_the_next():
     env = gymnasium.make(ID, **kw)
     obs, _ = venv.reset(seed=3)
     env.reset(seed=3)
-    for k in range(5):
+    for _ in range(5):
         o, _, _, truncated, one = env.step(obs[0, 6:8])
         obs, _, _, trunc, info = venv.step(obs[:, 6:8])
     assert truncated and trunc.all() and info["_final_obs"].all()
