@@ -67,13 +67,13 @@ class Episode:
         self.wall = time.perf_counter()
         if sink is not None:
             sink.begin(self.rec, geometry=self.loop.geometry(), ref_path=ref[: self.N if end is None else end[0]])
-        self._next(0)
+        self.advance(0)
 
     @property
     def plant(self):
         return self.loop.plant
 
-    def _next(self, k: int) -> None:
+    def advance(self, k: int) -> None:
         """Step k's inputs, or the episode's end: the run's end (k = N), the reference's, a divergence."""
         self.k = k
         if k < self.N and self.loop.live and self.loop.begin(k):
@@ -89,7 +89,7 @@ class Episode:
         stepped = self.loop.command(k, np.asarray(u, dtype=float).reshape(1, 2)) and self.loop.actuate(k)
         if stepped and self.sink is not None and (k + 1) % FLUSH_EVERY == 0:
             self.sink.flush(self.rec, k + 1)
-        self._next(k + 1)
+        self.advance(k + 1)
 
     @property
     def terminated(self) -> bool:

@@ -170,9 +170,9 @@ class TrackEnv(gym.Env):
         self._obs = np.zeros((1, len(self.names)))
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
-        super().reset(seed=seed)
         if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int) or seed < 0):
             raise ConfigError("seed", f"expected a whole number >= 0, got {seed!r}")
+        super().reset(seed=seed)
         s = int(seed) if seed is not None else int(self.np_random.integers(SEED_MAX))
         if self.episode is not None:
             self.episode.finish()

@@ -255,7 +255,7 @@ class TrackVectorEnv(VectorEnv):
             if ep.sink is not None and (k + 1) % FLUSH_EVERY == 0:
                 ep.sink.flush(ep.rec, k + 1)
             if code or not observe[i]:
-                ep._next(k + 1)
+                ep.advance(k + 1)
                 self._sync(int(i))
             else:
                 ep.k = k + 1
