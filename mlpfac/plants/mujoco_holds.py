@@ -137,6 +137,16 @@ class MujocoHolds:
         need, _, what = self.kerb_need(h)
         return f"kerb #{i + 1} ({h * 1e3:.3g} mm) asks {need:.3g} N m a driven wheel from rest {what}"
 
+    def world_need(self) -> str:
+        """What the kerbs ask of the motors from rest (:meth:`kerb_need`), in words for the run's
+        ``world:`` line ('' without kerbs)."""
+        kerbs = () if self.terrain is None else self.terrain.kerbs
+        if not kerbs:
+            return ""
+        limit = self.each_wheel()
+        of = f", of the {limit:.3g} N m a wheel the motors give" if math.isfinite(limit) else ""
+        return ", ".join(self._kerb_said(i, k.height) for i, k in enumerate(kerbs)) + of
+
     def world_warning(self) -> str:
         """What the robot cannot hold of its world, in words for the run's first line ('' when it holds
         all): a force beyond its tyres' traction or its motors (:meth:`holds`), a kerb its motors or

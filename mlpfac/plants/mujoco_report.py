@@ -78,6 +78,8 @@ class MujocoReport:
             out["locked_joints"] = list(self.robot.locked)
         if self.terrain is not None:
             out["world"] = self.world_said()
+        if self.world_need():  # the run's world: line
+            out["world_need"] = self.world_need()
         warning = self.world_warning()
         if warning:  # said first by `mlpfac run`
             out["world_warning"] = warning

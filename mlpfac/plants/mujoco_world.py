@@ -184,10 +184,7 @@ class MujocoWorld(MujocoHolds):
         if t.ramps:
             parts.append(f"{len(t.ramps)} ramp{'s' * (len(t.ramps) > 1)} (convex meshes)")
         if t.kerbs:
-            limit = self.each_wheel()
-            of = f", of the {limit:.3g} N m a wheel the motors give" if math.isfinite(limit) else ""
-            said = ", ".join(self._kerb_said(i, k.height) for i, k in enumerate(t.kerbs))
-            parts.append(f"{len(t.kerbs)} kerb{'s' * (len(t.kerbs) > 1)} (convex meshes; {said}{of})")
+            parts.append(f"{len(t.kerbs)} kerb{'s' * (len(t.kerbs) > 1)} (convex meshes)")
         if t.grid is not None:
             tiles = int(self._wld[W.W_NTILE])
             hfield = (

@@ -15,9 +15,7 @@ from mlpfac.plants.world_table import World
 from mlpfac.scenario.reference import sample
 
 BUMPS_DRAWN = "world.bumps"  # [drawn]: the digest of the rough ground drawn for the seed
-SAMPLE_BYTES = (
-    128  # bytes a sample of the reference takes while the world is laid out (measured: 16 floats at the peak)
-)
+SAMPLE_BYTES = 128  # bytes a reference's sample takes as the world is laid out (measured: 16 floats at the peak)
 
 
 def ground(
@@ -65,3 +63,43 @@ def recorded(table: dict, terrain: Terrain | None, was: str | None, seed: int, s
             "otherwise; remove the line to run the ground drawn now",
         )
     return {**table, "drawn": {**table.get("drawn", {}), BUMPS_DRAWN: digest}}
+
+
+def said(world: World, terrain: Terrain | None) -> str:
+    """What was built of ``world`` for a run, in words (the run's ``world:`` line): each ramp and
+    kerb where it lies, the rough ground, each patch; "" for an empty world."""
+    if terrain is None:
+        return ""
+    import math
+
+    def where(feature, placed) -> str:
+        if feature.at is None:
+            return f"at ({feature.x:g}, {feature.y:g}) m heading {feature.heading_deg or 0.0:g} deg"
+        return f"across the path at ({placed.x:.3g}, {placed.y:.3g}) m ({feature.at * 100:.3g} % of the path)"
+
+    parts = []
+    for ramp, placed in zip(world.ramps, terrain.ramps, strict=False):
+        slope = math.degrees(math.atan(ramp.slope))
+        parts.append(
+            f"a ramp {where(ramp, placed)}, {_m(ramp.height)} high, {_m(ramp.length)} long, {_m(placed.width)} "
+            f"wide ({slope:.2g} deg slopes)"
+        )
+    for kerb, placed in zip(world.kerbs, terrain.kerbs, strict=False):
+        parts.append(
+            f"a kerb {where(kerb, placed)}, a step of {_m(kerb.height)} up and {_m(kerb.length)} on down, "
+            f"{_m(placed.width)} wide"
+        )
+    if world.bumps is not None:
+        x0, y0, x1, y1 = terrain.arena
+        parts.append(
+            f"rough ground of heights in [0, {_m(world.bumps.height)}), crests about {_m(world.bumps.wavelength)} "
+            f"apart, drawn for this seed over x {x0:.3g} .. {x1:.3g} m, y {y0:.3g} .. {y1:.3g} m"
+        )
+    for p in world.patches:
+        parts.append(f"a patch of friction {p.mu:g} at ({p.x:g}, {p.y:g}) m, {_m(2 * p.radius)} across")
+    return "; ".join(parts)
+
+
+def _m(x: float) -> str:
+    """A length in words: cm below a metre."""
+    return f"{x * 100:.3g} cm" if x < 1.0 else f"{x:.3g} m"

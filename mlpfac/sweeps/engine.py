@@ -209,12 +209,13 @@ def sweep_folder(
     progress: bool | None = None,
     vary: list[str] | dict | None = None,
     threshold: float | None = None,
+    lost_threshold: float | None = None,
 ) -> Swept:
     """Validate everything (a ConfigError naming the flag before anything runs), plan, then
     :func:`sweep_into` ``out``; what ``mlpfac sweep`` / ``compare`` and :func:`mlpfac.sweep` do.
     ``command`` is what re-runs it (for messages); ``vary`` the ``--vary`` axes and draws
     (:mod:`mlpfac.sweeps.vary`), ``threshold`` the breaking points' limit in metres
-    (:mod:`mlpfac.sweeps.robustness`)."""
+    (:mod:`mlpfac.sweeps.robustness`), ``lost_threshold`` every run's ``lost_threshold_m``."""
     from mlpfac.sweeps.robustness import NO_AXIS, check_threshold
     from mlpfac.sweeps.vary import parse_vary
 
@@ -223,6 +224,10 @@ def sweep_folder(
     workers = check_execution_flags(workers, batch_size, scheduler, scheduler_timeout)
     axes = parse_vary(vary)
     threshold = check_threshold(threshold)
+    if lost_threshold is not None:
+        from mlpfac.scenario.parse import lost_threshold_m
+
+        lost_threshold = lost_threshold_m(lost_threshold, "--lost-threshold")
     if threshold is not None and not axes.axes:
         raise ConfigError("--threshold", NO_AXIS.replace("vary", "--vary"))
     scenarios = list(dict.fromkeys(scenarios))
@@ -240,10 +245,11 @@ def sweep_folder(
         from mlpfac.sweeps.worker import start_pool_server
 
         start_pool_server()  # the workers' fork server warms up while the runs are planned
-    jobs = plan(scenarios, names, seed_list, duration, axes)
+    jobs = plan(scenarios, names, seed_list, duration, axes, lost_threshold)
     check_writable(out)
     check_results_folder(out, table_files(stem))
     meta = sweep_meta(stem, scenarios, seeds, duration, jobs) | ({"vary": axes.texts()} if axes else {})
+    meta |= {"lost_threshold_m": lost_threshold} if lost_threshold is not None else {}
     meta |= {"threshold_m": threshold} if axes.axes else {}
     client = connect(scheduler, scheduler_timeout) if scheduler else None
     try:
