@@ -1,7 +1,7 @@
 """Forces and kerbs that fit any robot: a force given as a share of the robot's weight or a push as
 the velocity change it gives (the same newtons as before where the share is today's force, to the
-bit; the plant and the oracle told it given the same newtons), the run's first line when a force
-exceeds what the wheels hold, a gust with a correlation time, kerbs (the standard geometry of a wheel
+bit; the plant and the oracle told it given the same newtons), the run's warning under its outcome
+when a force exceeds what the wheels hold, a gust with a correlation time, kerbs (the standard geometry of a wheel
 against a step, known answers; refused where no wheel of that radius climbs) and features placed at
 (x, y), on our robot and on a maker's."""
 
@@ -88,9 +88,9 @@ def test_oracle_dynamic_is_told_the_newtons_the_plant_applies():
     np.testing.assert_array_equal(b.ctrl.world.schedules[0], b.plant._push)
 
 
-def test_the_run_says_first_when_a_force_exceeds_what_the_wheels_hold(tmp_path, capsys):
+def test_the_run_warns_when_a_force_exceeds_what_the_wheels_hold(tmp_path, capsys):
     """On a 0.9 kg robot the 30 N push of a round ago is beyond its tyres' traction (mu x the weight on
-    its wheels), said on the first line; the shipped push, 1 m/s of velocity change, is not."""
+    its wheels), said right under the run's outcome; the shipped push, 1 m/s of velocity change, is not."""
     (tmp_path / "small.xml").write_text(SMALL)
     robot = str(tmp_path / "small.xml")
     table = copy.deepcopy(load("eight-push", build=False).table)
@@ -100,14 +100,14 @@ def test_the_run_says_first_when_a_force_exceeds_what_the_wheels_hold(tmp_path, 
     path.write_text(to_toml(table))
     common = ["--robot", robot, "--controller", "kanayama", "--duration", "13", "--no-log", "--no-plot"]
     assert main(["run", str(path), *common, "--out", str(tmp_path / "a")]) in (0, 1)
-    first = capsys.readouterr().out.splitlines()[0]
+    first = capsys.readouterr().out.splitlines()[1]  # the outcome, then what was built and warned
     assert re.fullmatch(
-        r"warning: the force at 12\.5 s \(30 N, 3\.4 m g\) exceeds what the tyres' traction \(1 x \d+% of the 8\.9\d+ N "
+        r"  warning: the force at 12\.5 s \(30 N, 3\.4 m g\) exceeds what the tyres' traction \(1 x \d+% of the 8\.9\d+ N "
         r"weight on the driven wheels: [\d.]+ N\) can hold: the wheels slide",
         first,
     ), first
     assert main(["run", "eight-push", *common, "--out", str(tmp_path / "b")]) == 0
-    assert not capsys.readouterr().out.startswith("warning:")
+    assert "warning:" not in capsys.readouterr().out
 
 
 @pytest.mark.parametrize("name", ["eight-tow", "eight-push"])
@@ -175,8 +175,8 @@ def test_a_kerb_is_a_step_up_and_down_on_the_ground_the_robot_climbs():
     wheel_load = max(load for geom, _, load in p._footing if geom in p._tyres)
     r = float(p.robot.real_radius)
     assert need == pytest.approx(wheel_load * math.sqrt(0.005 * (2 * r - 0.005)), rel=0.01)  # the wheel's climb
-    world = scn.table["provenance"]["world"]
-    assert world.startswith("2 kerbs (convex meshes; kerb #1 (5 mm) asks 0.43 N m a driven wheel from rest")
+    need = scn.table["provenance"]["world_need"]  # the run's world: line
+    assert need.startswith("kerb #1 (5 mm) asks 0.43 N m a driven wheel from rest to climb it")
     # driven over the placed kerb, the robot's axle rises by its height, and comes down again
     rise = []
     p.reset(np.array([*(centre - 0.6 * np.array([placed.c, placed.s])), math.radians(115.0)]), np.random.default_rng(0))
@@ -193,17 +193,17 @@ def test_a_kerb_is_a_step_up_and_down_on_the_ground_the_robot_climbs():
 @pytest.mark.menagerie
 def test_a_kerb_on_makers_robots_says_what_their_motors_lack(tmp_path, capsys):
     """PAL TIAGo's 100 N m motors climb both kerbs; Stretch's forward motor (3 N m for both wheels)
-    cannot push its caster up either from rest: the run's first line says so, and it stalls at the
-    second with its caster against the step: lost."""
+    cannot push its caster up either from rest: the run says so under its outcome, and it stalls at
+    the second with its caster against the step: lost."""
     common = ["--controller", "kanayama", "--duration", "25", "--no-log", "--no-plot"]
     assert main(["run", "eight-kerb", "--robot", "pal_tiago", *common, "--out", str(tmp_path / "t")]) == 0
     out = capsys.readouterr().out
-    assert not out.startswith("warning:") and "ok, tracking" in out
+    assert "warning:" not in out and ": tracking" in out.splitlines()[0], out
     main(["run", "eight-kerb", "--robot", "hello_robot_stretch", *common, "--out", str(tmp_path / "s")])
     out = capsys.readouterr().out
-    first = out.splitlines()[0]
-    assert "ok, lost" in out
-    assert first.startswith("warning: kerb #1 (5 mm) asks 1.57 N m a driven wheel from rest to push its caster up it, "
+    outcome, first = out.splitlines()[:2]
+    assert ": lost" in outcome, outcome
+    assert first.startswith("  warning: kerb #1 (5 mm) asks 1.57 N m a driven wheel from rest to push its caster up it, "
                             "of motors that give 1.5 N m")  # fmt: skip
     assert "kerb #2 (8 mm) asks 2.38 N m" in first
 
@@ -258,3 +258,18 @@ def test_what_the_pages_say_of_forces_and_kerbs_is_what_the_code_gives():
         f"(`eight-tow`: {-tow.forces[0].fx:.2g} N on ours, {given['cart'][1]} N on the cart, {given['pal_tiago'][1]} N "
         "on TIAGo)" in results
     )
+
+
+def test_figure_1_draws_the_kerbs_and_the_time_on_them():
+    from matplotlib.patches import Polygon
+
+    from mlpfac.plots.figure1 import Draft
+    from mlpfac.plots.world import legend_entries, on_ground
+
+    rec = run(load("eight-kerb").with_overrides(controller="kanayama", duration=8.0))
+    prints = [p for p in Draft(rec, False).paths["e"].patches if isinstance(p, Polygon)]
+    assert len(prints) == 2  # each kerb's footprint
+    on = on_ground(rec)["kerb"]
+    k = int(np.argmax(on))  # the first step on the kerb at 20 % of the path
+    assert on.any() and rec.world and math.hypot(*(rec.pose[k, :2] - rec.world["kerbs"][0][0, :2])) < 0.7
+    assert "kerb (and the time on it)" in [e.get_label() for e in legend_entries(rec, True)]
