@@ -137,7 +137,10 @@ def _torque_level(scn: Scenario, instance: object | None, plant) -> Stepped:
             changed.apply(ev)
             dynamic = ev.kind in ("payload", "actuator", "wheel_radius")
             changes.append((*told(ev), changed.true_dynamics() if dynamic else None))
-    return OracleDynamic(robot, scn.T, gains, limits, changes, _world_told(scn, plant))
+    cfg = scn.plant_config
+    sensed = cfg.pose_source != "truth"  # its twist from the encoders through the nominal radius (omega: or a gyro)
+    encoders = (sensed, sensed and not cfg.gyro)
+    return OracleDynamic(robot, scn.T, gains, limits, changes, _world_told(scn, plant), encoders)
 
 
 def _world_told(scn: Scenario, plant) -> Told | None:
