@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import threading
 
 import numpy as np
 
@@ -62,6 +63,7 @@ def make_controller(scn: Scenario, instance: object | None = None, plant=None) -
 
 MEASURED: dict[tuple, list] = {}  # what the oracles are told that is measured (_measured), newest last
 MEASURED_MAX = 64  # scenarios kept (a sweep's seeds of a grid point run one after the other)
+_LOCK = threading.Lock()
 
 
 def _measured(scn: Scenario, probe) -> list[tuple[float, str, float]]:
@@ -75,14 +77,16 @@ def _measured(scn: Scenario, probe) -> list[tuple[float, str, float]]:
     table = {k: v for k, v in scn.table.items() if k != "seed" or scn.terrain is not None}
     peak = peak_wheel_speed(scn.reference, scn.duration, probe.robot)
     key = (repr(table), probe.robot.sha256, peak)
-    out = MEASURED.pop(key, None)
+    with _LOCK:  # a Dask worker may run several tasks in threads
+        out = MEASURED.pop(key, None)
     if out is None:
         out = _turning_told(scn, probe)
         times = {float(ev.time) for ev in scn.events if ev.kind in TOLD} | {t for t, *_ in out}
         out += _answer_told(scn, probe, times, peak)
-    MEASURED[key] = out
-    while len(MEASURED) > MEASURED_MAX:
-        del MEASURED[next(iter(MEASURED))]
+    with _LOCK:
+        MEASURED[key] = out
+        while len(MEASURED) > MEASURED_MAX:
+            del MEASURED[next(iter(MEASURED))]
     return list(out)
 
 
