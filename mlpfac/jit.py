@@ -49,6 +49,7 @@ MODULES = {  # the modules whose kernels each extension holds
         "mlpfac.dynamics",
         "mlpfac.control.law",
         "mlpfac.control.policy",
+        "mlpfac.control.oracle",
         "mlpfac.control.drive",
         "mlpfac.control.dynamic",
         "mlpfac.control.adaptive.kernels",

@@ -4,6 +4,7 @@ keys, wrong types and bad values named by their key), and a table written back a
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import math
 import re
@@ -92,11 +93,17 @@ def describe(hint) -> str:
     )
 
 
+@functools.cache
+def _hints(cls) -> dict:
+    """The types of a config dataclass's fields, read once a process (a sweep parses every run's table)."""
+    return typing.get_type_hints(cls)
+
+
 def build(cls, table: dict, where: str):
     """A frozen config dataclass from a TOML table: unknown keys, wrong types and bad values name the key."""
     fields = {f.name for f in dataclasses.fields(cls)}
     check_keys(table, fields, where)
-    hints = typing.get_type_hints(cls)
+    hints = _hints(cls)
     values = {}
     for key, val in table.items():
         if not typed(val, hints[key], key):

@@ -45,7 +45,10 @@ def _short(name: str, controller: str, duration: float = 4.0):
 @pytest.mark.parametrize(
     "name", ["eight-payload", "eight-torque", "eight-sensor-delay", "eight-control-period", "eight-wheel-radius"]
 )
-@pytest.mark.parametrize("controller", ["kanayama", "corradini", "adaptive", "adaptive-velocity", "adaptive-best"])
+@pytest.mark.parametrize(
+    "controller",
+    ["kanayama", "corradini", "adaptive", "adaptive-velocity", "adaptive-best", "oracle", "oracle-kanayama"],
+)
 def test_compiled_loop_is_the_step_by_step_loop(name, controller):
     scn = _short(name, controller)
     compiled_rec = run(scn)
@@ -78,7 +81,28 @@ def test_which_controllers_run_compiled():
         if ClosedLoop([s], b.ref, b.plant, b.ctrl, True, compiled=True).compiled:
             compiled.add(name)
     one_kernel = {"adaptive", "adaptive-forget", "adaptive-q", "adaptive-prior", "adaptive-best", "adaptive-velocity"}
-    assert compiled == {"kanayama", "corradini"} | one_kernel
+    assert compiled == {"kanayama", "corradini", "oracle", "oracle-kanayama"} | one_kernel
+    s = _short("eight-sensor-delay", "oracle", 0.1)  # told a delay: its predictor runs in Python
+    b = build(s)
+    assert not ClosedLoop([s], b.ref, b.plant, b.ctrl, True, compiled=True).compiled
+
+
+@pytest.mark.parametrize("controller", ["oracle", "oracle-kanayama"])
+@pytest.mark.parametrize(
+    ("name", "robot"),
+    [("eight-payload", "skid_short.xml"), ("eight-wheel-radius", "weak_servo.xml"), ("eight-control-period", None)],
+)
+def test_an_oracle_compiled_is_the_oracle_step_by_step(name, robot, controller):
+    """Told what a skid-steer's payload does to its turning (its track and kinematic centre), weak
+    servos' answer with a wheel radius, a control period: the same records, to the bit."""
+    from pathlib import Path
+
+    scn = load(name, robot=str(Path(__file__).parent / "data" / robot) if robot else None)
+    scn = scn.with_overrides(controller=controller, duration=scn.events[0].time + 2.0)
+    _same(run(scn), run(scn, on_step=lambda k: None))
+    seeds = [scn.with_overrides(seed=s) for s in range(2)]
+    for a, b in zip(run_batch(seeds), [run(s, on_step=lambda k: None) for s in seeds], strict=True):
+        _same(a, b)
 
 
 def test_adaptive_batch_compiled_records_max_weight_as_the_step_by_step_loop():

@@ -72,6 +72,31 @@ def test_the_factory_tells_the_oracle_the_weak_servos_answer_with_the_change():
     assert nothing.changes == [(12.5, "payload", 1.0)]  # told nothing of the payload: nor of the wheels
 
 
+def test_what_an_oracle_is_told_is_measured_once_for_the_seeds_of_a_scenario(monkeypatch, tmp_path):
+    """The wheels' answer is measured on a robot of the scenario's, not the run's: once a process for
+    the seeds of one scenario (a sweep's grid point), again for another value of it or a ground drawn
+    for each seed (mlpfac.loop.factory.MEASURED); every seed is told the same numbers."""
+    from mlpfac.loop import factory
+    from mlpfac.plants.mjcf import settle
+
+    calls: list[tuple] = []
+    monkeypatch.setattr(settle, "wheels_answer", lambda *a: calls.append(a) or wheels_answer(*a))
+    monkeypatch.setattr(factory, "MEASURED", {})
+    scn = load("eight-wheel-radius", robot=str(WEAK)).with_overrides(controller="oracle-kanayama")
+    told = make_controller(scn).changes
+    assert len(calls) == 1 and [kind for _, kind, _ in told] == ["wheel_radius", "wheel_gain", "wheel_offset"]
+    assert make_controller(scn.with_overrides(seed=7)).changes == told and len(calls) == 1
+    other = load("eight-wheel-radius", robot=str(WEAK), values={"events.0.scale": 1.3})
+    assert make_controller(other.with_overrides(controller="oracle-kanayama")).changes != told and len(calls) == 2
+    root = Path(__file__).parents[1]
+    text = (root / "sims" / "eight-bumps.toml").read_text().replace("../models/", f"{root}/models/")
+    (tmp_path / "bumps.toml").write_text(text + '\n[[events]]\ntime = 12.5\nkind = "wheel_radius"\nscale = 1.5\n')
+    bumps = load(tmp_path / "bumps.toml").with_overrides(controller="oracle")
+    for seed in (0, 1, 1):  # the rough ground is drawn for each seed: measured for each
+        make_controller(bumps.with_overrides(seed=seed))
+    assert len(calls) == 4
+
+
 def signs(r) -> np.ndarray:
     """The signs of the reference's wheel speeds, left and right."""
     return np.sign(wheel_speeds(r[3], r[4], *IK))

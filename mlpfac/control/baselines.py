@@ -91,8 +91,10 @@ class Stepped(Protocol):
 class LawKernel(Protocol):
     """A controller whose law the compiled closed loop runs (:mod:`mlpfac.loop.compiled`)."""
 
-    def law_kernel(self) -> tuple[int, np.ndarray]:
-        """(the law's number, its constants) for :func:`mlpfac.control.law.law_step`."""
+    def law_kernel(self, k: int = 0) -> tuple[int, np.ndarray, np.ndarray] | None:
+        """(the law's number, its constants, what it is told (none: empty)) from step k on, for
+        :func:`mlpfac.control.oracle.told_step` (:func:`mlpfac.control.law.law_step` where it is told
+        nothing); None where its step is not one kernel."""
         ...
 
 
@@ -143,11 +145,11 @@ class Corradini(Stepped):
     def telemetry(self) -> dict[str, np.ndarray | float]:
         return self._tele
 
-    def law_kernel(self) -> tuple[int, np.ndarray]:
-        """The law for the compiled closed loop: (its number, its constants) (:func:`mlpfac.control.law.law_step`)."""
+    def law_kernel(self, k: int = 0) -> tuple[int, np.ndarray, np.ndarray]:
+        """The law for the compiled closed loop: (its number, its constants, nothing told) (:func:`mlpfac.control.law.law_step`)."""
         from mlpfac.control.law import CORRADINI
 
-        return CORRADINI, np.array([self.T, *self.law.lambdas, *self._limits], dtype=float)
+        return CORRADINI, np.array([self.T, *self.law.lambdas, *self._limits], dtype=float), np.zeros(0)
 
 
 @dataclass(frozen=True)
@@ -198,11 +200,11 @@ class Kanayama(Stepped):
     def telemetry(self) -> dict[str, np.ndarray | float]:
         return self._tele
 
-    def law_kernel(self) -> tuple[int, np.ndarray]:
-        """The law for the compiled closed loop: (its number, its constants) (:func:`mlpfac.control.law.law_step`)."""
+    def law_kernel(self, k: int = 0) -> tuple[int, np.ndarray, np.ndarray]:
+        """The law for the compiled closed loop: (its number, its constants, nothing told) (:func:`mlpfac.control.law.law_step`)."""
         from mlpfac.control.law import KANAYAMA
 
-        return KANAYAMA, np.array(self._consts, dtype=float)
+        return KANAYAMA, np.array(self._consts, dtype=float), np.zeros(0)
 
 
 class PluginController(Stepped):

@@ -85,9 +85,9 @@ from collections import deque
 import numpy as np
 
 from mlpfac.control.baselines import Stepped
-from mlpfac.control.law import Law, corradini_step, kanayama_step
+from mlpfac.control.law import CORRADINI, KANAYAMA, Law, law_step
 from mlpfac.elementary import asin, cos, each, sin
-from mlpfac.jit import as_rows, seeds
+from mlpfac.jit import as_rows, kernel, seeds
 from mlpfac.model import tracking_errors
 from mlpfac.plants.events import ControlPeriod, DelayLine, Event, SensorDelay, WheelRadius
 
@@ -114,6 +114,54 @@ def told(event: Event) -> tuple[float, str, float]:
     else:
         number = 1.0
     return float(event.time), event.kind, float(number)
+
+
+@kernel()
+def _sign(x: float) -> float:
+    """np.sign of one number: -1, 0 (either zero), 1; NaN stays NaN."""
+    if x > 0.0:
+        return 1.0
+    if x < 0.0:
+        return -1.0
+    return 0.0 if x == 0.0 else x
+
+
+@kernel("void(i8, f8[::1], f8[::1], f8[:, ::1], f8, f8, f8[:, ::1], f8[:, ::1], f8[:, ::1])")
+def told_step(law, c, told, e, v_r, omega_r, u, out, tele):
+    """The law told the changes, for B seeds, in the Python loop and the compiled one alike: ``law``
+    and its constants ``c`` as :func:`~mlpfac.control.law.law_step` takes them (:meth:`Oracle._told`),
+    then ``told`` = (divide, turn, ahead, gain, offset, IK radius, IK track). The heading is led by
+    asin(ahead omega_r / v_r) where ahead != 0 and v_r > 0; the command (after the limits) divided
+    by ``divide`` (the period's factor x the radius's scale) and its omega x ``turn`` is ``u`` (what
+    the predictor moves the pose through); ``out`` is the command whose wheel speeds, through the
+    IK, the wheels answer with the ones ``u`` asks: each wheel w asked (w + offset s) / gain, s the
+    sign of its speed along the reference (the friction that slows it opposes its motion, which on
+    the path is the reference's: the command's own sign flips with the noise a law amplifies); as
+    (v, omega) through the IK's radius and track, v + radius offset (s_l + s_r) / 2 and omega +
+    radius offset (s_r - s_l) / track, both / gain. ``e`` is not written; ``tele``: (35)'s h_hat (B, 3)."""
+    divide, turn, ahead, gain, offset = told[0], told[1], told[2], told[3], told[4]
+    E = e
+    if ahead != 0.0 and v_r > 0.0:  # the sliding pose frame follows the path with its heading led
+        E = e.copy()
+        lead = asin(min(max(ahead * omega_r / v_r, -1.0), 1.0))
+        for b in range(E.shape[0]):
+            E[b, 2] += lead
+    law_step(law, c, E, v_r, omega_r, u, tele)
+    for b in range(u.shape[0]):
+        if divide != 1.0:
+            u[b, 0] /= divide
+            u[b, 1] /= divide
+        if turn != 1.0:
+            u[b, 1] *= turn
+        out[b, 0], out[b, 1] = u[b, 0], u[b, 1]
+    if gain != 1.0 or offset != 0.0:
+        radius, track = told[5], told[6]
+        half = 0.5 * omega_r * track
+        s_l, s_r = _sign(v_r - half), _sign(v_r + half)
+        lift = radius * offset
+        for b in range(u.shape[0]):
+            out[b, 0] = (u[b, 0] + lift * 0.5 * (s_l + s_r)) / gain
+            out[b, 1] = (u[b, 1] + lift * (s_r - s_l) / track) / gain
 
 
 class Oracle(Stepped):
@@ -164,8 +212,8 @@ class Oracle(Stepped):
         self._h, self._u, self._out = np.zeros((B, 3)), np.zeros((B, 2)), np.zeros((B, 2))
         self._q, self._e = np.zeros((B, 3)), np.zeros((B, 3))
         self._tele = {"h_hat": self._h[0] if self.single else self._h} if self.kanayama is None else {}
-        corradini_step(np.zeros((0, 3)), 1.0, 0.0, self.T, *self.law.lambdas, *self._limits, self._h[:0], self._u[:0])
-        kanayama_step(np.zeros((0, 3)), 1.0, 0.0, 1.0, 1.0, 1.0, *self._limits, self._u[:0])
+        self._told()
+        told_step(*self._kernel, np.zeros((0, 3)), 1.0, 0.0, self._u[:0], self._out[:0], self._h[:0])  # loaded
 
     def _apply(self, kind: str, value: float) -> None:
         if kind == "wheel_radius":
@@ -183,58 +231,51 @@ class Oracle(Stepped):
         elif kind == "wheel_offset":
             self.offset = value
 
-    def step(self, e: np.ndarray, r: np.ndarray) -> np.ndarray:
-        E = as_rows(e, 3)
-        k, T = self.k, self.T
-        if k > 0:
-            self.pose_step.push(k)
-        while self.pending and self.pending[0][0] <= k * T + 1e-9:  # the runner's rule for an event's step
+    def _due(self, k: int) -> None:
+        """Take the changes due at step k (the runner's rule for an event's step)."""
+        if not (self.pending and self.pending[0][0] <= k * self.T + 1e-9):
+            return
+        while self.pending and self.pending[0][0] <= k * self.T + 1e-9:
             _, kind, value = self.pending.pop(0)
             self._apply(kind, value)
+        self._told()
+
+    def _told(self) -> None:
+        """The law and what it is told as :func:`told_step` takes them. On the robot a velocity law's
+        c T per step is c times the motion meant: the limits x c, the command / c; on the kinematic
+        plant (7) c T is in f and G alike: (35) with c T."""
+        T, c = (self.hold * self.T, 1.0) if self.kinematic else (self.T, self.hold)
+        v_max, omega_max = self._limits
+        if self.kanayama is not None:
+            law, consts = KANAYAMA, [*self.kanayama, c * v_max, c * omega_max]
+        else:
+            law, consts = CORRADINI, [T, *self.law.lambdas, c * v_max, c * omega_max]
+        told = [c * self.radius, self.turn, self.ahead, self.gain, self.offset, *self.ik]
+        self._kernel = (law, np.array(consts, dtype=float), np.array(told, dtype=float))
+
+    def step(self, e: np.ndarray, r: np.ndarray) -> np.ndarray:
+        E = as_rows(e, 3)
+        k = self.k
+        if k > 0:
+            self.pose_step.push(k)
+        self._due(k)
         age = k - self.pose_step.read()
         if age > 0:
             E = self._predict(E, r, list(self.sent)[-age:])
-        if self.kinematic:  # model (7): c T in f and G alike
-            T_law, c = self.hold * T, 1.0
-        else:
-            T_law, c = T, self.hold
-        if self.ahead and r[3] > 0.0:  # the heading led by phi: the sliding pose frame follows the path
-            E = E.copy()
-            E[:, 2] += asin(min(max(self.ahead * float(r[4]) / float(r[3]), -1.0), 1.0))
-        v_max, omega_max = self._limits
-        if self.kanayama is not None:  # a velocity law: the robot's c T per step is c times the motion meant
-            kanayama_step(E, float(r[3]), float(r[4]), *self.kanayama, c * v_max, c * omega_max, self._u)
-        else:
-            corradini_step(
-                E, float(r[3]), float(r[4]), T_law, *self.law.lambdas, c * v_max, c * omega_max, self._h, self._u
-            )
-        gain = c * self.radius
-        if gain != 1.0:
-            self._u /= gain
-        if self.turn != 1.0:
-            self._u[:, 1] *= self.turn
+        told_step(*self._kernel, E, float(r[3]), float(r[4]), self._u, self._out, self._h)
         if self._depth:
-            self.sent.append((self._u * [self.radius, self.radius / self.turn], self.hold * T))
+            self.sent.append((self._u * [self.radius, self.radius / self.turn], self.hold * self.T))
         self.k += 1
-        u = self._u
-        if self.gain != 1.0 or self.offset != 0.0:
-            u = self._answered(r)
-        return u[0].copy() if self.single else u
+        return self._out[0].copy() if self.single else self._out
 
-    def _answered(self, r: np.ndarray) -> np.ndarray:
-        """The command whose wheel speeds, through the IK, the wheels answer with the ones ``self._u``
-        asks: each wheel w asked (w + offset s) / gain, s the sign of its speed along the reference
-        (the friction that slows it opposes its motion, which on the path is the reference's: the
-        command's own sign flips with the noise a law amplifies); as (v, omega) through the IK's
-        radius and track, v + radius offset (s_l + s_r) / 2 and omega + radius offset (s_r - s_l) /
-        track, both / gain."""
-        radius, track = self.ik
-        half = 0.5 * float(r[4]) * track
-        s_l, s_r = np.sign(float(r[3]) - half), np.sign(float(r[3]) + half)
-        lift = radius * self.offset
-        self._out[:, 0] = (self._u[:, 0] + lift * 0.5 * (s_l + s_r)) / self.gain
-        self._out[:, 1] = (self._u[:, 1] + lift * (s_r - s_l) / track) / self.gain
-        return self._out
+    def law_kernel(self, k: int = 0) -> tuple[int, np.ndarray, np.ndarray] | None:
+        """The told law for the compiled closed loop from step k on (the changes due by then taken):
+        (its number, its constants, what it is told) (:func:`told_step`); None with a sensor delay,
+        whose predictor runs in Python."""
+        if self._depth:
+            return None
+        self._due(k)
+        return self._kernel
 
     def _predict(self, E: np.ndarray, r: np.ndarray, sent: list) -> np.ndarray:
         """The error (2) to r of the pose the measured one reaches through ``sent``: exact unicycle arcs."""

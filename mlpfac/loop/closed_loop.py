@@ -172,9 +172,10 @@ class ClosedLoop:
         self.ctele = _allocate(self.ctrl_store, self.ctrl.telemetry(), self.recs, "ctrl", self.B, self.N, self.full)
         self.ptele = self.plant_rows()
         if isinstance(self.ctrl, LawKernel):
-            self.law, self.states = self.ctrl.law_kernel(), [no_state()] * self.B
+            self.law, self.states = self.ctrl.law_kernel(0), [no_state()] * self.B
         else:
-            self.law, self.states = (ADAPTIVE, np.zeros(0)), [self.ctrl.kernel_state(b) for b in range(self.B)]
+            none = np.zeros(0)
+            self.law, self.states = (ADAPTIVE, none, none), [self.ctrl.kernel_state(b) for b in range(self.B)]
         pose = self.pose[0]
         segment(0, 0, self.ref, *self.law, 1.0, pose, pose, pose, pose, self.u[0], self.ctele[0], self.ptele[0],
                 np.zeros((0, 3)), self.states[0], plants[0].kernel_args())  # fmt: skip
@@ -191,6 +192,8 @@ class ClosedLoop:
             if self._reference_ended(k):
                 break
             _apply_due(self.pending, k, T, self.plant, self.recs, self.live)
+            if self.law[0] != ADAPTIVE:  # an oracle takes the changes it is told with the events
+                self.law = self.ctrl.law_kernel(k)
             most = max(1, SEGMENT_PHYSICS // max(p._n for p in self.plant.plants))  # a signal waits no longer
             k1 = min(N, (k // FLUSH_EVERY + 1) * FLUSH_EVERY, k + most)
             if self.pending:  # up to the next event
@@ -338,9 +341,11 @@ class ClosedLoop:
 def _compiled(plant: PlantList, ctrl: Stepped) -> bool:
     """Whether the closed loop can run compiled: every plant has a compiled step, the controller's
     step is a kernel."""
-    kernel = isinstance(ctrl, LawKernel) or (isinstance(ctrl, StateKernel) and ctrl.kernel_state(0) is not None)
-    kernel = kernel and ctrl.level == "velocity"  # the segment's plant step takes (v, omega)
-    return kernel and all(isinstance(p, CompiledPlant) for p in plant.plants)
+    if ctrl.level != "velocity" or not all(isinstance(p, CompiledPlant) for p in plant.plants):
+        return False  # the segment's plant step takes (v, omega)
+    if isinstance(ctrl, LawKernel):
+        return ctrl.law_kernel(0) is not None
+    return isinstance(ctrl, StateKernel) and ctrl.kernel_state(0) is not None
 
 
 def _apply_due(pending: list, k: int, T: float, plant, recs: list[RunRecord], live: list[int]) -> None:

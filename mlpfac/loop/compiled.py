@@ -2,6 +2,7 @@
 
 For a plant with a compiled control step (the MuJoCo robot, :mod:`mlpfac.plants.compiled`) and a
 controller whose step is a kernel (Kanayama, Corradini: :func:`mlpfac.control.law.law_step`; the
+oracles told the changes without a sensor delay: :func:`mlpfac.control.oracle.told_step`; the
 adaptive scheme's compiled form: :func:`adaptive_row`), the
 runner steps each seed from one event (or sink flush) to the next with :func:`segment`. Every
 step is the runner's step, made of the same kernels the step-by-step loop calls with B = 1:
@@ -16,6 +17,7 @@ import numpy as np
 
 from mlpfac.control.adaptive.kernels import AdaptiveState, adaptive_step, state_type
 from mlpfac.control.law import law_step
+from mlpfac.control.oracle import told_step
 from mlpfac.jit import kernel
 from mlpfac.loop.kernels import bad_seeds
 from mlpfac.model import tracking_errors
@@ -59,13 +61,15 @@ def adaptive_row(s, first, e, v_r, omega_r, tele):
 
 @kernel(
     lambda: with_robot(
-        f"UniTuple(i8, 2)(i8, i8, f8[:, ::1], i8, f8[::1], f8, {', '.join(['f8[:, ::1]'] * 8)})", state_type()
+        f"UniTuple(i8, 2)(i8, i8, f8[:, ::1], i8, f8[::1], f8[::1], f8, {', '.join(['f8[:, ::1]'] * 8)})",
+        state_type(),
     ),
     ext="mujoco",
 )
-def segment(k0, k1, ref, law, c, limit, pose, pose_meas, e, e_true, u, ctele, ptele, draws, state, robot):
+def segment(k0, k1, ref, law, c, told, limit, pose, pose_meas, e, e_true, u, ctele, ptele, draws, state, robot):
     """Steps k0 .. k1 - 1 of one seed. The controller: ``law`` (a law's number, with constants ``c``,
-    or ADAPTIVE, with the seed's ``state``, step 0 its first step). Records (N, ...) are written at
+    and what an oracle is told, ``told``: :func:`mlpfac.control.oracle.told_step`; empty: the law
+    itself), or ADAPTIVE, with the seed's ``state``, step 0 its first step. Records (N, ...) are written at
     row k; ``ctele``, ``ptele`` (N, W) the controller's and the plant's telemetry rows; ``draws``
     (k1 - k0, 3) the plant's noise; ``robot`` :meth:`~mlpfac.plants.mujoco.MujocoPlant.kernel_args`.
 
@@ -73,7 +77,7 @@ def segment(k0, k1, ref, law, c, limit, pose, pose_meas, e, e_true, u, ctele, pt
     why (BAD: the runner's test, after the law; > 0: the plant's code, after the plant's step)."""
     st, hist = robot.st, robot.hist
     q, qm, ek, etk = np.empty((1, 3)), np.empty((1, 3)), np.empty((1, 3)), np.empty((1, 3))
-    uk, no_z, bad = np.empty((1, 2)), np.empty((1, 0)), np.zeros(1, dtype=np.bool_)
+    uk, sent, no_z, bad = np.empty((1, 2)), np.empty((1, 2)), np.empty((1, 0)), np.zeros(1, dtype=np.bool_)
     for k in range(k0, k1):
         r = ref[k]
         for j in range(3):
@@ -83,6 +87,8 @@ def segment(k0, k1, ref, law, c, limit, pose, pose_meas, e, e_true, u, ctele, pt
         if law == ADAPTIVE:
             adaptive_row(state, k == 0, ek, r[3], r[4], ctele[k])
             uk[0, 0], uk[0, 1], z = state.u[0, 0], state.u[0, 1], state.z
+        elif told.shape[0]:
+            told_step(law, c, told, ek, r[3], r[4], sent, uk, ctele[k : k + 1])
         else:
             law_step(law, c, ek, r[3], r[4], uk, ctele[k : k + 1])
         tracking_errors(q, r, etk)

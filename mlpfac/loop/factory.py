@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import threading
 
 import numpy as np
 
@@ -58,10 +59,38 @@ def make_controller(scn: Scenario, instance: object | None = None, plant=None) -
         if scn.plant_kind != "mujoco" or not scn.events:
             return Oracle(scn.law, scn.T, [told(ev) for ev in scn.events], scn.plant_kind == "kinematic", gains)
         probe = make_plant(scn, sample(scn.reference, np.arange(2) * scn.T))  # a robot of the scenario's to measure
-        changes = [told(ev) for ev in scn.events] + _turning_told(scn, probe)
-        changes += _answer_told(scn, probe, {t for t, kind, _ in changes if kind in TOLD})
+        changes = [told(ev) for ev in scn.events] + _measured(scn, probe)
         return Oracle(scn.law, scn.T, changes, False, gains, (probe.ik_radius, probe.ik_track))
     return Kanayama(scn.law, scn.kanayama, scn.T)
+
+
+MEASURED: dict[tuple, list] = {}  # what the oracles are told that is measured (_measured), newest last
+MEASURED_MAX = 64  # scenarios kept (a sweep's seeds of a grid point run one after the other)
+_LOCK = threading.Lock()
+
+
+def _measured(scn: Scenario, probe) -> list[tuple[float, str, float]]:
+    """What the oracle is told that is measured on ``probe`` (a robot of the scenario's, not the run's
+    own): each payload's turning of a skid-steer, then how the wheels answer a command after each
+    change it is told. Measured once a process for a scenario as resolved (its table but its seed;
+    with its seed where it has a world, whose rough ground is drawn for each), its robot's compiled
+    model (sha256) and the fastest a wheel turns along its reference (the speeds it is measured at):
+    the seeds of a sweep's grid point are told the same numbers, which cost 500 control steps of
+    the probe a change (:func:`~mlpfac.plants.mjcf.settle.wheels_answer`), a third of a 15-s run's."""
+    table = {k: v for k, v in scn.table.items() if k != "seed" or scn.terrain is not None}
+    peak = peak_wheel_speed(scn.reference, scn.duration, probe.robot)
+    key = (repr(table), probe.robot.sha256, peak)
+    with _LOCK:  # a Dask worker may run several tasks in threads
+        out = MEASURED.pop(key, None)
+    if out is None:
+        out = _turning_told(scn, probe)
+        times = {float(ev.time) for ev in scn.events if ev.kind in TOLD} | {t for t, *_ in out}
+        out += _answer_told(scn, probe, times, peak)
+    with _LOCK:
+        MEASURED[key] = out
+        while len(MEASURED) > MEASURED_MAX:
+            del MEASURED[next(iter(MEASURED))]
+    return list(out)
 
 
 def _turning_told(scn: Scenario, probe) -> list[tuple[float, str, float]]:
@@ -76,13 +105,13 @@ def _turning_told(scn: Scenario, probe) -> list[tuple[float, str, float]]:
     return out
 
 
-def _answer_told(scn: Scenario, probe, times: set[float]) -> list[tuple[float, str, float]]:
+def _answer_told(scn: Scenario, probe, times: set[float], peak: float) -> list[tuple[float, str, float]]:
     """How the wheels answer a command (:func:`mlpfac.plants.mjcf.settle.wheels_answer`, at the speeds
-    the reference asks), measured on ``probe`` with the events applied in turn up to each one at
-    ``times`` (those whose change the oracle is told), where it differs from what it was told last."""
+    the reference asks: ``peak`` the fastest), measured on ``probe`` with the events applied in turn up
+    to each one at ``times`` (those whose change the oracle is told), where it differs from what it
+    was told last."""
     from mlpfac.plants.mjcf.settle import wheels_answer  # here: importing the factory imports no MuJoCo
 
-    peak = peak_wheel_speed(scn.reference, scn.duration, probe.robot)
     out, last = [], (1.0, 0.0)
     for i, ev in enumerate(scn.events):
         if float(ev.time) in times and (answer := wheels_answer(probe, peak, scn.events[: i + 1])) != last:
@@ -115,7 +144,10 @@ def _torque_level(scn: Scenario, instance: object | None, plant) -> Stepped:
             changed.apply(ev)
             dynamic = ev.kind in ("payload", "actuator", "wheel_radius")
             changes.append((*told(ev), changed.true_dynamics() if dynamic else None))
-    return OracleDynamic(robot, scn.T, gains, limits, changes, _world_told(scn, plant))
+    cfg = scn.plant_config
+    sensed = cfg.pose_source != "truth"  # its twist from the encoders through the nominal radius (omega: or a gyro)
+    encoders = (sensed, sensed and not cfg.gyro)
+    return OracleDynamic(robot, scn.T, gains, limits, changes, _world_told(scn, plant), encoders)
 
 
 def _world_told(scn: Scenario, plant) -> Told | None:

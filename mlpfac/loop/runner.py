@@ -60,8 +60,8 @@ def run(
     also after a divergence, a Ctrl-C or a SIGTERM (the reason says "interrupted" or "terminated").
     ``built``: from :func:`build`, used once (the plant and the controller keep state).
     ``on_step(k)`` is called after every step k; the loop then goes step by step in Python. Without
-    it, a MuJoCo plant with Kanayama's or Corradini's law runs compiled from one event or flush to
-    the next (:mod:`mlpfac.loop.compiled`), to the same bits.
+    it, a MuJoCo plant with Kanayama's or Corradini's law, or an oracle told them, runs compiled from
+    one event or flush to the next (:mod:`mlpfac.loop.compiled`), to the same bits.
     A run is the closed loop of :func:`run_batch` with one seed (B = 1).
     """
     built = built or build(scn)
