@@ -122,6 +122,8 @@ def sweep(
     robots: list[str] | None = None,
     vary: dict | list[str] | None = None,
     threshold: float | None = None,
+    limit: bool = False,
+    limit_cache: str | Path | None = None,
 ) -> list[dict]:
     """Run scenarios x controllers x seeds (as ``mlpfac sweep``) and return the sweep's rows: the
     ``rows`` of sweep.json, one per scenario, controller and phase. With ``out`` the folder is
@@ -135,7 +137,9 @@ def sweep(
 
     The returned list has ``.errors`` ({(scenario, controller, seed): traceback}) and ``.paired``
     (the rows of paired.json). Ctrl-C raises KeyboardInterrupt (with ``out``, the runs written are
-    kept and the next call resumes them). ``robots``: every scenario on each (as ``--robots``)."""
+    kept and the next call resumes them). ``robots``: every scenario on each (as ``--robots``).
+    ``limit`` (as ``--limit``): the physical limit on every scenario and seed, each computed once and
+    kept in ``limit_cache`` (default ``runs/limits``); the paired rows gain ``x_limit_median``."""
     from mlpfac.plots.robustness import read_robustness
     from mlpfac.scenario.on_robot import robots_named, with_robots
     from mlpfac.sweeps import engine
@@ -155,6 +159,12 @@ def sweep(
         raise ConfigError("robots", f"expected a list of robots (names or files), got {robots!r}")
     if out is not None:
         out = user_path(out, "out")
+    if not isinstance(limit, bool):
+        raise ConfigError("limit", f"expected True or False, got {limit!r}")
+    if limit_cache is not None:
+        if not limit:
+            raise ConfigError("limit_cache", "is the cache of limit's runs: give it with limit=True")
+        limit_cache = user_path(limit_cache, "limit_cache")
     text = None
     if controllers is not None:
         specs = [
@@ -183,6 +193,8 @@ def sweep(
                 progress=False,
                 vary=vary,
                 threshold=threshold,
+                limit=limit,
+                limit_cache=Path(limit_cache) if limit_cache is not None else None,
             )
         robust = Path(out if out is not None else tmp) / "robustness.json"
         robustness = read_robustness(robust) if robust in result.paths else None

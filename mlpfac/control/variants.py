@@ -57,5 +57,8 @@ VARIANTS["adaptive-real-fast"] = VARIANTS["adaptive-real"] | {"input_P_alarm": 2
 
 # The shipped controllers of the torque level (mlpfac/control/dynamic.py): they command the wheels' torques.
 TORQUE_LEVEL = ("fierro-lewis", "adaptive-dynamic", "oracle-dynamic")
+# The model-predictive controllers with the run's own robot as their model (mlpfac/control/mpc/): they
+# command the drive the robot has, (v, omega) to velocity servos, the wheels' torques to torque motors.
+MPC_NAMES = ("mpc", "limit")
 # Every shipped controller (the oracles: mlpfac/control/oracle.py); any other name is a plug-in's.
-CONTROLLERS = (*VARIANTS, "corradini", "kanayama", "oracle", "oracle-kanayama", *TORQUE_LEVEL)
+CONTROLLERS = (*VARIANTS, "corradini", "kanayama", "oracle", "oracle-kanayama", *TORQUE_LEVEL, *MPC_NAMES)

@@ -123,7 +123,7 @@ def _check_rows(rows: list[dict], path: Path) -> None:
 
 
 def _render(folder: Path, view: str, opts: dict[str, str], data: dict, rows: list[dict]) -> str:
-    from mlpfac.sweeps.paired import PAIRED_COLUMNS, summary
+    from mlpfac.sweeps.paired import paired_columns, summary
     from mlpfac.sweeps.tables import COMPARE_COLUMNS, SWEEP_COLUMNS, markdown
 
     try:
@@ -142,7 +142,7 @@ def _render(folder: Path, view: str, opts: dict[str, str], data: dict, rows: lis
         from mlpfac.sweeps.robustness import markdown as breaking_markdown
 
         return breaking_markdown(rows, (data.get("meta") or {}).get("threshold_m"), data.get("curves"))
-    columns = {"sweep": SWEEP_COLUMNS, "compare": COMPARE_COLUMNS, "paired": PAIRED_COLUMNS}[view]
+    columns = {"sweep": SWEEP_COLUMNS, "compare": COMPARE_COLUMNS, "paired": paired_columns(rows)}[view]
     return markdown(rows, columns)
 
 
