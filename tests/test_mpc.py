@@ -11,7 +11,7 @@ import pytest
 
 import mlpfac
 from mlpfac.control.mpc.config import MpcConfig
-from mlpfac.control.mpc.kernels import covariance_predict, gauss_newton, kalman_update, plan_cost
+from mlpfac.control.mpc.kernels import covariance_predict, gauss_newton, kalman_update, plan_cost, residual_jacobian
 from mlpfac.exceptions import ConfigError
 from mlpfac.loop.factory import make_controller
 from mlpfac.loop.metrics import metrics
@@ -138,7 +138,10 @@ def test_the_gauss_newton_step_solves_the_damped_normal_equations():
         E[1 + p] = (r0 + w[p] * J[p]).reshape(H, 3)
     delta = np.zeros(M)
     mu = 0.1
-    gauss_newton(E, w, mu, 0.0, delta)
+    Jk = np.empty((M, 3 * H))
+    residual_jacobian(E, w, Jk)
+    np.testing.assert_allclose(Jk, J, rtol=1e-8, atol=1e-12)
+    gauss_newton(Jk, np.ascontiguousarray(E[0]), mu, 0.0, delta)
     A = J @ J.T
     A += mu * np.diag(np.diag(A))
     np.testing.assert_allclose(delta, np.linalg.solve(A, -J @ r0), rtol=1e-8)
@@ -176,7 +179,7 @@ def test_the_mpc_commands_the_drive_the_robot_has():
 @pytest.mark.parametrize(
     "key, value",
     [("horizon_s", 0.0), ("horizon_s", 1e9), ("knots", 0), ("knots", 2.5), ("iterations", 99),
-     ("heading_m", -1.0), ("accel_std", float("nan")), ("fd_step", 0.0), ("damping", "x")],
+     ("heading_m", -1.0), ("accel_std", float("nan")), ("fd_step", 0.0), ("damping", "x"), ("reuse", -1)],
 )  # fmt: skip
 def test_bad_settings_are_refused_naming_their_key(key, value):
     with pytest.raises(ConfigError) as err:

@@ -173,8 +173,9 @@ def _mpc(scn: Scenario, plant=None) -> Stepped:
     noise = np.zeros(3) if noise is None else np.asarray(noise, dtype=float)
     if getattr(pc, "pose_source", "truth") != "truth":
         noise = np.maximum(noise, 1.0e-3)
+    wheel_noise = float(getattr(pc, "wheel_speed_noise_std", 0.0))
     return MPC(scn.controller, scn.level, T, cfg, build_model, preview, scn.events, limits, scale, noise,
-               scn.controller == "limit")  # fmt: skip
+               scn.controller == "limit", wheel_noise)  # fmt: skip
 
 
 def _model_scenario(scn: Scenario) -> Scenario:

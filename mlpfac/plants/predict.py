@@ -112,12 +112,16 @@ def rollouts(x, st, w, U, ref, k, E, tele, robot):
                 _error(robot.st, ref[min(k + j + 1, last)], E[i, j])
 
 
-@kernel(lambda: with_robot("i8(f8[::1], f8[::1], f8, f8, f8, f8, f8[::1], f8[::1], f8[:, ::1], f8[::1])"), ext="mujoco")
-def transition(x, st, w, u0, u1, eps, x1, st1, A, tele, robot):
+@kernel(
+    lambda: with_robot("i8(f8[::1], f8[::1], f8, f8, f8, f8, i8[::1], f8[::1], f8[::1], f8[:, ::1], f8[::1])"),
+    ext="mujoco",
+)
+def transition(x, st, w, u0, u1, eps, S, x1, st1, A, tele, robot):
     """One control step of u = (u0, u1) from (x, st, w): the next state into (x1, st1) and, when A
-    is (2 nv, 2 nv), its Jacobian in the tangent space (positions, velocities) by forward
-    differences of ``eps`` (positions moved with ``mj_integratePos``, the next states compared with
-    ``mj_differentiatePos``). Returns the plant's divergence code of the unperturbed step."""
+    is (len(S), len(S)), its Jacobian among the tangent directions S (indices into positions 0..nv-1
+    and velocities nv..2nv-1) by forward differences of ``eps`` (positions moved with
+    ``mj_integratePos``, the next states compared with ``mj_differentiatePos``). Returns the plant's
+    divergence code of the unperturbed step."""
     draw = np.zeros(3)
     nv = robot.qvel.shape[0]
     _restore(x, st, w, robot)
@@ -128,7 +132,8 @@ def transition(x, st, w, u0, u1, eps, x1, st1, A, tele, robot):
     q1 = robot.qpos.copy()
     v1 = robot.qvel.copy()
     dq = np.zeros(nv)
-    for col in range(2 * nv):
+    for j in range(S.shape[0]):
+        col = S[j]
         _restore(x, st, w, robot)
         if col < nv:
             dq[:] = 0.0
@@ -139,9 +144,9 @@ def transition(x, st, w, u0, u1, eps, x1, st1, A, tele, robot):
         mj_step1(robot.mp, robot.dp)
         plant_step(u0, u1, draw, tele, robot)
         mj_differentiatePos(robot.mp, dq.ctypes.data, 1.0, q1.ctypes.data, robot.qpos.ctypes.data)
-        for i in range(nv):
-            A[i, col] = dq[i] / eps
-            A[nv + i, col] = (robot.qvel[i] - v1[i]) / eps
+        for i in range(S.shape[0]):
+            row = S[i]
+            A[i, j] = (dq[row] if row < nv else robot.qvel[row - nv] - v1[row - nv]) / eps
     return why
 
 
@@ -191,14 +196,18 @@ class Predictor:
 
     def __init__(self, plant) -> None:
         self.plant = plant
+        self.control_steps = 0  # control steps the model has taken (benchmarks/bench_mpc.py)
         self._sizes()
 
     def _sizes(self) -> None:
-        m = self.plant.model
+        p = self.plant
+        m = p.model
         self.nx = mujoco.mj_stateSize(m, STATE)
         self.nv = int(m.nv)
-        self.n = 2 * self.nv  # the tangent space's dimension (actuator states are predicted, not estimated)
-        self._tele = np.zeros(self.plant.tele.shape[0])
+        # the directions an estimator estimates: every position (in the tangent space), then every velocity
+        self.S = np.arange(2 * self.nv, dtype=np.int64)
+        self.n, self.half = 2 * self.nv, self.nv
+        self._tele = np.zeros(p.tele.shape[0])
 
     @property
     def world_step(self) -> bool:
@@ -219,21 +228,38 @@ class Predictor:
 
     def rollouts(self, x, st, k: int, U: np.ndarray, ref: np.ndarray, E: np.ndarray) -> None:
         rollouts(x, st, float(k), U, ref, k, E, self._tele, self.args())
+        self.control_steps += U.shape[0] * U.shape[1]
 
     def transition(self, x, st, k: int, u, eps: float, A: np.ndarray):
         x1, st1 = np.empty(self.nx), np.empty(N_ST)
-        why = transition(x, st, float(k), float(u[0]), float(u[1]), eps, x1, st1, A, self._tele, self.args())
+        why = transition(x, st, float(k), float(u[0]), float(u[1]), eps, self.S, x1, st1, A, self._tele, self.args())
+        self.control_steps += 1 + A.shape[0]
         return x1, st1, int(why)
 
     def correct(self, x, st, k: int, dx: np.ndarray):
+        """(x, st) moved by dx along the estimated directions S."""
+        full = np.zeros(2 * self.nv)
+        full[self.S] = dx
         x1, st1 = np.empty(self.nx), np.empty(N_ST)
-        correct(x, st, float(k), np.ascontiguousarray(dx, dtype=float), x1, st1, self.args())
+        correct(x, st, float(k), full, x1, st1, self.args())
         return x1, st1
 
+    def wheel_rows(self, x) -> tuple[np.ndarray, np.ndarray]:
+        """The wheels' speeds (left, right; forward positive) as a measurement of the state x: their
+        Jacobian (2, 2 nv) in the tangent space and their values."""
+        p = self.plant
+        nq = int(p.model.nq)
+        Hw, w = np.zeros((2, self.n)), np.empty(2)
+        for i, (dof, sign) in enumerate(zip(p.robot.dofs, p.robot.sign, strict=True)):
+            Hw[i, self.half + dof] = sign
+            w[i] = sign * x[1 + nq + dof]
+        return Hw, w
+
     def pose_jacobian(self, x, st, k: int) -> np.ndarray:
-        Hx = np.zeros((3, self.n))
+        """The pose's Jacobian (3, n) along the estimated directions S."""
+        Hx = np.zeros((3, 2 * self.nv))
         pose_jacobian(x, st, float(k), Hx, self.args())
-        return Hx
+        return np.ascontiguousarray(Hx[:, self.S])
 
     def apply(self, event, x, st) -> tuple[np.ndarray, np.ndarray]:
         """Tell the model ``event`` with the robot at (x, st): the state after it (an event that

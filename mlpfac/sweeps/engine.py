@@ -220,14 +220,12 @@ def sweep_folder(
     (:mod:`mlpfac.sweeps.vary`), ``threshold`` the breaking points' limit in metres
     (:mod:`mlpfac.sweeps.robustness`); ``limit`` adds ``limit`` on every scenario and seed, taken from
     (and kept in) the cache folder ``limit_cache`` (:mod:`mlpfac.sweeps.limits`)."""
-    from mlpfac.sweeps.limits import DEFAULT_CACHE, LIMIT, LimitCache
+    from mlpfac.sweeps.limits import DEFAULT_CACHE, LimitCache, with_limit
     from mlpfac.sweeps.robustness import NO_AXIS, check_threshold
     from mlpfac.sweeps.vary import parse_vary
 
     seed_list = parse_seeds(seeds)
-    names = parse_controllers(controllers)
-    if limit and LIMIT not in names:
-        names.append(LIMIT)
+    names = with_limit(parse_controllers(controllers), limit)
     cache = LimitCache(limit_cache or DEFAULT_CACHE) if limit else None
     if cache is not None:
         check_writable(cache.root, "--limit-cache")

@@ -37,6 +37,11 @@ SIMULATED_CODE = ("elementary.py", "normal.py", "model.py", "dynamics.py", "jit.
                   "plants", "scenario", "loop")  # fmt: skip
 
 
+def with_limit(names: list, limit: bool) -> list:
+    """The controllers of a sweep (``parse_controllers``'s), ``limit`` added with ``--limit``."""
+    return names + [LIMIT] if limit and LIMIT not in names else names
+
+
 @functools.cache
 def fingerprint() -> str:
     """mlpfac's version and a hash of the sources a run computes with."""

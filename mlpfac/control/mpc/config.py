@@ -18,9 +18,11 @@ class MpcConfig:
     iterations: int = 3  # Gauss-Newton steps a control step, at most
     tolerance: float = 0.05  # ... fewer once a step lowers the plan's cost by less than this share
     settled_m: float = 1.0e-4  # ... or once the plan's RMS residual is below this (m)
+    reuse: int = 2  # control steps a settled plan's Jacobian (and the estimator's step Jacobian) serve again (0: new ones every step)
     heading_m: float = 0.03  # m a radian of heading error costs, against the position's
     damping: float = 1.0e-3  # mu of the Levenberg-Marquardt step (on diag(J'J))
     accel_std: float = 0.1  # the estimator's process noise: std of each generalized acceleration (SI units / s^2)
+    told_std: float = 0.01  # ... and the std each velocity's estimate loses at an event it is told (SI units)
     fd_step: float = 1.0e-3  # the knots' finite-difference step, a share of the commands' scale
 
     def __post_init__(self) -> None:
@@ -29,6 +31,7 @@ class MpcConfig:
             "heading_m": (self.heading_m, 0.0, 1.0e3),
             "damping": (self.damping, 0.0, 1.0e6),
             "accel_std": (self.accel_std, 0.0, 1.0e6),
+            "told_std": (self.told_std, 0.0, 1.0e6),
             "fd_step": (self.fd_step, 1.0e-9, 1.0),
             "tolerance": (self.tolerance, 0.0, 1.0),
             "settled_m": (self.settled_m, 0.0, 1.0),
@@ -38,6 +41,7 @@ class MpcConfig:
                 raise ConfigError(key, f"expected a number in [{lo:g}, {hi:g}], got {val!r}")
         if not self.horizon_s > 0:
             raise ConfigError("horizon_s", f"must be positive, got {self.horizon_s}")
-        for key, val, hi in (("knots", self.knots, 20), ("iterations", self.iterations, 10)):
-            if isinstance(val, bool) or not isinstance(val, int) or not 1 <= val <= hi:
-                raise ConfigError(key, f"expected a whole number in [1, {hi}], got {val!r}")
+        for key, val, lo, hi in (("knots", self.knots, 1, 20), ("iterations", self.iterations, 1, 10),
+                                 ("reuse", self.reuse, 0, 100)):  # fmt: skip
+            if isinstance(val, bool) or not isinstance(val, int) or not lo <= val <= hi:
+                raise ConfigError(key, f"expected a whole number in [{lo}, {hi}], got {val!r}")

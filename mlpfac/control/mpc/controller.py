@@ -9,7 +9,13 @@ import numpy as np
 
 from mlpfac.control.baselines import Stepped
 from mlpfac.control.mpc.config import MpcConfig
-from mlpfac.control.mpc.kernels import covariance_predict, gauss_newton, kalman_update, plan_cost
+from mlpfac.control.mpc.kernels import (
+    covariance_predict,
+    gauss_newton,
+    kalman_update,
+    plan_cost,
+    residual_jacobian,
+)
 from mlpfac.jit import seeds
 from mlpfac.model import pose_from_error
 from mlpfac.plants.events import DelayLine, SensorDelay
@@ -33,6 +39,8 @@ class _Seed:
         self.pending: list = []
         self.u = knots[0].copy()
         self.mu, self.radius = 0.0, 0.1  # the plan's damping and trust radius (set by the controller)
+        self.J, self.age, self.cost = None, 0, math.inf  # the residuals' Jacobian, its age in steps, the plan's cost
+        self.A, self.A_age = None, 0  # the estimator's step Jacobian, its age in steps
         self.pose_step = DelayLine(0)  # which step's pose the measurement is (a sensor delay told)
 
 
@@ -44,7 +52,8 @@ class MPC(Stepped):
     no run steps; ``preview`` (N + H + 1, 5) the reference ahead; ``events`` the scenario's, told
     at their times; ``limits`` the knots' bounds (2,) per command coordinate; ``scale`` (2,) the
     commands' scale (the finite differences' and the damping's); ``noise`` (3,) the pose noise's
-    standard deviations the estimator is told."""
+    standard deviations the estimator is told; ``wheel_noise`` the wheels' speeds' (rad/s), which a
+    controller of the torque level measures with the pose."""
 
     labels: dict[str, list[str]] = {"plan": ["cost", "damping"]}
 
@@ -61,12 +70,14 @@ class MPC(Stepped):
         scale: np.ndarray,
         noise: np.ndarray,
         truth: bool,
+        wheel_noise: float = 0.0,
     ) -> None:
         self.name, self.level, self.T, self.config = name, level, float(T), config
         self.build_model, self.preview = build_model, np.ascontiguousarray(preview, dtype=float)
         self.events = sorted(events, key=lambda ev: ev.time)
         self.limits, self.scale = np.asarray(limits, dtype=float), np.asarray(scale, dtype=float)
         self.noise = np.maximum(np.asarray(noise, dtype=float), 1.0e-6)  # a pose known to a micrometre at best
+        self.wheel_noise = max(float(wheel_noise), 1.0e-3)  # rad/s: the wheels' speeds, at the torque level
         self.truth = truth
         self.H = max(1, int(round(config.horizon_s / self.T)))
         self.why: dict[int, str] = {}
@@ -87,12 +98,11 @@ class MPC(Stepped):
         for g in rngs:
             predictor = self.build_model(run_seed(g))
             x, st = predictor.capture()
-            n = predictor.n
+            n, half = predictor.n, predictor.half
             P = np.zeros((n, n))
-            nv = predictor.nv
-            for i in range(nv):  # a start known to the pose noise, at rest or at the speed it is given
+            for i in range(half):  # a start known to the pose noise, at rest or at the speed it is given
                 P[i, i] = float(self.noise[0] * self.noise[0])
-                P[nv + i, nv + i] = (self.config.accel_std * self.T) ** 2
+                P[half + i, half + i] = (self.config.accel_std * self.T) ** 2
             knots = np.zeros((self.config.knots, 2))
             if self.level == "velocity":
                 for i, j in enumerate(_knot_steps(self.H, self.config.knots)):
@@ -113,9 +123,11 @@ class MPC(Stepped):
         return {"plan": self._tele[0] if self.single else self._tele}
 
     def step(self, *args) -> np.ndarray:
-        if self.level == "torque":
+        wheels = None
+        if self.level == "torque":  # the pose, and the wheels' speeds as their encoders measure them
             (obs,) = args
             poses = np.asarray(obs.pose, dtype=float).reshape(-1, 3)
+            wheels = np.asarray(obs.wheel_speeds, dtype=float).reshape(-1, 2)
             r = np.asarray(obs.r, dtype=float)
         else:
             e, r = args
@@ -127,7 +139,7 @@ class MPC(Stepped):
             if self.truth:
                 self._observe_truth(s, b, k)
             else:
-                self._estimate(s, k, poses[b])
+                self._estimate(s, k, poses[b], None if wheels is None else wheels[b])
             self._u[b] = self._plan(s, k, b)
             s.u = self._u[b].copy()
         self.k += 1
@@ -143,11 +155,12 @@ class MPC(Stepped):
             s.model.apply(ev, *s.model.capture(self._plants[b]))
         s.x, s.st = s.model.capture(self._plants[b])
 
-    def _estimate(self, s: _Seed, k: int, pose: np.ndarray) -> None:
-        """The EKF: the pose measured now is of step m = k - its age (a sensor delay told); the
-        anchor is moved on to m through the model's steps with the commands sent (the covariance
-        with each step's Jacobian), the pose fused there, and the estimate predicted from it to step
-        k. An event due is told at step k, the anchor first moved on to k under the model before it."""
+    def _estimate(self, s: _Seed, k: int, pose: np.ndarray, wheels: np.ndarray | None) -> None:
+        """The EKF: the pose measured now (and, at the torque level, the wheels' speeds, which come
+        with it) is of step m = k - its age (a sensor delay told); the anchor is moved on to m
+        through the model's steps with the commands sent (the covariance with each step's
+        Jacobian), the measurement fused there, and the estimate predicted from it to step k. An
+        event due is told at step k, the anchor first moved on to k under the model before it."""
         if k > 0:
             s.pose_step.push(k)
             s.sent.append(s.u)
@@ -158,19 +171,23 @@ class MPC(Stepped):
                 s.x_a, s.st_a = s.model.apply(ev, s.x_a, s.st_a)
                 if isinstance(ev, SensorDelay):
                     s.pose_step.delay(ev.steps)
-            n, nv = s.model.n, s.model.nv
-            if s.P.shape[0] != n:
-                s.P = np.zeros((n, n))
-            for i in range(nv):  # told a change: the velocities less certain
-                s.P[nv + i, nv + i] += (10.0 * self.config.accel_std * self.T) ** 2
+            n, half = s.model.n, s.model.half
+            s.A = None  # the step's Jacobian taken afresh on the changed robot
+            for i in range(half):  # told a change: the velocities less certain (it jolts the robot)
+                s.P[half + i, half + i] += self.config.told_std * self.config.told_std
         m = k - (k - s.pose_step.read() if k > 0 else 0)
         if m > s.fused and m >= s.a:
             self._advance(s, m)
             Hx = s.model.pose_jacobian(s.x_a, s.st_a, m)
             st = s.st_a
             nu = np.array([pose[0] - st[4], pose[1] - st[5], _wrap(pose[2] - st[6])])
+            r = self.noise * self.noise
+            if wheels is not None:
+                Hw, predicted = s.model.wheel_rows(s.x_a)
+                Hx, nu = np.vstack([Hx, Hw]), np.concatenate([nu, wheels - predicted])
+                r = np.concatenate([r, np.full(2, self.wheel_noise * self.wheel_noise)])
             dx = np.zeros(s.model.n)
-            kalman_update(s.P, Hx, self.noise * self.noise, nu, dx)
+            kalman_update(s.P, Hx, r, nu, dx)
             s.x_a, s.st_a = s.model.correct(s.x_a, s.st_a, m, dx)
             s.fused = m
         x, st = s.x_a, s.st_a
@@ -181,15 +198,24 @@ class MPC(Stepped):
         s.x, s.st = x, st
 
     def _advance(self, s: _Seed, m: int) -> None:
-        """The anchor moved on to step m through the commands sent, the covariance with it."""
-        q = np.zeros(s.model.n)
-        q[s.model.nv :] = (self.config.accel_std * self.T) ** 2
+        """The anchor moved on to step m through the commands sent, the covariance with it (the
+        step's Jacobian taken afresh every ``reuse`` + 1 steps, and after an event: the robot turns
+        little in between)."""
+        n = s.model.n
+        q = np.zeros(n)
+        q[s.model.half :] = (self.config.accel_std * self.T) ** 2
         while s.a < m:
-            A = np.zeros((s.model.n, s.model.n))
+            settled = s.cost < 3 * self.H * self.config.settled_m * self.config.settled_m
+            fresh = s.A is None or s.A.shape[0] != n or s.A_age >= self.config.reuse or not settled
+            A = np.zeros((n, n)) if fresh else _NO_A
             x1, st1, why = s.model.transition(s.x_a, s.st_a, s.a, s.sent.pop(0), FD_STEP, A)
+            if fresh:
+                s.A, s.A_age = A, 0
+            else:
+                s.A_age += 1
             if why == 0:
                 s.x_a, s.st_a = x1, st1
-                covariance_predict(s.P, A, q)
+                covariance_predict(s.P, s.A, q)
             s.a += 1
 
     # -- the plan
@@ -199,18 +225,33 @@ class MPC(Stepped):
         the plan it gives costs less (Levenberg-Marquardt: the damping mu grows by 4 on a step
         refused, shrinks by 3 on one taken, and the step is cut to a trust radius in the commands'
         scale that halves or doubles with them: where the robot hardly answers its commands (its
-        wheels spinning on the floor) the linear model's step is no step to take). The first knot
-        is sent; the plan is shifted a step for the next."""
+        wheels spinning on the floor) the linear model's step is no step to take), until a step
+        gains less than ``tolerance`` or the plan's residuals are within ``settled_m``. Once they
+        are (the last step's plan settled), the residuals' Jacobian of the step before serves
+        ``reuse`` more steps (the plan it was taken on is a step older: a step on the same knots)
+        and the step is taken unchecked. The first knot is sent; the plan is shifted a step."""
         cfg, H, phi = self.config, self.H, self._phi
         M = 2 * cfg.knots
         w = np.tile(cfg.fd_step * self.scale, cfg.knots)  # the knots' finite-difference steps
         scale = np.tile(self.scale, cfg.knots)
-        E = np.empty((1 + M, H, 3))
-        U = np.empty((1 + M, H, 2))
+        settled = 3 * H * cfg.settled_m * cfg.settled_m  # a plan this close needs no second step
         delta = np.zeros(M)
         E1, U1 = np.empty((1, H, 3)), np.empty((1, H, 2))
         cost = math.inf
-        settled = 3 * H * cfg.settled_m * cfg.settled_m  # a plan this close needs no second step
+        if s.J is not None and s.age < cfg.reuse and s.cost < settled:
+            U1[0] = np.einsum("jk,kc->jc", phi, s.knots)
+            s.model.rollouts(s.x, s.st, k, U1, self.preview, E1)
+            E1[:, :, 2] *= cfg.heading_m
+            cost = plan_cost(E1[0])
+            if cost < settled:
+                gauss_newton(s.J, E1[0], s.mu, 1.0e-12, delta)
+                s.knots = np.clip(s.knots + delta.reshape(cfg.knots, 2), -self.limits, self.limits)
+                s.age += 1
+                return self._sent(s, b, cost)
+        E = np.empty((1 + M, H, 3))
+        U = np.empty((1 + M, H, 2))
+        if s.J is None:
+            s.J = np.empty((M, 3 * H))
         for _ in range(cfg.iterations):
             U[:] = np.einsum("jk,kc->jc", phi, s.knots)
             for p in range(M):
@@ -221,7 +262,9 @@ class MPC(Stepped):
             cost = plan_cost(E[0])
             if not math.isfinite(cost) or cost >= FAILED_COST:
                 break
-            gauss_newton(E, w, s.mu, 1.0e-12, delta)
+            residual_jacobian(E, w, s.J)
+            s.age = 0
+            gauss_newton(s.J, E[0], s.mu, 1.0e-12, delta)
             longest = float(np.max(np.abs(delta) / scale))
             if longest > s.radius:
                 delta *= s.radius / longest
@@ -241,9 +284,14 @@ class MPC(Stepped):
                     break
             else:
                 s.mu, s.radius = min(4.0 * s.mu, MU_MAX), max(0.5 * s.radius, RADIUS_MIN)
+        return self._sent(s, b, cost)
+
+    def _sent(self, s: _Seed, b: int, cost: float) -> np.ndarray:
+        """The plan's first knot, sent; the plan shifted a step for the next."""
+        s.cost = cost
         self._tele[b] = (cost, s.mu)
         u = s.knots[0].copy()
-        s.knots = _shift(s.knots, H)
+        s.knots = _shift(s.knots, self.H)
         return u
 
 

@@ -40,29 +40,34 @@ def _solve_spd(A, b, x):
         x[i] = s / L[i, i] if L[i, i] > 0.0 else 0.0
 
 
-@kernel("void(f8[:, :, ::1], f8[::1], f8, f8, f8[::1])")
-def gauss_newton(E, w, mu, floor, delta):
-    """The Levenberg-Marquardt step for the knots: E (1 + M, H, 3) the rollouts' errors (the plan's
-    first, then one per knot coordinate moved by its step), w (M,) those steps; residuals
-    (e1, e2, heading_m e3) scaled in E's third column by the caller. delta (M,) solves
-    (J'J + mu diag(J'J) + floor I) delta = -J'r with J[:, p] = (E[1 + p] - E[0]) / w[p]."""
-    M = w.shape[0]
+@kernel("void(f8[:, :, ::1], f8[::1], f8[:, ::1])")
+def residual_jacobian(E, w, J):
+    """J (M, 3 H): the residuals' Jacobian in the knots, J[p] = (E[1 + p] - E[0]) / w[p], from E
+    (1 + M, H, 3) the rollouts' residuals (the plan's first, then one per knot coordinate moved by
+    its step w[p])."""
     H = E.shape[1]
-    A = np.zeros((M, M))
-    g = np.zeros(M)
-    J = np.empty((M, H * 3))
-    for p in range(M):
+    for p in range(w.shape[0]):
         for j in range(H):
             for c in range(3):
                 J[p, j * 3 + c] = (E[1 + p, j, c] - E[0, j, c]) / w[p]
+
+
+@kernel("void(f8[:, ::1], f8[:, ::1], f8, f8, f8[::1])")
+def gauss_newton(J, r, mu, floor, delta):
+    """The Levenberg-Marquardt step for the knots: J (M, 3 H) the residuals' Jacobian, r (H, 3) the
+    plan's residuals (e1, e2, heading_m e3); delta (M,) solves (J'J + mu diag(J'J) + floor I) delta = -J'r."""
+    M = J.shape[0]
+    n = J.shape[1]
+    A = np.zeros((M, M))
+    g = np.zeros(M)
     for p in range(M):
         s = 0.0
-        for i in range(H * 3):
-            s += J[p, i] * E[0, i // 3, i % 3]
+        for i in range(n):
+            s += J[p, i] * r[i // 3, i % 3]
         g[p] = -s
         for q in range(p + 1):
             s = 0.0
-            for i in range(H * 3):
+            for i in range(n):
                 s += J[p, i] * J[q, i]
             A[p, q] = s
             A[q, p] = s
@@ -95,44 +100,44 @@ def covariance_predict(P, A, q):
 
 @kernel("void(f8[:, ::1], f8[:, ::1], f8[::1], f8[::1], f8[::1])")
 def kalman_update(P, Hx, r, nu, dx):
-    """The measurement update of the pose: Hx (3, n), r (3,) its noise variances, nu (3,) the
-    innovation; dx (n,) = K nu, and P <- P - K S K' (S = Hx P Hx' + diag(r), K = P Hx' S^-1),
+    """The measurement update: Hx (m, n) the measurement's Jacobian, r (m,) its noise variances, nu
+    (m,) the innovation; dx (n,) = K nu, and P <- P - K S K' (S = Hx P Hx' + diag(r), K = P Hx' S^-1),
     symmetric."""
-    n = P.shape[0]
-    PH = np.zeros((n, 3))
+    n, m = P.shape[0], Hx.shape[0]
+    PH = np.zeros((n, m))
     for i in range(n):
-        for c in range(3):
+        for c in range(m):
             s = 0.0
             for k in range(n):
                 s += P[i, k] * Hx[c, k]
             PH[i, c] = s
-    S = np.zeros((3, 3))
-    for a in range(3):
-        for c in range(3):
+    S = np.zeros((m, m))
+    for a in range(m):
+        for c in range(m):
             s = 0.0
             for k in range(n):
                 s += Hx[a, k] * PH[k, c]
             S[a, c] = s
         S[a, a] += r[a]
     # K' = S^-1 PH' (S symmetric positive definite), column by column
-    Kt = np.zeros((3, n))
-    col = np.empty(3)
-    out = np.empty(3)
+    Kt = np.zeros((m, n))
+    col = np.empty(m)
+    out = np.empty(m)
     for i in range(n):
-        for c in range(3):
+        for c in range(m):
             col[c] = PH[i, c]
         _solve_spd(S, col, out)
-        for c in range(3):
+        for c in range(m):
             Kt[c, i] = out[c]
     for i in range(n):
         s = 0.0
-        for c in range(3):
+        for c in range(m):
             s += Kt[c, i] * nu[c]
         dx[i] = s
     for i in range(n):
         for j in range(i + 1):
             s = 0.0
-            for c in range(3):
+            for c in range(m):
                 s += PH[i, c] * Kt[c, j]
             P[i, j] -= s
             if i != j:
