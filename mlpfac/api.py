@@ -67,6 +67,7 @@ def run(
     sink=None,
     on_step=None,
     robot: str | None = None,
+    lost_threshold: float | None = None,
 ) -> RunRecord:
     """One closed-loop run of ``scenario`` (a :class:`Scenario`, a shipped name or a .toml path).
 
@@ -77,7 +78,8 @@ def run(
     run.rrd (``record``), put in place only when whole. Without it, ``sink`` (:mod:`mlpfac.log`)
     may receive the recording and ``on_step(k)`` is called after every step. A status "diverged"
     or "interrupted" keeps what was recorded; what a user's controller raises is a
-    :class:`~mlpfac.exceptions.PluginError`. ``robot`` puts the scenario on that robot (as ``--robot``).
+    :class:`~mlpfac.exceptions.PluginError`. ``robot`` puts the scenario on that robot (as ``--robot``);
+    ``lost_threshold`` sets its ``lost_threshold_m`` (as ``--lost-threshold``).
     """
     from mlpfac.loop.runner import build
     from mlpfac.loop.runner import run as run_scenario
@@ -88,7 +90,11 @@ def run(
     if controller is not None and not isinstance(controller, str | Path | type):
         instance, controller = controller, type(controller)
     spec = None if controller is None else _spec(controller, "controller")
-    scn = scn.with_overrides(spec, seed, duration, flag="controller")
+    if lost_threshold is not None:
+        from mlpfac.scenario.parse import lost_threshold_m
+
+        lost_threshold = lost_threshold_m(lost_threshold, "lost_threshold")
+    scn = scn.with_overrides(spec, seed, duration, flag="controller", lost_threshold=lost_threshold)
     if out is not None:
         out = user_path(out, "out")
     if out is None:
@@ -122,6 +128,7 @@ def sweep(
     robots: list[str] | None = None,
     vary: dict | list[str] | None = None,
     threshold: float | None = None,
+    lost_threshold: float | None = None,
     limit: bool = False,
     limit_cache: str | Path | None = None,
 ) -> list[dict]:
@@ -137,9 +144,10 @@ def sweep(
 
     The returned list has ``.errors`` ({(scenario, controller, seed): traceback}) and ``.paired``
     (the rows of paired.json). Ctrl-C raises KeyboardInterrupt (with ``out``, the runs written are
-    kept and the next call resumes them). ``robots``: every scenario on each (as ``--robots``).
-    ``limit`` (as ``--limit``): the physical limit on every scenario and seed, each computed once and
-    kept in ``limit_cache`` (default ``runs/limits``); the paired rows gain ``x_limit_median``."""
+    kept and the next call resumes them). ``robots``: every scenario on each (as ``--robots``);
+    ``lost_threshold``: every run's ``lost_threshold_m`` (as ``--lost-threshold``). ``limit`` (as
+    ``--limit``): the physical limit on every scenario and seed, each computed once and kept in
+    ``limit_cache`` (default ``runs/limits``); the paired rows gain ``x_limit_median``."""
     from mlpfac.plots.robustness import read_robustness
     from mlpfac.scenario.on_robot import robots_named, with_robots
     from mlpfac.sweeps import engine
@@ -193,6 +201,7 @@ def sweep(
                 progress=False,
                 vary=vary,
                 threshold=threshold,
+                lost_threshold=lost_threshold,
                 limit=limit,
                 limit_cache=Path(limit_cache) if limit_cache is not None else None,
             )

@@ -52,6 +52,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser = Parser(prog="mlpfac", description=__doc__.splitlines()[0])
     parser.add_argument("--version", action="version", version=f"mlpfac {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=Parser)
+    from mlpfac.sweeps import cli as sweep
 
     p = sub.add_parser(
         "run",
@@ -69,6 +70,7 @@ def build_parser() -> argparse.ArgumentParser:
     from mlpfac.scenario.on_robot import ROBOT_HELP
 
     p.add_argument("--robot", help=ROBOT_HELP)
+    p.add_argument("--lost-threshold", type=float, metavar="METRES", help=sweep.LOST_HELP)
     p.add_argument("--out", type=cli_path, help="output folder (default runs/SCENARIO-CONTROLLER-sSEED)")
     plot = p.add_mutually_exclusive_group()  # a baseline is drawn in the figure: nothing without one
     plot.add_argument("--baseline", default="corradini", help="controller for panel (h) of the figure, or 'none'")
@@ -76,8 +78,6 @@ def build_parser() -> argparse.ArgumentParser:
     _sink_args(p)
 
     sub.add_parser("list", help="list the shipped scenarios, and the controllers shipped and installed")
-
-    from mlpfac.sweeps import cli as sweep
 
     sweep.add_compare_arguments(sub.add_parser("compare", help="controllers x scenarios x seeds -> a per-phase table"))
     sweep.add_sweep_arguments(sub.add_parser("sweep", help="Monte Carlo sweep -> mean, median, 95 %% CI per phase"))
@@ -109,6 +109,7 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="KEY=VALUES",
         help="an axis or a draw more than the budget's vary (as sweep's)",
     )
+    p.add_argument("--lost-threshold", type=float, metavar="METRES", help=sweep.LOST_HELP)
 
     p = sub.add_parser(
         "view",
@@ -174,7 +175,8 @@ def main(argv: list[str] | None = None) -> int:
             ):
                 from mlpfac.scenario.parse import load
 
-                scn = load(args.scenario, build=False)  # a bad name or file fails here (the children are ended)
+                scn = load(args.scenario, build=False, ends=False)  # a bad name or file fails here (the children
+                # are ended); its distributions' ends are checked with the robot built, by cmd_run
                 if args.robot is not None:
                     from mlpfac.scenario.on_robot import model_of
 
@@ -262,7 +264,10 @@ def cmd_report(args: argparse.Namespace) -> int:
 def cmd_check(args: argparse.Namespace) -> int:
     from mlpfac.checks import check
 
-    result = check(args.budget, args.junit, args.summary, args.baseline, args.out, args.workers, args.robot, args.vary)
+    result = check(
+        args.budget, args.junit, args.summary, args.baseline, args.out, args.workers, args.robot, args.vary,
+        args.lost_threshold,
+    )  # fmt: skip
     for line in result.lines():
         print(line)
     if result.cases:
@@ -343,20 +348,9 @@ def cmd_run(args: argparse.Namespace) -> int:
     from mlpfac.runs.folder import Recording, check_outputs, run_into_folder
     from mlpfac.scenario.parse import load
 
-    scn = load(args.scenario, robot=args.robot).with_overrides(args.controller, args.seed, args.duration)
-    found = scn.table.get("provenance", {})
-    for key in ("reference_warning", "torque_warning"):  # a reference its wheels or motors cannot drive: said first
-        if found.get(key):
-            print(f"warning: {found[key]}")
-    if found.get("found") or found.get("reference_fit") or found.get("reference_torque"):  # the model's answers
-        said = ("robot", "reference_fit") + (() if found.get("torque_warning") else ("reference_torque",))  # said once
-        print(f"robot: {'; '.join(found[k] for k in said if found.get(k))}")
-    if scn.dropped_events:
-        times = ", ".join(f"{t:g} s" for t in scn.dropped_events)
-        print(f"note: --duration {scn.duration:g} s ends before the event at {times}: this run has no such event")
-    route = scn.reference  # an open path run past its end
-    if getattr(route, "closed", True) is False and scn.duration > route.duration + scn.T:
-        print(f"note: the route ends at {route.duration:.4g} s; then the reference goes straight on along its last leg")
+    scn = load(args.scenario, robot=args.robot).with_overrides(
+        args.controller, args.seed, args.duration, lost_threshold=args.lost_threshold
+    )
     baseline = None
     if args.baseline != "none" and not args.no_plot:
         try:
@@ -376,7 +370,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         kept = " and ".join(map(str, done.kept))
         print(f"mlpfac: {rec.reason}; {kept} kept the earlier run, this one was discarded", file=sys.stderr)
         return _interrupt_code(rec)
-    _print_summary(done.metrics, out)
+    _print_summary(done.metrics, out, built_and_changed(scn))
     if done.sink is not None and done.sink.serving:
         print("serving the recording; Ctrl-C stops the web viewer", flush=True)
         done.sink.wait()
@@ -391,10 +385,35 @@ def _fmt(x: float | None, scale: float = 1.0, unit: str = "") -> str:
     return "-" if x is None else f"{x * scale:.2f}{unit}"
 
 
-def _outcome(m: dict) -> str:
-    """A finished run's outcome and the threshold that decided it, said so that it cannot be misread."""
-    which, side = ("a", "beyond") if m["outcome"] == "lost" else ("every", "within")
-    return f", {m['outcome']} ({which} phase's position RMS {side} {m['lost_threshold_m']:.3g} m)"
+def built_and_changed(scn) -> list[str]:
+    """What a run read of its robot, built around it and changed of the file, in words (printed under
+    the run's outcome): the robot's parts found, the reference fitted to its wheels or motors, the
+    world, a shorter --duration, a route run past its end, and warnings of what its wheels or motors
+    cannot give."""
+    from mlpfac.scenario.world import said as world_said
+
+    found = scn.table.get("provenance", {})
+    lines = [f"warning: {found[k]}" for k in ("reference_warning", "torque_warning") if found.get(k)]
+    if found.get("found") and found.get("robot"):
+        lines.append(f"robot: {found['robot']}")
+    fit = [found[k] for k in ("reference_fit", "reference_torque") if found.get(k) and not found.get("torque_warning")]
+    fit = fit or ([found["reference_fit"]] if found.get("reference_fit") else [])
+    if fit:
+        lines.append(f"reference: {'; '.join(fit)}")
+    world = world_said(scn.world, scn.terrain)
+    if world:
+        lines.append(f"world: {world}")
+    if scn.dropped_events:
+        times = ", ".join(f"{t:g} s" for t in scn.dropped_events)
+        lines.append(
+            f"note: --duration {scn.duration:g} s ends before the event at {times}: this run has no such event"
+        )
+    route = scn.reference  # an open path run past its end
+    if getattr(route, "closed", True) is False and scn.duration > route.duration + scn.T:
+        lines.append(
+            f"note: the route ends at {route.duration:.4g} s; then the reference goes straight on along its last leg"
+        )
+    return lines
 
 
 def _belief(m: dict) -> list[str]:
@@ -411,13 +430,13 @@ def _belief(m: dict) -> list[str]:
     ]
 
 
-def _print_summary(m: dict, out: Path) -> None:
-    print(
-        f"{m['scenario']} / {m['controller']} / seed {m['seed']}: {m['status']}"
-        + (f" ({m['reason']})" if m["reason"] else "")
-        + (_outcome(m) if m["status"] == "ok" else "")
-    )
-    for line in _belief(m):
+def _print_summary(m: dict, out: Path, said: list[str] = ()) -> None:
+    """The run's outcome first (as metrics.json records it, its threshold explained), then what was
+    read, built and changed (``said``), then its figures."""
+    from mlpfac.loop.metrics import outcome_words
+
+    print(f"{m['scenario']} / {m['controller']} / seed {m['seed']}: {outcome_words(m)}")
+    for line in [*_belief(m), *said]:
         print(f"  {line}")
     for ev in m["events"]:
         print(f"  event at {ev['time']:g} s: {ev['text']}")
@@ -425,9 +444,10 @@ def _print_summary(m: dict, out: Path) -> None:
         f"  position RMS {_fmt(m['rms_position_error_m'], 1e3, ' mm')}, max {_fmt(m['max_position_error_m'], 1e3, ' mm')}, heading RMS {_fmt(m['rms_heading_error_rad'], 1e3, ' mrad')}"
     )
     for name, ph in m["phases"].items():
-        print(
-            f"  {name:>6} [{ph['start_s']:g}, {ph['end_s']:g}) s: position RMS {_fmt(ph['rms_position_error_m'], 1e3, ' mm')}, heading RMS {_fmt(ph['rms_heading_error_rad'], 1e3, ' mrad')}"
-        )
+        if ph["end_s"] > ph["start_s"] and ph["rms_position_error_m"] is not None:  # a phase with a step
+            print(
+                f"  {name:>6} [{ph['start_s']:g}, {ph['end_s']:g}) s: position RMS {_fmt(ph['rms_position_error_m'], 1e3, ' mm')}, heading RMS {_fmt(ph['rms_heading_error_rad'], 1e3, ' mrad')}"
+            )
     learned = [
         f"{k} {m[key]:.3g}"
         for k, key in (("max |weight|", "max_abs_weight"), ("final mean diag P", "mean_diag_P_final"))

@@ -20,6 +20,36 @@ from pathlib import Path
 
 from mlpfac.interrupts import sigint_deferred
 
+KINDS = ((stat.S_ISDIR, "a folder"), (stat.S_ISFIFO, "a FIFO"), (stat.S_ISCHR, "a character device"),
+         (stat.S_ISBLK, "a block device"), (stat.S_ISSOCK, "a socket"))  # fmt: skip
+
+
+class NotAFileError(ValueError):
+    """What :func:`read_regular` refuses to read: not a regular file, or larger than asked."""
+
+
+def read_regular(path: Path, most: int) -> bytes:
+    """The bytes of the regular file at ``path``, if it holds at most ``most``: OSError as reading
+    raises it (FileNotFoundError...); :class:`NotAFileError` saying what it is for a folder, a FIFO, a
+    device or a socket (opened without waiting for a FIFO's writer, never read: /dev/zero is not
+    read whole), or saying its size for a file larger than ``most`` (found before it is read)."""
+    fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_NOCTTY)
+    try:
+        mode, size = os.fstat(fd).st_mode, os.fstat(fd).st_size
+        kind = next((name for test, name in KINDS if test(mode)), None if stat.S_ISREG(mode) else "not a file")
+        if kind is not None:
+            raise NotAFileError(f"is {kind}, not a regular file")
+        chunks, got = [], 0
+        while size <= most and got <= most:  # a file that grows while it is read stops at most + 1 bytes
+            chunk = os.read(fd, min(1 << 20, most + 1 - got))
+            if not chunk:
+                return b"".join(chunks)
+            chunks.append(chunk)
+            got += len(chunk)
+        raise NotAFileError(f"{max(size, got) / 2**20:.3g} MiB is more than the {most / 2**20:.3g} MiB allowed")
+    finally:
+        os.close(fd)
+
 
 def write_atomic(path: Path, data: str | bytes) -> None:
     """Write through a temporary file in the same folder and a rename: readers never see half a file."""

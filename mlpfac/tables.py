@@ -154,15 +154,24 @@ def to_toml(table: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+TOML_MAX = 16 * 2**20  # bytes of a TOML file (a scenario, a budget, a robot), at most
+
+
 def read_toml(path: Path, kind: str) -> dict:
     """The TOML file at ``path`` (a ``kind``, e.g. "scenario file"); a ConfigError naming it when it
     cannot be read or is not UTF-8 TOML."""
+    from mlpfac.files import NotAFileError, read_regular
+
     try:
-        return tomllib.loads(path.read_bytes().decode("utf-8"))
+        return tomllib.loads(read_regular(path, TOML_MAX).decode("utf-8"))
     except FileNotFoundError:
         raise ConfigError(str(path), f"{kind} not found") from None
     except IsADirectoryError:
         raise ConfigError(str(path), f"is a folder, not a {kind}") from None
+    except NotAFileError as err:
+        if str(err).startswith("is a folder"):
+            raise ConfigError(str(path), f"is a folder, not a {kind}") from None
+        raise ConfigError(str(path), f"{err} (a {kind})") from None
     except OSError as err:
         raise ConfigError(str(path), f"cannot read: {err.strerror or err}") from None
     except UnicodeDecodeError:

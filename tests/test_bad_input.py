@@ -160,7 +160,12 @@ BAD_FILES: dict[str, tuple[str | bytes, str]] = {
     "uniform of text": (MINIMAL + EVENT.replace("1.5", '{ uniform = ["a", 2.0] }'), "events.0.factor: uniform takes two"),
     "normal sd zero": (MINIMAL + EVENT.replace("1.5", "{ normal = [1.5, 0.0] }"), "standard deviation > 0"),
     "distribution unknown": (MINIMAL + EVENT.replace("1.5", "{ lognormal = [1.5, 0.1] }"), "factor"),
+    "lost_threshold_m zero": ("lost_threshold_m = 0.0\n", "lost_threshold_m: must be a number of metres above 0"),
+    "lost_threshold_m a word": ('lost_threshold_m = "far"\n', "lost_threshold_m: expected a number of metres"),
     "drawn without a distribution": (MINIMAL + "[drawn]\nduration = 0.5\n", "[drawn] duration: no distribution"),
+    "a distribution's low end out of range": (ROBOT + "[world]\npatches = [{ x = 1.0, y = 1.73, radius = 0.4, mu = { uniform = [-1.0, 0.5] } }]\n", "world.patches.0.mu = uniform(-1, 0.5) (its end -1): must be positive"),
+    "a distribution's ends out of range": (ROBOT + 'pose_source = "odometry"\ngyro = true\ngyro_bias = { uniform = [-20, 20] }\n', "plant.gyro_bias = uniform(-20, 20) (its end -20)"),
+    "a normal's end out of range": (MINIMAL + EVENT.replace("1.5", "{ normal = [1.5, 1.0] }"), "events.0.factor = normal(1.5, 1) (its end -1.5)"),
     "drawn a string": (MINIMAL + 'drawn = "x"\n', "drawn"),
     "torque-level controller on the kinematic plant": (MINIMAL + '[controller]\nname = "fierro-lewis"\n', '[plant] kind: fierro-lewis is a torque-level controller'),
     "torque-level controller on velocity servos": ('duration = 0.5\n[controller]\nname = "adaptive-dynamic"\n' + ROBOT + 'actuator = "velocity"\n', '[plant] actuator: adaptive-dynamic is a torque-level controller'),
@@ -278,6 +283,11 @@ GOOD = "class R:\n    def __init__(self, k=1.0):\n        self.k = k\n\n    def 
 BAD_BESIDE: dict[str, tuple[str, dict[str, str | bytes], str]] = {
     "csv line not a number": (ROUTE, {"route.csv": "x,y\n0,0\n1,abc\n"}, "route.csv line 3: expected numbers"),
     "csv header without y": (ROUTE, {"route.csv": "x,z\n0,0\n1,0\n"}, "line 1: a header line must name the columns x and y"),
+    "csv a yaw column": (ROUTE, {"route.csv": "x,y,yaw\n0,0,0\n1,0,0\n"}, "route.csv line 1: column 'yaw': a path takes no heading at its waypoints"),
+    "csv a time column": (ROUTE, {"route.csv": "t,x,y\n0,0,0\n1,1,0\n"}, "route.csv line 1: column 't': a path is timed within its limits"),
+    "csv a decimal comma": (ROUTE, {"route.csv": "x,y\n0,0\n2,5,0\n"}, "route.csv line 3: 3 values where the header on line 1 names 2 columns ('x,y'), got '2,5,0' (a decimal comma?"),
+    "csv a row short of the header": (ROUTE, {"route.csv": "x,y,id\n0,0,a\n1,0\n"}, "route.csv line 3: 2 values where the header on line 1 names 3 columns"),
+    "csv /dev/zero": ('[reference]\nkind = "path"\nfile = "/dev/zero"\n', {}, "[reference] file: /dev/zero: is a character device, not a regular file"),
     "csv three columns bare": (ROUTE, {"route.csv": "0,0,0\n1,0,0\n"}, "more columns: name them in a header line"),
     "csv binary": (ROUTE, {"route.csv": b"\xff\xfe\x00\x01"}, "route.csv: not a text file"),
     "csv empty": (ROUTE, {"route.csv": "x,y\n"}, "[reference] file: an open path needs at least 2 waypoints, got 0"),
@@ -291,7 +301,8 @@ BAD_BESIDE: dict[str, tuple[str, dict[str, str | bytes], str]] = {
     "own reference constructor raises": (OWN.format("R") + "[reference.params]\nk = -1.0\n", {"route.py": GOOD.format("(0.0,) * 7").replace("self.k = k", "assert k > 0, 'k > 0'")}, "[reference] params: R(**[reference.params]) raised AssertionError: k > 0"),
     "own reference six numbers": (OWN.format("R"), {"route.py": GOOD.format("(0.0,) * 6")}, "sample(0) returned 6 numbers, not 7"),
     "own reference nan at 0": (OWN.format("R"), {"route.py": GOOD.format("(float('nan'),) * 7")}, "sample(0) returned a value that is not finite"),
-    "own reference a word": (OWN.format("R"), {"route.py": GOOD.format("'seven'")}, "sample(0) raised ValueError"),
+    "own reference a word": (OWN.format("R"), {"route.py": GOOD.format("'seven'")}, "sample(0) returned 'seven', not seven numbers"),
+    "own reference standing still": (OWN.format("R"), {"route.py": GOOD.format("(1.0, 2.0, 0.0, 0.0, 0.0, 0.0, 0.0)")}, "[reference] kind: R stands still over the run"),
     "own reference sample raises": (OWN.format("R"), {"route.py": GOOD.format("1 / t")}, "sample(0) raised ZeroDivisionError"),
 }  # fmt: skip
 
@@ -406,6 +417,8 @@ BAD_FLAGS = {
     "--grpc-port without --serve": (["paper", "--grpc-port", "9100"], "--grpc-port means nothing without --serve"),
     "--bind without a viewer": (["paper", "--bind", "0.0.0.0"], "--bind means nothing without --serve or --spawn"),
     "--baseline with --no-plot": (["paper", "--baseline", "kanayama", "--no-plot"], "not allowed with argument --baseline"),
+    "lost threshold zero": (["paper", "--lost-threshold", "0"], "--lost-threshold: must be a number of metres above 0"),
+    "lost threshold huge": (["paper", "--lost-threshold", "1e308"], "--lost-threshold: must be a number of metres above 0 and at most 10000"),
 }  # fmt: skip
 
 
@@ -456,6 +469,7 @@ BAD_VIEW_PLOT = {
     "report --command of two --collect": (["report", "D", "--collect", "a=D", "--collect", "b=D", "--command", "c"], "--command: is the command of one --collect"),
     "sweep --threshold without --vary": (["sweep", "paper", "--threshold", "0.1"], "--threshold means nothing without --vary"),
     "sweep --threshold with a draw only": (["sweep", "paper", "--vary", "T=uniform:0.01:0.02", "--threshold", "0.1"], "--threshold: means nothing without an axis"),
+    "sweep --lost-threshold -1": (["sweep", "paper", "--lost-threshold", "-1"], "--lost-threshold: must be a number of metres above 0"),
     "sweep --threshold 1e308": (["sweep", "paper", "--vary", "T=0.01,0.02", "--threshold", "1e308"], "--threshold: must be a number of metres above 0 and at most 10000"),
     "sweep --batch-size without --batched": (["sweep", "paper", "--batch-size", "8"], "--batch-size means nothing without --batched"),
     "compare --scheduler-timeout without --scheduler": (["compare", "paper", "--scheduler-timeout", "3"], "--scheduler-timeout means nothing without --scheduler"),
@@ -650,3 +664,53 @@ def test_bad_input_is_one_line_in_the_commands_own_process(tmp_path, case):
     err = [ln for ln in proc.stderr.splitlines() if not ln.startswith("mlpfac: planning")]
     assert proc.returncode == 2 and len(err) == 1 and err[0].startswith(needle), proc.stderr
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("what", ["waypoints", "scenario"])
+def test_a_fifo_without_a_writer_is_refused_in_one_line_not_waited_for(tmp_path, what):
+    """A FIFO named as a path's CSV file or as the scenario file: one line, at once (never a read
+    that waits for a writer), exit 2; a file larger than allowed is refused before it is read."""
+    fifo = tmp_path / ("route.csv" if what == "waypoints" else "fifo.toml")
+    os.mkfifo(fifo)
+    scenario = tmp_path / "s.toml"
+    scenario.write_text(MINIMAL + '[reference]\nkind = "path"\nfile = "route.csv"\n')
+    target = scenario if what == "waypoints" else fifo
+    proc = subprocess.run(
+        [sys.executable, "-m", "mlpfac.cli", "run", str(target), "--no-log", "--out", str(tmp_path / "o")],
+        capture_output=True, text=True, timeout=60,
+    )  # fmt: skip
+    assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1, proc.stderr
+    assert f"{fifo}: is a FIFO, not a regular file" in proc.stderr, proc.stderr
+    from mlpfac.files import NotAFileError, read_regular
+
+    big = tmp_path / "big.csv"
+    big.write_bytes(b"0,0\n" * 1000)
+    with pytest.raises(NotAFileError, match="MiB is more than"):
+        read_regular(big, 100)
+    assert read_regular(big, 4000) == b"0,0\n" * 1000
+
+
+# A path's absurd limit: one line naming the key (no numpy warning, no 300-digit count), run as a user
+# runs it, its whole stderr read. (the [reference] line, the one line's start after the file's name)
+PATH_LIMITS = {
+    "v_max = 1e-300": "[reference] v_max: the path cannot be timed within its limits",
+    "omega_max = 1e-300": "[reference] omega_max: the path cannot be timed within its limits",
+    "radius = 1e-300": "[reference] radius: must be 0 (from the limits) or at least 0.001 m",
+    "speed = 1e-300": "[reference] speed: the path takes 1.44e+301 s to drive once",
+    "alpha_max = 1e-300": "[reference] alpha_max: the path takes",
+}
+
+
+@pytest.mark.parametrize("line", sorted(PATH_LIMITS))
+def test_a_paths_absurd_limit_is_one_line_naming_its_key(tmp_path, line):
+    path = tmp_path / "p.toml"
+    path.write_text(f'{MINIMAL.replace("duration = 0.5", "")}[reference]\nkind = "path"\nclosed = true\n'
+                    f"points = [[0, 0], [3, 0], [3, 3], [0, 3]]\n{line}\n")  # fmt: skip
+    proc = subprocess.run(
+        [sys.executable, "-m", "mlpfac.cli", "run", str(path), "--no-log", "--out", str(tmp_path / "o")],
+        capture_output=True, text=True, timeout=120,
+    )  # fmt: skip
+    err = proc.stderr.strip().splitlines()
+    assert proc.returncode == 2 and len(err) == 1, proc.stderr
+    assert err[0].startswith(f"mlpfac: error: {path} {PATH_LIMITS[line]}"), err[0]
+    assert not any(len(w) > 40 for w in err[0].split() if "/" not in w), err[0]  # no count of hundreds of digits

@@ -7,7 +7,8 @@ import sys
 
 import pytest
 
-from mlpfac.cli import _outcome, main
+from mlpfac.cli import main
+from mlpfac.loop.metrics import outcome_words
 
 
 def test_run_writes_metrics_config_and_figure(tmp_path, capsys):
@@ -32,17 +33,70 @@ def test_run_writes_metrics_config_and_figure(tmp_path, capsys):
     assert m["seed"] == 3 and m["controller"] == "adaptive" and m["status"] == "ok"
     assert "seed = 3" in (out / "config.toml").read_text()
     assert (out / "figure1.png").stat().st_size > 10_000
-    first = next(line for line in capsys.readouterr().out.splitlines() if line.startswith("paper / "))
-    assert first.startswith(f"paper / adaptive / seed 3: ok, {m['outcome']} (") and "position RMS" in first, first
+    first = capsys.readouterr().out.splitlines()[0]  # what happened, first
+    assert first.startswith(f"paper / adaptive / seed 3: {m['outcome']}: ") and "position RMS" in first, first
 
 
-def test_a_runs_outcome_says_its_threshold_the_right_way_round():
-    assert _outcome({"outcome": "tracking", "lost_threshold_m": 0.2}) == (
-        ", tracking (every phase's position RMS within 0.2 m)"
-    )
+PHASES = {"before": {"start_s": 2.0, "end_s": 12.5, "rms_position_error_m": 0.004},
+          "after": {"start_s": 12.5, "end_s": 25.0, "rms_position_error_m": 0.25}}  # fmt: skip
+WORDS = {  # a metrics.json's outcome, threshold, phases: the sentence the first line, the figure and the viewer say
+    "tracking": ({"outcome": "tracking", "lost_threshold_m": 0.3, "path_size_m": 1.0, "phases": PHASES},
+                 "tracking: every phase's position RMS (at most 250 mm) is within 0.3 m (lost_threshold_m)"),
+    "lost after the event": ({"outcome": "lost", "lost_threshold_m": 0.2, "path_size_m": 4.0, "phases": PHASES},
+                             "lost: the position RMS after the event (250 mm) is beyond 0.2 m (5 % of the path's 4 m size)"),
+    "lost without an event": ({"outcome": "lost", "lost_threshold_m": 0.2, "path_size_m": 4.0, "excluded_s": [0, 2],
+                               "phases": {"before": PHASES["after"]}},
+                              "lost: the position RMS after the 2 s warm-up (250 mm) is beyond 0.2 m"),
+    "within the warm-up": ({"outcome": "lost", "lost_threshold_m": 0.0839, "path_size_m": 1.678, "excluded_s": [0, 2],
+                            "rms_position_error_m": 1.8, "phases": {"before": {"start_s": 2, "end_s": 2,
+                                                                               "rms_position_error_m": None}}},
+                           "lost: the whole run's position RMS 1.8 m is beyond 0.0839 m (5 % of the path's 1.68 m size); "
+                           "the run ends within its warm-up, so the warm-up is judged too"),
+    "diverged": ({"outcome": "diverged", "status": "diverged", "reason": "position error 5.01 m beyond 5 m"},
+                 "diverged (position error 5.01 m beyond 5 m)"),
+}  # fmt: skip
+
+
+@pytest.mark.parametrize("case", sorted(WORDS))
+def test_a_runs_outcome_is_said_in_the_word_metrics_json_records_its_threshold_explained(case):
+    m, words = WORDS[case]
+    if m.get("lost_threshold_m") == 0.2 or m.get("path_size_m") == 1.678:
+        m["lost_threshold_m"] = 0.05 * m["path_size_m"]  # the default: 5 % of the path's size
+    assert outcome_words(m).startswith(words), outcome_words(m)
+    assert "ok" not in outcome_words(m).split()
+
+
+def test_a_run_within_its_warm_up_is_judged_on_what_it_has(tmp_path, capsys):
+    """A 2 s run ends within the 2 s warm-up: no phase has a step, so the outcome is judged over the
+    whole run (a robot left behind is lost, not "tracking" for want of a phase), the first line says
+    so, and no empty phase is printed."""
+    out = tmp_path / "run"
+    table = 'duration = 2.0\n[plant]\nkind = "kinematic"\n[reference]\nkind = "eight"\nspeed = 4.0\n'
+    (tmp_path / "fast.toml").write_text(table + '[controller]\nname = "corradini"\nv_max = 0.01\n')
+    assert main(["run", str(tmp_path / "fast.toml"), "--no-log", "--no-plot", "--out", str(out)]) == 0
+    m = json.loads((out / "metrics.json").read_text())
+    lines = capsys.readouterr().out.splitlines()
+    assert m["outcome"] == "lost" and m["phases"]["before"]["rms_position_error_m"] is None, m
     assert (
-        _outcome({"outcome": "lost", "lost_threshold_m": 0.0313}) == ", lost (a phase's position RMS beyond 0.0313 m)"
+        lines[0].startswith("fast / corradini / seed 0: lost: the whole run's position RMS") and "warm-up" in lines[0]
     )
+    assert not any("[2, 2)" in line for line in lines), lines
+
+
+def test_the_lost_threshold_is_a_key_and_a_flag_and_is_said(tmp_path, capsys):
+    """lost_threshold_m in the file, or --lost-threshold over it: the run judged against it, metrics.json
+    and config.toml hold it, the first line says it; bad values named by the key or the flag."""
+    (tmp_path / "s.toml").write_text('duration = 3.0\nlost_threshold_m = 1e-5\n[controller]\nname = "kanayama"\n')
+    out = tmp_path / "a"
+    assert main(["run", str(tmp_path / "s.toml"), "--no-log", "--no-plot", "--out", str(out)]) == 0
+    m = json.loads((out / "metrics.json").read_text())
+    assert m["outcome"] == "lost" and m["lost_threshold_m"] == 1e-5
+    assert "beyond 1e-05 m (lost_threshold_m)" in capsys.readouterr().out.splitlines()[0]
+    flag = ["--lost-threshold", "2.5", "--out", str(tmp_path / "b")]
+    assert main(["run", str(tmp_path / "s.toml"), "--no-log", "--no-plot", *flag]) == 0
+    assert json.loads((tmp_path / "b" / "metrics.json").read_text())["lost_threshold_m"] == 2.5
+    assert "lost_threshold_m = 2.5" in (tmp_path / "b" / "config.toml").read_text()
+    assert "within 2.5 m (lost_threshold_m)" in capsys.readouterr().out.splitlines()[0]
 
 
 def test_config_toml_reproduces_the_run(tmp_path):
@@ -225,3 +279,19 @@ def test_mujoco_sets_up_no_gl_context_when_only_shipped_code_runs(tmp_path, monk
     )
     proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, env=env, timeout=300)
     assert proc.stdout.splitlines()[-1] == "0 True False", proc.stdout + proc.stderr
+
+
+def test_the_lost_threshold_flag_sets_every_run_of_a_sweep_and_a_check(tmp_path, capsys):
+    import mlpfac
+
+    rows = mlpfac.sweep(["paper"], ["kanayama"], seeds="0-1", duration=3.0, workers=1, lost_threshold=1e-9)
+    assert rows[0]["lost"] == 2 and rows[0]["tracking"] == 0
+    budget = tmp_path / "b.toml"
+    budget.write_text('scenarios = ["paper"]\ncontrollers = ["kanayama"]\nduration = 3.0\n[[budget]]\nlost = 0\n')
+    argv = ["check", str(budget), "--workers", "1"]
+    assert main([*argv, "--out", str(tmp_path / "a")]) == 0
+    assert main([*argv, "--out", str(tmp_path / "b"), "--lost-threshold", "1e-9"]) == 1
+    budget.write_text(budget.read_text().replace("duration = 3.0", "duration = 3.0\nlost_threshold_m = 1e-9"))
+    assert main([*argv, "--out", str(tmp_path / "c")]) == 1
+    meta = json.loads((tmp_path / "c" / "sweep.json").read_text())["meta"]
+    assert meta["lost_threshold_m"] == 1e-9

@@ -144,9 +144,9 @@ NOT_DATA = {
         "16.6 kg), PAL TIAGo",  # the robots' and the events' settings
         "at 12.5 s that changes",
         "(3 kg, 0.05 m ahead of the axle and 0.08 m to its left)",
-        "the nominal model's 2.52)",  # what the runs' first line says (the nominal dynamic model)
+        "the nominal model's 2.52)",  # what a run says under its outcome (the nominal dynamic model)
         "of 2.52 between them",
-        "(the first line says 0.0885 N m of them at 1x)",
+        "(a run says 0.0885 N m of them at 1x)",
     ),
     "results-tiago.md": (
         "±5 rad/s (0.49 m/s)",  # the wheels' limit and the eight's speeds
@@ -243,6 +243,24 @@ def test_views_and_options(tmp_path: Path):
         report.parse_spec("data/compare view=plot", "page.md")
     with pytest.raises(ConfigError, match="missing"):
         report.render(folder, {"view": "sweep"})
+
+
+def test_a_summary_divides_by_the_bound_it_names_or_by_none():
+    """``bound=none``: the medians alone (no law of the table is a bound); ``bound=NAME``: the median
+    ratio to that law on the same seed, from runs.json (with the oracle, the same as x oracle)."""
+    from mlpfac.sweeps.paired import bound_ratios
+
+    folder = DOCS / "data" / "world-torque"
+    plain = report.render(folder, {"bound": "none", "scenarios": "eight-ramp+tug"})
+    assert "x)" not in plain and "| `oracle` | 1.50 |" in plain, plain
+    told = report.render(folder, {"bound": "oracle-dynamic", "scenarios": "eight-ramp+tug"})
+    assert "| `oracle-dynamic` | 1.10 |" in told and "| `corradini` | 1.50 (1.3x) |" in told, told
+    runs = json.loads((folder / "runs.json").read_text())["runs"]
+    rows = json.loads((folder / "paired.json").read_text())["rows"]
+    ratios = bound_ratios(runs, "oracle")
+    assert all(ratios[(r["scenario"], r["controller"])] == r["x_oracle_median"] for r in rows)
+    with pytest.raises(ConfigError, match="bound=nosuch: no run of nosuch"):
+        report.render(folder, {"bound": "nosuch"})
 
 
 def test_collect_keeps_the_command_and_stamps_the_version_and_date(tmp_path: Path):
@@ -375,6 +393,30 @@ def test_every_cheap_command_block_runs_as_written(tmp_path: Path, page: Path, b
         ["bash", "-eo", "pipefail", "-c", block], cwd=work, env=env, capture_output=True, text=True, timeout=600
     )
     assert r.returncode == 0, f"{page.name}: {block}\nstdout: {r.stdout[-2000:]}\nstderr: {r.stderr[-2000:]}"
+
+
+OUTPUT = re.compile(r"^<!-- output: (?P<cmd>.+?) -->\n```\n(?P<body>.*?)^```$", re.M | re.S)
+OUTPUTS = [(page, m["cmd"], m["body"]) for page in PAGES for m in OUTPUT.finditer(page.read_text())]
+
+
+def test_there_is_a_printed_output_to_compare():
+    assert any(cmd.startswith("mlpfac run ") for _, cmd, _ in OUTPUTS)
+
+
+@pytest.mark.parametrize(("page", "command", "shown"), OUTPUTS, ids=[f"{p.name}:{c[:60]}" for p, c, _ in OUTPUTS])
+def test_every_printed_output_on_a_page_is_what_its_command_prints(tmp_path: Path, page: Path, command: str, shown):
+    """A block marked ``<!-- output: COMMAND -->`` is what COMMAND prints, line for line (the wall
+    time a run took aside)."""
+    import subprocess
+
+    work, env = _workspace(tmp_path)
+    r = subprocess.run(["bash", "-c", command], cwd=work, env=env, capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr
+
+    def steady(text: str) -> list[str]:
+        return [re.sub(r"in \d+\.\d+ s wall", "in - s wall", line) for line in text.splitlines()]
+
+    assert steady(r.stdout) == steady(shown), f"{page.name}: {command}\n{r.stdout}"
 
 
 @pytest.mark.slow

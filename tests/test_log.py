@@ -19,6 +19,7 @@ import pytest
 from mlpfac import log
 from mlpfac.exceptions import ConfigError
 from mlpfac.log import compare, sinks
+from mlpfac.loop.metrics import metrics
 
 WEIGHT_LAYERS = {"NN_f/output": (0, 54), "NN_f/hidden": (54, 162), "NN_G/output": (162, 168), "NN_G/hidden": (168, 171)}
 POSE_ENTITIES = ("/world/robot", "/world/reference_now", "/top/plane/robot", "/top/plane/reference_now")
@@ -139,7 +140,7 @@ def check_contents(rec, ents, geometry) -> None:
     else:
         assert "/events" not in ents
     status = ents["/status"].temporal
-    assert status["TextLog:text"].values.to_pylist()[0][0].startswith(rec.status)
+    assert status["TextLog:text"].values.to_pylist()[0][0].startswith(metrics(rec)["outcome"])  # metrics.json's word
     assert status["TextLog:text"].times["step"].tolist() == [n - 1]
     assert status["TextLog:level"].values.to_pylist() == [[log.STATUS_LEVEL[rec.status]]]
 
@@ -169,7 +170,7 @@ def test_diverged_record_logs_only_its_rows(make_record, tmp_path, save_rrd, rrd
     check_contents(rec, ents, robot_geometry)  # n rows everywhere, last pose row 1502, one event
     assert len(rec.events) == 1
     text = ents["/status"].temporal["TextLog:text"].values.to_pylist()[0][0]
-    assert text.startswith("diverged: position error beyond 5 m") and "1503 steps" in text
+    assert text.startswith("diverged (position error beyond 5 m") and "1503 steps" in text
 
 
 def test_same_record_gives_the_same_contents(record, tmp_path, save_rrd, rrd_contents):

@@ -297,3 +297,32 @@ def test_dividing_by_the_radius_scale_is_the_ik_given_the_true_radius(limit):
     np.testing.assert_allclose(
         wheel_speeds(*(u / s), r, track, limit), wheel_speeds(*u, s * r, track, limit), rtol=1e-15
     )
+
+
+def test_a_ci_of_an_rms_never_reaches_below_zero():
+    """Two spread seeds: Student's t interval of the mean reaches below 0, which no RMS can; its lower
+    end is clipped at 0 (the same coverage: the mean it estimates is positive), in the tables of
+    data made before too."""
+    from mlpfac.sweeps.tables import _ci, _ci95
+
+    lo, hi = _ci95([0.1e-3, 1.0e-3])
+    assert lo == 0.0 and hi > 1.0e-3
+    assert _ci95([1.0, 1.1])[0] > 0.0  # a tight interval is as it was
+    assert _ci(-0.39e-3, 1.54e-3, 1e3) == "[0.00, 1.54]"
+
+
+def test_a_grid_points_summary_column_is_named_by_its_values_and_paired_md_by_words():
+    from mlpfac.sweeps.paired import column_name, note, summary
+
+    point = {"events.0.angle_deg": 12.0, "events.1.fy": 6.0}
+    assert column_name("aisle-slope-gust+events.0.angle_deg+12.0+events.1.fy+6.0", point) == (
+        "aisle-slope-gust: angle_deg 12, fy 6"
+    )
+    same = {"events.0.scale": 1.5, "events.1.scale": 2}
+    assert column_name("s+events.0.scale+1.5+events.1.scale+2", same) == "s: events.0.scale 1.5, events.1.scale 2"
+    row = {"scenario": "s+events.0.scale+1.5+events.1.scale+2", "controller": "kanayama", "runs": 1, "tracking": 1,
+           "pos_rms_m_median": 0.001, "x_oracle_median": None, "vary": same}  # fmt: skip
+    assert summary([row]).splitlines()[0] == "| controller | s: events.0.scale 1.5, events.1.scale 2 |"
+    text = note()
+    assert "TOLD_AT_MOST" not in text and "UNTOLD_MARK" not in text and "``" not in text
+    assert "at most 1.1 times itself untold" in text and "marks (‡)" in text

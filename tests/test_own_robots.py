@@ -245,14 +245,14 @@ def cart(order: tuple[str, str]) -> str:
 @pytest.mark.parametrize("order", [("left", "right"), ("right", "left")], ids=["left-first", "right-first"])
 def test_a_robot_runs_from_its_model_alone_and_reruns_from_its_config_toml(tmp_path, capsys, order):
     """Wheels, left and right, and the pose frame (the free body, moved to the axle midpoint) found
-    in the model whatever the XML's order; said on the run's first line, written into config.toml,
+    in the model whatever the XML's order; said under the run's outcome, written into config.toml,
     whose re-run names them and records the same."""
     (tmp_path / "cart.xml").write_text(cart(order))
     (tmp_path / "cart.toml").write_text(CART_TOML)
     first, again = tmp_path / "a", tmp_path / "b"
     common = ["--duration", "4", "--no-log", "--no-plot"]
     assert main(["run", str(tmp_path / "cart.toml"), *common, "--out", str(first)]) == 0
-    assert capsys.readouterr().out.splitlines()[0] == FOUND
+    assert capsys.readouterr().out.splitlines()[1] == f"  {FOUND}"  # after what happened
     config = tomllib.loads((first / "config.toml").read_text())
     assert {k: config["plant"][k] for k in ("left_actuator", "right_actuator", "body", "frame_offset")} == {
         "left_actuator": "spin_n",

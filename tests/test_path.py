@@ -129,7 +129,7 @@ def test_unset_limits_are_a_share_of_the_controllers():
     [
         "0,0\n2,0\n2,1\n",
         "x,y\n0,0\n2,0\n2,1\n",
-        "# a route\n\nt, y, x\n0, 0, 0\n1, 0, 2\n2, 1, 2\n",
+        "# a route\n\nid, y, x\n0, 0, 0\n1, 0, 2\n2, 1, 2\n",
         "0 0\n2 0\n2 1\n",
         '\ufeff"x";"y"\n0;0\n2;0\n2;1\n',
     ],
@@ -214,7 +214,7 @@ class Late:
         if t >= self.when:
             if self.how == "raise":
                 raise ValueError("off the map")
-            return (float("nan"),) * 7
+            return ("seven", "words") if self.how == "words" else (float("nan"),) * 7
         return (0.5 * t, 0.0, 0.0, 0.5, 0.0, 0.0, 0.0)
 '''
 
@@ -254,12 +254,20 @@ def test_a_reference_class_runs_in_run_and_sweep_batched_or_not(tmp_path):
     assert [r["pos_rms_m_mean"] for r in rows[0]] == [r["pos_rms_m_mean"] for r in rows[1]]  # batched: the same bits
 
 
-@pytest.mark.parametrize("how, says", [("nan", "not finite"), ("raise", "raised ValueError: off the map")])
+@pytest.mark.parametrize(
+    "how, says",
+    [
+        ("nan", "late.py:Late: sample(1) returned a value that is not finite"),
+        ("raise", "late.py:Late: sample(1) raised ValueError: off the map (late.py, line"),
+        ("words", "late.py:Late: sample(1) returned ('seven', 'words'), not seven numbers"),
+    ],
+)
 def test_a_reference_that_stops_being_finite_ends_the_run_there(tmp_path, how, says):
     f = _own(tmp_path, "late.py:Late", f'how = "{how}"')
     for controller in ("kanayama", "corradini"):
         rec = mlpfac.run(load(f).with_overrides(controller=controller))
         assert rec.status == "diverged" and says in rec.reason and rec.reason.endswith("at t = 1.00 s")
+        assert "own_reference.py" not in rec.reason and ("raised" in rec.reason) == (how == "raise")  # their file
         assert rec.n == 100 and np.all(np.isfinite(rec.pose[:100]))
     mlpfac.sweep([str(f)], ["kanayama"], seeds="0-1", batched=True, out=tmp_path / "sw")
     found = [json.loads(m.read_text()) for m in sorted((tmp_path / "sw").glob("own/kanayama/seed-*/metrics.json"))]
@@ -299,3 +307,21 @@ def test_a_paths_numbers_vary_and_are_drawn_as_any_other(tmp_path):
     radii = [d.reference.radius for d in drawn]
     assert radii[0] != radii[1] and all(0.1 <= r <= 0.4 for r in radii)
     assert drawn[0].table["drawn"]["reference.radius"] == radii[0]
+
+
+def test_a_path_put_on_a_robot_says_its_new_timing_after_the_files_words_with_their_stop(tmp_path, capsys):
+    """--robot retimes a path: the run says so under its outcome (the path's time once along it, and as
+    the file times it), and the description joins the robot's sentence to the file's with its stop."""
+    from mlpfac.cli import main
+
+    f = tmp_path / "mine.toml"
+    f.write_text('description = "A corridor from 5 s"\nduration = 3.0\n[reference]\nkind = "path"\n'
+                 "points = [[0, 0], [4, 0], [4, 3]]\n[plant]\nkind = \"kinematic\"\n")  # fmt: skip
+    scn = load(f, robot="cart")
+    assert scn.description.startswith("A corridor from 5 s. On cart: path timed within 0.5 of the wheels' limits")
+    fit = scn.table["provenance"]["reference_fit"]
+    assert ": once along it takes " in fit and " s as the file times it)" in fit
+    assert main(["run", str(f), "--robot", "cart", "--controller", "kanayama", "--no-log", "--no-plot",
+                 "--out", str(tmp_path / "o")]) == 0  # fmt: skip
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0].startswith("mine+cart / kanayama / seed 0: ") and f"  reference: {fit}" in lines

@@ -239,3 +239,35 @@ def test_log_axis_labels_do_not_overlap(lo: float, hi: float):
     texts = [t.get_text() for t in labels]
     assert len(boxes) >= 2 and all("times" not in t for t in texts), texts  # plain numbers
     assert all(a.x1 < b.x0 for a, b in zip(boxes[:-1], boxes[1:], strict=True)), texts
+
+
+def test_figure1_says_the_outcome_metrics_json_records_and_draws_the_world_and_the_belief():
+    """The title and panel (h) say tracking / lost / diverged (never "ok"), as the run's first line
+    does; a world's ramps and patches, the believed path of an odometry run, the events and a
+    force's stretch are drawn on the paths' panels; every legend sits above the panels, none on them."""
+    from matplotlib.patches import Circle, Polygon
+
+    from mlpfac.loop.metrics import metrics, outcome_words
+    from mlpfac.plots.figure1 import Draft
+
+    lost = run(load("eight-wheel-radius-odometry").with_overrides(controller="kanayama", duration=16.0))
+    base = run(load("eight-wheel-radius-odometry").with_overrides(controller="corradini", duration=16.0))
+    draft = Draft(lost, True).complete(base)
+    title = draft.fig._suptitle.get_text()
+    assert metrics(lost)["outcome"] == "lost" and title.endswith(outcome_words(metrics(lost))), title
+    assert draft.axes["h"].get_title().endswith(f"({metrics(base)['outcome']})")
+    assert "ok" not in title.split() and "(ok)" not in draft.axes["h"].get_title()
+    dashed = [ln for ln in draft.paths["e"].get_lines() if ln.get_linestyle() == "--"]
+    assert len(dashed) == 1 and len(dashed[0].get_xdata()) > 1000  # the believed path
+    labels = [t.get_text() for t in draft.fig.legends[0].get_texts()]
+    assert "believed (odometry)" in labels and any(x.startswith("event: ") for x in labels), labels
+    assert all(ax.get_legend() is None for ax in [*draft.paths.values(), draft.axes["a"]])
+    world = {}
+    for name in ("eight-ramp", "eight-wet-patch"):
+        rec = run(load(name).with_overrides(controller="kanayama", duration=5.0))
+        world[name] = Draft(rec, False).paths["e"].patches
+    assert sum(isinstance(p, Polygon) for p in world["eight-ramp"]) == 2
+    assert sum(isinstance(p, Circle) for p in world["eight-wet-patch"]) == 1
+    push = run(load("eight-push").with_overrides(controller="kanayama", duration=13.5))
+    thick = [ln for ln in Draft(push, False).paths["e"].get_lines() if ln.get_linewidth() == 3.0]
+    assert len(thick) == 1 and 15 <= len(thick[0].get_xdata()) <= 25  # 0.2 s of push at T = 0.01 s

@@ -136,7 +136,13 @@ def test_eight_wheel_radius_tracks_on_each_base(tmp_path, monkeypatch, capsys, r
     monkeypatch.chdir(tmp_path)  # outside the repository
     argv = ["run", "eight-wheel-radius", "--robot", robot, "--controller", "kanayama", "--duration", "8"]
     assert main([*argv, "--no-log", "--no-plot", "--out", "run"]) == 0
-    assert capsys.readouterr().out.startswith("robot: ")  # what was found and chosen, first
+    lines = capsys.readouterr().out.splitlines()  # what happened, then what was found and chosen
+    assert lines[0].startswith(f"eight-wheel-radius+{robot} / kanayama / seed 0: tracking: ") and lines[1].startswith(
+        "  robot: "
+    )
+    slowed = next(line for line in lines if line.startswith("  reference: reference x"))  # what --robot did to it
+    k = float(slowed.split("reference x", 1)[1].split()[0])
+    assert k == 1 or "what the file's 25 s drive of it now takes " in slowed, slowed
     metrics = json.loads((tmp_path / "run" / "metrics.json").read_text())
     assert metrics["phases"]["before"]["rms_position_error_m"] < TRACKS[robot]
 
@@ -272,8 +278,10 @@ def test_a_file_naming_its_robot_gets_the_reference_fitted_by_the_rule_of_robot(
     monkeypatch.chdir(tmp_path)
     argv = ["--controller", "kanayama", "--no-log", "--no-plot"]
     assert main(["run", str(bare_file(tmp_path, robot)), *argv, "--out", "a"]) == 0
-    first = capsys.readouterr().out.splitlines()[0]
-    assert first.startswith("robot: ") and "; reference x" in first and "(the rule of --robot)" in first
+    lines = capsys.readouterr().out.splitlines()  # what happened; what was found; what was done to the reference
+    first = lines[2]
+    assert lines[1].startswith("  robot: ") and first.startswith("  reference: reference x")
+    assert "(the rule of --robot)" in first
     config = tomllib.loads((tmp_path / "a" / "config.toml").read_text())
     table = read_toml(shipped_dir() / "eight-nominal.toml", "scenario") | {"duration": 8.0}  # the file's
     same = on_robot(table, robot)  # the one rule: the same reference and controller limits as --robot
@@ -313,10 +321,11 @@ def test_a_reference_the_robot_cannot_drive_is_said_in_numbers(tmp_path, robot):
 
 
 @pytest.mark.menagerie
-def test_the_warning_is_the_first_line_of_a_run(tmp_path, monkeypatch, capsys):
+def test_the_warning_follows_the_outcome_first_of_what_a_run_says(tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
     path = bare_file(tmp_path, "pal_tiago", '[reference]\nkind = "eight"\nwx = 0.25\nwy = 0.5\n')
     assert main(["run", str(path), "--controller", "kanayama", "--duration", "1", "--no-log", "--no-plot"]) == 0
-    lines = capsys.readouterr().out.splitlines()
-    assert lines[0].startswith("warning: the reference asks a peak wheel speed of 11.4 rad/s of wheels that give 5")
-    assert lines[1].startswith("robot: ") and "reference x" not in lines[1]
+    lines = capsys.readouterr().out.splitlines()  # what happened, then the warning first of what was read and done
+    assert lines[0].startswith(f"{path.stem} / kanayama / seed 0: ")
+    assert lines[1].startswith("  warning: the reference asks a peak wheel speed of 11.4 rad/s of wheels that give 5")
+    assert lines[2].startswith("  robot: ") and not any(line.startswith("  reference:") for line in lines)

@@ -260,9 +260,11 @@ def test_the_odometry_run_of_the_issue_is_lost_and_says_so(tmp_path, capsys):
     lines = capsys.readouterr().out.splitlines()
     m = json.loads((out / "metrics.json").read_text())
     assert code == 0 and m["outcome"] == "lost" and m["estimate"]["believed_outcome"] == "tracking"
-    assert lines[1].startswith("eight-wheel-radius-odometry / kanayama / seed 0: ok, lost")
-    assert lines[2].startswith("  lost: the truth is lost, while the robot believed it tracked")
-    assert lines[3].startswith("  pose from odometry: the estimate's error")
+    assert lines[0].startswith(
+        "eight-wheel-radius-odometry / kanayama / seed 0: lost: the position RMS after the event"
+    )
+    assert lines[1].startswith("  lost: the truth is lost, while the robot believed it tracked")
+    assert lines[2].startswith("  pose from odometry: the estimate's error")
     est = m["estimate"]
     assert est["pose_source"] == "odometry" and est["max_position_error_m"] > 0.2
     assert est["phases"]["before"]["rms_position_error_m"] < est["phases"]["after"]["rms_position_error_m"]

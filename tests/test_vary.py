@@ -82,9 +82,22 @@ def test_a_key_the_file_leaves_out_can_vary_and_the_values_take_the_files_type()
 
 
 BAD_VARY = {  # --vary: the text the one line must hold
-    "unknown key": (["no.such=1,2"], "--vary no.such: not a number of paper that can vary; these can: duration, T"),
-    "a string key": (["plant.kind=1,2"], "these can:"),
-    "the seed": (["seed=1,2"], "these can:"),
+    "unknown key": (["no.such=1,2"], "--vary no.such: not a number of paper that can vary; it sets duration, T"),
+    "a string key": (["plant.kind=1,2"], "it sets duration"),
+    "the seed": (["seed=1,2"], "it sets duration"),
+    "a reference class's parameter the file does not set": (
+        ["reference.params.r=1,2", "OWN"],
+        "own.toml sets no r in [reference.params] (your reference class's default is its own): write r = VALUE "
+        "there to vary it",
+    ),
+    "a key of a file that sets no number": (
+        ["plant.zz=1,2", "BARE"],
+        "bare.toml that can vary; it sets no number; a key",
+    ),
+    "a point --duration makes wrong": (
+        ["plant.fix_latency_s=0,5", "--duration", "2", "FUSED"],
+        "--vary plant.fix_latency_s=5.0 with --duration 2: 5 s is not shorter than the run (2 s)",
+    ),
     "a bad value": (["events.0.factor=1,-2"], "--vary events.0.factor=-2"),
     "not a number": (["events.0.factor=1,x"], "'x' is not a number"),
     "a range's count": (["events.0.factor=1:2:1"], "COUNT >= 2"),
@@ -120,6 +133,15 @@ def test_bad_vary_is_one_line_and_nothing_runs(tmp_path, capsys, case):
     if flags == ["FILE"]:  # a distribution of the file whose support leaves the key's range
         (tmp_path / "drawn.toml").write_text(DRAWN.replace("[1.0, 2.0]", "[-1.0, 2.0]"))
         argv[1], flags = str(tmp_path / "drawn.toml"), []
+    if flags[-1:] == ["FUSED"]:  # the fused pose's scenario, its fix latency an axis
+        argv[1], flags = "eight-wheel-radius-fused", flags[:-1]
+        argv = [a for i, a in enumerate(argv) if a != "--duration" and (i == 0 or argv[i - 1] != "--duration")]
+    if flags[-1:] in (["OWN"], ["BARE"]):  # a file of a reference class that sets no [reference.params]
+        (tmp_path / "c.py").write_text(OWN_CLASS)
+        name = "own.toml" if flags[-1] == "OWN" else "bare.toml"
+        kind = 'kind = "c.py:C"\n' if flags[-1] == "OWN" else ""
+        (tmp_path / name).write_text(f'[plant]\nkind = "kinematic"\n[reference]\n{kind}')
+        argv[1], flags = str(tmp_path / name), flags[:-1]
     for f in flags:
         argv += [f] if f.startswith("-") or argv[-1] in ("--threshold", "--duration") else ["--vary", f]
     if needle is None:
@@ -131,6 +153,16 @@ def test_bad_vary_is_one_line_and_nothing_runs(tmp_path, capsys, case):
     assert not (tmp_path / "o").exists()
 
 
+OWN_CLASS = """import math
+
+
+class C:
+    def __init__(self, r=1.0):
+        self.r = r
+
+    def sample(self, t):
+        return (self.r * math.cos(t), self.r * math.sin(t), t + math.pi / 2, self.r, 1.0, 0.0, 0.0)
+"""
 DRAWN = """name = "drawn"
 duration = 3.0
 [plant]

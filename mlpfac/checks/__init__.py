@@ -58,12 +58,14 @@ def check(
     workers: int | None = None,
     robot: str | None = None,
     vary: list[str] | dict | None = None,
+    lost_threshold: float | None = None,
 ) -> CheckResult:
     """Run the sweep of the budget file ``budget`` into ``out`` (default runs/check; runs already
     done there are skipped) with ``workers`` local processes (default 2), then judge it, against
     the runs of the sweep folder (or its sweep.json) ``baseline`` per seed where the budget asks.
     Writes JUnit XML to ``junit`` and a Markdown summary to ``summary`` when given. ``vary`` adds
-    axes and draws to the budget's ``vary`` (``--vary``, :mod:`mlpfac.sweeps.vary`).
+    axes and draws to the budget's ``vary`` (``--vary``, :mod:`mlpfac.sweeps.vary`); ``lost_threshold``
+    (``--lost-threshold``) sets every run's ``lost_threshold_m`` over the budget's.
 
     ``robot`` (``--robot``) runs every scenario of the budget on that robot instead of the
     budget's ``robots``. Bad input (the budget, a flag) is a ConfigError naming the file and key
@@ -84,7 +86,7 @@ def check(
     n_workers = check_execution_flags(DEFAULT_WORKERS if workers is None else workers)
     from mlpfac.sweeps.vary import parse_vary
 
-    b = read_budget(path, robot, parse_vary(vary))
+    b = read_budget(path, robot, parse_vary(vary), lost_threshold)
     needs = b.needs_baseline()
     if needs is not None and baseline is None:
         figure = next(f for f in needs.figures if f in ("no_worse_than_baseline", "p"))
@@ -101,8 +103,10 @@ def check(
     argv = ["mlpfac", "check", str(budget), "--out", str(out), "--workers", str(n_workers)]
     argv += ["--baseline", str(baseline)] if baseline is not None else []
     argv += [f"--vary={v}" for v in (vary if isinstance(vary, list) else parse_vary(vary).texts())]
+    argv += ["--lost-threshold", f"{lost_threshold!r}"] if lost_threshold is not None else []
     meta = sweep_meta("check", b.scenarios, b.seeds_text, b.duration, jobs) | {"budget": str(path)}
     meta |= {"vary": b.vary.texts(), "threshold_m": b.threshold} if b.vary else {}
+    meta |= {"lost_threshold_m": b.lost_threshold} if b.lost_threshold is not None else {}
     done = sweep_into(jobs, out, "sweep", SWEEP_COLUMNS, meta, shlex.join(argv), workers=n_workers)
     result = CheckResult(path, out, EXIT_MISS, files=list(done.paths), duration=b.duration)
     if done.code is not None:

@@ -14,7 +14,9 @@ from mlpfac.scenario.on_robot import robots_named, split_robot, with_robots
 from mlpfac.sweeps.plan import MAX_RUNS, Job, parse_controllers, parse_seeds, plan
 from mlpfac.sweeps.vary import Vary
 
-TOP_KEYS = ("scenarios", "robots", "controllers", "seeds", "duration", "vary", "threshold_m", "budget")
+TOP_KEYS = (
+    "scenarios", "robots", "controllers", "seeds", "duration", "vary", "threshold_m", "lost_threshold_m", "budget",
+)  # fmt: skip
 FILTER_KEYS = ("name", "scenario", "controller", "phase", "axis")
 
 
@@ -30,6 +32,7 @@ class Budget:
     vary: Vary = field(default_factory=Vary)
     threshold: float | None = None
     robots_by: str = "--robot"  # the flag or key of its robots, which their errors name
+    lost_threshold: float | None = None  # every run's lost_threshold_m (lost_threshold_m, --lost-threshold)
 
     def needs_baseline(self) -> Limit | None:
         return next((b for b in self.limits if any(FIGURES[f].baseline for f in b.figures)), None)
@@ -39,7 +42,7 @@ class Budget:
         load) and their groups; each limit's filters must match a group, and "after" needs an event."""
         try:
             with robots_named(self.robots_by):
-                jobs = plan(self.scenarios, self.controllers, self.seeds, self.duration, self.vary)
+                jobs = plan(self.scenarios, self.controllers, self.seeds, self.duration, self.vary, self.lost_threshold)
         except ConfigError as err:
             if err.where.startswith(self.robots_by):  # a robot's, named already
                 raise
@@ -78,9 +81,13 @@ class Budget:
         return jobs, list(groups.values())
 
 
-def read_budget(path: Path, robot: str | None = None, flags: Vary | None = None) -> Budget:
+def read_budget(
+    path: Path, robot: str | None = None, flags: Vary | None = None, lost_threshold: float | None = None
+) -> Budget:
     """The budget file at ``path``, checked; scenario paths and ``file.py:Class`` controllers are
-    taken from the file's own folder."""
+    taken from the file's own folder. ``lost_threshold`` (``--lost-threshold``) over the file's
+    ``lost_threshold_m``."""
+    from mlpfac.scenario.parse import lost_threshold_m
     from mlpfac.tables import read_toml
 
     table = read_toml(path, "budget file")
@@ -108,6 +115,10 @@ def read_budget(path: Path, robot: str | None = None, flags: Vary | None = None)
     duration = table.get("duration")
     if duration is not None and not (_is_number(duration) and math.isfinite(duration) and duration > 0):
         raise ConfigError(f"{path} duration", f"expected a positive number of seconds, got {duration!r}")
+    if lost_threshold is not None:
+        lost_threshold = lost_threshold_m(lost_threshold, "--lost-threshold")
+    elif table.get("lost_threshold_m") is not None:
+        lost_threshold = lost_threshold_m(table["lost_threshold_m"], f"{path} lost_threshold_m")
     n = len(dict.fromkeys(scenarios)) * len(controllers) * len(seeds)
     if n > MAX_RUNS:
         raise ConfigError(f"{path} seeds", f"{n} runs is more than the limit of {MAX_RUNS}; split the budget")
@@ -125,7 +136,7 @@ def read_budget(path: Path, robot: str | None = None, flags: Vary | None = None)
         raise ConfigError(f"{path} vary", f"{n} runs is more than the limit of {MAX_RUNS}; split the budget")
     return Budget(
         path, list(dict.fromkeys(scenarios)), controllers, seeds, seeds_text, duration, limits, vary, threshold,
-        robots_by,
+        robots_by, lost_threshold,
     )  # fmt: skip
 
 

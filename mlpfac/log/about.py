@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from mlpfac.loop.metrics import RunMetrics, metrics
+from mlpfac.loop.metrics import RunMetrics, metrics, outcome_words
 from mlpfac.loop.record import RunRecord
 
 CONTROLLERS = {
@@ -67,8 +67,10 @@ def _where_to_look(record: RunRecord) -> list[str]:
     w = min(int(round(record.warmup_s / record.T)), n)
     e = record.e_true[w:n]
     e = e[np.all(np.isfinite(e), axis=1)]
-    out = [f"**{record.status}**" + (f" ({record.reason})" if record.reason else "")]
-    run = RunMetrics.from_json(metrics(record))  # the figures of metrics.json, computed once
+    m = metrics(record)  # the figures of metrics.json, computed once
+    words, how = outcome_words(m), m["outcome"]
+    out = [f"**{how}**{words[len(how) :]}"]  # the outcome metrics.json records, as the run's first line says it
+    run = RunMetrics.from_json(m)
     est = run.estimate
     if est:  # what the robot believed: a belief that tracked while the truth was lost, said first
         out += ["", f"**{est['said']}**"] if est.get("said") else []
@@ -80,15 +82,16 @@ def _where_to_look(record: RunRecord) -> list[str]:
     whole = run.figures("whole")
     if not len(e) or whole is None:
         return out
-    m1, m2 = float(np.mean(e[:, 0])), float(np.mean(e[:, 1]))
-    out[0] += (
-        f"; after the {record.warmup_s:g} s warm-up: position RMS **{1e3 * whole[0]:.1f} mm**, "
-        f"mean e1 {1e3 * m1:+.1f} mm, mean e2 {1e3 * m2:+.1f} mm"
-    )
-    out.append("")
-    if abs(m1) > 0.01 and abs(m1) > 3 * abs(m2):
-        side = "behind" if m1 > 0 else "ahead of"
-        lag = f"- e1: the robot runs {side} its reference by {1e3 * abs(m1):.0f} mm on average, along the path"
+    e1, e2 = float(np.mean(e[:, 0])), float(np.mean(e[:, 1]))
+    out += [
+        "",
+        f"after the {record.warmup_s:g} s warm-up: position RMS **{1e3 * whole[0]:.1f} mm**, "
+        f"mean e1 {1e3 * e1:+.1f} mm, mean e2 {1e3 * e2:+.1f} mm",
+        "",
+    ]
+    if abs(e1) > 0.01 and abs(e1) > 3 * abs(e2):
+        side = "behind" if e1 > 0 else "ahead of"
+        lag = f"- e1: the robot runs {side} its reference by {1e3 * abs(e1):.0f} mm on average, along the path"
         if record.controller.startswith("adaptive"):
             lag += "; the networks do not learn this lag away (the finding on the robot: docs/results-dynamics.md)"
         out.append(lag)

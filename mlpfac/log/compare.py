@@ -274,7 +274,7 @@ def _about(files: list[tuple[Path, RunMetrics | None]], labels: list[str], color
             if isinstance(rms, int | float) and not isinstance(rms, bool)
             else ""
         )
-        lines.append(f"- **{label}** ({name}): {m.scenario if m else f.parent}, {m.status if m else '?'}{fig}")
+        lines.append(f"- **{label}** ({name}): {m.scenario if m else f.parent}, {m.outcome if m else '?'}{fig}")
     events = {(ev.get("time"), ev.get("text")) for _, m in files if m for ev in m.events if isinstance(ev, dict)}
     for t, text in sorted(events, key=str):
         lines.append(f"\n**event at {t:g} s**: {text} (dark-red diamonds on every plot)")

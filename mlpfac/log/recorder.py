@@ -237,7 +237,9 @@ class RerunSink:
 
     def _send_status(self, record: RunRecord) -> None:
         k = max(record.n - 1, 0)
-        text = f"{record.status}: {record.reason}" if record.reason else record.status
+        from mlpfac.loop.metrics import metrics, outcome_words
+
+        text = outcome_words(metrics(record))  # the outcome metrics.json records, in the words of the run's first line
         text += f" ({record.n} steps, {record.scenario} / {record.controller} / seed {record.seed})"
         self.rec.send_columns(
             "status",

@@ -157,6 +157,7 @@ class ClosedLoop:
                         np.array(self.ref[: self.N]), self.pose[b], self.pose_meas[b], self.e[b], self.e_true[b],
                         self.u[b])  # fmt: skip
         rec.warmup_s, rec.split_s = scn.warmup, scn.events[0].time if scn.events else None
+        rec.lost_threshold_m = scn.lost_threshold_m
         rec.labels = dict(self.ctrl.labels)
         rec.pose_source = getattr(scn.plant_config, "pose_source", "truth")  # what pose_meas is
         return rec

@@ -15,6 +15,7 @@ import numpy as np
 from mlpfac.loop.record import RunRecord
 
 LOST_FRACTION = 0.05  # a finished run is "lost" when a phase's position RMS exceeds this share of the path's size
+# (the scenario's lost_threshold_m, or --lost-threshold, sets the threshold in metres instead)
 BIN_S = 0.1  # seconds per bin of the position error's mean square in metrics.json (any window of whole bins)
 
 
@@ -127,18 +128,63 @@ def final_telemetry(rec: RunRecord, most: int = 8) -> dict:
 
 def outcome(rec: RunRecord, phases: dict) -> dict:
     """Whether the run tracked: "diverged" (stopped: non-finite, beyond ``divergence_m``, flipped),
-    "lost" (finished, but some phase's position RMS exceeds LOST_FRACTION of the path's size, the
-    larger side of the reference's bounding box: 0.2 m on the 4 m figure of eight), else "tracking";
-    "interrupted" when it did not end."""
-    xy = rec.ref[:, :2]
-    size = float(np.max(np.max(xy, axis=0) - np.min(xy, axis=0)))
-    limit = LOST_FRACTION * size
-    if rec.status != "ok":
-        how = rec.status
-    else:
-        rms = [p["rms_position_error_m"] for p in phases.values() if p["rms_position_error_m"] is not None]
-        how = "lost" if any(x > limit for x in rms) else "tracking"
+    "lost" (finished, but some phase's position RMS exceeds the threshold), else "tracking";
+    "interrupted" when it did not end. The threshold is the scenario's ``lost_threshold_m`` where it
+    sets one, else LOST_FRACTION of the path's size, the larger side of the reference's bounding box
+    over the run (0.2 m on the 4 m figure of eight). A run that ends within its warm-up has no phase
+    to judge: it is judged on what it has, the whole run, the warm-up included, so that a robot
+    left behind is never "tracking" for want of a phase (:func:`judged_whole`)."""
+    xy = rec.ref[:, :2]  # the reference over the whole run (a run stopped early too)
+    finite = xy[np.all(np.isfinite(xy), axis=1)]
+    size = float(np.max(np.max(finite, axis=0) - np.min(finite, axis=0))) if len(finite) else 0.0
+    limit = rec.lost_threshold_m if rec.lost_threshold_m is not None else LOST_FRACTION * size
+    rms = [p["rms_position_error_m"] for p in phases.values() if p["rms_position_error_m"] is not None]
+    if not rms:  # within the warm-up: judged on what it has
+        whole = _stats(rec, 0, rec.n)["rms_position_error_m"]
+        rms = [] if whole is None else [whole]
+    how = rec.status if rec.status != "ok" else "lost" if any(not x <= limit for x in rms) else "tracking"
     return {"outcome": how, "path_size_m": size, "lost_threshold_m": limit}
+
+
+def judged_whole(m: dict) -> bool:
+    """Whether a metrics.json's outcome was judged over the whole run, the warm-up included: no
+    phase has a step (the run ends within its warm-up)."""
+    return not any(p.get("rms_position_error_m") is not None for p in (m.get("phases") or {}).values())
+
+
+def threshold_words(m: dict) -> str:
+    """Where a metrics.json's lost threshold came from: the scenario's ``lost_threshold_m``, or
+    LOST_FRACTION of the path's size."""
+    size, limit = m.get("path_size_m"), m.get("lost_threshold_m")
+    if size is not None and limit == LOST_FRACTION * size:
+        return f"{LOST_FRACTION:.0%} of the path's {size:.3g} m size".replace("%", " %")
+    return "lost_threshold_m"
+
+
+def outcome_words(m: dict) -> str:
+    """A metrics.json's outcome in a sentence, its threshold explained: what a run's first line, the
+    title of its Figure 1 and the viewer's text say. "tracking" and "lost" name the figure that
+    decided it; "diverged" and "interrupted" say why."""
+    how = m.get("outcome") or m.get("status")
+    if how not in ("tracking", "lost"):
+        return f"{how}" + (f" ({m['reason']})" if m.get("reason") else "")
+    limit = f"{m['lost_threshold_m']:.3g} m ({threshold_words(m)})"
+    if judged_whole(m):
+        rms = m.get("rms_position_error_m")
+        where = f"the whole run's position RMS {_mm(rms)}"
+        side = "beyond" if how == "lost" else "within"
+        why = "; the run ends within its warm-up, so the warm-up is judged too"
+        return f"{how}: {where} is {side} {limit}{why}"
+    phases = {k: p["rms_position_error_m"] for k, p in m["phases"].items() if p["rms_position_error_m"] is not None}
+    if how == "lost":
+        name, rms = max(phases.items(), key=lambda kv: kv[1])
+        when = f"{name} the event" if "after" in m["phases"] else f"after the {m['excluded_s'][1]:g} s warm-up"
+        return f"{how}: the position RMS {when} ({_mm(rms)}) is beyond {limit}"
+    return f"{how}: every phase's position RMS (at most {_mm(max(phases.values()))}) is within {limit}"
+
+
+def _mm(x: float | None) -> str:
+    return "-" if x is None else f"{x * 1e3:.3g} mm" if x < 1.0 else f"{x:.3g} m"
 
 
 OUTCOMES = ("tracking", "lost", "diverged")

@@ -34,6 +34,7 @@ class RunRecord:
     status: str = "ok"
     reason: str = ""
     warmup_s: float = 2.0  # learning span excluded from the phase metrics
+    lost_threshold_m: float | None = None  # the scenario's; None: a share of the path's size (mlpfac.loop.metrics)
     split_s: float | None = None  # time of the first scheduled event: "before" / "after" phases
     labels: dict[str, list[str]] = field(default_factory=dict)  # per-component names of telemetry
     sim_time_s: float = 0.0  # physical time simulated by the plant

@@ -33,6 +33,10 @@ TOP = {
     "seed": ("", "the run's seed: noise, initial weights and the controller's stream (`--seed` overrides it)"),
     "warmup": ("s", "seconds at the start left out of the phase figures of `metrics.json` (the networks learn)"),
     "divergence_m": ("m", "a position error beyond this ends the run as diverged"),
+    "lost_threshold_m": (
+        "m",
+        "a finished run whose phase's position RMS is beyond this is lost (`--lost-threshold` overrides it)",
+    ),
     "reference": ("", "the path to track: [below](#reference)"),
     "initial": ("", "where the robot starts: [below](#initial)"),
     "plant": ("", "the robot: [below](#plant)"),
@@ -61,11 +65,15 @@ CONTROLLER = {
 }
 PATH = {  # [reference] kind = "path" (mlpfac.scenario.waypoints): key -> (unit, meaning)
     "points": ("m", "the waypoints, `[[x, y], ...]`: at least 2 (3 closed), none repeated, no turn back on itself"),
-    "file": ("", "or a CSV file of them (x and y in m, one a line, a header line allowed), from this file's folder"),
+    "file": (
+        "",
+        "or a CSV file of them (x and y in m, one a line, a header line allowed; no heading or time column), "
+        "from this file's folder",
+    ),
     "closed": ("", "the route returns to its first waypoint and loops (default false: it ends, then goes straight on)"),
     "radius": (
         "m",
-        "a right-angle corner's smallest radius of curvature (default: max(v_max / (2 omega_max), track / 2))",
+        "a right-angle corner's smallest radius of curvature (default: max(v_max / (2 omega_max), track / 2, 1 mm))",
     ),
     "v_max": (
         "m/s",
@@ -250,8 +258,10 @@ def _top_probe(key: str) -> tuple[str, str]:
     """The default and range of a scenario-level number, from :func:`mlpfac.scenario.parse` itself."""
     from mlpfac.scenario.parse import parse
 
-    if key not in ("duration", "T", "seed", "warmup", "divergence_m"):
+    if key not in ("duration", "T", "seed", "warmup", "divergence_m", "lost_threshold_m"):
         return {"name": ("the file's name", "letters, digits, `.` `_` `+` `-`")}.get(key, ("", ""))
+    if key == "lost_threshold_m":  # unset: a share of the path's size (mlpfac.loop.metrics)
+        return "5 % of the path's size", _range(lambda v: parse({key: v}), key, float)
     default = getattr(parse({}), key)
     if key == "duration":  # bounded below by T, above by the memory a run may take
         return f"{default:g}", ">= T; its steps must fit in memory"
@@ -268,6 +278,10 @@ def _path_probe(key: str) -> tuple[str, str]:
         return {"closed": ("false", ""), "points": ("", "within +-10000 m; at most 1000")}.get(key, ("", ""))
     base = {"points": [[0.0, 0.0], [1.0, 0.0]]}
     most, unit = RANGES[key]
+    if key == "radius":  # 0 (from the limits), or a corner the spline can draw
+        from mlpfac.scenario.path import MIN_RADIUS
+
+        return "", f"0, or >= {MIN_RADIUS:g}, <= {most:g}"
     low = _range(lambda v: make_path(base | {key: v}, "[reference]"), key, float)
     return ("1" if key == "speed" else ""), f"{low}, <= {most:g}"
 

@@ -12,11 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
-from mlpfac.loop.record import RunRecord, force_windows
-
-EVENT_COLOR = "firebrick"
-FORCE_SPAN = "mediumvioletred"  # the windows in which a force acts on the robot
-RUN_COLOR = "tab:blue"
+from mlpfac.loop.record import RunRecord
+from mlpfac.plots.world import EVENT_COLOR, RUN_COLOR, WARM_COLOR, legend_entries, mark_paths, mark_times, on_ground
 
 
 def figure1(rec: RunRecord, baseline: RunRecord | None, path: Path) -> list[str]:
@@ -52,15 +49,21 @@ class Draft:
         P = rec.ctrl.get("mean_diag_P")
         time_panels = _time_panels(rec, h)
         rows = -(-len(time_panels) // 2) + 1
-        height = 2.9 * rows + 0.6
-        self.fig = fig = Figure(figsize=(12, height), dpi=DPI)  # no pyplot: nothing global, nothing to close
-        FigureCanvasAgg(fig)
-        grid = fig.add_gridspec(rows, 2, **_layout(height))
-        if title:
-            title = f"{rec.scenario} / {rec.controller} / seed {rec.seed}: {rec.status}"
-            fig.suptitle(title + (f" ({rec.reason})" if rec.reason else ""), fontsize=12, y=1 - 0.06 / height, va="top")
         t = rec.t[:n]
         warm = min(rec.warmup_s, t[-1] if n else 0.0)
+        entries = legend_entries(rec, warm > 0)
+        lines = -(-len(entries) // LEGEND_COLUMNS)
+        heading = _title(rec)  # the run and its outcome, a line each (the outcome wrapped where long)
+        title_in = TITLE_LINE_IN * heading.count("\n") + TITLE_IN
+        top = title_in + LEGEND_LINE_IN * lines + 0.3  # the title, the legend under it, the panels' titles
+        height = 2.9 * rows + 0.2 + top
+        self.fig = fig = Figure(figsize=(12, height), dpi=DPI)  # no pyplot: nothing global, nothing to close
+        FigureCanvasAgg(fig)
+        grid = fig.add_gridspec(rows, 2, **_layout(height, top))
+        if title:  # the outcome metrics.json records, in its words; the legend of every panel under it
+            fig.suptitle(heading, fontsize=11, y=1 - 0.06 / height, va="top")
+            fig.legend(handles=entries, loc="upper center", ncol=min(len(entries), LEGEND_COLUMNS), fontsize=8,
+                       bbox_to_anchor=(0.5, 1 - title_in / height), frameon=False)  # fmt: skip
         self.axes = axes = {}
         self.paths = paths = {}
         drawn = (0, 1) if column is None else (column,)
@@ -85,18 +88,13 @@ class Draft:
             for minor in (False, True):  # plain "9e-02" labels: the same ticks, no mathtext to lay out
                 (ax.yaxis.set_minor_formatter if minor else ax.yaxis.set_major_formatter)(LogFormatter())
             ax.set(title="(g) mean of diag(P_k): the EKF's uncertainty", ylabel="mean diag(P_k) [-]")
+        ground = on_ground(rec)  # when the robot was on a ramp or a patch
         for tag, ax in axes.items():
             ax.set_xlabel("t [s]")
             ax.grid(alpha=0.3, which="both")
             ax.set_xlim(0, rec.t[-1] + rec.T)
-            for j, ev in enumerate(rec.events):
-                label = f"event: {str(ev.get('text') or ev.get('kind')).split(' (')[0]}" if j == 0 else None
-                ax.axvline(float(ev["time"]), color=EVENT_COLOR, lw=0.9, ls="--", label=label if tag == "a" else None)
-            for j, (t0, t1) in enumerate(force_windows(rec.events, rec.t[-1] + rec.T)):  # while a force acts
-                label = "a force acts" if j == 0 and tag == "a" else None
-                ax.axvspan(t0, t1, color=FORCE_SPAN, alpha=0.18, lw=0, zorder=0, label=label)
-        if rec.events and "a" in axes:
-            axes["a"].legend(loc="upper right", fontsize=8, framealpha=0.9)
+            if tag != "h":  # (h): the baseline's own times, where it is drawn
+                mark_times(ax, rec, ground)
         _paths(paths, rec, warm)
         if "h" in axes:
             axes["h"].set_visible(False)  # drawn by finish, over its blank place
@@ -149,7 +147,9 @@ class Draft:
             nb = baseline.n
             ax = self.axes["h"]
             _signal(ax, baseline.t[:nb], baseline.e_true[:nb, 1] * 1e3, min(baseline.warmup_s, baseline.t[nb - 1]))
-            ax.set(title=f"(h) e2 under the {baseline.controller} law, same seed ({baseline.status})", ylabel="e2 [mm]")
+            mark_times(ax, baseline, on_ground(baseline))
+            how = _outcome(baseline)["outcome"]
+            ax.set(title=f"(h) e2 under the {baseline.controller} law, same seed ({how})", ylabel="e2 [mm]")
         return self
 
 
@@ -190,6 +190,26 @@ def _time_panels(rec: RunRecord, h: bool) -> list[str]:
 
 
 DPI = 90
+TITLE_IN, TITLE_LINE_IN = 0.35, 0.2  # inches above the panels: the title's first line, each line more
+LEGEND_LINE_IN, LEGEND_COLUMNS = 0.22, 5  # ... a line of the legend, of this many entries
+TITLE_WIDTH = 130  # characters of the outcome a line of the title holds
+
+
+def _outcome(rec: RunRecord) -> dict:
+    """The run's figures as metrics.json records them (its outcome among them)."""
+    from mlpfac.loop.metrics import metrics
+
+    return metrics(rec)
+
+
+def _title(rec: RunRecord) -> str:
+    """The figure's title: the run, and its outcome in the words of its first line."""
+    import textwrap
+
+    from mlpfac.loop.metrics import outcome_words
+
+    words = textwrap.wrap(outcome_words(_outcome(rec)), TITLE_WIDTH)
+    return "\n".join([f"{rec.scenario} / {rec.controller} / seed {rec.seed}", *words])
 
 
 def write_png(pixels: np.ndarray, path: Path) -> None:
@@ -220,13 +240,14 @@ def warm_up() -> None:
     fig.canvas.draw()
 
 
-def _layout(height: float) -> dict[str, float]:
+def _layout(height: float, top: float) -> dict[str, float]:
     """A fixed layout (what constrained layout found for this figure, without its solver's passes):
-    margins in inches, room on the right for the legend of (d)."""
+    margins in inches (``top``: the title and the legend above the panels), room on the right for
+    the legend of (d)."""
     return {
         "left": 0.08,
         "right": 0.865,
-        "top": 1 - 0.5 / height,
+        "top": 1 - top / height,
         "bottom": 0.5 / height,
         "wspace": 0.2,
         "hspace": 0.36,
@@ -238,7 +259,7 @@ def _signal(ax, t: np.ndarray, y: np.ndarray, warm: float) -> None:
     ax.plot(t, y, color=RUN_COLOR, lw=0.8)
     after = y[(t >= warm) & np.isfinite(y)]
     if warm > 0:
-        ax.axvspan(0, warm, color="0.88", lw=0, zorder=0)
+        ax.axvspan(0, warm, color=WARM_COLOR, lw=0, zorder=0)
     if len(after) < 2:
         return
     lo, hi = np.percentile(after, [0.2, 99.8])
@@ -285,14 +306,15 @@ def _paths(axes: dict, rec: RunRecord, warm: float) -> None:
     k = w + int(np.argmax(err[w:])) if n else 0
     half = float(np.clip(3.0 * err[k], 0.03, 0.5)) if n else 0.5
     for ax in axes.values():
-        ax.plot(rec.ref[: len(rec.t), 0], rec.ref[: len(rec.t), 1], color="black", lw=1.0, label="reference")
-        ax.plot(pose[ok, 0], pose[ok, 1], color=RUN_COLOR, lw=1.0, label="robot")
+        ax.plot(rec.ref[: len(rec.t), 0], rec.ref[: len(rec.t), 1], color="black", lw=1.0)
+        ax.plot(pose[ok, 0], pose[ok, 1], color=RUN_COLOR, lw=1.0)
+        mark_paths(ax, rec)
         ax.set(xlabel="x [m]", ylabel="y [m]", aspect="equal")
         ax.grid(alpha=0.3)
     full, close = axes.get("e"), axes.get("f")
     if full is not None:
-        full.set_title("(e) reference and driven paths")
-        full.legend(loc="upper right", fontsize=8)
+        rough = " (on rough ground)" if (rec.world or {}).get("grid") is not None else ""
+        full.set_title(f"(e) reference and driven paths{rough}")
     if not n:
         return
     c = ref[k]

@@ -15,7 +15,9 @@ each drawn by the table code the sweep itself uses (:mod:`mlpfac.sweeps.tables`,
 
 - ``sweep``: the full per-phase table (``sweep.json``), ``compare``: the shorter one (``compare.json``);
 - ``paired``: per seed against Corradini's law and the oracle (``paired.json``);
-- ``summary``: controllers x scenarios, median position RMS and x oracle (``paired.json``);
+- ``summary``: controllers x scenarios, median position RMS and x oracle (``paired.json``); with
+  ``bound=NAME`` the ratio to that controller on the same seed (from ``runs.json``), ``bound=none``
+  no ratio (where no law of the table is a bound);
 - ``robustness``: each controller's breaking points along a ``--vary`` axis (``robustness.json``,
   :mod:`mlpfac.sweeps.robustness`);
 - ``text``: ``table.md`` as it is.
@@ -46,7 +48,7 @@ from mlpfac.report.verify import read_data, read_json
 MARKER = re.compile(r"^<!-- table: (?P<spec>.+?) -->\n(?P<body>.*?)^<!-- /table -->$", re.M | re.S)
 VIEWS = ("sweep", "compare", "paired", "summary", "robustness", "text")
 DATA_FILES = ("sweep.json", "compare.json", "paired.json", "robustness.json")
-OPTIONS = ("view", "scenarios", "controllers", "labels")
+OPTIONS = ("view", "scenarios", "controllers", "labels", "bound")
 ROW_TEXTS: dict[str, tuple[type, ...]] = {  # the fields of a sweep's rows that are no number
     "scenario": (str,), "controller": (str,), "phase": (str,), "worst_status": (str,), "no_event_twin": (str, type(None)),
     "vary": (dict,),
@@ -130,20 +132,38 @@ def _render(folder: Path, view: str, opts: dict[str, str], data: dict, rows: lis
         rows = select(rows, opts.get("scenarios"), opts.get("controllers"))
     except ConfigError as err:
         raise ConfigError(f"{folder} {err.where}", err.what) from None
+    bound = opts.get("bound", "oracle")
+    if view == "summary" and bound not in ("oracle", "none"):  # the ratios, by the data's own names
+        rows = _bound(folder, bound, rows)
     if "labels" in opts:
         kept = list(dict.fromkeys(r["scenario"] for r in rows))
         labels = opts["labels"].split(",")
         if len(labels) != len(kept):
             raise ConfigError(str(folder), f"labels: {len(labels)} given for {len(kept)} scenarios {kept}")
-        rows = [r | {"scenario": labels[kept.index(r["scenario"])]} for r in rows]
+        rows = [
+            {k: v for k, v in r.items() if k != "vary"} | {"scenario": labels[kept.index(r["scenario"])]} for r in rows
+        ]
     if view == "summary":
-        return summary(rows)
+        return summary(rows, None if bound == "none" else bound)
     if view == "robustness":
         from mlpfac.sweeps.robustness import markdown as breaking_markdown
 
         return breaking_markdown(rows, (data.get("meta") or {}).get("threshold_m"), data.get("curves"))
     columns = {"sweep": SWEEP_COLUMNS, "compare": COMPARE_COLUMNS, "paired": paired_columns(rows)}[view]
     return markdown(rows, columns)
+
+
+def _bound(folder: Path, bound: str, rows: list[dict]) -> list[dict]:
+    """``rows`` with the median ratio to ``bound`` on the same seed (``x_bound_median``), from the
+    data's runs.json; a ConfigError naming the option where no run of it is there."""
+    from mlpfac.sweeps.paired import bound_ratios
+
+    runs = read_json(folder, "runs.json").get("runs")
+    there = {r.get("controller") for r in runs if isinstance(r, dict)} if isinstance(runs, list) else set()
+    if bound not in there:
+        raise ConfigError(f"{folder} bound={bound}", f"no run of {bound} in runs.json ({', '.join(sorted(there))})")
+    ratios = bound_ratios(runs, bound)
+    return [r | {"x_bound_median": ratios.get((r["scenario"], r["controller"]))} for r in rows]
 
 
 def rewrite(page: Path) -> tuple[str, int]:

@@ -176,6 +176,27 @@ def resolve(table: dict, seed: int, source: str) -> tuple[dict, dict[str, tuple[
     return out, draws
 
 
+def check_ends(table: dict, where: str, load) -> None:
+    """Each distribution of ``table`` at both ends of what it can draw: ``load(table)`` of the table
+    with that end in its place (and out of a config.toml's ``[drawn]``), so that a seed whose draw
+    lands out of range is found before anything runs, whatever seed runs first (a sweep's grid
+    checks them so too); a ConfigError naming the distribution and its end (``where``: the file)."""
+    for key, spec in leaves(table).items():
+        if not is_distribution(spec):
+            continue
+        dist = distribution(spec, f"{where} {key}")
+        for end in dist.support():
+            at_end = copy.deepcopy(table)
+            put(at_end, key, end)
+            drawn = at_end.get("drawn")
+            if isinstance(drawn, dict) and key in drawn:  # a config.toml's record of the draw: this end instead
+                at_end["drawn"] = {k: v for k, v in drawn.items() if k != key}
+            try:
+                load(at_end)
+            except ConfigError as err:
+                raise ConfigError(f"{where} {key} = {dist} (its end {end:g})", f"{err.what} ({err.where})") from None
+
+
 def restore(table: dict, draws: dict[str, tuple[Distribution, float]]) -> dict:
     """A parsed table with its distributions back in place and what was drawn in ``[drawn]``."""
     if not draws:

@@ -28,7 +28,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 from mlpfac.exceptions import ConfigError
-from mlpfac.scenario.limits import SHARE, fitted_path
+from mlpfac.scenario.limits import SHARE, fitted_path, law_limits
 
 MENAGERIE_BASES = (
     "pal_tiago",
@@ -194,6 +194,13 @@ def robot_name(robot: str) -> str:
 
 def on_robot(table: dict, robot: str) -> dict:
     """The scenario ``table`` (as read from its file) put on ``robot`` by the module's rule."""
+    return on_robot_fit(table, robot)[0]
+
+
+def on_robot_fit(table: dict, robot: str) -> tuple[dict, dict]:
+    """:func:`on_robot`, and what it did to the reference in words (``[provenance] reference_fit``,
+    said under the run's outcome): the speed factor and how long what the file drove now takes, or
+    a path's new timing; ``reference_warning`` where a path's ``speed`` asks more than the wheels give."""
     from mlpfac.plants.config import MujocoConfig
     from mlpfac.plants.events import ControlPeriod, parse_event
     from mlpfac.plants.mujoco import robot_of
@@ -224,18 +231,49 @@ def on_robot(table: dict, robot: str) -> dict:
     ref = dict(out.get("reference", {"kind": "eight"}))
     kind = ref.get("kind", "eight")
     curve = make_reference(kind, {k: v for k, v in ref.items() if k != "kind"}) if kind in SPEEDS else None
-    fit = fitted_path(ref, r, out.get("controller"), True) if kind == "path" else fitted(ref, curve, duration, r)
+    warning = ""
+    if kind == "path":
+        *fit, warning = fitted_path(ref, r, out.get("controller"), True)
+    else:
+        fit = fitted(ref, curve, duration, r)
+    said = ""
     if fit is not None:
         out["reference"], limits, said = fit
+        if kind == "path":
+            said += _path_durations(ref, out["reference"], out.get("controller"))
         out.setdefault("controller", {}).update(limits)
         said += _limits_said(limits) if limits else ""
-        out["description"] = f"{out.get('description', '')} On {robot}: {said}.".strip()
+        out["description"] = sentences(out.get("description", ""), f"On {robot}: {said}.")
     out["plant"] = plant
     out["events"] = [_same_change(ev) for ev in raw]
     if not out["events"]:
         del out["events"]
     out["name"] = f"{out.get('name', 'scenario')}+{robot_name(robot)}"
-    return out
+    return out, {k: v for k, v in (("reference_fit", said), ("reference_warning", warning)) if v}
+
+
+def sentences(text: str, more: str) -> str:
+    """``text`` and the sentence ``more`` after it, with the stop between them that ``text`` may lack."""
+    text = text.strip()
+    if text and text[-1] not in ".!?":
+        text += "."
+    return f"{text} {more}".strip()
+
+
+def _path_durations(ref: dict, timed: dict, ctrl, other: bool = True) -> str:
+    """A path's time once along it as timed for the robot, beside its time as the file times it
+    (``other``: another robot's timing than the file's)."""
+    from mlpfac.scenario.reference import make_reference
+
+    def once(table: dict) -> float:
+        law = law_limits(ctrl)
+        return make_reference("path", {k: v for k, v in table.items() if k != "kind"}, limits=law).duration
+
+    try:
+        new, old = once(timed), once(ref) if other else None
+    except ConfigError:  # said by the scenario's own checks, where it is read
+        return ""
+    return f": once along it takes {new:.4g} s" + (f" ({old:.4g} s as the file times it)" if other else "")
 
 
 def peak_wheel_speed(curve, duration: float, r) -> float:
@@ -269,6 +307,8 @@ def fitted(ref: dict, curve, duration: float, r) -> tuple[dict, dict, str] | Non
     said = f"reference x{k:.3g} in speed (peak wheel speed {k * peak:.3g} of {w_max:.3g} rad/s)"
     if speed != 1.0:
         said += f", then x{speed:g} as [reference] speed asks"
+    if k < 1.0:
+        said += f": what the file's {duration:g} s drive of it now takes {duration / k:.4g} s"
     ref = dict(ref)
     if k < 1.0:
         for key, default in zip(SPEEDS[kind], DEFAULT_SPEEDS[kind], strict=True):
@@ -281,7 +321,7 @@ def fitted(ref: dict, curve, duration: float, r) -> tuple[dict, dict, str] | Non
 
 
 def _limits_said(ctrl: dict) -> str:
-    return f", v_max {ctrl['v_max']:g} m/s, omega_max {ctrl['omega_max']:g} rad/s"
+    return f"; the controller's v_max {ctrl['v_max']:g} m/s, omega_max {ctrl['omega_max']:g} rad/s"
 
 
 def on_its_robot(table: dict, scn) -> tuple[dict, dict]:
@@ -301,11 +341,13 @@ def on_its_robot(table: dict, scn) -> tuple[dict, dict]:
         return table, {}
     r = make_plant(scn, sample(scn.reference, np.arange(2) * scn.T)).robot  # every check made; its read cached
     if kind == "path":
-        ref, limits, said = fitted_path(ref, r, table.get("controller"), False)
+        ref, limits, said, warning = fitted_path(ref, r, table.get("controller"), False)
         ctrl = dict(table.get("controller", {}))
         ctrl |= {k: v for k, v in limits.items() if k not in ctrl}
         out = table | {"reference": ref, "controller": ctrl}
-        return out, {"reference_fit": said + (_limits_said(ctrl) if limits else "")}
+        said += _path_durations(ref, ref, ctrl, False)
+        fit = {"reference_fit": said + (_limits_said(ctrl) if limits else "")}
+        return out, fit | ({"reference_warning": warning} if warning else {})
     if not any(key in ref for key in (*SPEEDS[kind], "speed")):
         fit = fitted(ref, scn.reference, scn.duration, r)
         if fit is None:
@@ -315,7 +357,7 @@ def on_its_robot(table: dict, scn) -> tuple[dict, dict]:
         ctrl |= {k: v for k, v in limits.items() if k not in ctrl}
         said += _limits_said(ctrl) + " (the rule of --robot)"
         out = table | {"reference": ref, "controller": ctrl}
-        out["description"] = f"{table.get('description', '')} Fitted to the robot: {said}.".strip()
+        out["description"] = sentences(table.get("description", ""), f"Fitted to the robot: {said}.")
         return out, {"reference_fit": said}
     from mlpfac.plants.mjcf.wheels import wheel_speed_limit
 

@@ -26,6 +26,7 @@ from mlpfac.exceptions import ConfigError
 OWN_KEYS = ("params", "speed")
 WHAT = "(x, y, theta, v, omega, dv, domega)"
 FACTOR_MAX = 100.0  # the largest speed factor, as for every kind
+STILL_M, STILL_SAMPLES = 1e-9, 101  # a reference whose (x, y) spans at most this over the run stands still
 
 
 @dataclass(frozen=True)
@@ -59,6 +60,13 @@ class OwnReference:
         out[:, 5:7] *= k * k
         return out
 
+    def stands_still(self, duration: float, samples: int = STILL_SAMPLES) -> bool:
+        """Whether its (x, y) stays within STILL_M over ``duration`` s (``samples`` times, the finite
+        ones): no path whose size a lost threshold can be a share of."""
+        rows = self.rows(np.linspace(0.0, duration, samples))[:, :2]
+        rows = rows[np.all(np.isfinite(rows), axis=1)]
+        return bool(len(rows)) and float(np.max(np.max(rows, axis=0) - np.min(rows, axis=0))) <= STILL_M
+
     def why(self, t: float) -> str:
         """Why the sample at time ``t`` ended the run."""
         found = _row(self.obj, self.speed * t)
@@ -71,9 +79,13 @@ def _row(obj, t: float) -> tuple[float, ...] | str:
 
     try:
         got = obj.sample(t)
-        row = tuple(float(x) for x in got)
-    except Exception as err:  # a value of theirs that is no number is the same fault as their code raising
+    except Exception as err:  # their code raised: where, in their file
         return f"sample({t:g}) raised {one_line(err)}"
+    try:
+        row = tuple(float(x) for x in got)
+    except Exception:  # it returned what is not seven numbers (their __float__ may raise anything): what it returned
+        text = repr(got)
+        return f"sample({t:g}) returned {text[:80] + '...' if len(text) > 80 else text}, not seven numbers {WHAT}"
     if len(row) != 7:
         return f"sample({t:g}) returned {len(row)} numbers, not 7 {WHAT}"
     if not all(math.isfinite(x) for x in row):

@@ -30,6 +30,7 @@ from mlpfac.plants import refuse_torque
 from mlpfac.plants.events import Event, parse_event
 from mlpfac.plants.world import Terrain, World, parse_world
 from mlpfac.scenario import provenance
+from mlpfac.scenario.draws import check_ends
 from mlpfac.scenario.draws import put as put_value
 from mlpfac.scenario.draws import resolve as draw_values
 from mlpfac.scenario.draws import restore as restore_draws
@@ -48,6 +49,7 @@ from mlpfac.tables import (  # noqa: F401 (mlpfac.scenario.parse.to_toml)
 
 INITIAL_ERROR_MAX = 1e3  # m (e1, e2) and rad (e3): a start beyond this is not a tracking problem
 MEMORY_SHARE = 0.8  # a run may plan to use at most this share of the memory available now
+LOST_MAX = 1e4  # m: the largest lost_threshold_m
 
 TOP_KEYS = {
     "name",
@@ -57,6 +59,7 @@ TOP_KEYS = {
     "seed",
     "warmup",
     "divergence_m",
+    "lost_threshold_m",
     "reference",
     "initial",
     "plant",
@@ -99,6 +102,7 @@ class Scenario:
     plant_from: str = ""  # the robot its [plant] came from (--robot NAME: messages name it); "": the file's own
     world: World = World()  # the [world] table: ramps, rough ground, floor patches
     terrain: Terrain | None = None  # ... resolved for this run: where the ramps lie, the ground drawn for its seed
+    lost_threshold_m: float | None = None  # position RMS beyond which a run is lost; None: 5 % of the path's size
     mpc: MpcConfig = MpcConfig()  # [controller.mpc]: the model-predictive controllers' settings
 
     @property
@@ -125,12 +129,16 @@ class Scenario:
         seed: int | None = None,
         duration: float | None = None,
         flag: str = "--controller",
+        lost_threshold: float | None = None,
     ) -> Scenario:
-        """The same scenario with the command line's --controller, --seed, --duration applied; a bad
-        value is a ConfigError naming the flag, not the file. A plug-in's ``file.py:Class`` is taken
-        from the current folder; another controller than the file's drops its ``[controller.params]``."""
+        """The same scenario with the command line's --controller, --seed, --duration and
+        --lost-threshold applied; a bad value is a ConfigError naming the flag, not the file. A
+        plug-in's ``file.py:Class`` is taken from the current folder; another controller than the
+        file's drops its ``[controller.params]``."""
         table = copy.deepcopy(self.table)
         table.pop("drawn", None)  # drawn again, for the seed it runs
+        if lost_threshold is not None:
+            table["lost_threshold_m"] = lost_threshold_m(lost_threshold, "--lost-threshold")
         if controller is not None:
             if not isinstance(controller, str) or not controller:
                 raise ConfigError(flag, f"expected a controller's name, got {controller!r}")
@@ -175,6 +183,16 @@ class Scenario:
         return q0, (ref[0, 3:5].copy() if self.start_moving else None)
 
 
+def lost_threshold_m(value, where: str) -> float:
+    """A lost threshold in metres (``lost_threshold_m``, ``--lost-threshold``): above 0, at most
+    LOST_MAX; a ConfigError naming ``where``."""
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        raise ConfigError(where, f"expected a number of metres, got {value!r}")
+    if not 0 < value <= LOST_MAX:
+        raise ConfigError(where, f"must be a number of metres above 0 and at most {LOST_MAX:g}, got {value!r}")
+    return float(value)
+
+
 def _after(t, duration: float) -> bool:
     return isinstance(t, int | float) and not isinstance(t, bool) and t >= duration
 
@@ -190,7 +208,11 @@ def scenario_names() -> list[str]:
 
 
 def load(
-    name_or_path: str | Path, build: bool = True, robot: str | None = None, values: dict | None = None
+    name_or_path: str | Path,
+    build: bool = True,
+    robot: str | None = None,
+    values: dict | None = None,
+    ends: bool = True,
 ) -> Scenario:
     """A scenario by name (``paper`` -> the shipped paper.toml) or by path to a TOML file.
 
@@ -207,6 +229,8 @@ def load(
     on torque motors, what the reference asks of them is said, and warned beyond their limit
     (``reference_torque``, ``torque_warning``: :func:`mlpfac.scenario.on_robot.torque_need`). ``values`` sets numbers of the file by
     their dotted keys (:mod:`mlpfac.scenario.draws`) before it is checked, as if written in it.
+    Every distribution of the file is checked at both ends of what it can draw (``ends``; a sweep's
+    grid checks them itself), so that no seed's draw fails where another's ran.
     """
     if not isinstance(name_or_path, str | os.PathLike) or not str(name_or_path):
         raise ConfigError("scenario", f"expected a shipped scenario's name or a .toml file, got {name_or_path!r}")
@@ -237,19 +261,25 @@ def load(
         and not plant["model"].startswith("menagerie:")
     ):
         plant["model"] = str((path.parent / Path(plant["model"]).expanduser()).resolve())
-    plant_from = ""
+    if ends:  # each distribution at both ends of what it can draw, loaded as the file is
+        check_ends(table, str(path), lambda at_end: _built(at_end, path, build, robot, values))
+    return _built(table, path, build, robot, values)
+
+
+def _built(table: dict, path: Path, build: bool, robot: str | None, values: dict | None) -> Scenario:
+    """:func:`load`'s scenario from the file's table as read (its values set, its paths resolved)."""
+    plant_from, said = "", {}
     if robot is not None:
-        from mlpfac.scenario.on_robot import on_robot, robot_where
+        from mlpfac.scenario.on_robot import on_robot_fit, robot_where
 
         parse(table, str(path), check_model=False)  # the file's own errors first, named as its own
-        table, plant_from = on_robot(table, robot), robot_where(robot)
+        (table, said), plant_from = on_robot_fit(table, robot), robot_where(robot)
         for key, value in (values or {}).items():  # a limit asked for wins over the robot's (--vary controller.v_max)
             if key.startswith("controller."):
                 put_value(table, key, value)
     scn = parse(table, str(path), plant_from=plant_from)
     if not build:  # the file's data only (a listing): no robot is read, none downloaded
         return scn
-    said = {}
     if robot is None and scn.plant_kind == "mujoco":  # its reference fitted to its robot, or warned
         from mlpfac.scenario.on_robot import on_its_robot
 
@@ -383,11 +413,21 @@ def parse(table: dict, source: str = "<scenario>", check_model: bool = True, pla
     alpha = nets.alpha if name_c in VARIANTS else 0
     need, have = memory_needed(steps, alpha, adaptive.estimator), _memory_available()
     if need > MEMORY_SHARE * have:
-        raise ConfigError(
-            f"{source} duration",
-            f"{steps} steps of {alpha} weights need about {need / 2**30:.3g} GiB; {have / 2**30:.3g} GiB of memory "
-            "is available: shorten the duration, lengthen T or shrink the networks",
-        )
+        said = f"{_count(steps)} steps of {alpha} weights need about {need / 2**30:.3g} GiB; {have / 2**30:.3g} GiB of memory is available"
+        if "duration" not in table and hasattr(reference, "duration"):  # the path's time once along it: its key
+            from mlpfac.scenario.waypoints import slowest
+
+            def fits(s: float) -> bool:
+                return memory_needed(int(round(s / T)), alpha, adaptive.estimator) <= MEMORY_SHARE * have
+
+            key = slowest(ref_table, f"{source} [reference]", (law.v_max, law.omega_max), fits)
+            raise ConfigError(
+                f"{source} [reference]{' ' + key if key else ''}",
+                f"the path takes {duration:.3g} s to drive once, the run's duration: {said}; "
+                + (f"raise {key}" if key else "raise its limits")
+                + " or set the run's duration",
+            )
+        raise ConfigError(f"{source} duration", f"{said}: shorten the duration, lengthen T or shrink the networks")
 
     raw_events = table.get("events", [])
     if not isinstance(raw_events, list):
@@ -395,6 +435,14 @@ def parse(table: dict, source: str = "<scenario>", check_model: bool = True, pla
     events = [parse_event(ev, duration, f"{source} [[events]] #{i + 1}") for i, ev in enumerate(raw_events)]
     events.sort(key=lambda ev: ev.time)
 
+    lost = table.get("lost_threshold_m")
+    lost = None if lost is None else lost_threshold_m(lost, f"{source} lost_threshold_m")
+    if lost is None and hasattr(reference, "stands_still") and reference.stands_still(duration):
+        raise ConfigError(
+            f"{source} [reference] kind",
+            f"{kind.rpartition(':')[2]} stands still over the run ((x, y) the same at every time): no path's size "
+            "bounds its error (a run is lost beyond 5 % of it); set lost_threshold_m = METRES to judge the run",
+        )
     world = parse_world(table.get("world", {}), f"{source} [world]")
     terrain = ground(world, plant_kind, reference, world.over or duration, T, e0, seed, source)
     out = recorded(restore_draws(table, draws), terrain, bumps_drawn, seed, source)
@@ -408,6 +456,7 @@ def parse(table: dict, source: str = "<scenario>", check_model: bool = True, pla
         seed=seed,
         warmup=number(table, "warmup", 2.0, source, positive=False),
         divergence_m=number(table, "divergence_m", 5.0, source),
+        lost_threshold_m=lost,
         initial_error=tuple(float(x) for x in e0),
         start_moving=moving,
         reference=reference,
@@ -425,6 +474,11 @@ def parse(table: dict, source: str = "<scenario>", check_model: bool = True, pla
         world=world,
         terrain=terrain,
     )
+
+
+def _count(n: int) -> str:
+    """A count in words a line can hold: 1200000240, or 3.48e+305 beyond a billion."""
+    return f"{n}" if n < 10**10 else f"{n:.3g}"
 
 
 def _plugin(ctrl: dict, T: float, where: str, source: str) -> Plugin:

@@ -42,6 +42,7 @@ ROOT2 = math.sqrt(2.0)
 K = 5  # the spline's degree: quintic, so that omega_r's rate is continuous too
 CORNER_D = 4.0 * ROOT2 / 3.0  # d of a right angle whose smallest radius of curvature is 1 (at its middle)
 MIN_LEG = 1e-3  # m: consecutive waypoints closer than this are a repeated point
+MIN_RADIUS = 1e-3  # m: a corner rounded tighter than this (as a repeated point) is no corner the spline can draw
 MAX_TURN_COS = -0.985  # a waypoint may turn the route by up to about 170 degrees (cos 170 = -0.985)
 GRID_DS = 0.02  # m: the timing's grid along a span, at most
 CORNER_NODES = 64  # grid points per span of a corner, at least (the limits hold between two to 0.1 %)
@@ -65,7 +66,9 @@ class Path:
     a_max: float = 1.0  # m/s^2: |dv| + |domega| track / 2 (a wheel's rim acceleration), and |dv|
     alpha_max: float = 2.5  # rad/s^2: |domega|
     track: float = 0.0  # m: the wheels' track (0: v and omega limited apart, as on the kinematic model)
-    radius: float = 0.0  # m: a right angle's smallest radius of curvature (0: max(v_max / 2 omega_max, track / 2))
+    radius: float = (
+        0.0  # m: a right angle's smallest radius of curvature (0: max(v_max / 2 omega_max, track / 2, 1 mm))
+    )
     speed: float = 1.0  # x, the same path traversed this many times as fast
     file: str = ""  # the CSV file the points were read from ("": given inline)
     sha256: str = ""  # of that file
@@ -80,7 +83,7 @@ class Path:
 
     def key(self) -> tuple:
         """What the curve and its timing depend on (not ``speed``): the timed path is made once per key."""
-        radius = self.radius or max(self.v_max / (2.0 * self.omega_max), self.track / 2.0)
+        radius = self.radius or max(self.v_max / (2.0 * self.omega_max), self.track / 2.0, MIN_RADIUS)
         return (self.points, self.closed, radius, self.v_max, self.omega_max, self.a_max, self.alpha_max, self.track)
 
     @property

@@ -3,10 +3,15 @@ limits of a :class:`~mlpfac.scenario.path.Path`, each checked and named by its k
 errors by its line) before anything runs.
 
 A CSV file holds one waypoint a line, x and y in metres: ``x,y`` (comma- or space-separated), a
-header line naming the columns allowed (``x,y``, or more columns among which ``x`` and ``y``),
-blank lines and lines starting with ``#`` skipped. A relative ``file`` is taken from the scenario
-file's folder (:func:`mlpfac.scenario.parse.load`); the file's sha256 is recorded in the run's
-``[provenance]``, and a config.toml whose file changed since is refused.
+header line naming the columns allowed (``x,y``, or more columns among which ``x`` and ``y``: an
+id, a note), blank lines and lines starting with ``#`` skipped. Every row has as many values as
+the header names columns (``2,5,0`` under ``x,y``, a decimal comma, is refused, naming its line).
+A column that means what a path does not take from its file is refused by its name: a heading
+(``yaw``, ``theta``, ``heading``, ...: the robot heads along the path, which rounds each corner
+past its waypoint) or a timing (``t``, ``time``, ``v``, ``speed``, ...: the path is timed within
+its limits). A relative ``file`` is taken from the scenario file's folder
+(:func:`mlpfac.scenario.parse.load`); the file's sha256 is recorded in the run's ``[provenance]``,
+and a config.toml whose file changed since is refused.
 """
 
 from __future__ import annotations
@@ -18,11 +23,12 @@ from pathlib import Path as FilePath
 
 from mlpfac.exceptions import ConfigError
 from mlpfac.scenario.limits import ACCEL_TIME, SHARE
-from mlpfac.scenario.path import MAX_TURN_COS, MIN_LEG, Path
+from mlpfac.scenario.path import MAX_TURN_COS, MIN_LEG, MIN_RADIUS, Path
 
 PATH_KEYS = ("points", "file", "closed", "v_max", "omega_max", "a_max", "alpha_max", "track", "radius", "speed")
 MAX_POINTS = 1000  # waypoints: a route is its corners (the timing's grid grows with each)
 LENGTH_MAX = 1e4  # m, a waypoint's coordinates and the track
+CSV_MAX = 64 * 2**20  # bytes of a CSV file of waypoints, at most
 RANGES = {  # key: (largest, unit); each must be > 0 (track >= 0)
     "v_max": (20.0, "m/s"),
     "omega_max": (100.0, "rad/s"),
@@ -52,6 +58,11 @@ def make_path(params: dict, where: str, limits: tuple[float | None, float | None
         if not (0 <= val <= most if key == "track" else 0 < val <= most):
             low = ">= 0" if key == "track" else "> 0"
             raise ConfigError(f"{where} {key}", f"must be {low} and at most {most:g} {unit}, got {val!r}")
+        if key == "radius" and 0 < val < MIN_RADIUS:
+            raise ConfigError(
+                f"{where} radius",
+                f"must be 0 (from the limits) or at least {MIN_RADIUS:g} m (a corner the spline can draw), got {val!r}",
+            )
         values[key] = float(val)
     closed = params.get("closed", False)
     if not isinstance(closed, bool):
@@ -66,7 +77,40 @@ def make_path(params: dict, where: str, limits: tuple[float | None, float | None
     try:
         return Path(points=points, closed=closed, file=file, sha256=sha, **values)
     except ConfigError as err:
-        raise ConfigError(f"{where} {err.where}".strip(), err.what) from None
+        key = err.where or _culprit(params, where, limits)
+        raise ConfigError(f"{where} {key}".strip(), err.what) from None
+
+
+SLOWING = ("speed", "v_max", "omega_max", "a_max", "alpha_max", "radius")  # what a path's time once along it grows with
+
+
+def slowest(params: dict, where: str, limits: tuple, fits) -> str | None:
+    """The key of a path's ``[reference]`` table ``params`` that makes it too long to drive once
+    (``fits(seconds)`` False): ``speed`` when the path fits at speed 1, else the first limit the
+    table sets whose default makes it fit; None when no one key does."""
+    path = make_path(params, where, limits)
+    if "speed" in params and fits(path.geometry.t[-1]):
+        return "speed"
+    for key in SLOWING[1:]:
+        if key in params:
+            try:
+                if fits(make_path({k: v for k, v in params.items() if k != key}, where, limits).duration):
+                    return key
+            except ConfigError:
+                continue
+    return None
+
+
+def _culprit(params: dict, where: str, limits: tuple) -> str:
+    """The limit the table sets without which its path can be timed ("": none alone)."""
+    for key in SLOWING[1:]:
+        if key in params:
+            try:
+                make_path({k: v for k, v in params.items() if k != key}, where, limits)
+            except ConfigError:
+                continue
+            return key
+    return ""
 
 
 def _points(params: dict, where: str) -> tuple[list, list[str], str, str]:
@@ -99,21 +143,21 @@ def _points(params: dict, where: str) -> tuple[list, list[str], str, str]:
 def read_csv(path: FilePath, where: str) -> tuple[list[tuple[float, float]], list[str], str]:
     """A CSV file's waypoints, each one's ``file line N``, and the file's sha256; a ConfigError
     naming the file (and the line) for a file that cannot be read or a line that is not x, y."""
+    from mlpfac.files import NotAFileError, read_regular
+
     try:
-        data = path.read_bytes()
+        data = read_regular(path, CSV_MAX)
     except FileNotFoundError:
         raise ConfigError(where, f"{path}: no such file") from None
-    except IsADirectoryError:
-        raise ConfigError(where, f"{path}: is a folder, not a CSV file") from None
+    except NotAFileError as err:
+        raise ConfigError(where, f"{path}: {err} (a CSV file of waypoints)") from None
     except OSError as err:
         raise ConfigError(where, f"{path}: cannot read ({err.strerror or err})") from None
-    if len(data) > 64 * 2**20:
-        raise ConfigError(where, f"{path}: {len(data) / 2**20:.0f} MiB is too large for a file of waypoints")
     try:
         text = data.decode("utf-8-sig")
     except UnicodeDecodeError:
         raise ConfigError(where, f"{path}: not a text file (UTF-8 CSV: x,y a line)") from None
-    cols, points, names = None, [], []
+    cols, points, names, header = None, [], [], None
     for n, line in enumerate(text.splitlines(), start=1):
         if not line.strip() or line.lstrip().startswith("#"):
             continue
@@ -124,7 +168,8 @@ def read_csv(path: FilePath, where: str) -> tuple[list[tuple[float, float]], lis
                 raise ConfigError(
                     where, f"{path} line {n}: a header line must name the columns x and y, got {line.strip()!r}"
                 )
-            cols = (low.index("x"), low.index("y"))
+            _refuse_meant(low, cells, path, n, where)
+            cols, header = (low.index("x"), low.index("y")), (n, len(cells), line.strip())
             continue
         if cols is None:
             if len(cells) != 2:
@@ -133,6 +178,13 @@ def read_csv(path: FilePath, where: str) -> tuple[list[tuple[float, float]], lis
                     f"{path} line {n}: expected x,y (two numbers in m), got {line.strip()!r} (more columns: name them in a header line)",
                 )
             cols = (0, 1)
+        if header is not None and len(cells) != header[1]:
+            comma = " (a decimal comma? write 2.5, not 2,5)" if "," in line and len(cells) > header[1] else ""
+            raise ConfigError(
+                where,
+                f"{path} line {n}: {len(cells)} values where the header on line {header[0]} names {header[1]} "
+                f"columns ({header[2]!r}), got {line.strip()!r}{comma}",
+            )
         try:
             x, y = float(cells[cols[0]]), float(cells[cols[1]])
         except (IndexError, ValueError):
@@ -144,6 +196,31 @@ def read_csv(path: FilePath, where: str) -> tuple[list[tuple[float, float]], lis
         if len(points) > MAX_POINTS:
             raise ConfigError(where, f"{path}: more than {MAX_POINTS} waypoints (a route is its corners: thin it)")
     return points, names, hashlib.sha256(data).hexdigest()
+
+
+HEADING = ("yaw", "theta", "heading", "psi", "phi", "angle", "orientation", "qz", "qw")  # a column a heading is in
+TIMING = ("t", "time", "stamp", "timestamp", "v", "speed", "velocity", "omega")  # ... the path's timing
+
+
+def _refuse_meant(low: list[str], cells: list[str], path: FilePath, n: int, where: str) -> None:
+    """A ConfigError naming a header's column that means what a path does not take from its file: a
+    heading at each waypoint (a differential drive's heading along a path is the path's tangent,
+    and the corners are rounded past their waypoints), or times and speeds (a path is timed within
+    its limits). Other columns (an id, a note) are left aside."""
+    for name, cell in zip(low, cells, strict=True):
+        if name in HEADING:
+            raise ConfigError(
+                where,
+                f"{path} line {n}: column {cell!r}: a path takes no heading at its waypoints (the robot heads along "
+                "the path, which rounds each corner past its waypoint): remove the column; the path's heading is "
+                "its tangent",
+            )
+        if name in TIMING:
+            raise ConfigError(
+                where,
+                f"{path} line {n}: column {cell!r}: a path is timed within its limits ([reference] v_max, a_max, "
+                "speed, ...), not by its file: remove the column",
+            )
 
 
 def _is_number(text: str) -> bool:

@@ -61,3 +61,33 @@ def recorded(table: dict, terrain: Terrain | None, was: str | None, seed: int, s
             "otherwise; remove the line to run the ground drawn now",
         )
     return {**table, "drawn": {**table.get("drawn", {}), BUMPS_DRAWN: digest}}
+
+
+def said(world: World, terrain: Terrain | None) -> str:
+    """What was built of ``world`` for a run, in words (the run's ``world:`` line): each ramp where
+    it lies, the rough ground, each patch; "" for an empty world."""
+    if terrain is None:
+        return ""
+    import math
+
+    parts = []
+    for ramp, placed in zip(world.ramps, terrain.ramps, strict=False):
+        slope = math.degrees(math.atan(ramp.slope))
+        parts.append(
+            f"a ramp across the path at ({placed.x:.3g}, {placed.y:.3g}) m ({ramp.at * 100:.3g} % of the path), "
+            f"{_m(ramp.height)} high, {_m(ramp.length)} long, {_m(placed.width)} wide ({slope:.2g} deg slopes)"
+        )
+    if world.bumps is not None:
+        x0, y0, x1, y1 = terrain.arena
+        parts.append(
+            f"rough ground of heights in [0, {_m(world.bumps.height)}), crests about {_m(world.bumps.wavelength)} "
+            f"apart, drawn for this seed over x {x0:.3g} .. {x1:.3g} m, y {y0:.3g} .. {y1:.3g} m"
+        )
+    for p in world.patches:
+        parts.append(f"a patch of friction {p.mu:g} at ({p.x:g}, {p.y:g}) m, {_m(2 * p.radius)} across")
+    return "; ".join(parts)
+
+
+def _m(x: float) -> str:
+    """A length in words: cm below a metre."""
+    return f"{x * 100:.3g} cm" if x < 1.0 else f"{x:.3g} m"

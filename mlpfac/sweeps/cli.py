@@ -14,6 +14,10 @@ from mlpfac.targets import cli_path
 
 COMPARE_CONTROLLERS = ("adaptive", "corradini", "kanayama")
 CONTROLLERS_HELP = "shipped names, path/to/file.py:Class, package.module:Class or installed names"
+LOST_HELP = (
+    "a finished run is lost when a phase's position RMS exceeds this many metres (sets every scenario's "
+    "lost_threshold_m; default: each file's, else 5 %% of the path's size)"
+)
 
 
 def _add_common(p: argparse.ArgumentParser, seeds: str, out: str) -> None:
@@ -38,6 +42,7 @@ def _add_common(p: argparse.ArgumentParser, seeds: str, out: str) -> None:
         help="with --vary: the median position RMS a breaking point allows (default: the tracking limit, 0.2 m on "
         "the figure of eight)",
     )
+    p.add_argument("--lost-threshold", type=float, metavar="METRES", help=LOST_HELP)
     p.add_argument(
         "--out", type=cli_path, default=Path(out), help=f"results folder (default {out}); re-running skips whole runs"
     )
@@ -142,7 +147,8 @@ def _run_cli(args: argparse.Namespace, stem: str) -> int:
             scenarios_of(args), args.controllers, args.seeds, args.out, duration=args.duration, workers=args.workers,
             batched=args.batched, batch_size=args.batch_size, scheduler=args.scheduler,
             scheduler_timeout=args.scheduler_timeout, save_rrd=args.save_rrd, stem=stem, columns=columns, command=cmd,
-            vary=args.vary, threshold=args.threshold, limit=args.limit, limit_cache=args.limit_cache,
+            vary=args.vary, threshold=args.threshold, lost_threshold=args.lost_threshold, limit=args.limit,
+            limit_cache=args.limit_cache,
         )  # fmt: skip
     if done.code is not None:
         return done.code

@@ -211,6 +211,7 @@ def sweep_folder(
     progress: bool | None = None,
     vary: list[str] | dict | None = None,
     threshold: float | None = None,
+    lost_threshold: float | None = None,
     limit: bool = False,
     limit_cache: Path | None = None,
 ) -> Swept:
@@ -218,8 +219,9 @@ def sweep_folder(
     :func:`sweep_into` ``out``; what ``mlpfac sweep`` / ``compare`` and :func:`mlpfac.sweep` do.
     ``command`` is what re-runs it (for messages); ``vary`` the ``--vary`` axes and draws
     (:mod:`mlpfac.sweeps.vary`), ``threshold`` the breaking points' limit in metres
-    (:mod:`mlpfac.sweeps.robustness`); ``limit`` adds ``limit`` on every scenario and seed, taken from
-    (and kept in) the cache folder ``limit_cache`` (:mod:`mlpfac.sweeps.limits`)."""
+    (:mod:`mlpfac.sweeps.robustness`), ``lost_threshold`` every run's ``lost_threshold_m``; ``limit``
+    adds ``limit`` on every scenario and seed, taken from (and kept in) the cache folder
+    ``limit_cache`` (:mod:`mlpfac.sweeps.limits`)."""
     from mlpfac.sweeps.limits import DEFAULT_CACHE, LimitCache, with_limit
     from mlpfac.sweeps.robustness import NO_AXIS, check_threshold
     from mlpfac.sweeps.vary import parse_vary
@@ -232,6 +234,10 @@ def sweep_folder(
     workers = check_execution_flags(workers, batch_size, scheduler, scheduler_timeout)
     axes = parse_vary(vary)
     threshold = check_threshold(threshold)
+    if lost_threshold is not None:
+        from mlpfac.scenario.parse import lost_threshold_m
+
+        lost_threshold = lost_threshold_m(lost_threshold, "--lost-threshold")
     if threshold is not None and not axes.axes:
         raise ConfigError("--threshold", NO_AXIS.replace("vary", "--vary"))
     scenarios = list(dict.fromkeys(scenarios))
@@ -249,10 +255,11 @@ def sweep_folder(
         from mlpfac.sweeps.worker import start_pool_server
 
         start_pool_server()  # the workers' fork server warms up while the runs are planned
-    jobs = plan(scenarios, names, seed_list, duration, axes)
+    jobs = plan(scenarios, names, seed_list, duration, axes, lost_threshold)
     check_writable(out)
     check_results_folder(out, table_files(stem))
     meta = sweep_meta(stem, scenarios, seeds, duration, jobs) | ({"vary": axes.texts()} if axes else {})
+    meta |= {"lost_threshold_m": lost_threshold} if lost_threshold is not None else {}
     meta |= {"threshold_m": threshold} if axes.axes else {}
     client = connect(scheduler, scheduler_timeout) if scheduler else None
     try:

@@ -20,7 +20,7 @@ the warm-up when there is none). Per scenario and controller:
   physics allows (:mod:`mlpfac.control.mpc`);
 - **x untold** (a law told the change: ``oracle``, ``oracle-kanayama``, ``oracle-dynamic``): the
   median over seeds of its RMS / the same law's told nothing (``corradini``, ``kanayama``,
-  ``fierro-lewis``) where that ran too. A told law should be at most ``TOLD_AT_MOST`` of itself
+  ``fierro-lewis``) where that ran too. A told law should be at most ``TOLD_AT_MOST`` times itself
   untold; the summary marks (``UNTOLD_MARK``) a cell where it is not (docs/robots.md says why where
   it cannot be).
 """
@@ -37,7 +37,24 @@ REFERENCES = ("corradini", "oracle")
 LIMIT = "limit"  # the physical limit (mlpfac.control.mpc), where a sweep ran it
 UNTOLD = {"oracle": "corradini", "oracle-kanayama": "kanayama", "oracle-dynamic": "fierro-lewis"}  # told: untold
 TOLD_AT_MOST, UNTOLD_MARK = 1.1, "‡"
+NAMES = {"``TOLD_AT_MOST``": f"{TOLD_AT_MOST:g}", "``UNTOLD_MARK``": UNTOLD_MARK}  # the docstring's names, in words
 TWIN_IGNORES = ("name", "description", "events", "seed")  # what a scenario's twin without the event may differ in
+
+
+def note() -> str:
+    """What the paired figures are, for paired.md: the module's docstring but its title, its list a
+    Markdown list, the names of the code in their values (1.1, ‡), code in single backticks."""
+    out: list[str] = []
+    for line in (__doc__ or "").split("\n\n", 1)[1].splitlines():
+        line = line.strip()
+        if not line or line.startswith("- ") or not out or not out[-1]:
+            out.append(line)
+        else:
+            out[-1] += " " + line
+    text = "\n".join(out).strip()
+    for name, value in NAMES.items():
+        text = text.replace(name, value)
+    return text.replace("``", "`")
 
 
 def wilcoxon(x: list[float], y: list[float], alternative: str = "two-sided") -> float | None:
@@ -105,6 +122,7 @@ def _ratios(x: list[float | None], y: list[float | None]) -> list[float]:
 def paired_rows(jobs: list[Job], metrics: dict[tuple, RunMetrics]) -> list[dict]:
     """One row per scenario and controller (plan order): the paired figures of the module's docstring."""
     seeds: dict[tuple[str, str], list[int]] = {}
+    points = {j.scenario: j.point for j in jobs}
     for j in jobs:
         seeds.setdefault((j.scenario, j.controller), []).append(j.seed)
     twin = twins(jobs)
@@ -113,6 +131,8 @@ def paired_rows(jobs: list[Job], metrics: dict[tuple, RunMetrics]) -> list[dict]
         ms = [metrics.get((scn, ctrl, s)) for s in ss]
         x = [compared_rms(m) for m in ms]
         row: dict = {"scenario": scn, "controller": ctrl, "runs": sum(m is not None for m in ms)}
+        if points[scn]:  # a grid point of --vary: its values by key (the summary's column says them)
+            row["vary"] = dict(points[scn])
         for how in ("tracking", "lost", "diverged"):
             row[how] = sum(m is not None and m.outcome == how for m in ms)
         done = [m for m in ms if m is not None]
@@ -203,9 +223,27 @@ def _times(x: float) -> str:
     return f"{x:.2g}x" if x < 10 else f"{x:.0f}x"
 
 
-def summary(rows: list[dict]) -> str:
-    """Controllers x scenarios: the median RMS [mm] with x oracle, and tracking/lost/diverged unless all
-    tracked; a told law more than TOLD_AT_MOST of itself told nothing marked UNTOLD_MARK."""
+def column_name(scenario: str, point: dict | None) -> str:
+    """A summary's column: the scenario, and a grid point of ``--vary`` by its values, each named by
+    its key's last part where that is unique (``eight-slope: angle_deg 12, fy 6``), not by the
+    folder's name (``eight-slope+events.0.angle_deg+12.0+events.1.fy+6.0``)."""
+    if not point:
+        return scenario
+    from mlpfac.sweeps.vary import label
+
+    family = scenario.removesuffix(label("", tuple(point.items())))
+    short = [k.rsplit(".", 1)[-1] for k in point]
+    names = short if len(set(short)) == len(short) else list(point)
+    return f"{family}: " + ", ".join(f"{n} {v:g}" for n, v in zip(names, point.values(), strict=True))
+
+
+def summary(rows: list[dict], bound: str | None = "oracle") -> str:
+    """Controllers x scenarios: the median RMS [mm] with the median ratio to ``bound`` on the same
+    seed ("oracle": ``x_oracle_median``; another controller: each row's ``x_bound_median``, from
+    :func:`bound_ratios`; None: no ratio, where no law of the table is a bound), and
+    tracking/lost/diverged unless all tracked; a told law more than TOLD_AT_MOST of itself told
+    nothing marked UNTOLD_MARK."""
+    key = "x_oracle_median" if bound == "oracle" else "x_bound_median"
     scns = list(dict.fromkeys(r["scenario"] for r in rows))
     ctrls = list(dict.fromkeys(r["controller"] for r in rows))
     cell = {(r["scenario"], r["controller"]): r for r in rows}
@@ -215,8 +253,8 @@ def summary(rows: list[dict]) -> str:
             return "-"
         text = _mm(r["pos_rms_m_median"])
         ratios = []
-        if r["controller"] != "oracle" and r["x_oracle_median"] is not None:
-            ratios.append(_times(r["x_oracle_median"]))
+        if bound is not None and r["controller"] != bound and r.get(key) is not None:
+            ratios.append(_times(r[key]))
         if r["controller"] != LIMIT and r.get("x_limit_median") is not None:
             ratios.append(f"{_times(r['x_limit_median'])} limit")
         if ratios:
@@ -229,6 +267,30 @@ def summary(rows: list[dict]) -> str:
             text += f" [belief off {_mm(r['est_rms_m_median'])}]"
         return text
 
-    lines = ["| controller | " + " | ".join(scns) + " |", "|---|" + "---:|" * len(scns)]
+    heads = [column_name(s, next(r.get("vary") for r in rows if r["scenario"] == s)) for s in scns]
+    lines = ["| controller | " + " | ".join(heads) + " |", "|---|" + "---:|" * len(scns)]
     lines += [f"| `{c}` | " + " | ".join(fmt(cell.get((s, c))) for s in scns) + " |" for c in ctrls]
     return "\n".join(lines) + "\n"
+
+
+def bound_ratios(runs: list[dict], bound: str) -> dict[tuple[str, str], float | None]:
+    """Per scenario and controller: the median over seeds of its compared figure / ``bound``'s on the
+    same seed (as ``x oracle``, another law in place of the oracle), from the runs' figures as
+    ``runs.json`` keeps them (:func:`mlpfac.report.verify.run_row`)."""
+
+    def figure(r: dict) -> float:
+        if r["status"] != "ok":
+            return math.inf
+        phases = r.get("phases") or {}
+        after = (phases.get("after") or {}).get("rms_position_error_m")
+        x = after if after is not None else (phases.get("before") or {}).get("rms_position_error_m")
+        return math.inf if x is None else x
+
+    fig = {(r["scenario"], r["controller"], r["seed"]): figure(r) for r in runs}
+    out: dict[tuple[str, str], list[float]] = {}
+    for (scn, ctrl, seed), x in fig.items():
+        b = fig.get((scn, bound, seed))
+        out.setdefault((scn, ctrl), [])
+        if b is not None:
+            out[(scn, ctrl)] += _ratios([x], [b])
+    return {k: median(v) for k, v in out.items()}

@@ -97,9 +97,11 @@ def plan(
     seeds: list[int],
     duration: float | None = None,
     vary: Vary | None = None,
+    lost_threshold: float | None = None,
 ) -> list[Job]:
-    """Load and resolve every run (each grid point of ``vary``); raises ConfigError on the first bad
-    scenario, controller, seed or value."""
+    """Load and resolve every run (each grid point of ``vary``; ``lost_threshold``: every run's
+    ``lost_threshold_m``, ``--lost-threshold``); raises ConfigError on the first bad scenario,
+    controller, seed or value."""
     from mlpfac.scenario.on_robot import split_robot
     from mlpfac.scenario.parse import to_toml
     from mlpfac.sweeps.vary import grid, label
@@ -111,6 +113,10 @@ def plan(
         raise ConfigError("--seeds", "no seed given")
     if duration is not None and not (math.isfinite(duration) and duration > 0):
         raise ConfigError("--duration", f"must be a positive number of seconds, got {duration}")
+    if lost_threshold is not None:
+        from mlpfac.scenario.parse import lost_threshold_m
+
+        lost_threshold_m(lost_threshold, "--lost-threshold")  # named before any scenario is read
     jobs: list[Job] = []
     names: dict[str, str] = {}
     for src in scenarios:
@@ -123,8 +129,8 @@ def plan(
                 )
             names[base.name] = src
             family = base.name.replace(label("", point), "", 1) if point else base.name  # the scenario (on its robot)
-            if duration is not None:  # once a scenario: what its reference asks of torque motors is said again here
-                base = base.with_overrides(duration=duration)
+            if duration is not None or lost_threshold is not None:  # once a scenario: what its reference asks of
+                base = _overridden(base, duration, lost_threshold, point)  # torque motors is said again here
             for ctrl in controllers:
                 # parsed once; only the seed varies, so each seed's table is this one with its seed
                 # (what with_overrides(seed=...) gives: parse checks a seed >= 0, which parse_seeds did);
@@ -140,6 +146,19 @@ def plan(
                         config = configs(seed, table)
                     jobs.append(Job(scn.name, scn.controller, seed, scn.source, table, config, point, family))
     return jobs
+
+
+def _overridden(base, duration: float | None, lost_threshold: float | None, point: tuple):
+    """``base`` with ``--duration`` and ``--lost-threshold`` applied; where a grid point's value does
+    not hold over the shorter run, a ConfigError naming that value of ``--vary`` beside ``--duration``."""
+    try:
+        return base.with_overrides(duration=duration, lost_threshold=lost_threshold)
+    except ConfigError as err:
+        blamed = [(k, v) for k, v in point if err.where.split()[-1] == k.split(".")[-1]]  # the key it names
+        if duration is None or not blamed:
+            raise
+        values = " ".join(f"{k}={v!r}" for k, v in blamed)
+        raise ConfigError(f"--vary {values} with --duration {duration:g}", err.what) from None
 
 
 def _seed_configs(table: dict, seeds: list[int], to_toml) -> Callable[[int, dict], str]:

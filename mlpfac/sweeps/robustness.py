@@ -12,7 +12,8 @@ the position RMS after the change, i.e. the last phase; a diverged run counts as
   state, :mod:`mlpfac.control.mpc`), its breaking point is the **physical breaking point**: beyond
   it what breaks is the robot (its traction, its torque), not a controller;
 - whether the point **holds**: every seed tracks and the median is within the threshold (default:
-  the runs' own tracking limit, 5 % of the path's size: 0.2 m on the 4 m figure of eight).
+  the runs' own tracking limit: their scenario's ``lost_threshold_m``, else 5 % of the path's size,
+  0.2 m on the 4 m figure of eight).
 
 An axis of one value (``--vary controller.v_max=1e9``) is a setting, not an axis: each row keeps it
 in ``set``, and the curves' heading says it.
@@ -82,7 +83,7 @@ def nominal(job: Job, key: str, metrics: RunMetrics | None = None):
                 if found:
                     return float(found[1])
     try:
-        value = get(load(job.source, build=False).table, key)
+        value = get(load(job.source, build=False, ends=False).table, key)
     except (KeyError, ConfigError):
         return None
     return value if isinstance(value, int | float) and not isinstance(value, bool) else None
@@ -216,7 +217,11 @@ def markdown(points: list[dict], threshold: float | None, rows: list[dict] | Non
         who = "limit (the physical breaking point)" if b["controller"] == LIMIT else b["controller"]
         cells = [b["scenario"], who, f"`{b['axis']}`", at, _num(b["nominal"])]
         lines.append("| " + " | ".join(cells + [_side(b.get("below")), _side(b.get("above"))]) + " |")
-    limit = "the runs' own tracking limit (5 % of the path's size)" if threshold is None else f"{threshold:g} m"
+    limit = (
+        "the runs' own tracking limit (their lost_threshold_m, else 5 % of the path's size)"
+        if threshold is None
+        else f"{threshold:g} m"
+    )
     note = (
         f"\nBreaking point: the last value, going away from the nominal one, at which every seed tracks and the "
         f"median position RMS after the change is within {limit}; the curves are in robustness.json and "

@@ -15,7 +15,10 @@ from mlpfac.sweeps.plan import Job
 
 
 def _ci95(xs: list[float]) -> tuple[float | None, float | None]:
-    """95 % confidence interval of the mean (Student t); None for fewer than two values."""
+    """95 % confidence interval of the mean (Student t) of RMS figures, its lower end clipped at 0;
+    None for fewer than two values. An RMS is never negative, so neither is the mean it estimates:
+    the clipped interval holds that mean exactly when the t interval does (the same 95 % coverage),
+    where a t interval of few, spread values (2 seeds) reaches below 0."""
     n = len(xs)
     if n < 2:
         return None, None
@@ -24,7 +27,7 @@ def _ci95(xs: list[float]) -> tuple[float | None, float | None]:
     mean = math.fsum(xs) / n
     sd = math.sqrt(math.fsum((x - mean) * (x - mean) for x in xs) / (n - 1))
     half = float(t.ppf(0.975, n - 1)) * sd / math.sqrt(n)
-    return mean - half, mean + half
+    return max(mean - half, 0.0), mean + half
 
 
 def aggregate(jobs: list[Job], metrics: dict[tuple, RunMetrics]) -> list[dict]:
@@ -119,7 +122,9 @@ def _f(x: float | None, scale: float = 1.0, digits: int = 2) -> str:
 
 
 def _ci(lo, hi, scale: float) -> str:
-    return "-" if lo is None else f"[{lo * scale:.2f}, {hi * scale:.2f}]"
+    """An interval of RMS figures (its lower end clipped at 0, as :func:`_ci95` makes it, in data of
+    an earlier version too)."""
+    return "-" if lo is None else f"[{max(lo, 0.0) * scale:.2f}, {hi * scale:.2f}]"
 
 
 SWEEP_COLUMNS: list[tuple[str, Callable[[dict], str]]] = [
@@ -192,8 +197,10 @@ def write_tables(out: Path, stem: str, rows: list[dict], columns, meta: dict) ->
     paths = [out / f"{stem}.csv", out / f"{stem}.md", out / f"{stem}.json"]
     note = (
         "\nStatistics over the runs that finished (tracking or lost; not over diverged ones); 95 % CI of "
-        "the mean (Student t). Tracking: every phase's position RMS within 5 % of the path's size (0.2 m on "
-        "the 4 m figure of eight); lost: beyond it; diverged: stopped (non-finite, beyond divergence_m, "
+        "the mean (Student t), its lower end clipped at 0 (an RMS is never negative: the clip keeps the "
+        "interval's coverage). Tracking: every phase's position RMS within the run's lost threshold (its "
+        "scenario's lost_threshold_m, else 5 % of the path's size: 0.2 m on the 4 m figure of eight); lost: "
+        "beyond it; diverged: stopped (non-finite, beyond divergence_m, "
         "flipped). Worst seed: the first to diverge if any diverged, else the largest position RMS; re-run "
         "it alone with `mlpfac run SCENARIO --controller C --seed S`.\n"
     )
@@ -225,7 +232,7 @@ def write_paired(out: Path, rows: list[dict], meta: dict) -> list[Path]:
     w.writeheader()
     for r in rows:
         w.writerow({k: ("" if r.get(k) is None else r[k]) for k in PAIRED_FIELDS})
-    note = "\n" + " ".join(" ".join((paired.__doc__ or "").split("\n\n")[1:]).split()) + "\n"
+    note = "\n" + paired.note() + "\n"
     paths = [out / name for name in PAIRED_FILES]
     write_atomic(paths[0], buf.getvalue())
     write_atomic(paths[1], markdown(rows, paired.paired_columns(rows)) + note)

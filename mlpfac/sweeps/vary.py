@@ -175,8 +175,21 @@ def _typed(value: Any, current: Any) -> Any:
 
 
 def _key_error(src: str, key: str, table: dict) -> ConfigError:
-    keys = [k for k, v in leaves(table).items()]
-    return ConfigError(f"{FLAG} {key}", f"not a number of {src} that can vary; these can: {', '.join(keys)}")
+    """``key`` is no number of ``src`` that can vary: what can (never an empty list)."""
+    parts = key.split(".")
+    if parts[:2] == ["reference", "params"] and len(parts) == 3:  # a reference class's parameter: only where set
+        return ConfigError(
+            f"{FLAG} {key}",
+            f"{src} sets no {parts[2]} in [reference.params] (your reference class's default is its own): write "
+            f"{parts[2]} = VALUE there to vary it",
+        )
+    keys = list(leaves(table))
+    sets = f"it sets {', '.join(keys)}" if keys else "it sets no number"
+    return ConfigError(
+        f"{FLAG} {key}",
+        f"not a number of {src} that can vary; {sets}; a key it leaves to its default (duration, T, "
+        "plant.pose_noise_std, ...) varies too where its table takes it: docs/scenario-file.md lists them",
+    )
 
 
 def _present(table: dict, key: str) -> bool:
@@ -193,7 +206,7 @@ def grid(src: str, vary: Vary, duration: float | None = None, robot: str | None 
     of an event that ``duration`` (``--duration``) leaves out is a ConfigError."""
     from mlpfac.scenario.parse import load
 
-    file = load(src, build=False)
+    file = load(src, build=False, ends=False)  # the file's distributions: checked at both ends below
     numbers = leaves(file.table)
     if duration is not None:
         _check_duration(vary, numbers, duration)
@@ -202,7 +215,7 @@ def grid(src: str, vary: Vary, duration: float | None = None, robot: str | None 
         k: distribution(v, f"{src} {k}") for k, v in numbers.items() if isinstance(v, dict) and k not in axis_keys
     }
     if not vary and not in_file:
-        return [((), load(src, robot=robot))]
+        return [((), load(src, robot=robot, ends=False))]
     drawn = {k: d.table() for k, d in vary.draws.items()}
     for key in [a.key for a in vary.axes] + list(drawn):
         if key.split(".")[0] in SKIPPED or (key not in numbers and _present(file.table, key)):
@@ -210,7 +223,7 @@ def grid(src: str, vary: Vary, duration: float | None = None, robot: str | None 
         if key not in numbers:  # a key the file leaves to its default, as plant.pose_noise_std
             first = next((a.values[0] for a in vary.axes if a.key == key), None)
             try:
-                load(src, build=False, values={key: 0 if first is None else first})
+                load(src, build=False, values={key: 0 if first is None else first}, ends=False)
             except ConfigError as err:
                 if err.what.startswith(("unknown key", "no such key", "not a parameter")):
                     raise _key_error(src, key, file.table) from None
@@ -225,7 +238,9 @@ def grid(src: str, vary: Vary, duration: float | None = None, robot: str | None 
                 _checked(src, {**drawn, a.key: v}, f"{FLAG} {a.key}={v!r}", build=False)
     out = []
     if not axes:
-        return [((), _checked(src, drawn, "", build=True, robot=robot) if drawn else load(src, robot=robot))]
+        return [
+            ((), _checked(src, drawn, "", build=True, robot=robot) if drawn else load(src, robot=robot, ends=False))
+        ]
     for vals in itertools.product(*(values for _, values in axes)):
         point = tuple(zip((a.key for a, _ in axes), vals, strict=True))
         where = f"{FLAG} " + " ".join(f"{k}={v!r}" for k, v in point)
@@ -262,7 +277,7 @@ def _checked(src: str, values: dict, where: str, build: bool = True, robot: str 
     from mlpfac.scenario.parse import load
 
     try:
-        return load(src, build=build, robot=robot, values=values)
+        return load(src, build=build, robot=robot, values=values, ends=False)
     except ConfigError as err:
         if not where:
             raise
