@@ -178,6 +178,11 @@ def _plan(command: str, root: Path, where: str = "command"):
     where_run = root / folder if folder is not None else root
     if not where_run.is_dir():
         raise ConfigError(where, f"cd {folder}: no such folder ({where_run}): {command!r}")
+    lost = args.lost_threshold
+    if lost is not None:
+        from mlpfac.scenario.parse import lost_threshold_m
+
+        lost = lost_threshold_m(lost, "--lost-threshold")
     with contextlib.chdir(where_run), robots_named_as(args):
         jobs = plan(
             scenarios_of(args),
@@ -185,6 +190,7 @@ def _plan(command: str, root: Path, where: str = "command"):
             parse_seeds(args.seeds),
             args.duration,
             parse_vary(args.vary),  # the grid points and draws: each point's runs are its own scenario
+            lost,
         )
     return jobs, where_run
 

@@ -171,7 +171,7 @@ class MPC(Stepped):
                 s.x_a, s.st_a = s.model.apply(ev, s.x_a, s.st_a)
                 if isinstance(ev, SensorDelay):
                     s.pose_step.delay(ev.steps)
-            n, half = s.model.n, s.model.half
+            half = s.model.half
             s.A = None  # the step's Jacobian taken afresh on the changed robot
             for i in range(half):  # told a change: the velocities less certain (it jolts the robot)
                 s.P[half + i, half + i] += self.config.told_std * self.config.told_std
