@@ -191,3 +191,31 @@ def test_mpc_on_the_kinematic_model_is_refused():
     with pytest.raises(ConfigError) as err:
         mlpfac.load("paper").with_overrides(controller="mpc")
     assert "MuJoCo" in str(err.value)
+
+
+def test_a_sweep_with_limit_pairs_every_run_with_it_and_computes_each_limit_once(tmp_path, capsys):
+    """--limit adds ``limit`` on every scenario and seed; the paired rows and the summary say x limit;
+    a second sweep into another folder takes every limit from the cache (the same metrics, nothing
+    run), and a cache folder changed by hand is run again."""
+    from mlpfac.cli import main
+
+    cache = tmp_path / "limits"
+    args = ["compare", "eight-nominal", "--controllers", "kanayama", "--seeds", "0-1", "--duration", "0.3",
+            "--workers", "1", "--limit", "--limit-cache", str(cache)]  # fmt: skip
+    assert main([*args, "--out", str(tmp_path / "a")]) == 0
+    first = capsys.readouterr().out
+    assert "limit" in first and "x limit" in (tmp_path / "a" / "paired.md").read_text()
+    assert "limit" in (tmp_path / "a" / "summary.md").read_text()
+    kept = sorted(cache.glob("*/*/metrics.json"))
+    assert len(kept) == 2
+    assert main([*args, "--out", str(tmp_path / "b")]) == 0
+    second = capsys.readouterr().out
+    assert "2 limits from the cache, 2 run now" in second, second
+    for seed in ("seed-0000", "seed-0001"):
+        a = (tmp_path / "a" / "eight-nominal" / "limit" / seed / "metrics.json").read_text()
+        b = (tmp_path / "b" / "eight-nominal" / "limit" / seed / "metrics.json").read_text()
+        assert a == b
+    kept[0].parent.joinpath("simulated.toml").write_text("seed = 99\n")
+    assert main([*args, "--out", str(tmp_path / "c")]) == 0
+    assert "1 limits from the cache, 3 run now" in capsys.readouterr().out
+
