@@ -219,3 +219,14 @@ def test_a_sweep_with_limit_pairs_every_run_with_it_and_computes_each_limit_once
     assert main([*args, "--out", str(tmp_path / "c")]) == 0
     assert "1 limits from the cache, 3 run now" in capsys.readouterr().out
 
+
+
+def test_its_settings_vary_as_any_number_of_the_file():
+    """``--vary controller.mpc.horizon_s=...`` on a file that sets no [controller.mpc]: each point
+    a scenario whose planner has that horizon."""
+    from mlpfac.sweeps.plan import plan
+    from mlpfac.sweeps.vary import parse_vary
+
+    jobs = plan(["eight-nominal"], ["mpc"], [0], 0.2, parse_vary(["controller.mpc.horizon_s=0.2,0.4"]))
+    got = sorted(mlpfac.parse(j.table, "x").mpc.horizon_s for j in jobs)
+    assert got == [0.2, 0.4]

@@ -20,6 +20,7 @@ class MpcConfig:
     settled_m: float = 1.0e-4  # ... or once the plan's RMS residual is below this (m)
     reuse: int = 2  # control steps a settled plan's Jacobian (and the estimator's step Jacobian) serve again (0: new ones every step)
     heading_m: float = 0.03  # m a radian of heading error costs, against the position's
+    heading_end_m: float = 1.0  # ... at the horizon's last step (the plan ends along the path)
     damping: float = 1.0e-3  # mu of the Levenberg-Marquardt step (on diag(J'J))
     accel_std: float = 0.1  # the estimator's process noise: std of each generalized acceleration (SI units / s^2)
     told_std: float = 0.01  # ... and the std each velocity's estimate loses at an event it is told (SI units)
@@ -29,6 +30,7 @@ class MpcConfig:
         checks = {
             "horizon_s": (self.horizon_s, 0.0, 10.0),
             "heading_m": (self.heading_m, 0.0, 1.0e3),
+            "heading_end_m": (self.heading_end_m, 0.0, 1.0e3),
             "damping": (self.damping, 0.0, 1.0e6),
             "accel_std": (self.accel_std, 0.0, 1.0e6),
             "told_std": (self.told_std, 0.0, 1.0e6),

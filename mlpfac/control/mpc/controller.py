@@ -241,7 +241,7 @@ class MPC(Stepped):
         if s.J is not None and s.age < cfg.reuse and s.cost < settled:
             U1[0] = np.einsum("jk,kc->jc", phi, s.knots)
             s.model.rollouts(s.x, s.st, k, U1, self.preview, E1)
-            E1[:, :, 2] *= cfg.heading_m
+            self._weigh(E1)
             cost = plan_cost(E1[0])
             if cost < settled:
                 gauss_newton(s.J, E1[0], s.mu, 1.0e-12, delta)
@@ -258,7 +258,7 @@ class MPC(Stepped):
                 i, c = divmod(p, 2)
                 U[1 + p, :, c] += phi[:, i] * w[p]
             s.model.rollouts(s.x, s.st, k, U, self.preview, E)
-            E[:, :, 2] *= cfg.heading_m
+            self._weigh(E)
             cost = plan_cost(E[0])
             if not math.isfinite(cost) or cost >= FAILED_COST:
                 break
@@ -274,7 +274,7 @@ class MPC(Stepped):
                 break
             U1[0] = np.einsum("jk,kc->jc", phi, knots)
             s.model.rollouts(s.x, s.st, k, U1, self.preview, E1)
-            E1[:, :, 2] *= cfg.heading_m
+            self._weigh(E1)
             new = plan_cost(E1[0])
             if new < cost:
                 gain = (cost - new) / cost
@@ -285,6 +285,12 @@ class MPC(Stepped):
             else:
                 s.mu, s.radius = min(4.0 * s.mu, MU_MAX), max(0.5 * s.radius, RADIUS_MIN)
         return self._sent(s, b, cost)
+
+    def _weigh(self, E: np.ndarray) -> None:
+        """The rollouts' errors (R, H, 3) as the plan's residuals: the heading's weighed by
+        ``heading_m``, at the horizon's end by ``heading_end_m`` (the plan ends along the path)."""
+        E[:, :-1, 2] *= self.config.heading_m
+        E[:, -1, 2] *= self.config.heading_end_m
 
     def _sent(self, s: _Seed, b: int, cost: float) -> np.ndarray:
         """The plan's first knot, sent; the plan shifted a step for the next."""
