@@ -230,3 +230,16 @@ def test_its_settings_vary_as_any_number_of_the_file():
     jobs = plan(["eight-nominal"], ["mpc"], [0], 0.2, parse_vary(["controller.mpc.horizon_s=0.2,0.4"]))
     got = sorted(mlpfac.parse(j.table, "x").mpc.horizon_s for j in jobs)
     assert got == [0.2, 0.4]
+
+
+@pytest.mark.parametrize("robot", ["tests/data/weak_servo.xml", "tests/data/skid_short.xml", "tug"])
+def test_it_runs_on_a_users_mjcf_a_skid_steer_and_a_torque_driven_robot(robot):
+    """From the MJCF alone (a light robot with weak servos; four wheels that skid; the tug's torque
+    motors): both controllers run to the end, at the level the robot's drive takes."""
+    from pathlib import Path
+
+    path = str(Path(__file__).resolve().parent.parent / robot) if robot.endswith(".xml") else robot
+    for c in ("mpc", "limit"):
+        scn = mlpfac.load("eight-nominal", robot=path).with_overrides(controller=c, duration=0.3)
+        rec = run(scn)
+        assert rec.status == "ok" and rec.n == scn.steps, (robot, c, rec.reason)

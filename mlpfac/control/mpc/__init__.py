@@ -11,7 +11,8 @@ within their ranges.
 **The plan** (a Gauss-Newton step a control step, as MuJoCo MPC's gradient-based planners take
 one from the last plan): the commands over a horizon of H control steps are a linear spline of
 ``knots`` knots, the first one the command sent now. The cost is the tracking error (2) over the
-horizon, sum_j e1_j^2 + e2_j^2 + (heading_m e3_j)^2, its residuals' Jacobian in the knots found by
+horizon, sum_j e1_j^2 + e2_j^2 + (heading_m e3_j)^2 (heading_end_m at the last step: the plan ends
+along the path), its residuals' Jacobian in the knots found by
 forward differences of rollouts of the model (1 + 2 knots rollouts of H steps), and the knots
 moved by the Levenberg-Marquardt step (J'J + mu diag(J'J)) delta = -J'r, kept within the drive's
 limits; the plan is then shifted one step to start the next.

@@ -21,7 +21,7 @@ from mlpfac.model import pose_from_error
 from mlpfac.plants.events import DelayLine, SensorDelay
 
 FAILED_COST = 1.0e9  # a plan whose rollout diverged (its errors FAILED) costs at least this
-MU_MAX, RADIUS_MIN, RADIUS_MAX = 1.0e6, 1.0e-3, 1.0  # the damping's ceiling, the trust radius's range (of the scale)
+MU_MAX, RADIUS_MIN = 1.0e6, 1.0e-3  # the damping's ceiling, the trust radius's least (a share of the scale)
 FD_STEP = 1.0e-6  # the estimator's finite-difference step in the state's tangent space (m, rad, m/s, rad/s)
 _NO_A = np.zeros((0, 0))
 
@@ -279,7 +279,7 @@ class MPC(Stepped):
             if new < cost:
                 gain = (cost - new) / cost
                 s.knots, cost = knots, new
-                s.mu, s.radius = max(s.mu / 3.0, cfg.damping), min(2.0 * s.radius, RADIUS_MAX)
+                s.mu, s.radius = max(s.mu / 3.0, cfg.damping), min(2.0 * s.radius, cfg.trust)
                 if gain < cfg.tolerance or new < settled:  # converged: the next step starts from here
                     break
             else:

@@ -152,3 +152,4 @@ def plan_cost(E):
         for c in range(E.shape[1]):
             s += E[j, c] * E[j, c]
     return s
+
