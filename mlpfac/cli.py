@@ -256,9 +256,9 @@ def cmd_list() -> int:
 
 
 def cmd_report(args: argparse.Namespace) -> int:
-    from mlpfac.report import results as report
+    from mlpfac.report import run_cli
 
-    return report.run_cli(args)
+    return run_cli(args)
 
 
 def cmd_check(args: argparse.Namespace) -> int:

@@ -48,6 +48,7 @@ MODULES = {  # the modules whose kernels each extension holds
         "mlpfac.model",
         "mlpfac.dynamics",
         "mlpfac.control.law",
+        "mlpfac.control.policy",
         "mlpfac.control.drive",
         "mlpfac.control.dynamic",
         "mlpfac.control.adaptive.kernels",

@@ -441,6 +441,69 @@ def test_bad_flag(tmp_path, capsys, monkeypatch, case):
     assert not (tmp_path / "out").exists()
 
 
+def _policy(**change) -> dict:
+    """A policy file's arrays (mlpfac.control.policy), one layer, with ``change`` (None: left out)."""
+    import numpy as np
+
+    arrays = {"format": np.array("mlpfac-policy-1"), "features": np.array("tracking-1"), "obs_scale": np.ones(8),
+              "obs_clip": np.array(5.0), "act_scale": np.ones(2), "feedforward": np.array(1.0),
+              "W0": np.zeros((2, 8)), "b0": np.zeros(2)}  # fmt: skip
+    return {k: v for k, v in (arrays | change).items() if v is not None}
+
+
+# a policy file as --controller: (its arrays, or bytes; text the message must hold)
+BAD_POLICIES = {
+    "not an npz": (b"PK\x03\x04 not a zip", "not a policy file"),
+    "text": (b"W0 = 1\n", "not a policy file"),
+    "no weights": (_policy(W0=None, b0=None), "expected 1 to 8 layers"),
+    "a missing array": (_policy(obs_scale=None), "no array 'obs_scale'"),
+    "wrong format": (_policy(format="__np__:other"), "format must be 'mlpfac-policy-1'"),
+    "wrong shape": (_policy(W0="__np__:zeros:2,7"), "W0 has shape (2, 7), expected (2, 8)"),
+    "a bias of the wrong size": (_policy(b0="__np__:zeros:3"), "b0 has shape (3,), expected (2,)"),
+    "three outputs": (_policy(W0="__np__:zeros:3,8", b0="__np__:zeros:3"), "W0 has shape (3, 8), expected (2, 8)"),
+    "a weight not finite": (_policy(W0="__np__:nan:2,8"), "W0 holds a value that is not finite"),
+    "a scale of zero": (_policy(obs_scale="__np__:zeros:8"), "must be positive"),
+    "text weights": (_policy(W0="__np__:text"), "W0 holds <U"),
+}  # fmt: skip
+
+
+def _array(v):
+    import numpy as np
+
+    if not (isinstance(v, str) and v.startswith("__np__:")):
+        return v
+    kind, _, shape = v[7:].partition(":")
+    dims = tuple(int(x) for x in shape.split(",")) if shape else ()
+    return {"other": np.array("other"), "text": np.array(["a", "b"]), "zeros": np.zeros(dims),
+            "nan": np.full(dims, np.nan)}[kind]  # fmt: skip
+
+
+@pytest.mark.parametrize("case", sorted(BAD_POLICIES))
+def test_bad_policy_file(tmp_path, capsys, monkeypatch, case):
+    import numpy as np
+
+    content, needle = BAD_POLICIES[case]
+    monkeypatch.chdir(tmp_path)
+    path = tmp_path / "mine.npz"
+    if isinstance(content, bytes):
+        path.write_bytes(content)
+    else:
+        with open(path, "wb") as fh:
+            np.savez(fh, **{k: _array(v) for k, v in content.items()})
+    assert (
+        code_of(["run", "eight-nominal", "--controller", "mine.npz", "--no-log", "--out", str(tmp_path / "out")]) == 2
+    )
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and needle in err and "--controller" in err and "mine.npz" in err, err
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_missing_policy_file_is_named(tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert code_of(["run", "eight-nominal", "--controller", "nosuch.npz", "--no-log", "--out", "out"]) == 2
+    assert "nosuch.npz: no such policy file" in capsys.readouterr().err
+
+
 # view, plot and check: (argv, text the message must hold); "D" is a folder holding no run
 BAD_VIEW_PLOT = {
     "view: no run.rrd": (["view", "D"], "no run.rrd"),
@@ -472,6 +535,9 @@ BAD_VIEW_PLOT = {
     "report --command without --collect": (["report", "D", "--command", "c"], "--command means nothing without --collect"),
     "report --code-version without --collect": (["report", "D", "--code-version", "abc"], "--code-version means nothing without --collect"),
     "report --command of two --collect": (["report", "D", "--collect", "a=D", "--collect", "b=D", "--command", "c"], "--command: is the command of one --collect"),
+    "report --remake with --check": (["report", "D", "--remake", "--check"], "--remake means nothing with --check"),
+    "report --sources with --verify": (["report", "D", "--sources", "--verify", "1"], "--sources means nothing with --verify"),
+    "report --remake: no such dataset": (["report", "D", "--remake", "nosuch"], "--remake nosuch: no such dataset: nosuch"),
     "sweep --threshold without --vary": (["sweep", "paper", "--threshold", "0.1"], "--threshold means nothing without --vary"),
     "sweep --threshold with a draw only": (["sweep", "paper", "--vary", "T=uniform:0.01:0.02", "--threshold", "0.1"], "--threshold: means nothing without an axis"),
     "sweep --lost-threshold -1": (["sweep", "paper", "--lost-threshold", "-1"], "--lost-threshold: must be a number of metres above 0"),

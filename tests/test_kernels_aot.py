@@ -19,8 +19,8 @@ from mlpfac.exceptions import ConfigError
 
 # Short runs that call every exported kernel between them: every shipped controller (the adaptive
 # step and its EKF, the estimators' ekf_update, the input model and the delay bank, the baselines'
-# compiled closed loop, a delay line of integers: the oracle's), the torque-driven wheels, the
-# kinematic plant, and batches of seeds (B > 1) on both plants.
+# compiled closed loop, a delay line of integers: the oracle's; a policy's MLP), the torque-driven
+# wheels, the kinematic plant, batches of seeds (B > 1) on both plants, and the vector environment.
 RUNS = (
     *(("eight-nominal", c) for c in CONTROLLERS if c not in TORQUE_LEVEL),
     *(("eight-torque", c) for c in TORQUE_LEVEL),  # the wheels' torques: a robot with torque motors
@@ -63,6 +63,16 @@ SCRIPT = textwrap.dedent(
     h, H = np.empty((2, 3)), np.empty((2, 3, 162))
     networks_h_jacobian(z, xf, xG, e, u, 9, 9, True, h, H)
     out["jacobian"] = hashlib.sha256(h.tobytes() + H.tobytes()).hexdigest()
+    import gymnasium, mlpfac.envs  # the vector environment's kernel (many robots a call), and a policy's inputs
+    from mlpfac.control.policy import features
+    v = gymnasium.make_vec("mlpfac/Track-v0", num_envs=2, vectorization_mode="vector_entry_point", duration=0.3)
+    obs, _ = v.reset(seed=0)
+    for _ in range(40):
+        obs = v.step(obs[:, 6:8])[0]
+    X = np.empty((2, 8))
+    features(np.ascontiguousarray(obs[:, :3]), np.ascontiguousarray(obs[:, 6:8]), np.ascontiguousarray(obs[:, 8:10]),
+             2.0, 5.0, np.full(8, 0.1), 5.0, X)
+    out["vector env"] = hashlib.sha256(obs.tobytes() + X.tobytes()).hexdigest()
     print(json.dumps({"runs": out, "numba": "numba" in sys.modules}))
     """
 )

@@ -210,10 +210,13 @@ def _seeds_text(v, path: Path) -> str:
 
 
 def _near(spec: str, here: Path) -> str:
-    """``file.py:Class`` with a relative file -> the file from the budget's folder, as an absolute path."""
+    """``file.py:Class`` (or a policy's ``file.npz``) with a relative file -> the file from the budget's
+    folder, as an absolute path."""
     file, sep, rest = spec.partition(":")
     if sep and file.endswith(".py") and not Path(file).is_absolute():
         return f"{here / file}:{rest}"
+    if spec.endswith(".npz") and not Path(spec).is_absolute():
+        return str(here / spec)
     return spec
 
 

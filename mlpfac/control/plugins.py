@@ -50,15 +50,19 @@ class Plugin:
 
 
 def is_plugin_spec(text: str) -> bool:
-    """Whether a controller name is a plug-in (not one of the shipped controllers)."""
-    return text not in CONTROLLERS
+    """Whether a controller name is a plug-in (not one of the shipped controllers, nor a policy's
+    ``.npz`` file: :mod:`mlpfac.control.policy`)."""
+    return text not in CONTROLLERS and not text.endswith(".npz")
 
 
 def absolute_spec(spec: str, base: Path) -> str:
-    """``file.py:Class`` with a relative path made absolute against ``base``; other names unchanged."""
+    """``file.py:Class`` (or a policy's ``file.npz``) with a relative path made absolute against
+    ``base``; other names unchanged."""
     path, sep, cls = spec.rpartition(":")
     if sep and path.endswith(".py") and not Path(path).expanduser().is_absolute():
         return f"{(base / Path(path).expanduser()).resolve()}:{cls}"
+    if spec.endswith(".npz") and not Path(spec).expanduser().is_absolute():
+        return str((base / Path(spec).expanduser()).resolve())
     return spec
 
 

@@ -24,6 +24,7 @@ from mlpfac.dynamics import RobotModel
 from mlpfac.jit import as_rows
 
 WHAT = "(tau_left, tau_right)"
+_ARRAYS = ("e", "r", "r_dot", "pose", "twist", "wheel_speeds")
 
 
 @dataclass(frozen=True)
@@ -41,6 +42,14 @@ class Observation:
 
     def __getitem__(self, key: str):
         return getattr(self, key)
+
+    def __eq__(self, other) -> bool:
+        """Equal where every array is, element by element (the dataclass's own comparison of arrays fails)."""
+        if not isinstance(other, Observation):
+            return NotImplemented
+        return self.t == other.t and all(np.array_equal(getattr(self, k), getattr(other, k)) for k in _ARRAYS)
+
+    __hash__ = None  # type: ignore[assignment] - arrays: not hashable
 
     def seed(self, b: int | slice) -> Observation:
         """Seed b's own observation, from a batch's (``slice(None)``: the whole batch's), every array a

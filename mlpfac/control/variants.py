@@ -60,5 +60,8 @@ TORQUE_LEVEL = ("fierro-lewis", "adaptive-dynamic", "oracle-dynamic")
 # The model-predictive controllers with the run's own robot as their model (mlpfac/control/mpc/): they
 # command the drive the robot has, (v, omega) to velocity servos, the wheels' torques to torque motors.
 MPC_NAMES = ("mpc", "limit")
-# Every shipped controller (the oracles: mlpfac/control/oracle.py); any other name is a plug-in's.
-CONTROLLERS = (*VARIANTS, "corradini", "kanayama", "oracle", "oracle-kanayama", *TORQUE_LEVEL, *MPC_NAMES)
+# The shipped policies (mlpfac/control/policy.py): an MLP trained off-line, its weights in policies/NAME.npz.
+POLICIES = ("policy-dr",)
+# Every shipped controller (the oracles: mlpfac/control/oracle.py); any other name is a plug-in's
+# (or a policy's file, path/to/policy.npz).
+CONTROLLERS = (*VARIANTS, "corradini", "kanayama", "oracle", "oracle-kanayama", *TORQUE_LEVEL, *MPC_NAMES, *POLICIES)

@@ -20,6 +20,7 @@ CONTROLLERS = {
     "fierro-lewis": "wheel torques: Kanayama's law backstepped through computed torque with the nominal dynamic model",
     "adaptive-dynamic": "wheel torques: fierro-lewis with MLPs and an EKF learning the dynamic model's error",
     "oracle-dynamic": "wheel torques: fierro-lewis told the plant's changes (its true dynamic model)",
+    "policy-dr": "an MLP policy trained off-line over randomized robots (PPO), no learning on-line",
 }
 COLOURS = (
     "**colours**: v, omega: commanded blue, measured orange, reference grey; wheels: left blue, right red, "

@@ -171,8 +171,7 @@ class ClosedLoop:
         """The telemetry arrays a compiled segment writes, and its kernels loaded by a segment of no step."""
         plants = self.plant.plants
         self.ctele = _allocate(self.ctrl_store, self.ctrl.telemetry(), self.recs, "ctrl", self.B, self.N, self.full)
-        tele = {k: v[None] for k, v in plants[0].telemetry().items()}
-        self.ptele = _allocate(self.plant_store, tele, self.recs, "plant", self.B, self.N, True)
+        self.ptele = self.plant_rows()
         if isinstance(self.ctrl, LawKernel):
             self.law, self.states = self.ctrl.law_kernel(), [no_state()] * self.B
         else:
@@ -180,6 +179,11 @@ class ClosedLoop:
         pose = self.pose[0]
         segment(0, 0, self.ref, *self.law, 1.0, pose, pose, pose, pose, self.u[0], self.ctele[0], self.ptele[0],
                 np.zeros((0, 3)), self.states[0], plants[0].kernel_args())  # fmt: skip
+
+    def plant_rows(self) -> np.ndarray:
+        """The plant's telemetry (B, N, W), allocated now: each row what a compiled step writes."""
+        tele = {k: v[None] for k, v in self.plant.plants[0].telemetry().items()}
+        return _allocate(self.plant_store, tele, self.recs, "plant", self.B, self.N, True)
 
     def run_segments(self, sink) -> None:
         k, N, T = 0, self.N, self.T
@@ -218,25 +222,40 @@ class ClosedLoop:
     def run_steps(self, sink, on_step: Callable[[int], None] | None) -> None:
         for k in range(self.N):
             raise_swallowed()
-            if self._reference_ended(k):
-                break
-            _apply_due(self.pending, k, self.T, self.plant, self.recs, self.live)
-            if not self._control(k) or not self._actuate(k):
+            if not self.begin(k) or not self._control(k) or not self.actuate(k):
                 break
             if on_step is not None:
                 on_step(k)
             if sink is not None and (k + 1) % FLUSH_EVERY == 0:
                 sink.flush(self.recs[0], k + 1)
 
+    def begin(self, k: int) -> bool:
+        """Step k about to start: the events due applied. False: the reference stopped being finite
+        here, and every live seed ended."""
+        if self._reference_ended(k):
+            return False
+        _apply_due(self.pending, k, self.T, self.plant, self.recs, self.live)
+        return True
+
     def _control(self, k: int) -> bool:
         """Step k's errors (2) and command, recorded; the seeds whose step diverged stop. False: none live."""
-        q, q_meas, r, e, et = self.plant.true_pose(), self.plant.measure(), self.ref[k], self._e, self._et
+        return self.command(k, self.ctrl.step(*self.observe(k)))
+
+    def observe(self, k: int) -> tuple:
+        """Step k's errors (2) of the measured pose, and what the controller is given for them:
+        ``(e, r)``, or ``(Observation,)`` at the torque level. A caller that commands the plant
+        itself (:mod:`mlpfac.envs`) then hands its command to :meth:`command` and :meth:`actuate`."""
+        q, q_meas, r, e = self.plant.true_pose(), self.plant.measure(), self.ref[k], self._e
         tracking_errors(q_meas, r, e)
+        self._q, self._q_meas = q, q_meas
         if self.torque:
             w = self.plant.motion()
-            u = self.ctrl.step(Observation(e, r, self.r_dot[k], q_meas, w[:, :2], w[:, 2:], k * self.T))
-        else:
-            u = self.ctrl.step(e, r)
+            return (Observation(e, r, self.r_dot[k], q_meas, w[:, :2], w[:, 2:], k * self.T),)
+        return e, r
+
+    def command(self, k: int, u: np.ndarray) -> bool:
+        """Step k's command ``u`` (B, 2), recorded with its errors; the seeds whose step diverged stop. False: none live."""
+        q, q_meas, r, e, et = self._q, self._q_meas, self.ref[k], self._e, self._et
         tracking_errors(q, r, et)
         self.pose[:, k], self.pose_meas[:, k], self.e[:, k], self.e_true[:, k], self.u[:, k] = q, q_meas, e, et, u
         z = self._record_ctrl(k)
@@ -265,7 +284,7 @@ class ClosedLoop:
                 self.ctrl_store[key][:, k] = val
         return tele.get("z")
 
-    def _actuate(self, k: int) -> bool:
+    def actuate(self, k: int) -> bool:
         """The plant stepped with step k's command, its telemetry recorded; the seeds whose plant
         left its valid range stop. False: none live."""
         self.plant.step(self._u)

@@ -19,7 +19,7 @@ from mlpfac.control.law import law_step
 from mlpfac.jit import kernel
 from mlpfac.loop.kernels import bad_seeds
 from mlpfac.model import tracking_errors
-from mlpfac.plants.compiled import S_POSE, plant_step, with_robot
+from mlpfac.plants.compiled import ROW, S_POSE, f1_at, f2_at, plant_step, robot_at, with_robot
 
 BAD = -1  # the runner's test stopped the seed (a plant's own reasons are its codes, > 0)
 ADAPTIVE = 0  # the controller's number for the adaptive scheme (the laws': mlpfac.control.law.KANAYAMA, ...)
@@ -95,3 +95,65 @@ def segment(k0, k1, ref, law, c, limit, pose, pose_meas, e, e_true, u, ctele, pt
         if why:
             return k, why
     return k1, 0
+
+
+# One step of many seeds, each at its own step k (mlpfac.envs.vector): each seed's arrays by address,
+# a row of ``table`` (:func:`mlpfac.plants.compiled.robot_row`, then (address, rows, columns) of each
+# array below): the plant's telemetry row, the reference (N + 1, 5), the record's pose, measured pose,
+# errors, true errors (N, 3) and commands (N, 2), the plant's telemetry rows (N, W), the loop's true
+# and measured pose (1, 3), its errors and true errors of the step (1, 3), the true errors after the
+# step (1, 3), the plant's noise draws (n, width).
+(TELE_AT, REF_AT, POSE_AT, POSE_MEAS_AT, E_AT, E_TRUE_AT, U_AT, PTELE_AT, Q_AT, Q_MEAS_AT, E_STEP_AT, ET_STEP_AT,
+ ET_NEXT_AT, DRAWS_AT) = (ROW + 3 * i for i in range(14))  # fmt: skip
+WIDTH = ROW + 3 * 14
+
+
+@kernel(
+    "void(i8[::1], b1[::1], f8[:, ::1], b1[::1], f8[::1], i8[:, ::1], i8[::1], i8[::1], i8[::1], f8[:, ::1], "
+    "f8[:, ::1], f8[:, ::1])",
+    ext="mujoco",
+)
+def across(ks, active, U, observe, limit, table, drawn, stepping, codes, En, ETn, Rn):
+    """Step ks[i] of each active seed i with its command U[i]: the closed loop's step
+    (:meth:`~mlpfac.loop.closed_loop.ClosedLoop.command` then :meth:`~mlpfac.loop.closed_loop.ClosedLoop.actuate`,
+    made of the same kernels, to the same bits), and where ``observe[i]`` the next step's errors (2)
+    of the measured pose En[i] and of the true pose ETn[i], and its reference sample Rn[i]. ``drawn[i]``
+    counts the seed's noise draws used; ``stepping[0]`` names the seed stepping (MuJoCo's warnings mark
+    it). codes[i]: 0, BAD (the runner's test stopped it before its plant's step) or its plant's code."""
+    no_z, bad, uk = np.empty((1, 0)), np.zeros(1, dtype=np.bool_), np.empty((1, 2))
+    for i in range(ks.shape[0]):
+        codes[i] = 0
+        if not active[i]:
+            continue
+        t, k = table[i], ks[i]
+        ref, q, qm = f2_at(t, REF_AT), f2_at(t, Q_AT), f2_at(t, Q_MEAS_AT)
+        e, et, u = f2_at(t, E_STEP_AT), f2_at(t, ET_STEP_AT), f2_at(t, U_AT)
+        pose, pose_meas, e_rec, et_rec = f2_at(t, POSE_AT), f2_at(t, POSE_MEAS_AT), f2_at(t, E_AT), f2_at(t, E_TRUE_AT)
+        tracking_errors(q, ref[k], et)
+        for j in range(3):
+            pose[k, j], pose_meas[k, j], e_rec[k, j], et_rec[k, j] = q[0, j], qm[0, j], e[0, j], et[0, j]
+        uk[0, 0], uk[0, 1] = U[i, 0], U[i, 1]
+        u[k, 0], u[k, 1] = uk[0, 0], uk[0, 1]
+        if bad_seeds(q, uk, et, no_z, limit[i], bad):
+            codes[i] = BAD
+            continue
+        robot = robot_at(t)
+        stepping[0] = i
+        tele = f1_at(t, TELE_AT)
+        why = plant_step(uk[0, 0], uk[0, 1], f2_at(t, DRAWS_AT)[drawn[i]], tele, robot)
+        drawn[i] += 1
+        ptele = f2_at(t, PTELE_AT)
+        for j in range(tele.shape[0]):
+            ptele[k, j] = tele[j]
+        for j in range(3):
+            q[0, j], qm[0, j] = robot.st[S_POSE + j], robot.hist[0, j]
+        if why:
+            codes[i] = why
+        elif observe[i]:
+            r, et_next = ref[k + 1], f2_at(t, ET_NEXT_AT)
+            tracking_errors(qm, r, e)
+            tracking_errors(q, r, et_next)
+            for j in range(3):
+                En[i, j], ETn[i, j] = e[0, j], et_next[0, j]
+            for j in range(5):
+                Rn[i, j] = r[j]

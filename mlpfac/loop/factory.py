@@ -20,6 +20,7 @@ from mlpfac.control.adaptive.dynamic_level import AdaptiveDynamic
 from mlpfac.control.baselines import Corradini, Kanayama, PluginController, Stepped
 from mlpfac.control.dynamic import OUTER_GAINS, FierroLewis, OracleDynamic, Told
 from mlpfac.control.oracle import TOLD, TURNING, Oracle, told
+from mlpfac.control.policy import Policy
 from mlpfac.control.torque import TorquePluginController
 from mlpfac.control.variants import MPC_NAMES
 from mlpfac.plants import make_plant  # noqa: F401 (the plant half of the factory, as mlpfac.loop.factory.make_plant)
@@ -41,6 +42,8 @@ def make_controller(scn: Scenario, instance: object | None = None, plant=None) -
         return _torque_level(scn, instance, plant)
     if scn.plugin is not None:
         return PluginController(scn.plugin, scn.T, instance)
+    if scn.policy is not None:  # a trained policy's weights (mlpfac.control.policy)
+        return Policy(scn.policy, scn.controller, scn.T, scn.law)
     if scn.controller in VARIANTS:
         over = dict(VARIANTS[scn.controller])
         nets = dataclasses.replace(scn.adaptive.networks, **over.pop("networks", {}))

@@ -139,6 +139,55 @@ if built("mujoco") is None:
         "mj_getState", types.void(_P, _P, _P, types.uint32)
     )
     _remainder = types.ExternalFunction("remainder", types.float64(types.float64, types.float64))  # IEEE, exact
+    from numba import carray
+    from numba.extending import intrinsic
+
+    @intrinsic
+    def address(typingctx, addr):
+        """A whole number as the pointer it is (an array's address, from :func:`robot_row`)."""
+
+        def codegen(context, builder, signature, args):
+            return builder.inttoptr(args[0], context.get_value_type(types.voidptr))
+
+        return types.voidptr(types.int64), codegen
+
+
+ROW = 2 + 3 * (len(Robot._fields) - 2)  # a robot as a row of numbers: mp, dp, then (address, rows, columns) an array
+
+
+def robot_row(robot: Robot, row: np.ndarray) -> None:
+    """``robot``'s arrays by address into ``row`` (ROW,) int64, as :func:`robot_at` reads them back
+    in a kernel that steps many robots (:func:`mlpfac.loop.compiled.across`). The arrays must outlive
+    every call that reads the row: the caller keeps ``robot``."""
+    row[0], row[1] = robot.mp, robot.dp
+    for i, a in enumerate(robot[2:]):
+        assert a.flags.c_contiguous and a.dtype in (np.float64, np.int64)
+        row[2 + 3 * i : 5 + 3 * i] = a.ctypes.data, a.shape[0], a.shape[1] if a.ndim == 2 else 1
+
+
+@kernel()
+def f1_at(t, j):
+    """The float64 vector whose (address, length) a row holds at j."""
+    return carray(address(t[j]), t[j + 1], np.float64)
+
+
+@kernel()
+def i1_at(t, j):
+    return carray(address(t[j]), t[j + 1], np.int64)
+
+
+@kernel()
+def f2_at(t, j):
+    """The float64 matrix whose (address, rows, columns) a row holds at j."""
+    return carray(address(t[j]), (t[j + 1], t[j + 2]), np.float64)
+
+
+@kernel()
+def robot_at(t):
+    """The :class:`Robot` whose arrays a row of :func:`robot_row` holds (views of the same memory)."""
+    return Robot(t[0], t[1], f1_at(t, 2), f1_at(t, 5), f1_at(t, 8), f1_at(t, 11), f1_at(t, 14), f1_at(t, 17), f1_at(t, 20),
+                 i1_at(t, 23), f1_at(t, 26), f1_at(t, 29), f2_at(t, 32), i1_at(t, 35), f1_at(t, 38), f1_at(t, 41), f1_at(t, 44),
+                 f1_at(t, 47), f1_at(t, 50), f1_at(t, 53), f1_at(t, 56), f1_at(t, 59), f1_at(t, 62), f2_at(t, 65), f2_at(t, 68))  # fmt: skip
 
 
 def with_robot(signature: str, *more):
@@ -166,13 +215,19 @@ def _fatal(msg: bytes) -> None:
 ctypes.c_void_p.in_dll(_LIB, "mju_user_error").value = ctypes.cast(_fatal, ctypes.c_void_p).value
 
 WARNINGS: list[str] = []  # MuJoCo's warnings in this process, newest last (at most a few kept)
-_WATCHED: list[np.ndarray | None] = [None]  # the st array of the robot stepping now (watch)
+_WATCHED: list = [None]  # the st array of the robot stepping now (watch), or of many (watch_many)
+STEPPING = np.zeros(1, dtype=np.int64)  # which of many watched robots steps now (a kernel sets it)
 
 
 def watch(st: np.ndarray | None) -> None:
     """Name the robot (its ``st``) that steps next: a warning of MuJoCo marks it (``st[S_WARN]``),
     and its next divergence test ends its run (WARNED)."""
     _WATCHED[0] = st
+
+
+def watch_many(sts: list[np.ndarray]) -> None:
+    """Name the robots a kernel steps in turn, writing which one steps now into :data:`STEPPING`."""
+    _WATCHED[0] = sts
 
 
 @ctypes.CFUNCTYPE(None, ctypes.c_char_p)
@@ -182,6 +237,8 @@ def _warning(msg: bytes) -> None:
     WARNINGS.append(" ".join(msg.decode(errors="replace").split()))
     del WARNINGS[:-4]
     st = _WATCHED[0]
+    if isinstance(st, list):
+        st = st[int(STEPPING[0])]
     if st is not None:
         st[S_WARN] = 1.0
 

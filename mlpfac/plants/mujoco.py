@@ -313,6 +313,12 @@ class MujocoPlant(MujocoEvents, TorqueDrive, MujocoReport, SensingPlant, MujocoW
         torques (tau_l, tau_r) in N m after :meth:`torque_commands`."""
         K.watch(self.st)
         K.plant_step(float(u[0]), float(u[1]), self.draws(1)[0], self.tele, self._args)
+        self.stepped()
+
+    def stepped(self) -> None:
+        """What follows the compiled step in Python (a kernel that steps many robots calls it after
+        :func:`~mlpfac.plants.compiled.plant_step` too): under a torque-level controller, the twist
+        and wheel speeds measured with their noise."""
         if self._motion is not None:
             t = self.tele
             if self._sensing is not None:  # from the encoders and the gyro

@@ -18,6 +18,7 @@ each drawn by the table code the sweep itself uses (:mod:`mlpfac.sweeps.tables`,
 - ``summary``: controllers x scenarios, median position RMS and x oracle (``paired.json``); with
   ``bound=NAME`` the ratio to that controller on the same seed (from ``runs.json``), ``bound=none``
   no ratio (where no law of the table is a bound);
+- ``untold``: each law told the change against itself told nothing, per scenario (``paired.json``);
 - ``robustness``: each controller's breaking points along a ``--vary`` axis (``robustness.json``,
   :mod:`mlpfac.sweeps.robustness`);
 - ``limit``: per scenario the physical limit, ``mpc`` and the bound against it, and the controllers
@@ -34,26 +35,24 @@ the data and the tables.
 
 from __future__ import annotations
 
-import argparse
 import json
 import re
 import shlex
 import subprocess
-import sys
 from datetime import UTC, datetime
 from pathlib import Path
 
 from mlpfac.exceptions import ConfigError
 from mlpfac.files import write_atomic
-from mlpfac.report.verify import read_data, read_json
+from mlpfac.report.data import read_data, read_json
 
 MARKER = re.compile(r"^<!-- table: (?P<spec>.+?) -->\n(?P<body>.*?)^<!-- /table -->$", re.M | re.S)
-VIEWS = ("sweep", "compare", "paired", "summary", "robustness", "limit", "text")
+VIEWS = ("sweep", "compare", "paired", "summary", "untold", "robustness", "limit", "text")
 DATA_FILES = ("sweep.json", "compare.json", "paired.json", "robustness.json")
 OPTIONS = ("view", "scenarios", "controllers", "labels", "bound")
 ROW_TEXTS: dict[str, tuple[type, ...]] = {  # the fields of a sweep's rows that are no number
     "scenario": (str,), "controller": (str,), "phase": (str,), "worst_status": (str,), "no_event_twin": (str, type(None)),
-    "vary": (dict,),
+    "vary": (dict,), "draws": (list,),
 }  # fmt: skip
 DATA_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]*")  # a data folder's name (--collect NAME=...)
 
@@ -124,7 +123,15 @@ def _check_rows(rows: list[dict], path: Path) -> None:
         for key, v in r.items():
             want = ROW_TEXTS.get(key, (int, float, type(None)))
             if not isinstance(v, want) or (isinstance(v, bool) and bool not in want):
-                kind = "a text" if str in want else "a table" if dict in want else "a number or null"
+                kind = (
+                    "a text"
+                    if str in want
+                    else "a table"
+                    if dict in want
+                    else "a list"
+                    if list in want
+                    else "a number or null"
+                )
                 raise ConfigError(f"{path} rows[{i}].{key}", f"expected {kind}, got {v!r}")
 
 
@@ -149,6 +156,8 @@ def _render(folder: Path, view: str, opts: dict[str, str], data: dict, rows: lis
         ]
     if view == "summary":
         return summary(rows, None if bound == "none" else bound)
+    if view == "untold":
+        return untold(rows)
     if view == "robustness":
         from mlpfac.sweeps.robustness import markdown as breaking_markdown
 
@@ -195,6 +204,18 @@ def _bound(folder: Path, bound: str, rows: list[dict]) -> list[dict]:
         raise ConfigError(f"{folder} bound={bound}", f"no run of {bound} in runs.json ({', '.join(sorted(there))})")
     ratios = bound_ratios(runs, bound)
     return [r | {"x_bound_median": ratios.get((r["scenario"], r["controller"]))} for r in rows]
+
+
+def untold(rows: list[dict]) -> str:
+    """Each law told the change against itself told nothing: the median over seeds of the per-seed
+    ratio of their position RMS (``x_untold_median`` of paired.json), where both ran."""
+    lines = ["| scenario | told | x itself untold |", "| --- | --- | ---: |"]
+    lines += [
+        f"| {r['scenario']} | {r['controller']} | {r['x_untold_median']:.2f} |"
+        for r in rows
+        if isinstance(r.get("x_untold_median"), float)
+    ]
+    return "\n".join(lines) + "\n"
 
 
 def rewrite(page: Path) -> tuple[str, int]:
@@ -264,6 +285,20 @@ def code_version() -> str:
     return out.stdout.strip()
 
 
+def machine() -> str:
+    """The machine collecting a dataset: its processor and cores (a benchmark's timings are this
+    machine's; a run's bits depend on it only as docs/reproducibility.md says)."""
+    import os
+    import platform
+
+    try:
+        lines = Path("/proc/cpuinfo").read_text().splitlines()
+    except OSError:
+        lines = []
+    cpu = next((line.split(":", 1)[1].strip() for line in lines if line.startswith("model name")), None)
+    return f"{cpu or platform.processor() or platform.machine()}, {os.cpu_count()} CPUs"
+
+
 def collect(folder: Path, results: Path, command: str | None = None, version: str | None = None) -> Path:
     """Copy a finished results folder (or a script's printed table, a file) into a data folder and
     write its meta.json: the command (kept from the earlier meta.json unless given), the code
@@ -274,8 +309,8 @@ def collect(folder: Path, results: Path, command: str | None = None, version: st
     if not command:
         raise ConfigError("--command", f"{folder} has no meta.json yet: give the command that made {results}")
     runs = None
-    if results.is_file():
-        sources = {"table.md": results}
+    if results.is_file():  # a printed Markdown table (a .md file), else a command's printed output
+        sources = {"table.md" if results.suffix == ".md" else "output.txt": results}
     else:
         sources = {n: results / n for n in DATA_FILES if (results / n).is_file()}
         if "paired.json" not in sources:
@@ -292,6 +327,9 @@ def collect(folder: Path, results: Path, command: str | None = None, version: st
             write_atomic(folder / RUNS_FILE, f'{{"runs": [\n{lines}\n]}}\n')
         elif runs is not None and (folder / RUNS_FILE).is_file():  # they were of other results
             (folder / RUNS_FILE).unlink()
+        for name in {"table.md", "output.txt"} - set(sources):  # a script's text of another kind, before
+            if results.is_file() and (folder / name).is_file():
+                (folder / name).unlink()
         made = max(src.stat().st_mtime for src in sources.values())
     except OSError as err:
         raise ConfigError(str(err.filename or folder), f"cannot copy the results ({err.strerror or err})") from None
@@ -299,6 +337,7 @@ def collect(folder: Path, results: Path, command: str | None = None, version: st
         "command": command,
         "code_version": version or code_version(),
         "date": datetime.fromtimestamp(made, UTC).strftime("%Y-%m-%dT%H:%M:%SZ"),
+        "machine": machine(),
     }
     try:
         write_atomic(old, json.dumps(meta, indent=2) + "\n")
@@ -315,32 +354,3 @@ def _collect_item(item: str) -> tuple[str, str]:
     if not DATA_NAME.fullmatch(name):  # not a path: ../x, a/b, . or /abs would write outside DOCS/data
         raise ConfigError(f"--collect {item}", f"NAME is one data folder's name (letters, digits, - _ .), got {name!r}")
     return name, results
-
-
-def run_cli(args: argparse.Namespace) -> int:
-    """``mlpfac report``: collect, then verify the data (``--verify``) and check the tables
-    (``--check``), both when both are given (exit 1 if a run or a table differs), or write the tables."""
-    collects = [_collect_item(item) for item in args.collect]  # every one checked before any is copied
-    if args.made_by is not None and len(collects) > 1:
-        raise ConfigError(
-            "--command", f"is the command of one --collect; {len(collects)} were given: collect each apart"
-        )
-    for name, results in collects:
-        print(f"{results} -> {collect(args.docs / 'data' / name, Path(results), args.made_by, args.code_version)}")
-    code = 0
-    if args.verify is not None:
-        from mlpfac.report.verify import run_cli as verify
-
-        code = verify(args.docs, args.verify, args.strict)  # a line per dataset as it is done
-    if args.check:
-        old = stale(args.docs)
-        for page in old:
-            print(
-                f"mlpfac: {page}: a table differs from its data; `mlpfac report {args.docs}` writes it", file=sys.stderr
-            )
-        code = max(code, 1 if old else 0)
-    if args.verify is not None or args.check:
-        return code
-    for page, n, changed in write(args.docs):
-        print(f"{page}: {n} tables, {'written' if changed else 'unchanged'}")
-    return 0

@@ -17,39 +17,17 @@ import json
 import random
 import shlex
 import sys
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from mlpfac.exceptions import ConfigError, MlpfacError, UnavailableError
 from mlpfac.flags import Parser
+from mlpfac.report.data import OUTPUT, read_json, record
 
 RUNS_FILE = "runs.json"
 UNTIMED = ("wall_time_s", "rrd")  # what differs between two runs of the same bits: time, and the recording's bytes
 FIGURES = ("rms_position_error_m", "max_position_error_m", "rms_heading_error_rad")
-
-
-def read_data(folder: Path, name: str) -> str:
-    """A data file's text; ConfigError naming it when it is missing or cannot be read."""
-    path = folder / name
-    if not path.is_file():
-        raise ConfigError(str(path), "missing: the data folder holds no such file")
-    try:
-        return path.read_text()
-    except (OSError, UnicodeDecodeError) as err:
-        raise ConfigError(str(path), f"cannot read: {err}") from None
-
-
-def read_json(folder: Path, name: str) -> dict:
-    """A data file's JSON; ConfigError naming it when it is not what a sweep writes."""
-    text = read_data(folder, name)
-    try:
-        data = json.loads(text)
-    except (ValueError, RecursionError) as err:
-        raise ConfigError(str(folder / name), f"not valid JSON: {err}") from None
-    if not isinstance(data, dict):
-        raise ConfigError(str(folder / name), "expected a JSON object")
-    return data
 
 
 def digest(metrics: dict) -> str:
@@ -103,12 +81,16 @@ class Verdict:
     flipped: list[str] = field(default_factory=list)  # outcome or status changed
     skipped: str = ""  # why the dataset could not be verified here
     unverified: str = ""  # why the dataset has nothing to verify
+    printed: bool = False  # a command's printed output, run again whole (checked 1: its output)
 
     def line(self) -> str:
         if self.skipped:
             return f"{self.name}: skipped: {self.skipped}"
         if self.unverified:
             return f"{self.name}: not verified: {self.unverified}"
+        if self.printed:
+            what = "as recorded" if self.identical else f"differs: {self.worst_run}"
+            return f"{self.name}: its printed output {what}"
         if self.identical == self.checked:
             return f"{self.name}: {self.checked} of {self.checked} runs bit-identical"
         out = (
@@ -244,6 +226,7 @@ class Planned:
     kept: dict = field(default_factory=dict)
     jobs: list = field(default_factory=list)
     where: Path | None = None
+    output: bool = False  # a command's printed output (output.txt), run again whole
 
 
 def prepare(folder: Path, root: Path) -> Planned:
@@ -261,6 +244,10 @@ def prepare(folder: Path, root: Path) -> Planned:
     p = Planned(Verdict(folder.name, command if isinstance(command, str) else ""))
     _words(command, f"{meta} command")  # a command that is no command line is bad input, even for a script's table
     if not (folder / RUNS_FILE).is_file():
+        if (folder / OUTPUT).is_file():  # a command's printed output: run again and compared, or a record
+            p.verdict.unverified = record(folder)
+            p.output = not p.verdict.unverified
+            return p
         table = (folder / "table.md").is_file()
         p.verdict.unverified = "a script's table: run its command again to check it" if table else ""
         p.verdict.unverified = (
@@ -332,25 +319,31 @@ def verify_dataset(p: Planned, n: int) -> Verdict:
     return v
 
 
-def verify(docs: Path, n: int) -> Iterator[Verdict]:
+def verify(docs: Path, n: int, output: Callable[[Planned, Path], Verdict] | None = None) -> Iterator[Verdict]:
     """Every dataset of ``docs/data`` checked by :func:`verify_dataset`, one after the other, from
-    the repository root (the folder above ``docs``, where the recorded commands run). Every
-    dataset is read and planned first: bad input raises ConfigError before the first run."""
+    the repository root (the folder above ``docs``, where the recorded commands run); a command's
+    printed output by ``output`` (:func:`mlpfac.report.remake.verify_output`: its command run
+    again; without it, left unverified). Every dataset is read and planned first: bad input raises
+    ConfigError before the first run."""
     if n < 1:
         raise ConfigError("--verify", f"must be a number of runs >= 1, got {n}")
     data = docs / "data"
     if not data.is_dir():
         raise ConfigError(str(data), "no data folder: nothing to verify")
     root = docs.resolve().parent
-    planned = [prepare(f, root) for f in sorted(data.iterdir()) if (f / "meta.json").is_file()]
-    return (verify_dataset(p, n) for p in planned)
+    folders = [f for f in sorted(data.iterdir()) if (f / "meta.json").is_file()]
+    planned = [(prepare(f, root), f) for f in folders]
+    for p, _ in planned:
+        if p.output and output is None:
+            p.verdict.unverified, p.output = "a command's printed output: run its command again to check it", False
+    return (output(p, f) if p.output else verify_dataset(p, n) for p, f in planned)
 
 
-def run_cli(docs: Path, n: int, strict: bool = False) -> int:
+def run_cli(docs: Path, n: int, strict: bool = False, output: Callable[[Planned, Path], Verdict] | None = None) -> int:
     """``mlpfac report DOCS --verify N [--strict]``: a line per dataset as it is done; exit 1 if a
     run differs (or, with ``strict``, if a dataset was skipped), else 0."""
     differs, skipped = False, []
-    for v in verify(docs, n):
+    for v in verify(docs, n, output):
         print(v.line(), flush=True)
         differs |= v.differs
         skipped += [v.name] if v.skipped else []

@@ -7,6 +7,7 @@ distribution, drawn from the run's seed when the scenario is parsed::
 
     scale = { uniform = [0.9, 1.1] }      # uniform on [0.9, 1.1]
     mass_scale = { normal = [2.0, 0.3] }  # normal, mean 2, standard deviation 0.3, cut at mean +- 3 sd
+    steps = { choice = [0, 1, 2, 4] }     # one of these, each as likely (a whole number stays whole)
 
 Each draw takes its numbers from ``(seed, key)`` alone, so seed k is the same robot for every
 controller (paired statistics stay paired) and adding a distribution changes no other draw; the
@@ -26,7 +27,7 @@ import numpy as np
 
 from mlpfac.exceptions import ConfigError
 
-KINDS = ("uniform", "normal")
+KINDS = ("uniform", "normal", "choice")
 NORMAL_CUT = 3.0  # a normal draw is cut at mean +- NORMAL_CUT standard deviations (drawn again beyond)
 DRAW_STREAM = 0x6D6C7066  # tags the draws' seed sequence apart from every other stream of a run
 SKIPPED = ("provenance", "drawn", "seed", "name", "description")  # top-level keys that are no number to vary
@@ -35,16 +36,20 @@ RECORDS = ("provenance", "drawn")  # top-level tables the program writes: never 
 
 @dataclass(frozen=True)
 class Distribution:
-    """``uniform`` on [a, b], or ``normal`` with mean a and standard deviation b (cut at +- 3 b)."""
+    """``uniform`` on [a, b], ``normal`` with mean a and standard deviation b (cut at +- 3 b), or
+    ``choice`` of ``values`` (a and b their least and greatest)."""
 
     kind: str
     a: float
     b: float
+    values: tuple = ()
 
-    def support(self) -> tuple[float, float]:
-        """The smallest and largest value a draw can take."""
+    def support(self) -> tuple:
+        """The smallest and largest value a draw can take (a choice: every value it can take)."""
         if self.kind == "uniform":
             return self.a, self.b
+        if self.kind == "choice":
+            return self.values
         return self.a - NORMAL_CUT * self.b, self.a + NORMAL_CUT * self.b
 
     def draw(self, seed: int, key: str) -> float:
@@ -52,6 +57,8 @@ class Distribution:
         rng = np.random.default_rng(np.random.SeedSequence([DRAW_STREAM, seed, zlib.crc32(key.encode())]))
         if self.kind == "uniform":
             return float(self.a + (self.b - self.a) * rng.random())
+        if self.kind == "choice":
+            return self.values[int(rng.integers(len(self.values)))]
         from mlpfac.normal import normal  # here: importing the kernels' module checks MLPFAC_KERNELS
 
         while True:
@@ -60,10 +67,15 @@ class Distribution:
                 return x
 
     def table(self) -> dict:
-        return {self.kind: [self.a, self.b]}
+        return {self.kind: list(self.values) if self.kind == "choice" else [self.a, self.b]}
+
+    def text(self) -> str:
+        """As ``--vary`` writes it: ``uniform:1:2``, ``choice:0:1:2``."""
+        return ":".join([self.kind, *(f"{x:g}" for x in (self.values if self.kind == "choice" else (self.a, self.b)))])
 
     def __str__(self) -> str:
-        return f"{self.kind}({self.a:g}, {self.b:g})"
+        nums = self.values if self.kind == "choice" else (self.a, self.b)
+        return f"{self.kind}({', '.join(f'{x:g}' for x in nums)})"
 
 
 def is_distribution(value: Any) -> bool:
@@ -72,8 +84,17 @@ def is_distribution(value: Any) -> bool:
 
 
 def distribution(value: Any, where: str) -> Distribution:
-    """The distribution a table ``{uniform = [a, b]}`` or ``{normal = [mean, sd]}`` names; a ConfigError naming ``where``."""
+    """The distribution a table ``{uniform = [a, b]}``, ``{normal = [mean, sd]}`` or ``{choice = [x, y, ...]}``
+    names; a ConfigError naming ``where``."""
     ((kind, ab),) = value.items()
+    if kind == "choice":
+        ok = isinstance(ab, list | tuple) and len(ab) >= 2
+        ok = ok and all(isinstance(x, int | float) and not isinstance(x, bool) and math.isfinite(x) for x in ab)
+        if not ok:
+            raise ConfigError(where, f"choice takes two or more finite numbers, got {ab!r}")
+        if len(set(ab)) != len(ab):
+            raise ConfigError(where, f"choice names a value twice in {list(ab)!r}: each value once")
+        return Distribution(kind, float(min(ab)), float(max(ab)), tuple(ab))
     ok = isinstance(ab, list | tuple) and len(ab) == 2
     ok = ok and all(isinstance(x, int | float) and not isinstance(x, bool) and math.isfinite(x) for x in ab)
     if not ok:

@@ -23,7 +23,8 @@ from mlpfac.control.baselines import KanayamaGains
 from mlpfac.control.law import Law
 from mlpfac.control.mpc.config import MpcConfig
 from mlpfac.control.plugins import Plugin, absolute_spec, is_plugin_spec, resolve
-from mlpfac.control.variants import MPC_NAMES, TORQUE_LEVEL, VARIANTS
+from mlpfac.control.policy import PolicyFile, is_policy_spec, policy_file, policy_name, read_policy
+from mlpfac.control.variants import CONTROLLERS, MPC_NAMES, TORQUE_LEVEL, VARIANTS
 from mlpfac.exceptions import ConfigError
 from mlpfac.model import pose_from_error
 from mlpfac.plants import refuse_torque
@@ -99,6 +100,7 @@ class Scenario:
     table: dict
     dropped_events: tuple[float, ...] = ()  # times of the file's events a shorter --duration left out
     plugin: Plugin | None = None  # a user's controller (mlpfac.control.plugins); None: a shipped one
+    policy: PolicyFile | None = None  # a policy's weights (mlpfac.control.policy): policy-dr or a .npz file
     plant_from: str = ""  # the robot its [plant] came from (--robot NAME: messages name it); "": the file's own
     world: World = World()  # the [world] table: ramps, rough ground, floor patches
     terrain: Terrain | None = None  # ... resolved for this run: where the ramps lie, the ground drawn for its seed
@@ -149,6 +151,8 @@ class Scenario:
                 ctrl["name"] = controller
             if is_plugin_spec(controller):  # checked here, so that an error names the flag
                 _plugin(ctrl, self.T, flag, self.source)
+            elif is_policy_spec(controller):
+                _policy(controller, flag)
         if seed is not None:
             if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
                 raise ConfigError("--seed", f"expected a whole number >= 0, got {seed!r}")
@@ -378,12 +382,16 @@ def parse(table: dict, source: str = "<scenario>", check_model: bool = True, pla
     name_c = ctrl.get("name", "adaptive")
     if not isinstance(name_c, str) or not name_c:
         raise ConfigError(f"{where} name", f"expected a controller's name, got {name_c!r}")
-    plugin = None
+    plugin = policy = None
     if is_plugin_spec(name_c):
         plugin = _plugin(ctrl, T, f"{where} name", source)
         name_c = plugin.name
         table = provenance.with_controller(table, plugin, source, check_model)
-    elif "params" in ctrl:
+    elif is_policy_spec(name_c):
+        policy = _policy(name_c, f"{where} name")
+        name_c = policy_name(name_c)
+        table = provenance.with_controller(table, policy, source, check_model)
+    if plugin is None and "params" in ctrl:
         raise ConfigError(
             f"{where} params", f"[controller.params] is for a plug-in controller; {name_c} takes its own keys"
         )
@@ -470,6 +478,7 @@ def parse(table: dict, source: str = "<scenario>", check_model: bool = True, pla
         events=tuple(events),
         table=out,
         plugin=plugin,
+        policy=policy,
         plant_from=plant_from,
         world=world,
         terrain=terrain,
@@ -479,6 +488,15 @@ def parse(table: dict, source: str = "<scenario>", check_model: bool = True, pla
 def _count(n: int) -> str:
     """A count in words a line can hold: 1200000240, or 3.48e+305 beyond a billion."""
     return f"{n}" if n < 10**10 else f"{n:.3g}"
+
+
+def _policy(name: str, where: str) -> PolicyFile:
+    """The policy ``name`` names (shipped, or a .npz file), read and checked; its name a folder's."""
+    short = policy_name(name)
+    if name not in CONTROLLERS and (not FOLDER_NAME.fullmatch(short) or short in CONTROLLERS):
+        raise ConfigError(where, f"{name}: a policy file's name ({short!r}) names its folders: letters, digits and "
+                          ". _ + -, not a shipped controller's name")  # fmt: skip
+    return read_policy(policy_file(name), where)
 
 
 def _plugin(ctrl: dict, T: float, where: str, source: str) -> Plugin:

@@ -53,13 +53,14 @@ def parse_controllers(text: str | None, where: str = "--controllers") -> list[st
     from pathlib import Path
 
     from mlpfac.control.plugins import absolute_spec, is_plugin_spec, resolve
+    from mlpfac.control.policy import policy_name
 
     names = [absolute_spec(c.strip(), Path.cwd()) for c in text.split(",") if c.strip()]
     if not names:
         raise ConfigError(where, "no controller given")
     seen: dict[str, str] = {}
     for c in names:
-        name = resolve(c, None, 0.01, where).name if is_plugin_spec(c) else c
+        name = resolve(c, None, 0.01, where).name if is_plugin_spec(c) else policy_name(c) if c.endswith(".npz") else c
         if seen.setdefault(name, c) != c:
             raise ConfigError(where, f"{seen[name]} and {c} are both named {name!r}; their folders would collide")
     return list(dict.fromkeys(names))

@@ -5,8 +5,8 @@ KEY is the dotted path of a number in the scenario file as a user writes it (:mo
 
 - a list, ``1.0,1.25,1.5``, or an inclusive range with a count, ``1.0:2.0:11`` (whole numbers when
   both ends are and the step is whole): an **axis**; two or more axes make a grid;
-- a distribution, ``uniform:LOW:HIGH`` or ``normal:MEAN:SD``: the number is **drawn** from each
-  run's seed, as a ``{ uniform = [LOW, HIGH] }`` written in the file would be.
+- a distribution, ``uniform:LOW:HIGH``, ``normal:MEAN:SD`` or ``choice:X:Y:...``: the number is
+  **drawn** from each run's seed, as a ``{ uniform = [LOW, HIGH] }`` written in the file would be.
 
 Each grid point is the scenario with its values written in, named ``SCENARIO+KEY+VALUE`` (one
 ``+KEY+VALUE`` per axis): a folder of the sweep, a row of its tables, a scenario of the paired
@@ -59,7 +59,7 @@ class Vary:
         return math.prod(len(a.values) for a in self.axes)
 
     def texts(self) -> list[str]:
-        return [a.text for a in self.axes] + [f"{k}={d.kind}:{d.a:g}:{d.b:g}" for k, d in self.draws.items()]
+        return [a.text for a in self.axes] + [f"{k}={d.text()}" for k, d in self.draws.items()]
 
 
 def _number(text: str, where: str) -> int | float:
@@ -80,6 +80,8 @@ def _number(text: str, where: str) -> int | float:
 def _values(key: str, text: str, where: str) -> tuple[Any, ...] | Distribution:
     parts = text.split(":")
     if parts[0].strip() in KINDS:
+        if parts[0].strip() == "choice":
+            return distribution({"choice": [_number(p, where) for p in parts[1:]]}, where)
         if len(parts) != 3:
             raise ConfigError(where, f"a distribution is {parts[0]}:A:B, got {text!r}")
         a, b = (_number(p, where) for p in parts[1:])
@@ -98,7 +100,8 @@ def _values(key: str, text: str, where: str) -> tuple[Any, ...] | Distribution:
         return _distinct(values, text, where)
     if len(parts) != 1:
         raise ConfigError(
-            where, f"expected a list 1.0,1.5, a range 1.0:2.0:11 or uniform:A:B / normal:M:SD, got {text!r}"
+            where,
+            f"expected a list 1.0,1.5, a range 1.0:2.0:11 or uniform:A:B / normal:M:SD / choice:X:Y:..., got {text!r}",
         )
     if text.count(",") >= MAX_RUNS:
         raise ConfigError(where, f"more than the limit of {MAX_RUNS} values (runs per sweep)")
@@ -231,7 +234,8 @@ def grid(src: str, vary: Vary, duration: float | None = None, robot: str | None 
     for key, dist in (in_file | vary.draws).items():  # a draw can take any value of its support: both ends are checked
         name = f"{FLAG} {key}={dist}" if key in vary.draws else f"{src} {key} = {dist}"
         for end in dist.support():
-            _checked(src, {**drawn, key: _typed(end, numbers.get(key))}, f"{name} (its end {end:g})")
+            what = "value" if dist.kind == "choice" else "end"
+            _checked(src, {**drawn, key: _typed(end, numbers.get(key))}, f"{name} (its {what} {end:g})")
     if len(axes) > 1:  # each value alone first, so that a bad one is named alone (without building the plant)
         for a, values in axes:
             for v in values:
@@ -264,7 +268,8 @@ def _check_duration(vary: Vary, numbers: dict, duration: float) -> None:
             raise ConfigError(f"{FLAG} {key}={late!r}", f"the event would be left out by --duration {duration:g}")
     for key in [a.key for a in vary.axes] + list(vary.draws):
         parts = key.split(".")
-        if parts[0] != "events" or len(parts) < 3 or f"events.{parts[1]}.time" in times:
+        when = f"events.{parts[1]}.time" if len(parts) >= 3 else ""
+        if parts[0] != "events" or len(parts) < 3 or when in times or when in vary.draws:  # its time varies too
             continue
         t = numbers.get(f"events.{parts[1]}.time")
         if isinstance(t, int | float) and t >= duration:
