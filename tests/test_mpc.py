@@ -220,7 +220,6 @@ def test_a_sweep_with_limit_pairs_every_run_with_it_and_computes_each_limit_once
     assert "1 limits from the cache, 3 run now" in capsys.readouterr().out
 
 
-
 def test_its_settings_vary_as_any_number_of_the_file():
     """``--vary controller.mpc.horizon_s=...`` on a file that sets no [controller.mpc]: each point
     a scenario whose planner has that horizon."""
@@ -243,3 +242,25 @@ def test_it_runs_on_a_users_mjcf_a_skid_steer_and_a_torque_driven_robot(robot):
         scn = mlpfac.load("eight-nominal", robot=path).with_overrides(controller=c, duration=0.3)
         rec = run(scn)
         assert rec.status == "ok" and rec.n == scn.steps, (robot, c, rec.reason)
+
+
+def test_the_limit_view_sets_every_controller_against_the_limit_seed_by_seed():
+    """A known answer: per seed ratios to limit, their median; the bound the least of the laws of
+    the bound on each seed; a run lost counted as a seed not tracked; a diverged one infinite."""
+    from mlpfac.report.limit import limit_table
+
+    def run_(ctrl, seed, rms, outcome="tracking", status="ok"):
+        return {"scenario": "s", "controller": ctrl, "seed": seed, "status": status, "outcome": outcome,
+                "phases": {"before": {"rms_position_error_m": 1.0}, "after": {"rms_position_error_m": rms}}}  # fmt: skip
+
+    runs = [run_("limit", 0, 1e-4), run_("limit", 1, 2e-4), run_("limit", 2, 1e-4)]
+    runs += [run_("mpc", 0, 2e-4), run_("mpc", 1, 6e-4), run_("mpc", 2, 3e-4)]
+    runs += [run_("oracle", 0, 1e-3), run_("oracle", 1, 4e-4), run_("oracle", 2, 2e-3)]
+    runs += [run_("kanayama", 0, 2e-3), run_("kanayama", 1, 2e-3), run_("kanayama", 2, 1e-3)]
+    runs += [run_("corradini", 0, 5e-3, "lost"), run_("corradini", 1, 1.0, "diverged", "diverged"),
+             run_("corradini", 2, 4e-3)]  # fmt: skip
+    table = limit_table(runs, ["s"], ["kanayama", "corradini"])
+    row = table.splitlines()[2]
+    # limit median 0.1 mm; mpc ratios 2, 3, 3 -> 3x; bound per seed 1, 0.4, 1 mm (oracle, oracle, kanayama)
+    # -> median 1 mm, ratios 10, 2, 10 -> 10x; kanayama ratios 20, 10, 10 -> 10x; corradini 50, inf, 40
+    assert row == "| s | 0.1 | 0.3 (3x) | 1 (oracle; 10x) | 2 (10x) | 5 (50x) 1/3 |", row

@@ -152,4 +152,3 @@ def plan_cost(E):
         for c in range(E.shape[1]):
             s += E[j, c] * E[j, c]
     return s
-
