@@ -129,6 +129,8 @@ def sweep(
     vary: dict | list[str] | None = None,
     threshold: float | None = None,
     lost_threshold: float | None = None,
+    limit: bool = False,
+    limit_cache: str | Path | None = None,
 ) -> list[dict]:
     """Run scenarios x controllers x seeds (as ``mlpfac sweep``) and return the sweep's rows: the
     ``rows`` of sweep.json, one per scenario, controller and phase. With ``out`` the folder is
@@ -143,7 +145,9 @@ def sweep(
     The returned list has ``.errors`` ({(scenario, controller, seed): traceback}) and ``.paired``
     (the rows of paired.json). Ctrl-C raises KeyboardInterrupt (with ``out``, the runs written are
     kept and the next call resumes them). ``robots``: every scenario on each (as ``--robots``);
-    ``lost_threshold``: every run's ``lost_threshold_m`` (as ``--lost-threshold``)."""
+    ``lost_threshold``: every run's ``lost_threshold_m`` (as ``--lost-threshold``). ``limit`` (as
+    ``--limit``): the physical limit on every scenario and seed, each computed once and kept in
+    ``limit_cache`` (default ``runs/limits``); the paired rows gain ``x_limit_median``."""
     from mlpfac.plots.robustness import read_robustness
     from mlpfac.scenario.on_robot import robots_named, with_robots
     from mlpfac.sweeps import engine
@@ -163,6 +167,12 @@ def sweep(
         raise ConfigError("robots", f"expected a list of robots (names or files), got {robots!r}")
     if out is not None:
         out = user_path(out, "out")
+    if not isinstance(limit, bool):
+        raise ConfigError("limit", f"expected True or False, got {limit!r}")
+    if limit_cache is not None:
+        if not limit:
+            raise ConfigError("limit_cache", "is the cache of limit's runs: give it with limit=True")
+        limit_cache = user_path(limit_cache, "limit_cache")
     text = None
     if controllers is not None:
         specs = [
@@ -192,6 +202,8 @@ def sweep(
                 vary=vary,
                 threshold=threshold,
                 lost_threshold=lost_threshold,
+                limit=limit,
+                limit_cache=Path(limit_cache) if limit_cache is not None else None,
             )
         robust = Path(out if out is not None else tmp) / "robustness.json"
         robustness = read_robustness(robust) if robust in result.paths else None

@@ -57,12 +57,13 @@ MODULES = {  # the modules whose kernels each extension holds
         "mlpfac.loop.kernels",
         "mlpfac.control.adaptive.input_model",
         "mlpfac.control.adaptive.delay_bank",
+        "mlpfac.control.mpc.kernels",
         "mlpfac.plants.events",
         "mlpfac.plants.ik",
         "mlpfac.plants.odometry",
         "mlpfac.plants.terrain",
     ),
-    "mujoco": ("mlpfac.plants.compiled", "mlpfac.loop.compiled"),
+    "mujoco": ("mlpfac.plants.compiled", "mlpfac.loop.compiled", "mlpfac.plants.predict"),
 }
 FILES = tuple(m.removeprefix("mlpfac.").replace(".", "/") + ".py" for ms in MODULES.values() for m in ms) + ("jit.py",)
 JIT = {"cache": True, "error_model": "numpy", "nogil": True}  # numpy's inf or NaN for a division by zero

@@ -264,12 +264,15 @@ def test_figure_1_draws_the_kerbs_and_the_time_on_them():
     from matplotlib.patches import Polygon
 
     from mlpfac.plots.figure1 import Draft
-    from mlpfac.plots.world import legend_entries, on_ground
+    from mlpfac.plots.world import footprint, legend_entries, on_ground
 
     rec = run(load("eight-kerb").with_overrides(controller="kanayama", duration=8.0))
     prints = [p for p in Draft(rec, False).paths["e"].patches if isinstance(p, Polygon)]
     assert len(prints) == 2  # each kerb's footprint
     on = on_ground(rec)["kerb"]
-    k = int(np.argmax(on))  # the first step on the kerb at 20 % of the path
-    assert on.any() and rec.world and math.hypot(*(rec.pose[k, :2] - rec.world["kerbs"][0][0, :2])) < 0.7
+    centres = [footprint(c).mean(axis=0) for c in rec.world["kerbs"]]
+    assert np.allclose(centres[1], [1.75, 1.7])  # the kerb placed at (x, y), met first (at 2 s)
+    for kerb, after in ((1, 0.0), (0, 4.0)):  # then the one across the path at 20 % of it
+        k = int(np.argmax(on & (rec.t[: rec.n] >= after)))
+        assert on[k] and math.hypot(*(rec.pose[k, :2] - centres[kerb])) < 0.7, (kerb, rec.t[k])
     assert "kerb (and the time on it)" in [e.get_label() for e in legend_entries(rec, True)]

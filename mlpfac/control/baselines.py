@@ -86,6 +86,11 @@ class Stepped(Protocol):
     def drop(self, b: int) -> None:
         """Seed b stopped (it diverged): a batched controller steps it no more. Nothing by default."""
 
+    def watch(self, plants: list) -> None:
+        """The run's plants, one per seed, reset, before the first step: ``limit`` reads the robot's
+        true state from them (:mod:`mlpfac.control.mpc`). Nothing by default: no other controller
+        sees more of the robot than its measurements."""
+
 
 @runtime_checkable
 class LawKernel(Protocol):

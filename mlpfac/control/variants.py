@@ -57,8 +57,11 @@ VARIANTS["adaptive-real-fast"] = VARIANTS["adaptive-real"] | {"input_P_alarm": 2
 
 # The shipped controllers of the torque level (mlpfac/control/dynamic.py): they command the wheels' torques.
 TORQUE_LEVEL = ("fierro-lewis", "adaptive-dynamic", "oracle-dynamic")
+# The model-predictive controllers with the run's own robot as their model (mlpfac/control/mpc/): they
+# command the drive the robot has, (v, omega) to velocity servos, the wheels' torques to torque motors.
+MPC_NAMES = ("mpc", "limit")
 # The shipped policies (mlpfac/control/policy.py): an MLP trained off-line, its weights in policies/NAME.npz.
 POLICIES = ("policy-dr",)
 # Every shipped controller (the oracles: mlpfac/control/oracle.py); any other name is a plug-in's
 # (or a policy's file, path/to/policy.npz).
-CONTROLLERS = (*VARIANTS, "corradini", "kanayama", "oracle", "oracle-kanayama", *TORQUE_LEVEL, *POLICIES)
+CONTROLLERS = (*VARIANTS, "corradini", "kanayama", "oracle", "oracle-kanayama", *TORQUE_LEVEL, *MPC_NAMES, *POLICIES)

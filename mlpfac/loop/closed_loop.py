@@ -128,6 +128,7 @@ class ClosedLoop:
         ctrl.reset([c for c, _ in gens])
         q0, u0 = base.initial_state(ref)
         plant.reset(q0, [p for _, p in gens], u0)
+        ctrl.watch(plant.plants if isinstance(plant, PlantList) else [plant])
         self.pose, self.pose_meas, self.e, self.e_true, self.u = (np.full((B, N, d), np.nan) for d in (3, 3, 3, 3, 2))
         self.recs = [self._record(b, s) for b, s in enumerate(scns)]
         for b, rec in enumerate(self.recs):  # the terrain each seed's robot drives on (its own rough ground)

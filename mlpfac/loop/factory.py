@@ -23,6 +23,7 @@ from mlpfac.control.dynamic import OUTER_GAINS, FierroLewis, OracleDynamic, Told
 from mlpfac.control.oracle import TOLD, TURNING, Oracle, told
 from mlpfac.control.policy import Policy
 from mlpfac.control.torque import TorquePluginController
+from mlpfac.control.variants import MPC_NAMES
 from mlpfac.plants import make_plant  # noqa: F401 (the plant half of the factory, as mlpfac.loop.factory.make_plant)
 from mlpfac.plants.events import Force, Slope
 from mlpfac.scenario.on_robot import peak_wheel_speed
@@ -36,6 +37,8 @@ def make_controller(scn: Scenario, instance: object | None = None, plant=None) -
     wheels' torques (:mod:`mlpfac.control.dynamic`, given the nominal model of ``plant``, the run's
     MuJoCo robot, built from the scenario when not given), or a user's own (:mod:`mlpfac.control.plugins`;
     ``instance``: an object of it, made by the caller, runs one seed)."""
+    if scn.controller in MPC_NAMES and scn.plugin is None:
+        return _mpc(scn, plant)
     if scn.level == "torque":
         return _torque_level(scn, instance, plant)
     if scn.plugin is not None:
@@ -160,3 +163,61 @@ def _world_told(scn: Scenario, plant) -> Told | None:
     if not slopes and not any(isinstance(ev, Force) for ev in scn.events):
         return None
     return Told(slopes, plant.forces, scn.steps)
+
+
+def _mpc(scn: Scenario, plant=None) -> Stepped:
+    """``mpc`` or ``limit`` (:mod:`mlpfac.control.mpc`): its model of each seed's run a robot built
+    from the scenario for that seed (its terrain and forces' noise are the seed's), with the true
+    pose and no noise, reset where the run starts; the reference sampled over the run and a
+    horizon beyond; the drive's limits (the controller's (v, omega) limits, or the motors'
+    torques); the pose noise the estimator is told (the scenario's, at least 1 mm on a pose a
+    source estimates)."""
+    from mlpfac.control.mpc.controller import MPC
+    from mlpfac.plants.predict import Predictor
+
+    T, cfg = scn.T, scn.mpc
+    H = max(1, int(round(cfg.horizon_s / T)))
+    preview = sample(scn.reference, np.arange(scn.steps + H + 1) * T)
+    ref = preview[: scn.steps + 1]
+    model_scn = _model_scenario(scn)
+    probe = plant if plant is not None else make_plant(model_scn, ref[:2])
+
+    def build_model(seed) -> Predictor:
+        s = model_scn
+        if isinstance(seed, int) and seed != scn.seed:  # a seed of a batch: its own world
+            s = _model_scenario(scn.with_overrides(seed=seed))
+        p = make_plant(s, ref[:2])
+        q0, u0 = s.initial_state(ref)
+        p.reset(q0, np.random.default_rng(np.random.SeedSequence(seed)), u0)  # the seed's forces' schedule
+        return Predictor(p)
+
+    if scn.level == "torque":
+        limits = np.array(probe._torque_max)
+        scale = limits.copy()
+    else:
+        v_r, w_r = np.abs(preview[:, 3]).max(), np.abs(preview[:, 4]).max()
+        scale = np.array([max(float(v_r), 0.1), max(float(w_r), 0.5)])
+        law = scn.law
+        limits = np.array(
+            [
+                10.0 * scale[0] if law.v_max is None else float(law.v_max),
+                10.0 * scale[1] if law.omega_max is None else float(law.omega_max),
+            ]
+        )
+    pc = scn.plant_config
+    noise = pc.noise_std()
+    noise = np.zeros(3) if noise is None else np.asarray(noise, dtype=float)
+    if getattr(pc, "pose_source", "truth") != "truth":
+        noise = np.maximum(noise, 1.0e-3)
+    wheel_noise = float(getattr(pc, "wheel_speed_noise_std", 0.0))
+    return MPC(scn.controller, scn.level, T, cfg, build_model, preview, scn.events, limits, scale, noise,
+               scn.controller == "limit", wheel_noise)  # fmt: skip
+
+
+def _model_scenario(scn: Scenario) -> Scenario:
+    """The scenario a model of its robot is built from: the same robot, world and events, its pose
+    the true one without noise (the estimator is told the noise, the model does not make it)."""
+    pc = dataclasses.replace(
+        scn.plant_config, pose_source="truth", pose_noise_std=0.0, twist_noise_std=0.0, wheel_speed_noise_std=0.0
+    )
+    return dataclasses.replace(scn, plant_config=pc)

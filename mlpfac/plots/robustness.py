@@ -3,7 +3,9 @@
 
 One axis: per scenario, the median position RMS after the change against the value, per
 controller, with its 95 % interval as a band, the bound (the best law told the change) dashed
-black, the threshold dotted, the nominal value marked; below it, the share of seeds tracking.
+black, the threshold dotted, the nominal value marked; ``limit`` (the run's own robot as the
+model, given the true state: :mod:`mlpfac.control.mpc`) solid black, and beyond the value where it
+lets go, shaded: the physical breaking point; below it, the share of seeds tracking.
 Two axes or more: per scenario and controller a map over the first two axes (the others at their
 first value) of the median position RMS, each point that holds ringed.
 """
@@ -18,6 +20,9 @@ import numpy as np
 
 from mlpfac.exceptions import ConfigError
 from mlpfac.plots.colors import controller_colors, mpl
+
+LIMIT = "limit"  # the physical limit (mlpfac.control.mpc): its curve and breaking point drawn apart
+LIMIT_LABEL = "limit (the robot as its model, the true state)"
 
 
 def robustness_plot(out: Path) -> list[Path]:
@@ -70,8 +75,10 @@ def _curves(ax, share_ax, fam: str, key: str, rows: list[dict], points: list[dic
         rs = sorted((r for r in rows if r["controller"] == ctrl), key=lambda r: r["point"][key])
         x = [r["point"][key] for r in rs]
         med = np.array([_finite(r["median_m"]) for r in rs]) * 1e3
-        c = colors[ctrl]
-        ax.plot(x, med, "o-", color=c, label=ctrl, ms=4)
+        c = "k" if ctrl == LIMIT else colors[ctrl]
+        ax.plot(
+            x, med, "o-", color=c, label=LIMIT_LABEL if ctrl == LIMIT else ctrl, ms=4, lw=2.2 if ctrl == LIMIT else 1.5
+        )
         lo = np.array([_finite(r["ci_lo_m"]) for r in rs]) * 1e3
         hi = np.array([_finite(r["ci_hi_m"]) for r in rs]) * 1e3
         ax.fill_between(x, lo, hi, color=c, alpha=0.15, lw=0)
@@ -82,6 +89,16 @@ def _curves(ax, share_ax, fam: str, key: str, rows: list[dict], points: list[dic
         by = [1e3 * _finite(next(r["bound_m"] for r in one if r["point"][key] == v)) for v in bx]
         ax.plot(bx, by, "k--", lw=1.2, label="bound (best law told the change)")
     ax.axhline(1e3 * rows[0]["threshold_m"], color="0.4", ls=":", lw=1, label="threshold")
+    values = [r["point"][key] for r in rows]
+    for p in points:  # beyond where the physics lets go: no controller holds there
+        if p["scenario"] != fam or p["controller"] != LIMIT or p["axis"] != key or p["at"]:
+            continue
+        for side, end in (("below", min(values)), ("above", max(values))):
+            b = p.get(side)
+            if b and not b["whole_axis"] and b["fails_at"] is not None:
+                for a in (ax, share_ax):
+                    a.axvspan(b["fails_at"], end, color="0.88", zorder=0, lw=0)
+                ax.axvline(b["fails_at"], color="k", lw=0.8, ls="-.", label=f"the physics lets go ({b['fails_at']:g})")
     nominal = next((p["nominal"] for p in points if p["scenario"] == fam and p["axis"] == key), None)
     for a in (ax, share_ax):
         if nominal is not None:

@@ -21,6 +21,8 @@ each drawn by the table code the sweep itself uses (:mod:`mlpfac.sweeps.tables`,
 - ``untold``: each law told the change against itself told nothing, per scenario (``paired.json``);
 - ``robustness``: each controller's breaking points along a ``--vary`` axis (``robustness.json``,
   :mod:`mlpfac.sweeps.robustness`);
+- ``limit``: per scenario the physical limit, ``mpc`` and the bound against it, and the controllers
+  listed (``controllers=``), each x limit on the same seed (``runs.json``: :mod:`mlpfac.report.limit`);
 - ``text``: ``table.md`` as it is.
 
 Options (shell words after the view): ``scenarios=a,b`` and ``controllers=a,b`` keep those, in
@@ -45,7 +47,7 @@ from mlpfac.files import write_atomic
 from mlpfac.report.data import read_data, read_json
 
 MARKER = re.compile(r"^<!-- table: (?P<spec>.+?) -->\n(?P<body>.*?)^<!-- /table -->$", re.M | re.S)
-VIEWS = ("sweep", "compare", "paired", "summary", "untold", "robustness", "text")
+VIEWS = ("sweep", "compare", "paired", "summary", "untold", "robustness", "limit", "text")
 DATA_FILES = ("sweep.json", "compare.json", "paired.json", "robustness.json")
 OPTIONS = ("view", "scenarios", "controllers", "labels", "bound")
 ROW_TEXTS: dict[str, tuple[type, ...]] = {  # the fields of a sweep's rows that are no number
@@ -90,6 +92,8 @@ def render(folder: Path, opts: dict[str, str]) -> str:
     view = opts.get("view", "summary")
     if view == "text":
         return read_data(folder, "table.md")
+    if view == "limit":
+        return _limit(folder, opts)
     name = {"sweep": "sweep.json", "compare": "compare.json", "robustness": "robustness.json"}.get(view, "paired.json")
     if view == "robustness":
         from mlpfac.plots.robustness import read_robustness
@@ -132,7 +136,7 @@ def _check_rows(rows: list[dict], path: Path) -> None:
 
 
 def _render(folder: Path, view: str, opts: dict[str, str], data: dict, rows: list[dict]) -> str:
-    from mlpfac.sweeps.paired import PAIRED_COLUMNS, summary
+    from mlpfac.sweeps.paired import paired_columns, summary
     from mlpfac.sweeps.tables import COMPARE_COLUMNS, SWEEP_COLUMNS, markdown
 
     try:
@@ -158,8 +162,35 @@ def _render(folder: Path, view: str, opts: dict[str, str], data: dict, rows: lis
         from mlpfac.sweeps.robustness import markdown as breaking_markdown
 
         return breaking_markdown(rows, (data.get("meta") or {}).get("threshold_m"), data.get("curves"))
-    columns = {"sweep": SWEEP_COLUMNS, "compare": COMPARE_COLUMNS, "paired": PAIRED_COLUMNS}[view]
+    columns = {"sweep": SWEEP_COLUMNS, "compare": COMPARE_COLUMNS, "paired": paired_columns(rows)}[view]
     return markdown(rows, columns)
+
+
+def _limit(folder: Path, opts: dict[str, str]) -> str:
+    """The ``limit`` view (:mod:`mlpfac.report.limit`) of the data's runs.json: its scenarios (or those
+    listed) in their order, the controllers listed; a ConfigError naming what is not there."""
+    from mlpfac.report.limit import LIMIT, limit_table
+
+    runs = read_json(folder, "runs.json").get("runs")
+    if not isinstance(runs, list) or not all(isinstance(r, dict) and "scenario" in r for r in runs):
+        raise ConfigError(str(folder / "runs.json"), "expected the runs a dataset keeps")
+    there = list(dict.fromkeys(r["scenario"] for r in runs))
+    ctrls = {r.get("controller") for r in runs}
+    if LIMIT not in ctrls:
+        raise ConfigError(f"{folder} view=limit", "no run of limit in runs.json: make it with --limit")
+    scenarios = opts["scenarios"].split(",") if "scenarios" in opts else there
+    controllers = opts["controllers"].split(",") if "controllers" in opts else []
+    missing = [s for s in scenarios if s not in there] + [c for c in controllers if c not in ctrls]
+    if missing:
+        raise ConfigError(f"{folder} view=limit", f"{', '.join(missing)} not in the data")
+    table = limit_table(runs, scenarios, controllers)
+    if "labels" in opts:
+        labels = opts["labels"].split(",")
+        if len(labels) != len(scenarios):
+            raise ConfigError(str(folder), f"labels: {len(labels)} given for {len(scenarios)} scenarios {scenarios}")
+        for scn, label in zip(scenarios, labels, strict=True):
+            table = table.replace(f"| {scn} |", f"| {label} |", 1)
+    return table
 
 
 def _bound(folder: Path, bound: str, rows: list[dict]) -> list[dict]:

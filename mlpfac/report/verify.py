@@ -149,6 +149,7 @@ def _plan(command: str, root: Path, where: str = "command"):
     if words[:1] != ["mlpfac"] or words[1:2] not in (["sweep"], ["compare"]):
         raise ScriptTableError(command, "a script's table: run its command again to check it")
     from mlpfac.sweeps.cli import robots_named_as, scenarios_of
+    from mlpfac.sweeps.limits import with_limit
     from mlpfac.sweeps.plan import parse_controllers, parse_seeds, plan
     from mlpfac.sweeps.vary import parse_vary
 
@@ -159,13 +160,19 @@ def _plan(command: str, root: Path, where: str = "command"):
     where_run = root / folder if folder is not None else root
     if not where_run.is_dir():
         raise ConfigError(where, f"cd {folder}: no such folder ({where_run}): {command!r}")
+    lost = args.lost_threshold
+    if lost is not None:
+        from mlpfac.scenario.parse import lost_threshold_m
+
+        lost = lost_threshold_m(lost, "--lost-threshold")
     with contextlib.chdir(where_run), robots_named_as(args):
         jobs = plan(
             scenarios_of(args),
-            parse_controllers(args.controllers),
+            with_limit(parse_controllers(args.controllers), args.limit),
             parse_seeds(args.seeds),
             args.duration,
             parse_vary(args.vary),  # the grid points and draws: each point's runs are its own scenario
+            lost,
         )
     return jobs, where_run
 

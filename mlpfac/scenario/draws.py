@@ -152,8 +152,8 @@ def put(table: dict, key: str, value: Any) -> bool:
             node = node[int(part)]
         elif isinstance(node, dict) and isinstance(node.get(part), dict | list):
             node = node[part]
-        elif isinstance(node, dict) and part not in node and node is table and part not in RECORDS:
-            node = node.setdefault(part, {})  # a table the file leaves out, as [plant]
+        elif isinstance(node, dict) and part not in node and (node is not table or part not in RECORDS):
+            node = node.setdefault(part, {})  # a table the file leaves out, as [plant] or [controller.mpc]
         else:
             return False
     if isinstance(node, list):

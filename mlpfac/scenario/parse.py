@@ -21,9 +21,10 @@ from mlpfac.control.adaptive.config import AdaptiveConfig
 from mlpfac.control.adaptive.networks import Networks
 from mlpfac.control.baselines import KanayamaGains
 from mlpfac.control.law import Law
+from mlpfac.control.mpc.config import MpcConfig
 from mlpfac.control.plugins import Plugin, absolute_spec, is_plugin_spec, resolve
 from mlpfac.control.policy import PolicyFile, is_policy_spec, policy_file, policy_name, read_policy
-from mlpfac.control.variants import CONTROLLERS, TORQUE_LEVEL, VARIANTS
+from mlpfac.control.variants import CONTROLLERS, MPC_NAMES, TORQUE_LEVEL, VARIANTS
 from mlpfac.exceptions import ConfigError
 from mlpfac.model import pose_from_error
 from mlpfac.plants import refuse_torque
@@ -70,7 +71,7 @@ TOP_KEYS = {
     "provenance",
     "drawn",
 }
-CONTROLLER_KEYS = {"name", "lambdas", "v_max", "omega_max", "adaptive", "kanayama", "params"}
+CONTROLLER_KEYS = {"name", "lambdas", "v_max", "omega_max", "adaptive", "kanayama", "mpc", "params"}
 NETWORK_KEYS = {f.name for f in dataclasses.fields(Networks)}
 ADAPTIVE_KEYS = {f.name for f in dataclasses.fields(AdaptiveConfig)} - {"networks"} | NETWORK_KEYS
 
@@ -105,6 +106,7 @@ class Scenario:
     world: World = World()  # the [world] table: ramps, rough ground, floor patches
     terrain: Terrain | None = None  # ... resolved for this run: where the ramps lie, the ground drawn for its seed
     lost_threshold_m: float | None = None  # position RMS beyond which a run is lost; None: 5 % of the path's size
+    mpc: MpcConfig = MpcConfig()  # [controller.mpc]: the model-predictive controllers' settings
 
     @property
     def drawn(self) -> dict[str, float]:
@@ -116,6 +118,8 @@ class Scenario:
         """What the controller commands: "velocity" (v, omega), or "torque" (the wheels' torques)."""
         if self.plugin is not None:
             return self.plugin.level
+        if self.controller in MPC_NAMES:  # the drive the robot has: torques to torque motors
+            return "torque" if getattr(self.plant_config, "actuator", None) == "torque" else "velocity"
         return "torque" if self.controller in TORQUE_LEVEL else "velocity"
 
     @property
@@ -392,6 +396,10 @@ def parse(table: dict, source: str = "<scenario>", check_model: bool = True, pla
         raise ConfigError(
             f"{where} params", f"[controller.params] is for a plug-in controller; {name_c} takes its own keys"
         )
+    if name_c in MPC_NAMES and plant_kind != "mujoco":
+        raise ConfigError(
+            f"{where} name", f"{name_c} plans with the run's MuJoCo robot as its model; this plant is {plant_kind}"
+        )
     level = plugin.level if plugin is not None else "torque" if name_c in TORQUE_LEVEL else "velocity"
     if level == "torque":
         refuse_torque(name_c, plant_kind, getattr(plant_config, "actuator", None), source, plant_from, read=False)
@@ -408,6 +416,7 @@ def parse(table: dict, source: str = "<scenario>", check_model: bool = True, pla
     adaptive = build(AdaptiveConfig, ad, f"{where}.adaptive")
     adaptive = dataclasses.replace(adaptive, networks=nets)
     kanayama = build(KanayamaGains, subtable(ctrl, "kanayama", where), f"{where}.kanayama")
+    mpc = build(MpcConfig, subtable(ctrl, "mpc", where), f"{where}.mpc")
 
     steps = int(round(duration / T))
     alpha = nets.alpha if name_c in VARIANTS else 0
@@ -474,6 +483,7 @@ def parse(table: dict, source: str = "<scenario>", check_model: bool = True, pla
         law=law,
         adaptive=adaptive,
         kanayama=kanayama,
+        mpc=mpc,
         events=tuple(events),
         table=out,
         plugin=plugin,

@@ -46,6 +46,18 @@ def _add_common(p: argparse.ArgumentParser, seeds: str, out: str) -> None:
     p.add_argument(
         "--out", type=cli_path, default=Path(out), help=f"results folder (default {out}); re-running skips whole runs"
     )
+    p.add_argument(
+        "--limit",
+        action="store_true",
+        help="add the physical limit on every scenario and seed (controller `limit`: the run's own robot as the "
+        "model, given the true state), each computed once and kept in --limit-cache; the tables gain x limit",
+    )
+    p.add_argument(
+        "--limit-cache",
+        type=cli_path,
+        metavar="DIR",
+        help="with --limit: the folder of computed limits, reused across sweeps (default runs/limits)",
+    )
     g = p.add_argument_group("execution")
     g.add_argument("--workers", type=int, default=None, help="local worker processes (default: number of CPUs)")
     g.add_argument(
@@ -67,6 +79,7 @@ def _add_common(p: argparse.ArgumentParser, seeds: str, out: str) -> None:
         ("--threshold", "--vary"),
         ("--batch-size", "--batched"),
         ("--scheduler-timeout", "--scheduler"),
+        ("--limit-cache", "--limit"),
     ):
         needs(p, flag, other)
 
@@ -134,7 +147,8 @@ def _run_cli(args: argparse.Namespace, stem: str) -> int:
             scenarios_of(args), args.controllers, args.seeds, args.out, duration=args.duration, workers=args.workers,
             batched=args.batched, batch_size=args.batch_size, scheduler=args.scheduler,
             scheduler_timeout=args.scheduler_timeout, save_rrd=args.save_rrd, stem=stem, columns=columns, command=cmd,
-            vary=args.vary, threshold=args.threshold, lost_threshold=args.lost_threshold,
+            vary=args.vary, threshold=args.threshold, lost_threshold=args.lost_threshold, limit=args.limit,
+            limit_cache=args.limit_cache,
         )  # fmt: skip
     if done.code is not None:
         return done.code

@@ -142,6 +142,7 @@ def sweep_into(
     batch_size: int = 64,
     save_rrd: bool = False,
     progress: bool | None = None,
+    cache=None,
 ) -> Swept:
     """Run ``jobs`` into ``out`` under its lock (runs already done are skipped), then write the
     tables (``stem``.csv / .md / .json, paired.*, summary.md) and ``stem``.png. Stopped by Ctrl-C or
@@ -159,6 +160,7 @@ def sweep_into(
                 save_rrd=save_rrd,
                 progress=progress,
                 locked=True,
+                cache=cache,
             )
         except OutputError as err:
             raise OutputError(f"{err}; the runs written before are whole, resume with: {cmd}") from None
@@ -210,17 +212,25 @@ def sweep_folder(
     vary: list[str] | dict | None = None,
     threshold: float | None = None,
     lost_threshold: float | None = None,
+    limit: bool = False,
+    limit_cache: Path | None = None,
 ) -> Swept:
     """Validate everything (a ConfigError naming the flag before anything runs), plan, then
     :func:`sweep_into` ``out``; what ``mlpfac sweep`` / ``compare`` and :func:`mlpfac.sweep` do.
     ``command`` is what re-runs it (for messages); ``vary`` the ``--vary`` axes and draws
     (:mod:`mlpfac.sweeps.vary`), ``threshold`` the breaking points' limit in metres
-    (:mod:`mlpfac.sweeps.robustness`), ``lost_threshold`` every run's ``lost_threshold_m``."""
+    (:mod:`mlpfac.sweeps.robustness`), ``lost_threshold`` every run's ``lost_threshold_m``; ``limit``
+    adds ``limit`` on every scenario and seed, taken from (and kept in) the cache folder
+    ``limit_cache`` (:mod:`mlpfac.sweeps.limits`)."""
+    from mlpfac.sweeps.limits import DEFAULT_CACHE, LimitCache, with_limit
     from mlpfac.sweeps.robustness import NO_AXIS, check_threshold
     from mlpfac.sweeps.vary import parse_vary
 
     seed_list = parse_seeds(seeds)
-    names = parse_controllers(controllers)
+    names = with_limit(parse_controllers(controllers), limit)
+    cache = LimitCache(limit_cache or DEFAULT_CACHE) if limit else None
+    if cache is not None:
+        check_writable(cache.root, "--limit-cache")
     workers = check_execution_flags(workers, batch_size, scheduler, scheduler_timeout)
     axes = parse_vary(vary)
     threshold = check_threshold(threshold)
@@ -255,7 +265,7 @@ def sweep_folder(
     try:
         return sweep_into(jobs, out, stem, columns, meta, command or f"mlpfac {stem} ...", workers=workers,
                           client=client, batched=batched, batch_size=batch_size, save_rrd=save_rrd,
-                          progress=progress)  # fmt: skip
+                          progress=progress, cache=cache)  # fmt: skip
     finally:
         if client is not None:
             client.close()
@@ -280,7 +290,9 @@ def report(done: Swept) -> int:
     redo = sum(oc.redo.values())
     why = "; ".join(f"{k} {v}" for k, v in oc.redo.items())
     print(
-        f"{len(done.jobs)} runs ({oc.skipped} already done, {oc.ran} run now in {oc.wall_s:.1f} s"
+        f"{len(done.jobs)} runs ({oc.skipped} already done"
+        + (f", {oc.cached} limits from the cache" if oc.cached else "")
+        + f", {oc.ran} run now in {oc.wall_s:.1f} s"
         + (f", of which {redo} were found but run again: {why}" if redo else "")
         + f") -> {', '.join(map(str, done.paths))}"
     )

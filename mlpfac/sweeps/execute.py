@@ -36,6 +36,7 @@ class Outcome:
     terminated: bool = False  # the interruption was a SIGTERM
     wall_s: float = 0.0
     redo: dict[str, int] = field(default_factory=dict)  # why folders found were not done -> how many
+    cached: int = 0  # runs of ``limit`` taken from the cache of computed limits (mlpfac.sweeps.limits)
 
 
 def make_tasks(jobs: list[Job], batched: bool, batch_size: int) -> list[list[Job]]:
@@ -60,6 +61,7 @@ def execute(
     progress: bool | None = None,
     on_result: Callable[[dict], None] | None = None,
     locked: bool = False,
+    cache=None,
 ) -> Outcome:
     """Run the jobs not done yet; write each run's folder as its result arrives.
 
@@ -69,12 +71,14 @@ def execute(
     every folder written so far is whole. ``out`` is locked for the sweep (``folder_lock``) unless
     the caller holds the lock (``locked``); recordings are made in ``out/.tmp``, which is removed at
     the end and, left by a killed sweep, at the start. A failed write raises :class:`OutputError`.
+    ``cache`` (a :class:`~mlpfac.sweeps.limits.LimitCache`): ``limit``'s runs are taken from it where
+    it holds them (written into ``out`` as if run) and kept in it when run.
     """
     with contextlib.ExitStack() as stack:
         if not locked:
             stack.enter_context(folder_lock(out, "--out"))
         try:
-            return _execute(jobs, out, workers, client, batched, batch_size, save_rrd, progress, on_result)
+            return _execute(jobs, out, workers, client, batched, batch_size, save_rrd, progress, on_result, cache)
         except OSError as err:
             raise _oserror(err, str(out)) from None
 
@@ -108,7 +112,7 @@ class _SigtermSeen:
             self.previous = None
 
 
-def _execute(jobs, out, workers, client, batched, batch_size, save_rrd, progress, on_result) -> Outcome:
+def _execute(jobs, out, workers, client, batched, batch_size, save_rrd, progress, on_result, cache=None) -> Outcome:
     t0 = time.perf_counter()
     out.mkdir(parents=True, exist_ok=True)
     tmp = out / TMP_DIR
@@ -117,17 +121,23 @@ def _execute(jobs, out, workers, client, batched, batch_size, save_rrd, progress
     done: dict[tuple, dict] = {}
     todo: list[Job] = []
     redo: dict[str, int] = {}
+    cached = 0
     for j in jobs:
         m, why = check_done(out, j, save_rrd)
         if m is None and os.path.lexists(j.folder(out)):  # replaced whole: nothing but a run's files in it
             check_run_folder(j.folder(out), "run folder")
+        if m is None and cache is not None and j.controller == cache.controller and not save_rrd:
+            m = cache.lookup(j)
+            if m is not None:
+                write_result(out, j, {"metrics": m, "error": None})
+                cached += 1
         if m is None:
             todo.append(j)
             if why is not None:
                 redo[why] = redo.get(why, 0) + 1
         else:
             done[j.key] = RunMetrics.from_json(m)
-    outcome = Outcome(jobs, done, {}, skipped=len(done), ran=0, redo=redo)
+    outcome = Outcome(jobs, done, {}, skipped=len(done) - cached, ran=0, redo=redo, cached=cached)
     by_key = {j.key: j for j in todo}
     tasks = make_tasks(todo, batched, batch_size)
     bar = _progress(len(todo), progress)
@@ -156,6 +166,8 @@ def _execute(jobs, out, workers, client, batched, batch_size, save_rrd, progress
                 else:
                     outcome.metrics[job.key] = RunMetrics.from_json(res["metrics"])
                     failed += res["metrics"]["status"] != "ok"
+                    if cache is not None and job.controller == cache.controller:
+                        cache.store(job, res["metrics"])
                 if on_result is not None:
                     on_result(res)
                 if bar is not None:

@@ -15,6 +15,9 @@ the warm-up when there is none). Per scenario and controller:
   and the oracle on the RMS, and against Corradini's law on the event cost. A run that diverged
   counts as worse than any finished one (a loss, and the largest rank); a pair with a run missing
   is left out; a pair of equal figures is no win (and is dropped by the test, as Wilcoxon's rule);
+- **x limit** (where the sweep ran ``limit``, ``--limit``): the median over seeds of the run's RMS /
+  ``limit``'s, the run's own robot as the model given the true state: how far from what the
+  physics allows (:mod:`mlpfac.control.mpc`);
 - **x untold** (a law told the change: ``oracle``, ``oracle-kanayama``, ``oracle-dynamic``): the
   median over seeds of its RMS / the same law's told nothing (``corradini``, ``kanayama``,
   ``fierro-lewis``) where that ran too. A told law should be at most ``TOLD_AT_MOST`` times itself
@@ -31,6 +34,7 @@ from mlpfac.loop.metrics import RunMetrics
 from mlpfac.sweeps.plan import Job
 
 REFERENCES = ("corradini", "oracle")
+LIMIT = "limit"  # the physical limit (mlpfac.control.mpc), where a sweep ran it
 UNTOLD = {"oracle": "corradini", "oracle-kanayama": "kanayama", "oracle-dynamic": "fierro-lewis"}  # told: untold
 TOLD_AT_MOST, UNTOLD_MARK = 1.1, "‡"
 NAMES = {"``TOLD_AT_MOST``": f"{TOLD_AT_MOST:g}", "``UNTOLD_MARK``": UNTOLD_MARK}  # the docstring's names, in words
@@ -142,6 +146,9 @@ def paired_rows(jobs: list[Job], metrics: dict[tuple, RunMetrics]) -> list[dict]
         refs = {r: [compared_rms(metrics.get((scn, r, s))) for s in ss] for r in REFERENCES}
         row["x_oracle_median"] = median(_ratios(x, refs["oracle"]))
         row["oracle_pos_rms_m_median"] = median([v for v in refs["oracle"] if v is not None and math.isfinite(v)])
+        limit = [compared_rms(metrics.get((scn, LIMIT, s))) for s in ss]
+        row["x_limit_median"] = median(_ratios(x, limit))
+        row["limit_pos_rms_m_median"] = median([v for v in limit if v is not None and math.isfinite(v)])
         for r in REFERENCES:
             row[f"wins_vs_{r}"], row[f"pairs_vs_{r}"], row[f"p_vs_{r}"] = compare(x, refs[r])
         untold = [compared_rms(metrics.get((scn, UNTOLD[ctrl], s))) for s in ss] if ctrl in UNTOLD else []
@@ -198,6 +205,22 @@ PAIRED_COLUMNS: list[tuple[str, Callable[[dict], str]]] = [
     ("wins vs oracle", lambda r: f"{r['wins_vs_oracle']}/{r['pairs_vs_oracle']}"),
     ("p vs oracle", lambda r: _p(r["p_vs_oracle"])),
 ]
+LIMIT_COLUMNS: list[tuple[str, Callable[[dict], str]]] = [
+    ("limit [mm]", lambda r: _mm(r.get("limit_pos_rms_m_median"))),
+    ("x limit", lambda r: _x(r.get("x_limit_median"))),
+]
+
+
+def paired_columns(rows: list[dict]) -> list[tuple[str, Callable[[dict], str]]]:
+    """The paired table's columns: with the limit's beside the oracle's where a row has it."""
+    if not any(r.get("limit_pos_rms_m_median") is not None for r in rows):
+        return PAIRED_COLUMNS
+    at = next(i for i, (name, _) in enumerate(PAIRED_COLUMNS) if name == "x oracle") + 1
+    return PAIRED_COLUMNS[:at] + LIMIT_COLUMNS + PAIRED_COLUMNS[at:]
+
+
+def _times(x: float) -> str:
+    return f"{x:.2g}x" if x < 10 else f"{x:.0f}x"
 
 
 def column_name(scenario: str, point: dict | None) -> str:
@@ -229,9 +252,13 @@ def summary(rows: list[dict], bound: str | None = "oracle") -> str:
         if r is None or not r["runs"]:
             return "-"
         text = _mm(r["pos_rms_m_median"])
+        ratios = []
         if bound is not None and r["controller"] != bound and r.get(key) is not None:
-            x = r[key]
-            text += f" ({x:.2g}x)" if x < 10 else f" ({x:.0f}x)"
+            ratios.append(_times(r[key]))
+        if r["controller"] != LIMIT and r.get("x_limit_median") is not None:
+            ratios.append(f"{_times(r['x_limit_median'])} limit")
+        if ratios:
+            text += f" ({'; '.join(ratios)})"
         if r["tracking"] != r["runs"]:
             text += f" {r['tracking']}/{r['lost']}/{r['diverged']}"
         if (r.get("x_untold_median") or 0.0) > TOLD_AT_MOST:  # worse than itself told nothing (or lost where it ran)

@@ -173,9 +173,9 @@ def _seed_configs(table: dict, seeds: list[int], to_toml) -> Callable[[int, dict
     return lambda seed, t: f"{head}seed = {seed!r}\n{tail}"
 
 
-def check_writable(out: Path) -> None:
+def check_writable(out: Path, flag: str = "--out") -> None:
     """ConfigError unless ``out`` is (or can be created as) a writable folder; creates nothing."""
-    p = resolved(out, f"--out {out}")
+    p = resolved(out, f"{flag} {out}")
     while not p.exists():
         p = p.parent
     if not p.is_dir():

@@ -8,6 +8,9 @@ the position RMS after the change, i.e. the last phase; a diverged run counts as
 - the **share of seeds tracking** (``outcome`` of metrics.json);
 - the **bound**: the median over seeds of the least RMS of the laws told the change
   (``oracle``, ``oracle-kanayama``) that the sweep ran on the same seed and point;
+- where the sweep ran ``limit`` (``--limit``: the run's own robot as the model, given the true
+  state, :mod:`mlpfac.control.mpc`), its breaking point is the **physical breaking point**: beyond
+  it what breaks is the robot (its traction, its torque), not a controller;
 - whether the point **holds**: every seed tracks and the median is within the threshold (default:
   the runs' own tracking limit: their scenario's ``lost_threshold_m``, else 5 % of the path's size,
   0.2 m on the 4 m figure of eight).
@@ -39,6 +42,7 @@ from mlpfac.sweeps.plan import Job
 
 # the laws told the change: the bound (oracle-dynamic where it runs: a robot with torque motors)
 TOLD = ("oracle", "oracle-kanayama", "oracle-dynamic")
+LIMIT = "limit"  # the physical limit (mlpfac.control.mpc)
 UNCHANGED = {"scale": 1.0, "factor": 1.0, "mass_scale": 1.0, "kv_scale": 1.0, "force_scale": 1.0, "steps": 0}
 SIDES = ("below", "above")
 FROM = re.compile(r"friction (\S+) -> ")  # the robot's own friction, in a friction event's record
@@ -210,7 +214,8 @@ def markdown(points: list[dict], threshold: float | None, rows: list[dict] | Non
     ]
     for b in points:
         at = ", ".join(f"{k} = {v:g}" for k, v in b["at"].items()) or "-"
-        cells = [b["scenario"], b["controller"], f"`{b['axis']}`", at, _num(b["nominal"])]
+        who = "limit (the physical breaking point)" if b["controller"] == LIMIT else b["controller"]
+        cells = [b["scenario"], who, f"`{b['axis']}`", at, _num(b["nominal"])]
         lines.append("| " + " | ".join(cells + [_side(b.get("below")), _side(b.get("above"))]) + " |")
     limit = (
         "the runs' own tracking limit (their lost_threshold_m, else 5 % of the path's size)"
@@ -222,6 +227,11 @@ def markdown(points: list[dict], threshold: float | None, rows: list[dict] | Non
         f"median position RMS after the change is within {limit}; the curves are in robustness.json and "
         "robustness.png.\n"
     )
+    if any(b["controller"] == LIMIT for b in points):
+        note += (
+            "\nlimit: the run's own robot as its model, given the true state (a model-predictive controller): where it "
+            "lets go the physics does (the wheels' traction, the motors' torque), not a controller.\n"
+        )
     table = curves_markdown(rows or [])
     if table:
         note += (

@@ -10,7 +10,7 @@ from pathlib import Path
 from mlpfac.files import write_atomic
 from mlpfac.loop.metrics import OUTCOMES, RunMetrics
 from mlpfac.sweeps.folders import PHASES
-from mlpfac.sweeps.paired import PAIRED_COLUMNS, TOLD_AT_MOST, UNTOLD_MARK, median, summary
+from mlpfac.sweeps.paired import TOLD_AT_MOST, UNTOLD_MARK, median, summary
 from mlpfac.sweeps.plan import Job
 
 
@@ -215,6 +215,7 @@ PAIRED_FIELDS = [
     "oracle_pos_rms_m_median", "x_oracle_median", "no_event_twin", "event_cost_median",
     "wins_vs_corradini", "pairs_vs_corradini", "p_vs_corradini", "wins_cost_vs_corradini",
     "pairs_cost_vs_corradini", "p_cost_vs_corradini", "wins_vs_oracle", "pairs_vs_oracle", "p_vs_oracle",
+    "limit_pos_rms_m_median", "x_limit_median",
 ]  # fmt: skip
 
 
@@ -230,11 +231,11 @@ def write_paired(out: Path, rows: list[dict], meta: dict) -> list[Path]:
     w = csv.DictWriter(buf, fieldnames=PAIRED_FIELDS, lineterminator="\n")
     w.writeheader()
     for r in rows:
-        w.writerow({k: ("" if r[k] is None else r[k]) for k in PAIRED_FIELDS})
+        w.writerow({k: ("" if r.get(k) is None else r[k]) for k in PAIRED_FIELDS})
     note = "\n" + paired.note() + "\n"
     paths = [out / name for name in PAIRED_FILES]
     write_atomic(paths[0], buf.getvalue())
-    write_atomic(paths[1], markdown(rows, PAIRED_COLUMNS) + note)
+    write_atomic(paths[1], markdown(rows, paired.paired_columns(rows)) + note)
     write_atomic(paths[2], json.dumps({"meta": meta, "rows": rows}, indent=2) + "\n")
     estimated = any(r.get("est_rms_m_median") is not None for r in rows)
     write_atomic(paths[3], summary(rows) + SUMMARY_NOTE + (ESTIMATE_NOTE if estimated else ""))
@@ -244,7 +245,7 @@ def write_paired(out: Path, rows: list[dict], meta: dict) -> list[Path]:
 SUMMARY_NOTE = (
     "\nMedian position RMS [mm] over the seeds, after the event (over the whole run after the warm-up "
     "where there is none), over the runs that finished; (k x): the median over seeds of the ratio to "
-    "the oracle on the same seed; t/l/d: tracking / lost / diverged, where not every run tracked; "
+    "the oracle on the same seed (and k x limit: to the physical limit, where the sweep ran it); t/l/d: tracking / lost / diverged, where not every run tracked; "
     f"{UNTOLD_MARK}: a law told the change more than {TOLD_AT_MOST:g}x itself told nothing (the median over "
     "seeds of the ratio on the same seed).\n"
 )
