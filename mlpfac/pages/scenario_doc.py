@@ -61,6 +61,7 @@ CONTROLLER = {
     ),
     "adaptive": ("", "the adaptive scheme's options: [below](#controlleradaptive)"),
     "kanayama": ("", "Kanayama's gains: [below](#controllerkanayama)"),
+    "mpc": ("", "the planner's and the estimator's settings of `mpc` and `limit`: [below](#controllermpc)"),
     "params": ("", "keyword arguments of your own controller's class (`Class(T=..., **params)`); a plug-in only"),
 }
 PATH = {  # [reference] kind = "path" (mlpfac.scenario.waypoints): key -> (unit, meaning)
@@ -253,6 +254,7 @@ def _dataclass_rows(
 
         p = f.metadata.get("param")
         bounds = () if p is None else tuple(b for b in (p.minimum, p.maximum) if b is not None)
+        bounds = bounds or tuple(getattr(cls, "LIMITS", {}).get(f.name, ()))  # a class's declared ranges
         cells = (f"`{f.name}`", _type(hints[f.name]), _default(f), _range(make, f.name, hints[f.name], bounds))
         rows.append("| " + " | ".join(_cell(c) for c in (*cells, notes.get(f.name, ""))) + " |")
     return rows
@@ -328,6 +330,7 @@ def scenario_page() -> str:
     from mlpfac.control.adaptive.networks import Networks
     from mlpfac.control.baselines import KanayamaGains
     from mlpfac.control.law import Law
+    from mlpfac.control.mpc.config import MpcConfig
     from mlpfac.plants.config import MujocoConfig
     from mlpfac.plants.events import EVENTS, MU_MAX
     from mlpfac.plants.kinematic import KinematicConfig, KinematicPlant
@@ -431,6 +434,13 @@ def scenario_page() -> str:
         "v = v_r cos e3 + Kx e1, ω = ω_r + v_r (Ky e2 + Kθ sin e3).",
         "",
         *_dataclass_rows(KanayamaGains, "[controller.kanayama]"),
+        "",
+        "### `[controller.mpc]`",
+        "",
+        "`mpc` and `limit`: model-predictive control with the run's own MuJoCo robot as the model "
+        "([Controllers](controllers.md#the-physical-limit-mpc-and-limit)).",
+        "",
+        *_dataclass_rows(MpcConfig, "[controller.mpc]"),
     ]
     out += [
         "",

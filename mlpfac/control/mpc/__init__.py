@@ -15,7 +15,12 @@ horizon, sum_j e1_j^2 + e2_j^2 + (heading_m e3_j)^2 (heading_end_m at the last s
 along the path), its residuals' Jacobian in the knots found by
 forward differences of rollouts of the model (1 + 2 knots rollouts of H steps), and the knots
 moved by the Levenberg-Marquardt step (J'J + mu diag(J'J)) delta = -J'r, kept within the drive's
-limits; the plan is then shifted one step to start the next.
+limits and within a trust radius (``trust`` times the commands' scale). A step is kept only where
+a rollout of the moved plan costs less (mu falls); else mu grows and the step is taken again, up
+to ``iterations`` a control step, stopping once a step lowers the cost by less than
+``tolerance`` of it or the plan's RMS residual is below ``settled_m``; a settled plan's Jacobian
+(and the estimator's step Jacobian) serve again for up to ``reuse`` control steps. The plan is
+then shifted one step to start the next.
 
 **The state** ``mpc`` plans from is estimated from the pose the scenario's pose source gives, as
 every controller gets it (truth with noise, odometry, fused): an extended Kalman filter on the
@@ -23,7 +28,8 @@ model's whole state (positions and velocities, in their tangent space) whose pre
 model's step and whose Jacobian is the step's own (forward differences, as ``mjd_transitionFD``
 takes them, through the whole control step), process noise ``accel_std`` on every velocity, the
 pose noise it is told as the measurement's, and a pose that arrives late (a sensor delay it is
-told) fused at its own step and predicted forward again. ``limit`` is the same planner given the
+told) fused at its own step and predicted forward again. On torque motors the wheels' speeds
+(their encoders, with the scenario's wheel-speed noise) are measured beside the pose. ``limit`` is the same planner given the
 robot's true state each step: what perfect information and a perfect model achieve.
 
 One thread, no BLAS, MuJoCo's own C functions from compiled kernels: the same bits on every

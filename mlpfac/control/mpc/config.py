@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import ClassVar
 
 from mlpfac.exceptions import ConfigError
 
@@ -27,25 +28,31 @@ class MpcConfig:
     told_std: float = 0.01  # ... and the std each velocity's estimate loses at an event it is told (SI units)
     fd_step: float = 1.0e-3  # the knots' finite-difference step, a share of the commands' scale
 
+    LIMITS: ClassVar[dict[str, tuple[float, float]]] = {  # each key's accepted range, closed (horizon_s > 0)
+        "horizon_s": (0.0, 10.0),
+        "knots": (1, 20),
+        "iterations": (1, 10),
+        "tolerance": (0.0, 1.0),
+        "settled_m": (0.0, 1.0),
+        "reuse": (0, 100),
+        "heading_m": (0.0, 1.0e3),
+        "heading_end_m": (0.0, 1.0e3),
+        "damping": (0.0, 1.0e6),
+        "trust": (1.0e-3, 100.0),
+        "accel_std": (0.0, 1.0e6),
+        "told_std": (0.0, 1.0e6),
+        "fd_step": (1.0e-9, 1.0),
+    }
+
     def __post_init__(self) -> None:
-        checks = {
-            "horizon_s": (self.horizon_s, 0.0, 10.0),
-            "heading_m": (self.heading_m, 0.0, 1.0e3),
-            "heading_end_m": (self.heading_end_m, 0.0, 1.0e3),
-            "damping": (self.damping, 0.0, 1.0e6),
-            "trust": (self.trust, 1.0e-3, 100.0),
-            "accel_std": (self.accel_std, 0.0, 1.0e6),
-            "told_std": (self.told_std, 0.0, 1.0e6),
-            "fd_step": (self.fd_step, 1.0e-9, 1.0),
-            "tolerance": (self.tolerance, 0.0, 1.0),
-            "settled_m": (self.settled_m, 0.0, 1.0),
-        }
-        for key, (val, lo, hi) in checks.items():
-            if not (isinstance(val, int | float) and math.isfinite(val) and lo <= val <= hi):
+        for key, (lo, hi) in self.LIMITS.items():
+            val = getattr(self, key)
+            if isinstance(lo, int):
+                if isinstance(val, bool) or not isinstance(val, int) or not lo <= val <= hi:
+                    raise ConfigError(key, f"expected a whole number in [{lo}, {hi}], got {val!r}")
+            elif not (
+                isinstance(val, int | float) and not isinstance(val, bool) and math.isfinite(val) and lo <= val <= hi
+            ):
                 raise ConfigError(key, f"expected a number in [{lo:g}, {hi:g}], got {val!r}")
         if not self.horizon_s > 0:
             raise ConfigError("horizon_s", f"must be positive, got {self.horizon_s}")
-        for key, val, lo, hi in (("knots", self.knots, 1, 20), ("iterations", self.iterations, 1, 10),
-                                 ("reuse", self.reuse, 0, 100)):  # fmt: skip
-            if isinstance(val, bool) or not isinstance(val, int) or not lo <= val <= hi:
-                raise ConfigError(key, f"expected a whole number in [{lo}, {hi}], got {val!r}")
