@@ -20,19 +20,9 @@ import math
 from collections import Counter
 
 from mlpfac.sweeps.bound import BOUND_LAWS
-from mlpfac.sweeps.paired import median
+from mlpfac.sweeps.paired import figure, median
 
 LIMIT, MPC = "limit", "mpc"
-
-
-def figure(r: dict) -> float:
-    """A run's compared figure from its row of runs.json: the last phase's position RMS, inf if it diverged."""
-    if r["status"] != "ok":
-        return math.inf
-    phases = r.get("phases") or {}
-    after = (phases.get("after") or {}).get("rms_position_error_m")
-    x = after if after is not None else (phases.get("before") or {}).get("rms_position_error_m")
-    return math.inf if x is None else x
 
 
 def _mm(x: float | None) -> str:

@@ -273,18 +273,20 @@ def summary(rows: list[dict], bound: str | None = "oracle") -> str:
     return "\n".join(lines) + "\n"
 
 
+def figure(r: dict) -> float:
+    """A run's compared figure from its row of runs.json: the last phase's position RMS, inf if it diverged."""
+    if r["status"] != "ok":
+        return math.inf
+    phases = r.get("phases") or {}
+    after = (phases.get("after") or {}).get("rms_position_error_m")
+    x = after if after is not None else (phases.get("before") or {}).get("rms_position_error_m")
+    return math.inf if x is None else x
+
+
 def bound_ratios(runs: list[dict], bound: str) -> dict[tuple[str, str], float | None]:
     """Per scenario and controller: the median over seeds of its compared figure / ``bound``'s on the
     same seed (as ``x oracle``, another law in place of the oracle), from the runs' figures as
     ``runs.json`` keeps them (:func:`mlpfac.report.verify.run_row`)."""
-
-    def figure(r: dict) -> float:
-        if r["status"] != "ok":
-            return math.inf
-        phases = r.get("phases") or {}
-        after = (phases.get("after") or {}).get("rms_position_error_m")
-        x = after if after is not None else (phases.get("before") or {}).get("rms_position_error_m")
-        return math.inf if x is None else x
 
     fig = {(r["scenario"], r["controller"], r["seed"]): figure(r) for r in runs}
     out: dict[tuple[str, str], list[float]] = {}
