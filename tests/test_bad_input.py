@@ -206,7 +206,7 @@ BAD_FILES: dict[str, tuple[str | bytes, str]] = {
     "own reference params a number": ('[reference]\nkind = "nope.py:Route"\nparams = 3\n', "[reference] params: expected a table"),
     "own reference speed zero": ('[reference]\nkind = "nope.py:Route"\nspeed = 0\n', "[reference] speed"),
     "drawn not the seed's draw": (MINIMAL + EVENT.replace("1.5", "{ uniform = [1.0, 2.0] }") + '[drawn]\n"events.0.factor" = 1.0\n', "is not what seed 0 draws"),
-    # the pose source ([plant] pose_source, mlpfac.plants.sensors)
+    # the pose source ([plant] pose_source, mlpfac.plants.sensors.sensing)
     "pose source unknown": (ROBOT + 'pose_source = "gps"\n', "[plant] pose_source: choose"),
     "pose source a number": (ROBOT + "pose_source = 1\n", "[plant] pose_source"),
     "pose source on the kinematic plant": (MINIMAL + 'pose_source = "odometry"\n', "[plant] pose_source: 'odometry': the kinematic plant"),
