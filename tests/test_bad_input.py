@@ -778,7 +778,7 @@ def test_a_fifo_without_a_writer_is_refused_in_one_line_not_waited_for(tmp_path,
     )  # fmt: skip
     assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1, proc.stderr
     assert f"{fifo}: is a FIFO, not a regular file" in proc.stderr, proc.stderr
-    from mlpfac.files import NotAFileError, read_regular
+    from mlpfac.io.files import NotAFileError, read_regular
 
     big = tmp_path / "big.csv"
     big.write_bytes(b"0,0\n" * 1000)
