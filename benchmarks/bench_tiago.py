@@ -24,7 +24,7 @@ import mujoco
 import numpy as np
 
 from mlpfac.exceptions import MlpfacError
-from mlpfac.plants.mujoco import MujocoConfig, MujocoPlant
+from mlpfac.plants.mujoco.plant import MujocoConfig, MujocoPlant
 from mlpfac.scenario.parse import load
 
 

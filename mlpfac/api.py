@@ -19,10 +19,10 @@ from pathlib import Path
 
 from mlpfac.control.plugins import local_spec
 from mlpfac.exceptions import ConfigError, MlpfacError
+from mlpfac.io.targets import user_path
 from mlpfac.loop.record import RunRecord
 from mlpfac.scenario.parse import Scenario, load
 from mlpfac.sweeps.worker import not_in_a_worker
-from mlpfac.targets import user_path
 
 
 def _scenario(scenario: Scenario | str | Path, where: str = "scenario", robot: str | None = None) -> Scenario:

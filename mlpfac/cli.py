@@ -14,10 +14,10 @@ import sys
 import threading
 from pathlib import Path
 
-from mlpfac import exits
-from mlpfac.exits import EXIT_BAD_INPUT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_TERMINATED  # noqa: F401 (cli.EXIT_*)
 from mlpfac.flags import Parser, needs, not_with
-from mlpfac.targets import cli_path
+from mlpfac.io import exits
+from mlpfac.io.exits import EXIT_BAD_INPUT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_TERMINATED  # noqa: F401 (cli.EXIT_*)
+from mlpfac.io.targets import cli_path
 
 
 def _sink_args(p: argparse.ArgumentParser) -> None:
@@ -156,7 +156,7 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     from mlpfac.exceptions import MlpfacError, PluginError
-    from mlpfac.interrupts import handle_sigterm
+    from mlpfac.io.interrupts import handle_sigterm
 
     handle_sigterm()
 
@@ -322,8 +322,8 @@ def cmd_plot(args: argparse.Namespace) -> int:
 def _plot_panels(folders: list[Path], png: Path) -> int:
     """``mlpfac plot --panels PNG FOLDER...``: every folder's robustness.json in one figure."""
     from mlpfac.exceptions import ConfigError
+    from mlpfac.io.targets import check_report_file, write_report_file
     from mlpfac.plots.robustness import panels_plot
-    from mlpfac.targets import check_report_file, write_report_file
 
     if png.suffix.lower() != ".png":
         raise ConfigError(f"--panels {png}", "must name a .png file")

@@ -12,7 +12,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from mlpfac.exits import EXIT_BAD_INPUT
+from mlpfac.io.exits import EXIT_BAD_INPUT
 
 _RULES = "_mlpfac_flag_rules"  # the parser's attribute holding its rules: (flag, others, needed)
 

@@ -60,10 +60,10 @@ MODULES = {  # the modules whose kernels each extension holds
         "mlpfac.control.mpc.kernels",
         "mlpfac.plants.events",
         "mlpfac.plants.ik",
-        "mlpfac.plants.odometry",
-        "mlpfac.plants.terrain",
+        "mlpfac.plants.sensors.odometry",
+        "mlpfac.plants.world.terrain",
     ),
-    "mujoco": ("mlpfac.plants.compiled", "mlpfac.loop.compiled", "mlpfac.plants.predict"),
+    "mujoco": ("mlpfac.plants.mujoco.compiled", "mlpfac.loop.compiled", "mlpfac.plants.mujoco.predict"),
 }
 FILES = tuple(m.removeprefix("mlpfac.").replace(".", "/") + ".py" for ms in MODULES.values() for m in ms) + ("jit.py",)
 JIT = {"cache": True, "error_model": "numpy", "nogil": True}  # numpy's inf or NaN for a division by zero
@@ -125,7 +125,7 @@ def stamp(salt: str = "") -> int:
 def built(ext: str):
     """The built module of ``ext`` when it is current (``None``: numba compiles the kernels; why
     in :data:`WHY`). ``"mujoco"``'s calls MuJoCo's library by name and depends on its version:
-    :mod:`mlpfac.plants.compiled` loads the library and sets :data:`SALT` first."""
+    :mod:`mlpfac.plants.mujoco.compiled` loads the library and sets :data:`SALT` first."""
     mode = os.environ.get(ENV, "")
     if mode not in ("", "jit", "aot", "build"):
         raise ConfigError(ENV, f"{mode!r} is neither jit (numba compiles the kernels) nor aot (the built ones only)")

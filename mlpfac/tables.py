@@ -167,7 +167,7 @@ TOML_MAX = 16 * 2**20  # bytes of a TOML file (a scenario, a budget, a robot), a
 def read_toml(path: Path, kind: str) -> dict:
     """The TOML file at ``path`` (a ``kind``, e.g. "scenario file"); a ConfigError naming it when it
     cannot be read or is not UTF-8 TOML."""
-    from mlpfac.files import NotAFileError, read_regular
+    from mlpfac.io.files import NotAFileError, read_regular
 
     try:
         return tomllib.loads(read_regular(path, TOML_MAX).decode("utf-8"))

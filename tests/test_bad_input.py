@@ -206,7 +206,7 @@ BAD_FILES: dict[str, tuple[str | bytes, str]] = {
     "own reference params a number": ('[reference]\nkind = "nope.py:Route"\nparams = 3\n', "[reference] params: expected a table"),
     "own reference speed zero": ('[reference]\nkind = "nope.py:Route"\nspeed = 0\n', "[reference] speed"),
     "drawn not the seed's draw": (MINIMAL + EVENT.replace("1.5", "{ uniform = [1.0, 2.0] }") + '[drawn]\n"events.0.factor" = 1.0\n', "is not what seed 0 draws"),
-    # the pose source ([plant] pose_source, mlpfac.plants.sensors)
+    # the pose source ([plant] pose_source, mlpfac.plants.sensors.sensing)
     "pose source unknown": (ROBOT + 'pose_source = "gps"\n', "[plant] pose_source: choose"),
     "pose source a number": (ROBOT + "pose_source = 1\n", "[plant] pose_source"),
     "pose source on the kinematic plant": (MINIMAL + 'pose_source = "odometry"\n', "[plant] pose_source: 'odometry': the kinematic plant"),
@@ -778,7 +778,7 @@ def test_a_fifo_without_a_writer_is_refused_in_one_line_not_waited_for(tmp_path,
     )  # fmt: skip
     assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1, proc.stderr
     assert f"{fifo}: is a FIFO, not a regular file" in proc.stderr, proc.stderr
-    from mlpfac.files import NotAFileError, read_regular
+    from mlpfac.io.files import NotAFileError, read_regular
 
     big = tmp_path / "big.csv"
     big.write_bytes(b"0,0\n" * 1000)

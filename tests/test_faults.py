@@ -59,7 +59,7 @@ def test_a_warning_marks_the_robot_stepping_and_ends_a_compiled_segment():
     """The handler marks the robot whose step warned; its divergence test (compiled, in every step
     of a segment too) then says so."""
     from mlpfac.loop.runner import build
-    from mlpfac.plants import compiled
+    from mlpfac.plants.mujoco import compiled
     from mlpfac.scenario.parse import load
 
     scn = load("eight-nominal").with_overrides("kanayama", duration=0.5)

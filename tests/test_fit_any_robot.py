@@ -18,7 +18,7 @@ import pytest
 import mlpfac
 from mlpfac.cli import main
 from mlpfac.loop.runner import build, run
-from mlpfac.plants.mujoco_holds import climb
+from mlpfac.plants.mujoco.holds import climb
 from mlpfac.scenario.parse import load, parse
 from mlpfac.tables import to_toml
 
@@ -151,7 +151,7 @@ def test_the_standard_geometry_of_a_wheel_against_a_step():
     below it (a 5 cm wheel, a 1 cm step: 3 cm and 4 cm, tan a = 0.75); at 0.9 r, tan a is 10."""
     d, tan = climb(0.05, 0.01)
     assert d == pytest.approx(0.03, rel=1e-15) and tan == pytest.approx(0.75, rel=1e-15)
-    from mlpfac.plants.mujoco_holds import STEP_SHARE
+    from mlpfac.plants.mujoco.holds import STEP_SHARE
 
     assert climb(1.0, STEP_SHARE)[1] == pytest.approx(10.0, rel=1e-12)
 

@@ -94,7 +94,7 @@ def _hashes(mode: str) -> dict:
 @pytest.mark.skipif(os.environ.get(jit.ENV) == "jit", reason="MLPFAC_KERNELS=jit: numba compiles them")
 def test_the_installed_kernels_are_current_and_used():
     """An install (editable or not) builds them: a run imports neither numba nor its compiler."""
-    import mlpfac.plants.compiled  # noqa: F401  (loads MuJoCo's library, which the second module calls)
+    import mlpfac.plants.mujoco.compiled  # noqa: F401  (loads MuJoCo's library, which the second module calls)
 
     for ext, name in jit.EXTENSIONS.items():
         assert jit.built(ext) is not None, f"{name} is missing or stale: reinstall (pip install -e .)"
@@ -164,7 +164,7 @@ def test_a_delay_line_of_integers_or_strided_rows_pushes_what_it_was_given():
 def test_a_mujoco_other_than_the_built_ones_asks_for_a_reinstall():
     """The MuJoCo kernels were built against one MuJoCo's functions and enums; the core kernels
     built, they cannot be compiled by numba instead (they call the built ones): one line."""
-    script = "import mujoco; mujoco.__version__ = '0.0.0'; import mlpfac.plants.compiled"
+    script = "import mujoco; mujoco.__version__ = '0.0.0'; import mlpfac.plants.mujoco.compiled"
     out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=300)
     assert out.returncode != 0
     assert "mlpfac.plants._kernels was built from other sources, for another processor or another MuJoCo" in out.stderr

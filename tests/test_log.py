@@ -324,9 +324,7 @@ def test_view_needs_a_run_in_each_folder(tmp_path):
 
 
 def test_runs_without_logging_do_not_import_rerun():
-    code = (
-        "import sys, mlpfac.loop.runner, mlpfac.cli, mlpfac.scenario.parse, mlpfac.files; print('rerun' in sys.modules)"
-    )
+    code = "import sys, mlpfac.loop.runner, mlpfac.cli, mlpfac.scenario.parse, mlpfac.io.files; print('rerun' in sys.modules)"
     out = subprocess.run(
         [sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=Path(__file__).parents[1]
     )

@@ -1,4 +1,4 @@
-"""``mpc`` and ``limit`` (mlpfac.control.mpc) and the robot as their model (mlpfac.plants.predict):
+"""``mpc`` and ``limit`` (mlpfac.control.mpc) and the robot as their model (mlpfac.plants.mujoco.predict):
 the model predicts the run to the bit, its Jacobians agree with MuJoCo's and with finite
 differences, the estimator's and the planner's algebra with numpy's, the controllers track better
 than the laws on a short run, give the same bits twice, and refuse what cannot work in one line."""
@@ -16,7 +16,7 @@ from mlpfac.exceptions import ConfigError
 from mlpfac.loop.factory import make_controller
 from mlpfac.loop.metrics import metrics
 from mlpfac.loop.runner import build, run
-from mlpfac.plants.predict import STATE, Predictor
+from mlpfac.plants.mujoco.predict import STATE, Predictor
 
 
 def _scenario(name: str, controller: str, duration: float, **kw):

@@ -12,7 +12,7 @@ import pytest
 
 from mlpfac.exceptions import ConfigError
 from mlpfac.plants.events import make_event, parse_event
-from mlpfac.plants.mujoco import MujocoConfig, MujocoPlant
+from mlpfac.plants.mujoco.plant import MujocoConfig, MujocoPlant
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENE = ROOT / "models" / "scene.xml"
@@ -681,7 +681,7 @@ def test_the_eight_scenarios_are_shipped():
         "eight-control-period",
         "eight-sensor-delay",
         "eight-torque",
-        "eight-wheel-radius-odometry",  # its pose from the encoders (mlpfac.plants.sensors)
+        "eight-wheel-radius-odometry",  # its pose from the encoders (mlpfac.plants.sensors.sensing)
         "eight-wheel-radius-fused",  # ... and a localizer's fixes
         "eight-slope",
         "eight-ramp",

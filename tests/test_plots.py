@@ -137,7 +137,7 @@ def test_the_painter_draws_figure1_as_figure1_does(tmp_path, short_runs):
     assert (_pixels(tmp_path / "there.png") == _pixels(tmp_path / "here.png")).all()
     from functools import partial
 
-    from mlpfac.interrupts import ForkedChild
+    from mlpfac.io.interrupts import ForkedChild
     from mlpfac.plots.figure1 import Draft
     from mlpfac.plots.painter import _column
 

@@ -304,7 +304,7 @@ def test_connect_streams_to_a_running_viewer_and_keeps_no_file(tmp_path):
 
 @pytest.mark.parametrize("exchange", [True, False], ids=["renameat2", "rename-aside"])
 def test_a_stage_replaces_a_full_folder_whole(tmp_path, monkeypatch, exchange):
-    from mlpfac import files as outputs
+    from mlpfac.io import files as outputs
 
     if not exchange:
         monkeypatch.setattr(outputs, "_exchange", lambda a, b: False)

@@ -1,4 +1,4 @@
-"""The compiled closed loop (mlpfac.loop.compiled) and the compiled plant step (mlpfac.plants.compiled):
+"""The compiled closed loop (mlpfac.loop.compiled) and the compiled plant step (mlpfac.plants.mujoco.compiled):
 the same records, to the bit, as the step-by-step loop; divergence stops at the same step for the
 same reason; MuJoCo's fatal errors end the process with one line."""
 
@@ -15,8 +15,8 @@ import pytest
 
 from mlpfac.loop.factory import make_plant
 from mlpfac.loop.runner import run, run_batch
-from mlpfac.plants import compiled
 from mlpfac.plants.events import DelayLine
+from mlpfac.plants.mujoco import compiled
 from mlpfac.scenario.parse import load
 from mlpfac.scenario.reference import sample
 
@@ -217,7 +217,7 @@ def test_a_fatal_mujoco_error_in_a_compiled_step_is_one_line_and_exit_1():
         """
         import mujoco
         from numba import njit
-        from mlpfac.plants import compiled
+        from mlpfac.plants.mujoco import compiled
         bodies = "".join(f'<body pos="0 0 {i * 0.01}"><freejoint/><geom size=".1"/></body>' for i in range(20))
         m = mujoco.MjModel.from_xml_string(f'<mujoco><size memory="20K"/><worldbody>{bodies}</worldbody></mujoco>')
         d = mujoco.MjData(m)

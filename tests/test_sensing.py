@@ -1,4 +1,4 @@
-"""The pose sources ([plant] pose_source, mlpfac.plants.sensors / odometry): the prediction's Jacobians
+"""The pose sources ([plant] pose_source, mlpfac.plants.sensors.sensing / odometry): the prediction's Jacobians
 by finite differences, known answers of the encoders, the gyro and the delayed fix, the compiled
 loop against the step-by-step loop for each source, a config.toml that runs again to the bit, the
 metrics of what the robot believed, and users' controllers on every source."""
@@ -13,10 +13,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import mlpfac.plants.sensors.odometry as O  # noqa: N812
 from mlpfac.cli import main
 from mlpfac.loop.metrics import metrics
 from mlpfac.loop.runner import run
-from mlpfac.plants import odometry as O  # noqa: N812
 from mlpfac.scenario.parse import load, parse
 
 R, B, DT = 0.05, 0.3, 0.01  # a wheel's radius and the track (m), a control step (s)
@@ -50,7 +50,7 @@ def test_the_prediction_jacobians_are_its_derivatives(gyro):
 
 
 def _estimator(mode=1, gyro=False, cpr=0, offsets=(0.0, 0.0), bias=0.0, rate=0.0, latency=0.0, fix_noise=0.0):
-    """An estimator's array as the plant makes it (mlpfac.plants.sensors.Sensing.start), at the origin."""
+    """An estimator's array as the plant makes it (mlpfac.plants.sensors.sensing.Sensing.start), at the origin."""
     cap = math.ceil(latency / DT + 1e-9) + 2 if mode == 2 else 0
     s = np.zeros(O.O_RING + cap * O.R_W)
     s[O.O_MODE], s[O.O_GYRO], s[O.O_Q] = mode, float(gyro), 2 * math.pi / cpr if cpr else 0.0

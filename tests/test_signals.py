@@ -106,7 +106,7 @@ def test_a_signal_wrapped_by_python_in_another_error_still_ends_cleanly(tmp_path
     in one line, with no traceback."""
     code = (
         "import mlpfac.cli as cli\n"
-        "from mlpfac.interrupts import Terminated\n"
+        "from mlpfac.io.interrupts import Terminated\n"
         "def main():\n"
         "    try:\n"
         "        raise Terminated()\n"

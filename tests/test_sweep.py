@@ -192,7 +192,7 @@ def test_ctrl_c_while_a_folder_is_written_waits_for_the_folder(tmp_path):
     """The race the test above can hit: SIGINT between a run's config.toml and its metrics.json."""
     import signal
 
-    from mlpfac.interrupts import sigint_deferred
+    from mlpfac.io.interrupts import sigint_deferred
 
     written = []
     with pytest.raises(KeyboardInterrupt), sigint_deferred():

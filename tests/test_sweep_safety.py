@@ -140,7 +140,7 @@ def test_where_two_folders_cannot_be_exchanged_a_failed_swap_keeps_the_old_folde
     """Without renameat2's exchange the old folder is renamed aside first: if the new one then
     cannot take its place, the old one goes back; a sweep killed in between finds it aside and the
     next sweep puts it back (not removed as a temporary)."""
-    from mlpfac import files as outputs
+    from mlpfac.io import files as outputs
 
     target = tmp_path / "paper" / "adaptive" / "seed-0000"
     outputs.write_folder_whole(target, {"metrics.json": "old"})
@@ -166,7 +166,7 @@ def test_where_two_folders_cannot_be_exchanged_a_failed_swap_keeps_the_old_folde
 
 
 def test_a_folder_that_cannot_be_made_is_named_as_the_run_folder(tmp_path, monkeypatch):
-    from mlpfac import files as outputs
+    from mlpfac.io import files as outputs
 
     def full(dir, prefix):
         raise OSError(28, "No space left on device", str(Path(dir) / f"{prefix}abcd1234"))

@@ -1,7 +1,7 @@
 """What is not ours is never damaged: a report file that is a device, a FIFO, a link or our own
 stdout is written through; a user's own tables in a results folder are refused, an empty path too;
 view --save, report on a full disk, a broken recording leave the earlier file as it was. Each test
-fails without its fix (mlpfac.targets, mlpfac.log.compare, mlpfac.report.results)."""
+fails without its fix (mlpfac.io.targets, mlpfac.log.compare, mlpfac.report.results)."""
 
 from __future__ import annotations
 

@@ -18,7 +18,7 @@ import mlpfac
 from mlpfac.loop.runner import build, run
 from mlpfac.plants import make_plant
 from mlpfac.plants.events import Force, Slope
-from mlpfac.plants.forces import event_step, force_schedule, in_newtons_all
+from mlpfac.plants.world.forces import event_step, force_schedule, in_newtons_all
 from mlpfac.scenario.parse import load, parse
 from mlpfac.scenario.reference import sample
 

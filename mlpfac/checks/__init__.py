@@ -72,12 +72,12 @@ def check(
     before anything runs.
     """
     from mlpfac.exceptions import OutputError
+    from mlpfac.io.targets import check_report_file, check_results_folder, user_path, write_report_file
     from mlpfac.sweeps.engine import SWEEP_COLUMNS, check_execution_flags, report, sweep_into, sweep_meta
     from mlpfac.sweeps.folders import _oserror
     from mlpfac.sweeps.plan import check_writable
     from mlpfac.sweeps.tables import table_files
     from mlpfac.sweeps.worker import not_in_a_worker
-    from mlpfac.targets import check_report_file, check_results_folder, user_path, write_report_file
 
     not_in_a_worker("check")
 

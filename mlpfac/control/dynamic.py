@@ -53,7 +53,7 @@ from mlpfac.dynamics import P_FV, P_FW, P_TMAX, accelerations, torque_of
 from mlpfac.elementary import cos, sin
 from mlpfac.jit import kernel, seeds
 from mlpfac.plants.events import DelayLine
-from mlpfac.plants.forces import force_schedule, run_seed
+from mlpfac.plants.world.forces import force_schedule, run_seed
 
 VELOCITY_SHARE = 0.5  # Kv T: the velocity error's share closed each control step
 # Kanayama's gains (Kx, Ky, Ktheta) of the outer law where the scenario sets none ([controller.kanayama]):
@@ -223,7 +223,7 @@ def twist_ahead(p: np.ndarray, twist: np.ndarray, sent: list[tuple[np.ndarray, f
 class Told:
     """The world ``oracle-dynamic`` is told: the slopes (time, and gravity's (g_x, g_y) along the floor
     after it) and the ``force`` events among a run's ``events`` of ``steps`` control steps, whose
-    schedule it meets (:func:`mlpfac.plants.forces.force_schedule`, the same stream as the plant's)."""
+    schedule it meets (:func:`mlpfac.plants.world.forces.force_schedule`, the same stream as the plant's)."""
 
     def __init__(self, slopes: list[tuple[float, float, float]], events, steps: int) -> None:
         self.slopes, self.events, self.steps = sorted(slopes), tuple(events), int(steps)

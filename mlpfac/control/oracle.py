@@ -36,7 +36,7 @@ only what the nominal design would need to be redone for the changed robot:
 - **payload on a skid-steer** (``TURNING``): how it turns. A skid-steer's wheels slide as it
   turns, so its load sets the track it turns as and where its kinematic centre lies (the point
   that moves along its heading), measured by the factory on a robot with the event, as the plant
-  measures them while it settles (:meth:`~mlpfac.plants.mujoco.MujocoPlant.turning_change`): the
+  measures them while it settles (:meth:`~mlpfac.plants.mujoco.plant.MujocoPlant.turning_change`): the
   track's ratio t and the centre's move a ahead of the pose frame. omega is sent x t, so the
   robot turns at the rate the law meant. With the centre a ahead, the pose frame slides sideways
   at -a omega as the robot turns, and it follows the path only with the heading led by the angle

@@ -106,7 +106,7 @@ def configure(
         raise ConfigError("reward", f"expected a callable reward(e_true, u, info) -> float, got {reward!r}")
     folder = None
     if record is not None:
-        from mlpfac.targets import user_path
+        from mlpfac.io.targets import user_path
 
         folder = Path(user_path(record, "record"))
         if folder.exists() and not folder.is_dir():

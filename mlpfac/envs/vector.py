@@ -38,8 +38,8 @@ from mlpfac.envs.track import RENDER_MODES, SEED_MAX, configure
 from mlpfac.exceptions import ConfigError
 from mlpfac.loop import compiled as A  # noqa: N812 - the kernel stepping many robots, and its row's layout
 from mlpfac.loop.closed_loop import FLUSH_EVERY
-from mlpfac.plants import compiled as K  # noqa: N812 - the MuJoCo plant's compiled step
-from mlpfac.plants.compiled import ROW, robot_row
+from mlpfac.plants.mujoco import compiled as K  # noqa: N812 - the MuJoCo plant's compiled step
+from mlpfac.plants.mujoco.compiled import ROW, robot_row
 
 CHUNK = 256  # noise draws taken from a robot's stream at once (never past its next event)
 

@@ -19,7 +19,7 @@ import numpy as np
 import rerun as rr
 
 from mlpfac.exceptions import ConfigError
-from mlpfac.interrupts import Terminated
+from mlpfac.io.interrupts import Terminated
 from mlpfac.log.layout import ABOUT, layout
 from mlpfac.log.recorder import APPLICATION_ID, disconnect
 from mlpfac.log.schema import REFSPEED_COLOR, RGB, entity_part
@@ -128,7 +128,7 @@ def save_comparison(runs: Sequence[Path | str], path: Path | str) -> Path:
     """Write the runs' comparison recording to ``path`` (checked and read back like a run's): made
     beside it and renamed into place when whole, so a failure (a broken run.rrd, a full disk, a
     signal) leaves an earlier file at ``path`` as it was."""
-    from mlpfac.files import Stage, check_save_file
+    from mlpfac.io.files import Stage, check_save_file
 
     files = run_files(runs)
     path = Path(path)

@@ -16,7 +16,7 @@ from collections.abc import Sequence
 import numpy as np
 import rerun as rr
 
-from mlpfac.interrupts import Terminated
+from mlpfac.io.interrupts import Terminated
 from mlpfac.log.about import about_text
 from mlpfac.log.belief import send_belief, send_belief_static
 from mlpfac.log.layout import ABOUT, blueprint, marked_origins

@@ -26,7 +26,7 @@ from urllib.parse import quote, urlsplit
 import rerun as rr
 
 from mlpfac.exceptions import ConfigError
-from mlpfac.interrupts import die_with_parent
+from mlpfac.io.interrupts import die_with_parent
 from mlpfac.log.recorder import APPLICATION_ID, RerunSink
 
 SPAWN_PORT = 9876  # the native viewer's gRPC port, rerun's default

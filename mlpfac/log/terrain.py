@@ -4,7 +4,7 @@ tilted from a ``slope`` event on, the robot drawn at the ground's height under i
 a ``force`` event as an arrow on the robot while it acts (``world/force``).
 
 The record carries the terrain as plain data (``record.world``, from
-:meth:`mlpfac.plants.world.Terrain.as_dict`) and the events as they were applied; nothing here
+:meth:`mlpfac.plants.world.layout.Terrain.as_dict`) and the events as they were applied; nothing here
 reads the plant. A slope turns the floor's frame in the 3D view: the entities drawn in it (the
 floor, the terrain, the paths, the arrows) are given the tilt as their transform at the event's
 time, and the robot's pose is composed with it (the top view stays a map).
@@ -20,7 +20,7 @@ import rerun as rr
 from mlpfac.log.schema import FORCE_COLORS
 from mlpfac.log.series import ns
 from mlpfac.loop.record import RunRecord
-from mlpfac.plants.terrain import ground_height
+from mlpfac.plants.world.terrain import ground_height
 
 FLOOR_FRAME = (
     "world/floor",
@@ -91,7 +91,7 @@ def _disc(world: dict, patch: dict, n: int = 48) -> rr.Mesh3D:
 
 
 def ground(world: dict, x: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """The ground's height at the points (x, y) (:func:`mlpfac.plants.terrain.ground_height`, the
+    """The ground's height at the points (x, y) (:func:`mlpfac.plants.world.terrain.ground_height`, the
     function the plant measures the robot against); 0 without a world."""
     x, y = np.broadcast_arrays(np.asarray(x, dtype=float), np.asarray(y, dtype=float))
     if not world:

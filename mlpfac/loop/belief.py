@@ -1,6 +1,6 @@
 """What the robot believed, beside the truth: the error of its pose estimate (what the controller was
 given against the true pose) and the outcome it would have reported of itself, for a run whose
-pose source is not the truth (``[plant] pose_source``, :mod:`mlpfac.plants.sensors`). The headline
+pose source is not the truth (``[plant] pose_source``, :mod:`mlpfac.plants.sensors.sensing`). The headline
 figures and the outcome stay the truth's (:mod:`mlpfac.loop.metrics`)."""
 
 from __future__ import annotations

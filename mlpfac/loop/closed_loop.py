@@ -12,7 +12,7 @@ import numpy as np
 from mlpfac.control.baselines import LawKernel, StateKernel, Stepped
 from mlpfac.control.torque import Observation, reference_rates
 from mlpfac.elementary import hypot
-from mlpfac.interrupts import raise_swallowed
+from mlpfac.io.interrupts import raise_swallowed
 from mlpfac.loop.compiled import ADAPTIVE, BAD, no_state, segment
 from mlpfac.loop.kernels import bad_seeds
 from mlpfac.loop.record import RunRecord

@@ -1,6 +1,6 @@
 """The closed loop compiled between events: many control steps of one seed in one kernel call.
 
-For a plant with a compiled control step (the MuJoCo robot, :mod:`mlpfac.plants.compiled`) and a
+For a plant with a compiled control step (the MuJoCo robot, :mod:`mlpfac.plants.mujoco.compiled`) and a
 controller whose step is a kernel (Kanayama, Corradini: :func:`mlpfac.control.law.law_step`; the
 oracles told the changes without a sensor delay: :func:`mlpfac.control.oracle.told_step`; the
 adaptive scheme's compiled form: :func:`adaptive_row`), the
@@ -21,7 +21,7 @@ from mlpfac.control.oracle import told_step
 from mlpfac.jit import kernel
 from mlpfac.loop.kernels import bad_seeds
 from mlpfac.model import tracking_errors
-from mlpfac.plants.compiled import ROW, S_POSE, f1_at, f2_at, plant_step, robot_at, with_robot
+from mlpfac.plants.mujoco.compiled import ROW, S_POSE, f1_at, f2_at, plant_step, robot_at, with_robot
 
 BAD = -1  # the runner's test stopped the seed (a plant's own reasons are its codes, > 0)
 ADAPTIVE = 0  # the controller's number for the adaptive scheme (the laws': mlpfac.control.law.KANAYAMA, ...)
@@ -71,7 +71,7 @@ def segment(k0, k1, ref, law, c, told, limit, pose, pose_meas, e, e_true, u, cte
     and what an oracle is told, ``told``: :func:`mlpfac.control.oracle.told_step`; empty: the law
     itself), or ADAPTIVE, with the seed's ``state``, step 0 its first step. Records (N, ...) are written at
     row k; ``ctele``, ``ptele`` (N, W) the controller's and the plant's telemetry rows; ``draws``
-    (k1 - k0, 3) the plant's noise; ``robot`` :meth:`~mlpfac.plants.mujoco.MujocoPlant.kernel_args`.
+    (k1 - k0, 3) the plant's noise; ``robot`` :meth:`~mlpfac.plants.mujoco.plant.MujocoPlant.kernel_args`.
 
     Returns (k, why): (k1, 0) when every step ran, else the step k at which the seed stopped and
     why (BAD: the runner's test, after the law; > 0: the plant's code, after the plant's step)."""
@@ -104,7 +104,7 @@ def segment(k0, k1, ref, law, c, told, limit, pose, pose_meas, e, e_true, u, cte
 
 
 # One step of many seeds, each at its own step k (mlpfac.envs.vector): each seed's arrays by address,
-# a row of ``table`` (:func:`mlpfac.plants.compiled.robot_row`, then (address, rows, columns) of each
+# a row of ``table`` (:func:`mlpfac.plants.mujoco.compiled.robot_row`, then (address, rows, columns) of each
 # array below): the plant's telemetry row, the reference (N + 1, 5), the record's pose, measured pose,
 # errors, true errors (N, 3) and commands (N, 2), the plant's telemetry rows (N, W), the loop's true
 # and measured pose (1, 3), its errors and true errors of the step (1, 3), the true errors after the

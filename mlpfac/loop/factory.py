@@ -173,7 +173,7 @@ def _mpc(scn: Scenario, plant=None) -> Stepped:
     torques); the pose noise the estimator is told (the scenario's, at least 1 mm on a pose a
     source estimates)."""
     from mlpfac.control.mpc.controller import MPC
-    from mlpfac.plants.predict import Predictor
+    from mlpfac.plants.mujoco.predict import Predictor
 
     T, cfg = scn.T, scn.mpc
     H = max(1, int(round(cfg.horizon_s / T)))

@@ -40,7 +40,7 @@ class RunRecord:
     sim_time_s: float = 0.0  # physical time simulated by the plant
     wall_time_s: float = 0.0
     pose_source: str = "truth"  # where pose_meas came from ([plant] pose_source): "truth", "odometry", "fused"
-    world: dict = field(default_factory=dict)  # the terrain driven on, as drawn (mlpfac.plants.world.Terrain.as_dict)
+    world: dict = field(default_factory=dict)  # the terrain driven on, as drawn (plants.world.layout.Terrain.as_dict)
 
     @property
     def estimate_error(self) -> np.ndarray | None:

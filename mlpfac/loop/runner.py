@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from mlpfac.control.baselines import Stepped
-from mlpfac.interrupts import Terminated
+from mlpfac.io.interrupts import Terminated
 from mlpfac.loop.closed_loop import ClosedLoop
 from mlpfac.loop.factory import make_controller, make_plant
 from mlpfac.loop.record import RunRecord

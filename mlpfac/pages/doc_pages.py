@@ -151,7 +151,7 @@ def main(argv: list[str] | None = None) -> int:
         for name in old:
             print(f"{docs / name}: differs from what the code gives; run: python -m mlpfac.pages {docs}")
         return 1 if old else 0
-    from mlpfac.files import write_atomic
+    from mlpfac.io.files import write_atomic
 
     texts = pages()
     for name in texts:  # only our own pages are replaced: a regular file that says it is written here

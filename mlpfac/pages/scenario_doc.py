@@ -334,8 +334,8 @@ def scenario_page() -> str:
     from mlpfac.plants.config import MujocoConfig
     from mlpfac.plants.events import EVENTS, MU_MAX
     from mlpfac.plants.kinematic import KinematicConfig, KinematicPlant
-    from mlpfac.plants.mujoco_holds import STEP_SHARE
-    from mlpfac.plants.world_table import FEATURES_MAX, Bumps, Kerb, Patch, Ramp
+    from mlpfac.plants.mujoco.holds import STEP_SHARE
+    from mlpfac.plants.world.table import FEATURES_MAX, Bumps, Kerb, Patch, Ramp
     from mlpfac.scenario.reference import REFERENCES
 
     out = [

@@ -1,5 +1,9 @@
 """The plants a run drives: the kinematic unicycle (:mod:`~mlpfac.plants.kinematic`) and a MuJoCo
-robot (:mod:`~mlpfac.plants.mujoco`); :func:`make_plant` builds the one a scenario names.
+robot (:mod:`~mlpfac.plants.mujoco`); :func:`make_plant` builds the one a scenario names. Beside
+them, by block: a robot read from its MJCF (:mod:`~mlpfac.plants.mjcf`), the world around it
+(:mod:`~mlpfac.plants.world`), what it senses of its own pose (:mod:`~mlpfac.plants.sensors`); and
+what every plant shares: the events (:mod:`~mlpfac.plants.events`), the IK (:mod:`~mlpfac.plants.ik`),
+the ``[plant]`` table (:mod:`~mlpfac.plants.config`), the interface (:mod:`~mlpfac.plants.base`).
 
 Only this package imports mujoco, and only in its modules, not here: importing the package is cheap.
 """
@@ -25,7 +29,7 @@ class PlantSpec(Protocol):
     controller: str
     level: str  # "torque": the controller commands the wheels' torques
     steps: int  # control steps of a run
-    terrain: object  # the world resolved for the run (mlpfac.plants.world.Terrain), or None
+    terrain: object  # the world resolved for the run (mlpfac.plants.world.layout.Terrain), or None
 
 
 def make_plant(scn: PlantSpec, ref: np.ndarray):
@@ -38,7 +42,7 @@ def make_plant(scn: PlantSpec, ref: np.ndarray):
             plant, robot = KinematicPlant(scn.plant_config, scn.T, ref), None
         else:
             from mlpfac.plants.events import ControlPeriod
-            from mlpfac.plants.mujoco import MujocoPlant
+            from mlpfac.plants.mujoco.plant import MujocoPlant
 
             periods = (scn.T, *(ev.factor * scn.T for ev in scn.events if isinstance(ev, ControlPeriod)))
             plant = robot = MujocoPlant(scn.plant_config, scn.T, periods)
@@ -53,7 +57,7 @@ def make_plant(scn: PlantSpec, ref: np.ndarray):
         plant.check_event(ev, f"{scn.source} [[events]] #{i + 1}")
     if robot is not None:
         _check_size(scn, robot)
-        if scn.terrain is not None or any(ev.kind == "force" for ev in scn.events):  # mlpfac.plants.mujoco_world
+        if scn.terrain is not None or any(ev.kind == "force" for ev in scn.events):  # mlpfac.plants.mujoco.world
             robot.set_world(scn.terrain, scn.events, scn.steps, f"{scn.source} [world]", f"{scn.source} [[events]]")
     return plant
 

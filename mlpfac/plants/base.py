@@ -71,7 +71,7 @@ class Plant(Protocol):
         """The ``[plant]`` keys the scenario left unset and the plant found in its model ({}: none)."""
 
     def terrain_record(self) -> dict:
-        """The terrain it drives on, as a recording draws it (:meth:`mlpfac.plants.world.Terrain.as_dict`;
+        """The terrain it drives on, as a recording draws it (:meth:`mlpfac.plants.world.layout.Terrain.as_dict`;
         {} without one)."""
 
     def geometry(self) -> list[dict]:
@@ -84,7 +84,7 @@ class Plant(Protocol):
 
 @runtime_checkable
 class CompiledPlant(Protocol):
-    """A plant whose control step is compiled (:mod:`mlpfac.plants.compiled`): the closed loop runs
+    """A plant whose control step is compiled (:mod:`mlpfac.plants.mujoco.compiled`): the closed loop runs
     it, with a law kernel, from one event or log flush to the next (:mod:`mlpfac.loop.compiled`)."""
 
     _n: int

@@ -14,7 +14,7 @@ import numpy as np
 
 from mlpfac.exceptions import ConfigError
 from mlpfac.plants.model_file import is_menagerie, menagerie_name, model_path, shipped_model
-from mlpfac.plants.sensors import check_sensing
+from mlpfac.plants.sensors.sensing import check_sensing
 
 LIMITS = ("wheel_radius", "track", "turning_track", "max_wheel_speed", "timestep")
 ARMATURE_MAX = 1e3  # kg m^2 on a wheel's hinge, at most
@@ -81,7 +81,7 @@ class MujocoConfig:
     wheel_speed_noise_std: float = 0.0  # std of noise on the wheel speeds a torque-level controller measures (rad/s)
     pi_kp: float | None = None  # torque drive: PI proportional gain, N m per rad/s; None: scaled to the robot's inertia
     pi_ki: float | None = None  # torque drive: PI integral gain, N m per rad; None: scaled to the robot's inertia
-    # --- what the robot senses of its pose (mlpfac.plants.sensors) ---
+    # --- what the robot senses of its pose (mlpfac.plants.sensors.sensing) ---
     pose_source: str = "truth"  # "truth" (the pose, + pose_noise_std), "odometry" (wheels, gyro), "fused" (+ fixes)
     encoder_cpr: int | None = None  # the wheel encoders' counts a revolution; None: exact angles
     gyro: bool = False  # the heading rate from a gyro on the pose frame (MuJoCo's gyro sensor), not the wheels

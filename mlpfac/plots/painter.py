@@ -18,7 +18,7 @@ from contextlib import contextmanager, suppress
 from functools import partial
 from pathlib import Path
 
-from mlpfac.interrupts import ForkedChild, die_with_parent, read_in_background
+from mlpfac.io.interrupts import ForkedChild, die_with_parent, read_in_background
 
 
 class Painter(ForkedChild):

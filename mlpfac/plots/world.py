@@ -3,7 +3,7 @@ the ramps' and kerbs' footprints and the patches on the paths' panels, the path 
 (``[plant] pose_source`` other than the truth), where each event happened and where a force acted
 along the driven path, and, on the panels against time, when the robot was on a ramp, a kerb or a
 patch.
-The record carries all of it as plain data (``record.world``, :meth:`mlpfac.plants.world.Terrain.as_dict`;
+The record carries all of it as plain data (``record.world``, :meth:`mlpfac.plants.world.layout.Terrain.as_dict`;
 the events as applied): nothing here reads the plant.
 
 Every mark gets one entry in the figure's legend, drawn above the panels (:func:`legend_entries`),
@@ -54,7 +54,7 @@ def on_ground(rec: RunRecord) -> dict[str, np.ndarray]:
 
 def footprint(corners) -> np.ndarray:
     """A ramp's (or a kerb's) footprint on the floor, (4, 2): its foot's two sides, then its end's (the prism's
-    corners 0, 1, 7, 6 of :meth:`mlpfac.plants.world.PlacedRamp.corners`)."""
+    corners 0, 1, 7, 6 of :meth:`mlpfac.plants.world.layout.PlacedRamp.corners`)."""
     c = np.asarray(corners, dtype=float)
     return c[[0, 1, 7, 6], :2]
 

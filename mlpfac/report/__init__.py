@@ -12,7 +12,7 @@ from pathlib import Path
 
 from mlpfac.exceptions import ConfigError
 from mlpfac.flags import needs, not_with
-from mlpfac.targets import cli_path
+from mlpfac.io.targets import cli_path
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

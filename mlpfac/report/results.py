@@ -43,7 +43,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 from mlpfac.exceptions import ConfigError
-from mlpfac.files import write_atomic
+from mlpfac.io.files import write_atomic
 from mlpfac.report.data import read_data, read_json
 
 MARKER = re.compile(r"^<!-- table: (?P<spec>.+?) -->\n(?P<body>.*?)^<!-- /table -->$", re.M | re.S)

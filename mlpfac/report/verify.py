@@ -279,7 +279,7 @@ def prepare(folder: Path, root: Path) -> Planned:
 def rerun(job) -> tuple[dict | None, str | None]:
     """One run of a job: its metrics, or None and the error a bug raised. A Ctrl-C or a SIGTERM
     during the run ends the verification as that signal (exit 130 or 143)."""
-    from mlpfac.interrupts import Terminated
+    from mlpfac.io.interrupts import Terminated
     from mlpfac.loop.metrics import metrics
     from mlpfac.loop.runner import run
     from mlpfac.scenario.parse import parse

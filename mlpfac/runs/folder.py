@@ -1,5 +1,5 @@
 """One run into a folder: config.toml, metrics.json, figure1.png and run.rrd, written beside the
-folder and put in place only when whole (:class:`mlpfac.files.Stage`), under its lock. What
+folder and put in place only when whole (:class:`mlpfac.io.files.Stage`), under its lock. What
 ``mlpfac run`` does, and :func:`mlpfac.run` with ``out``.
 """
 
@@ -12,8 +12,8 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from mlpfac.exceptions import ConfigError, PluginError
-from mlpfac.files import Stage, check_run_folder, check_save_file, folder_lock, write_atomic
-from mlpfac.interrupts import raise_swallowed, sigint_deferred
+from mlpfac.io.files import Stage, check_run_folder, check_save_file, folder_lock, write_atomic
+from mlpfac.io.interrupts import raise_swallowed, sigint_deferred
 from mlpfac.loop.metrics import metrics
 from mlpfac.runs.replay import DEFER_MAX_S, DeferredSink
 
@@ -70,7 +70,7 @@ def check_outputs(out: Path, recording: Recording) -> Recording:
     return replace(recording, save=save)
 
 
-STAGED_NAME = ".{}.tmp-XXXXXXXX"  # what a name becomes while it is written beside its place (mlpfac.files.Stage)
+STAGED_NAME = ".{}.tmp-XXXXXXXX"  # what a name becomes while it is written beside its place (mlpfac.io.files.Stage)
 
 
 def _check_length(path: Path, flag: str) -> None:
@@ -207,7 +207,7 @@ def open_sink(recording: Recording, scn, save: tuple[Path, Path] | None):
 def _run_into(folder: Stage, out: Path, scn, built, sink, baseline, painter) -> tuple:
     """The run, then its folder (config.toml, metrics.json, figure1.png) in the stage. A write that
     fails is a ConfigError naming the file where it would have gone."""
-    from mlpfac.interrupts import Terminated
+    from mlpfac.io.interrupts import Terminated
     from mlpfac.loop.runner import run
 
     rec = run(scn, sink=sink, built=built)

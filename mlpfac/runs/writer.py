@@ -17,7 +17,7 @@ import pickle
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 
-from mlpfac.interrupts import ForkedChild, read_in_background
+from mlpfac.io.interrupts import ForkedChild, read_in_background
 
 
 class Writer(ForkedChild):

@@ -4,7 +4,7 @@ controller put on another robot, by one rule (docs/robots.md):
 - the robot is its model alone (``[plant] kind = "mujoco"``, ``model``), or a robot file's
   ``[plant]`` table: every other part is found or chosen in the model
   (:mod:`mlpfac.plants.mjcf.defaults`); the scenario's pose noise and pose source (its encoders,
-  gyro and fixes: :mod:`mlpfac.plants.sensors`) are kept;
+  gyro and fixes: :mod:`mlpfac.plants.sensors.sensing`) are kept;
 - the reference is slowed in time (the same path, v and omega x k, k <= 1) until its peak wheel
   speed (|v| + |omega| b / 2) / r at ``[reference] speed = 1`` is at most ``SHARE`` of the robot's
   wheel-speed limit (a ``speed`` the file or ``--vary`` sets then runs that path as many times as fast): the
@@ -204,7 +204,7 @@ def on_robot_fit(table: dict, robot: str) -> tuple[dict, dict]:
     a path's new timing; ``reference_warning`` where a path's ``speed`` asks more than the wheels give."""
     from mlpfac.plants.config import MujocoConfig
     from mlpfac.plants.events import ControlPeriod, parse_event
-    from mlpfac.plants.mujoco import robot_of
+    from mlpfac.plants.mujoco.plant import robot_of
     from mlpfac.scenario.reference import make_reference
     from mlpfac.tables import build
 
@@ -212,7 +212,7 @@ def on_robot_fit(table: dict, robot: str) -> tuple[dict, dict]:
     out.pop("provenance", None)  # what another robot's run simulated
     old = out.get("plant") if isinstance(out.get("plant"), dict) else {}
     plant = robot_table(robot)
-    from mlpfac.plants.sensors import SENSOR_KEYS
+    from mlpfac.plants.sensors.sensing import SENSOR_KEYS
 
     if "pose_source" not in plant:  # what the robot senses of its pose goes with the scenario, but where its file says
         for key in ("pose_noise_std", *SENSOR_KEYS):

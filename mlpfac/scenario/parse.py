@@ -29,8 +29,8 @@ from mlpfac.exceptions import ConfigError
 from mlpfac.model import pose_from_error
 from mlpfac.plants import refuse_torque
 from mlpfac.plants.events import Event, parse_event
-from mlpfac.plants.world import Terrain
-from mlpfac.plants.world_table import World, parse_world
+from mlpfac.plants.world.layout import Terrain
+from mlpfac.plants.world.table import World, parse_world
 from mlpfac.scenario import provenance
 from mlpfac.scenario.draws import check_ends
 from mlpfac.scenario.draws import put as put_value
@@ -369,7 +369,7 @@ def parse(table: dict, source: str = "<scenario>", check_model: bool = True, pla
         from mlpfac.plants.config import MujocoConfig
 
         plant_config = build(MujocoConfig, plant_table, where)
-        from mlpfac.plants.sensors import check_run
+        from mlpfac.plants.sensors.sensing import check_run
 
         check_run(plant_config, duration, T, where)  # the fixes against the run's length and period
     else:

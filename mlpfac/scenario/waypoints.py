@@ -143,7 +143,7 @@ def _points(params: dict, where: str) -> tuple[list, list[str], str, str]:
 def read_csv(path: FilePath, where: str) -> tuple[list[tuple[float, float]], list[str], str]:
     """A CSV file's waypoints, each one's ``file line N``, and the file's sha256; a ConfigError
     naming the file (and the line) for a file that cannot be read or a line that is not x, y."""
-    from mlpfac.files import NotAFileError, read_regular
+    from mlpfac.io.files import NotAFileError, read_regular
 
     try:
         data = read_regular(path, CSV_MAX)

@@ -1,5 +1,5 @@
 """A scenario's ``[world]`` over its run: the terrain resolved from the reference over the whole
-run and the run's seed (:func:`mlpfac.plants.world.resolve`, once, so that every plant of the run
+run and the run's seed (:func:`mlpfac.plants.world.layout.resolve`, once, so that every plant of the run
 and its probes build the same world), and what was drawn of it recorded in the table's ``[drawn]``
 (the rough ground's digest, ``world.bumps``), checked against a fresh draw when a config.toml runs
 again, as a distribution's draw is (:mod:`mlpfac.scenario.draws`)."""
@@ -10,8 +10,8 @@ import numpy as np
 
 from mlpfac.exceptions import ConfigError
 from mlpfac.model import pose_from_error
-from mlpfac.plants.world import Terrain, resolve
-from mlpfac.plants.world_table import World
+from mlpfac.plants.world.layout import Terrain, resolve
+from mlpfac.plants.world.table import World
 from mlpfac.scenario.reference import sample
 
 BUMPS_DRAWN = "world.bumps"  # [drawn]: the digest of the rough ground drawn for the seed

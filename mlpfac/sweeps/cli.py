@@ -10,7 +10,7 @@ import sys
 from pathlib import Path
 
 from mlpfac.flags import needs
-from mlpfac.targets import cli_path
+from mlpfac.io.targets import cli_path
 
 COMPARE_CONTROLLERS = ("adaptive", "corradini", "kanayama")
 CONTROLLERS_HELP = "shipped names, path/to/file.py:Class, package.module:Class or installed names"

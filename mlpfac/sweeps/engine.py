@@ -19,7 +19,7 @@ below is importable from here:
        DIR/<scenario>/<controller>/seed-0003/metrics.json   = run_metrics.metrics(rec)
 
    Each folder is written beside its place and renamed into it whole
-   (:func:`mlpfac.files.write_folder_whole`): a killed sweep leaves it as it was or whole. A run counts as done (:func:`check_done`) when config.toml
+   (:func:`mlpfac.io.files.write_folder_whole`): a killed sweep leaves it as it was or whole. A run counts as done (:func:`check_done`) when config.toml
    equals the resolved scenario, metrics.json is a metrics dict of this scenario, controller and
    seed, and with ``save_rrd`` run.rrd has the size and sha256 recorded in metrics.json; any other
    folder is run again, and the summary says how many and why.
@@ -58,7 +58,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from mlpfac.exceptions import ConfigError, OutputError, WorkerLostError  # noqa: F401 (also as mlpfac.sweeps.engine.*)
-from mlpfac.files import folder_lock
+from mlpfac.io.files import folder_lock
+from mlpfac.io.targets import check_results_folder
 from mlpfac.sweeps.execute import (  # noqa: F401  (the engine's API, used as mlpfac.sweeps.engine.*)
     TMP_DIR,
     Outcome,
@@ -86,7 +87,6 @@ from mlpfac.sweeps.tables import (  # noqa: F401
     write_tables,
 )
 from mlpfac.sweeps.worker import BLAS_THREAD_VARIABLES, rrd_is_whole, run_task, worker_environment  # noqa: F401
-from mlpfac.targets import check_results_folder
 
 EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_TERMINATED = 0, 1, 2, 130, 143
 WORKERS_PER_CORE = 4  # --workers above this many per core is refused (each worker holds ~130 MB)

@@ -11,8 +11,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from mlpfac.exceptions import ConfigError, WorkerLostError
-from mlpfac.files import check_run_folder, folder_lock, remove_staged
-from mlpfac.interrupts import Terminated, raise_swallowed, sigint_deferred
+from mlpfac.io.files import check_run_folder, folder_lock, remove_staged
+from mlpfac.io.interrupts import Terminated, raise_swallowed, sigint_deferred
 from mlpfac.loop.metrics import RunMetrics
 from mlpfac.sweeps.folders import _oserror, check_done, write_result
 from mlpfac.sweeps.plan import Job
@@ -67,7 +67,7 @@ def execute(
 
     ``client`` is a ``dask.distributed.Client`` or None (local). ``progress``: None shows a bar
     only when stderr is a terminal. KeyboardInterrupt (Ctrl-C, or SIGTERM as
-    :class:`~mlpfac.interrupts.Terminated`) stops the workers and returns with ``interrupted=True``;
+    :class:`~mlpfac.io.interrupts.Terminated`) stops the workers and returns with ``interrupted=True``;
     every folder written so far is whole. ``out`` is locked for the sweep (``folder_lock``) unless
     the caller holds the lock (``locked``); recordings are made in ``out/.tmp``, which is removed at
     the end and, left by a killed sweep, at the start. A failed write raises :class:`OutputError`.

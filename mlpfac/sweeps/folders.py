@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from mlpfac.exceptions import OutputError
-from mlpfac.files import write_folder_whole
+from mlpfac.io.files import write_folder_whole
 
 if TYPE_CHECKING:
     from mlpfac.sweeps.plan import Job

@@ -26,7 +26,7 @@ import hashlib
 import json
 from pathlib import Path
 
-from mlpfac.files import write_folder_whole
+from mlpfac.io.files import write_folder_whole
 from mlpfac.sweeps.folders import metrics_problem
 from mlpfac.sweeps.plan import Job
 

@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from mlpfac.exceptions import ConfigError
-from mlpfac.files import resolved
+from mlpfac.io.files import resolved
 from mlpfac.sweeps.vary import MAX_RUNS, Vary
 
 

@@ -34,7 +34,7 @@ import re
 from pathlib import Path
 
 from mlpfac.exceptions import ConfigError
-from mlpfac.files import write_atomic
+from mlpfac.io.files import write_atomic
 from mlpfac.loop.metrics import RunMetrics
 from mlpfac.plots.robustness import check_threshold  # noqa: F401 (the sweep's, the budget's and the file's)
 from mlpfac.sweeps.paired import compared_rms, median

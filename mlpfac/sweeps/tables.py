@@ -7,7 +7,7 @@ import math
 from collections.abc import Callable
 from pathlib import Path
 
-from mlpfac.files import write_atomic
+from mlpfac.io.files import write_atomic
 from mlpfac.loop.metrics import OUTCOMES, RunMetrics
 from mlpfac.sweeps.folders import PHASES
 from mlpfac.sweeps.paired import TOLD_AT_MOST, UNTOLD_MARK, median, summary

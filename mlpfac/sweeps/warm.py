@@ -31,7 +31,7 @@ try:
     from mlpfac.loop.metrics import metrics  # noqa: F401
     from mlpfac.loop.runner import run  # noqa: F401
     from mlpfac.model import tracking_errors
-    from mlpfac.plants import compiled  # noqa: F401
+    from mlpfac.plants.mujoco import compiled  # noqa: F401
     from mlpfac.scenario.parse import load, parse  # noqa: F401
     from mlpfac.sweeps.worker import run_task  # noqa: F401
 

@@ -306,7 +306,7 @@ def _die_with_parent(parent: int) -> None:
     daemon thread exits the process once it has another parent (the parent died, it was reparented)."""
     import threading
 
-    from mlpfac.interrupts import die_with_parent
+    from mlpfac.io.interrupts import die_with_parent
 
     die_with_parent(parent=parent)
 

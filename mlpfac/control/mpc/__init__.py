@@ -2,7 +2,7 @@
 
 The physical limit beside every result: a controller whose model is not a model of the robot but
 the robot, the plant a run steps, built from the scenario as the run's is
-(:class:`~mlpfac.plants.predict.Predictor`: its compiled model, world, drive and force schedule),
+(:class:`~mlpfac.plants.mujoco.predict.Predictor`: its compiled model, world, drive and force schedule),
 told every event at its time as the oracles are (the model after the event: a new wheel, a new
 control period, a slope, a load), and the reference ahead of it. It commands what the robot's
 drive takes: (v, omega) through the IK to velocity servos, the wheels' torques to torque motors,

@@ -48,7 +48,7 @@ class MPC(Stepped):
     """``mpc`` (``truth=False``: the state estimated from the measured pose) or ``limit``
     (``truth=True``: given the robot's true state through :meth:`watch`).
 
-    ``build_model(seed)`` gives the model of a seed's run: a reset :class:`~mlpfac.plants.mujoco.MujocoPlant`
+    ``build_model(seed)`` gives the model of a seed's run: a reset :class:`~mlpfac.plants.mujoco.plant.MujocoPlant`
     no run steps; ``preview`` (N + H + 1, 5) the reference ahead; ``events`` the scenario's, told
     at their times; ``limits`` the knots' bounds (2,) per command coordinate; ``scale`` (2,) the
     commands' scale (the finite differences' and the damping's); ``noise`` (3,) the pose noise's
@@ -90,7 +90,7 @@ class MPC(Stepped):
             self._plants = plants
 
     def reset(self, rng) -> None:
-        from mlpfac.plants.forces import run_seed
+        from mlpfac.plants.world.forces import run_seed
 
         rngs, self.single = seeds(rng)
         self.k = 0

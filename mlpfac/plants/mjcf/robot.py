@@ -6,7 +6,7 @@ ready step by step (:mod:`mlpfac.plants.mjcf.prepare`: the parts the configurati
 found by :mod:`mlpfac.plants.mjcf.detect`, what the model does not say itself chosen by
 :mod:`mlpfac.plants.mjcf.defaults` and made as :class:`mujoco.MjSpec` edits by
 :mod:`mlpfac.plants.mjcf.edits`), then the robot settled on its wheels and measured there. The
-stepping plant (:class:`mlpfac.plants.mujoco.MujocoPlant`) drives the robot it describes. Nothing
+stepping plant (:class:`mlpfac.plants.mujoco.plant.MujocoPlant`) drives the robot it describes. Nothing
 here steps a run.
 """
 
@@ -21,7 +21,6 @@ import numpy as np
 
 from mlpfac.exceptions import ConfigError
 from mlpfac.model import norm
-from mlpfac.plants.compiled import yaw
 from mlpfac.plants.config import MujocoConfig, check_timestep
 from mlpfac.plants.mjcf import defaults, drive, edits, prepare, shapes
 from mlpfac.plants.mjcf import wheels as wheel_parts
@@ -59,7 +58,7 @@ class Robot:
     tyres: tuple[int, ...]  # the wheels' collision geoms (sphere, cylinder or mesh)
     qpos_rest: np.ndarray
     ctrl_rest: np.ndarray  # the controls at rest: the keyframe's (0 without one), the wheels' 0
-    site_rest: tuple[np.ndarray, float]  # site position and heading at rest
+    site_rest: tuple[np.ndarray, np.ndarray]  # site position and orientation (xmat, row-major) at rest
     real_radius: float
     real_track: float
     sign: tuple[float, float]
@@ -207,7 +206,7 @@ def _settled(r: prepare.Reading) -> Robot:
         sha256=r.sha256, spec=r.spec, model=m, dt=dt, acts=(r.acts[0], r.acts[1]), site=site, root=root,
         qroot=int(m.jnt_qposadr[jnt]), droot=int(m.jnt_dofadr[jnt]), dofs=dofs, wheel_bodies=wheel_bodies,
         tyres=tyres, qpos_rest=d.qpos.copy(), ctrl_rest=d.ctrl.copy(),
-        site_rest=(d.site_xpos[site].copy(), yaw(d.site_xmat[site])),
+        site_rest=(d.site_xpos[site].copy(), d.site_xmat[site].copy()),
         real_radius=max(wheel_parts.radius(m, g, int(m.body_jntadr[m.geom_bodyid[g]])) for g in tyres),
         real_track=track, sign=sign, act_per_wheel=(float(c[0]), float(c[1])),
         geometry=shapes.static_geometry(m, d, site, root, r.visual_only),

@@ -73,7 +73,7 @@ def turning(plant, events: Sequence = ()) -> tuple[float, float, str]:
     r (w_r - w_l) / omega, and the kinematic centre's distance ahead of the pose frame, -v_y / omega
     (the point of the base that moves along its heading: where the instantaneous centre of rotation
     projects onto its axis; Kozlowski & Pazderski 2004, Martinez et al. 2005), and what it did in
-    words; (nan, nan, why) where it does not turn. ``plant`` is a :class:`~mlpfac.plants.mujoco.MujocoPlant`;
+    words; (nan, nan, why) where it does not turn. ``plant`` is a :class:`~mlpfac.plants.mujoco.plant.MujocoPlant`;
     ``events``: plant events applied in turn at the start (a payload, a floor: what they do to the
     turning; the next reset undoes them)."""
     w = TURN_SHARE * (wheel_speed_limit(plant.robot) or 1.0)
@@ -112,7 +112,7 @@ def wheels_answer(plant, peak: float, events: Sequence = ()) -> tuple[float, flo
     through the two, w = gain w_asked - offset, each to 3 digits: gain = 2 rho2 - rho1, offset =
     peak (rho2 - rho1) [rad/s]; an offset > 0 where the wheels turn that much slower than asked at
     every speed (a joint's friction against a weak servo's kv: its steady error, friction / kv);
-    (1, 0) where they answer as asked. ``plant`` is a :class:`~mlpfac.plants.mujoco.MujocoPlant`;
+    (1, 0) where they answer as asked. ``plant`` is a :class:`~mlpfac.plants.mujoco.plant.MujocoPlant`;
     ``events``: plant events applied in turn at the start (the next reset undoes them)."""
     plant.reset(np.zeros(3), np.random.default_rng(0))
     for event in events:

@@ -24,7 +24,7 @@ def interrupted(err: BaseException) -> int | None:
     """The exit code of a Ctrl-C or SIGTERM that ``err`` is, or was raised while handling (MuJoCo's
     compiled module fails its import with ImportError when a signal lands as it initialises),
     said on stderr; None when ``err`` has no signal behind it."""
-    from mlpfac.interrupts import Terminated
+    from mlpfac.io.interrupts import Terminated
 
     seen = set()
     while err is not None and id(err) not in seen:

@@ -3,7 +3,7 @@ stands on (its wheels, casters and skids, the load each carries, how low the res
 what its wheels hold against a force (the tyres' traction, the motors), what a kerb asks of them
 (the standard geometry of a wheel against a step), and what it cannot climb or hold, refused or said
 in words for the run's first line. :class:`MujocoHolds` is the part of
-:class:`~mlpfac.plants.mujoco_world.MujocoWorld` that does it.
+:class:`~mlpfac.plants.mujoco.world.MujocoWorld` that does it.
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ import numpy as np
 
 from mlpfac.exceptions import ConfigError
 from mlpfac.plants.events import MU_MAX, Force
-from mlpfac.plants.world_table import CURVATURE
+from mlpfac.plants.world.table import CURVATURE
 
 # The highest step a wheel of radius r climbs is STEP_SHARE r: there the step's edge leans its force
 # MU_MAX to 1 from the vertical (:func:`climb`): a driven wheel would need a tyre friction of MU_MAX, the
@@ -25,7 +25,7 @@ STEP_SHARE = 1.0 - 1.0 / math.sqrt(1.0 + MU_MAX * MU_MAX)
 
 class MujocoHolds:
     """The terrain's checks against the robot and what it holds (its attributes are
-    :class:`~mlpfac.plants.mujoco.MujocoPlant`'s)."""
+    :class:`~mlpfac.plants.mujoco.plant.MujocoPlant`'s)."""
 
     def _check_terrain(self, terrain, where: str) -> None:
         """What the robot needs of ``terrain``: tyres that can touch the bottom of the rough ground's
@@ -94,7 +94,7 @@ class MujocoHolds:
 
     def weight(self) -> tuple[float, float]:
         """The robot's mass (kg, at the start: its nominal model's) and gravity's magnitude (m/s^2): what
-        a force given relative to it is put in newtons with (:func:`mlpfac.plants.forces.in_newtons`)."""
+        a force given relative to it is put in newtons with (:func:`mlpfac.plants.world.forces.in_newtons`)."""
         m0 = self.robot.model
         return float(m0.body_subtreemass[self._root]), float(np.sqrt(np.sum(m0.opt.gravity * m0.opt.gravity)))
 

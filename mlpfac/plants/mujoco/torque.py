@@ -1,7 +1,7 @@
 """A MuJoCo robot under a torque-level controller (:mod:`mlpfac.control.torque`): the wheels' torques
 in, the base's twist and the wheel speeds measured, its drive's torque limits, and its dynamic model
 read from its MuJoCo model (the nominal one, and as the events changed it).
-:class:`TorqueDrive` is the part of :class:`~mlpfac.plants.mujoco.MujocoPlant` that does it.
+:class:`TorqueDrive` is the part of :class:`~mlpfac.plants.mujoco.plant.MujocoPlant` that does it.
 """
 
 from __future__ import annotations
@@ -12,9 +12,9 @@ import math
 import numpy as np
 
 from mlpfac.normal import standard_normal
-from mlpfac.plants import compiled as K  # noqa: N812 - the kernel's layout constants, K.F_DT ...
 from mlpfac.plants.mjcf import drive
 from mlpfac.plants.mjcf.edits import torque_limit
+from mlpfac.plants.mujoco import compiled as K  # noqa: N812 - the kernel's layout constants, K.F_DT ...
 
 
 class TorqueDrive:

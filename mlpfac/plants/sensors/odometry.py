@@ -1,6 +1,6 @@
 """The robot's own estimate of its pose, compiled into the plant's control step: wheel odometry
 (encoder angles, quantized to counts), a gyro's heading rate, and an EKF that fuses delayed
-absolute fixes (:mod:`mlpfac.plants.sensors` says what each key does; docs/equations.md writes the
+absolute fixes (:mod:`mlpfac.plants.sensors.sensing` says what each key does; docs/equations.md writes the
 equations with these symbols).
 
 State x = (x, y, theta, s_l, s_r): the pose of the pose frame and the scale factors of the two

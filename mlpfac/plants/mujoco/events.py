@@ -2,7 +2,7 @@
 mid-run by editing the model's :class:`mujoco.MjSpec` and recompiling it with the state kept
 (``spec.recompile``), so a changed model is exactly the model one would compile with the new
 numbers (masses, inertias and every derived constant included); nothing edits XML text.
-:class:`MujocoEvents` is the part of :class:`~mlpfac.plants.mujoco.MujocoPlant` that does it.
+:class:`MujocoEvents` is the part of :class:`~mlpfac.plants.mujoco.plant.MujocoPlant` that does it.
 """
 
 from __future__ import annotations

@@ -1,5 +1,5 @@
 """What the ``force`` events of a run apply, control step by control step: the schedule the MuJoCo
-plant writes into the robot's applied forces (:mod:`mlpfac.plants.mujoco_world`) and that
+plant writes into the robot's applied forces (:mod:`mlpfac.plants.mujoco.world`) and that
 ``oracle-dynamic`` is told (:mod:`mlpfac.control.dynamic`), made once when a run starts.
 
 A force given relative to the robot (a share of its weight, a push's velocity change) is put in

@@ -1,30 +1,30 @@
 """The world around a MuJoCo robot: the terrain of a scenario's ``[world]`` built into the scene the
 plant compiles (the robot's files are never edited), the floor tilted by a ``slope`` event, and
 the forces of ``force`` events. :class:`MujocoWorld` is the part of
-:class:`~mlpfac.plants.mujoco.MujocoPlant` that does it.
+:class:`~mlpfac.plants.mujoco.plant.MujocoPlant` that does it.
 
 - **Ramps and kerbs**: one convex mesh each (a trapezoid prism: up, top, down; a kerb's a box, its
   steps vertical), a static geom of the world. What the robot can climb and hold is
-  :mod:`mlpfac.plants.mujoco_holds`'s.
+  :mod:`mlpfac.plants.mujoco.holds`'s.
 - **Rough ground**: the wheels and casters (the geoms the robot stands on at rest) touch it
   through a contact tile each, the surface's tangent plane under the geom moved before every
-  physics step (:func:`mlpfac.plants.terrain.place_tiles`: MuJoCo's sphere-on-heightfield test
+  physics step (:func:`mlpfac.plants.world.terrain.place_tiles`: MuJoCo's sphere-on-heightfield test
   would cost a step 2.5x over); a MuJoCo heightfield of the heights drawn for the run
-  (:mod:`mlpfac.plants.world`) is there for the rest of the robot, where it reaches that low.
+  (:mod:`mlpfac.plants.world.layout`) is there for the rest of the robot, where it reaches that low.
 - **Sprung casters**: a robot on more than three points gets its casters' contacts soft on
   terrain (a rigid chassis on four points lifts a drive wheel off uneven ground).
 - **Patches**: flush with the floor, so no geom: each control step, the compiled step sets each
   tyre's sliding friction to the patch's under its centre, or to its own off the patches
-  (:func:`mlpfac.plants.terrain.patches`). A flush geom with a contact priority would touch the
+  (:func:`mlpfac.plants.world.terrain.patches`). A flush geom with a contact priority would touch the
   tyre together with the floor, at the same point, and MuJoCo would share the normal force between
   two frictions; a patch a millimetre proud of the floor would be a step.
 - **Slope**: gravity turned in the floor's frame at the event (the robot settled on the flat floor
   first: a scene tilted from the start fails the settle check); the viewer draws the floor tilted.
 - **Forces**: in newtons for this robot (a force given relative to it:
-  :func:`mlpfac.plants.forces.in_newtons`), a schedule per control step
-  (:func:`mlpfac.plants.forces.force_schedule`, made at reset from the run's seed) that the compiled step writes into ``xfrc_applied`` of the root body
+  :func:`mlpfac.plants.world.forces.in_newtons`), a schedule per control step
+  (:func:`mlpfac.plants.world.forces.force_schedule`, made at reset from the run's seed) that the compiled step writes into ``xfrc_applied`` of the root body
   every control step (MuJoCo keeps it across physics steps), turned into the world's axes when it
-  is the robot's (:func:`mlpfac.plants.terrain.push`); telemetry ``force`` says what was applied.
+  is the robot's (:func:`mlpfac.plants.world.terrain.push`); telemetry ``force`` says what was applied.
 
 The new geoms take the floor's friction and contact priority, so the tyres' friction stays the
 contact's, as on the floor, and sit at the floor's height (read from the robot's contacts at rest:
@@ -41,11 +41,11 @@ import mujoco
 import numpy as np
 
 from mlpfac.exceptions import ConfigError
-from mlpfac.plants import terrain as W  # noqa: N812 - the packed world's layout, W.W_STEP ...
 from mlpfac.plants.events import Force, Slope
-from mlpfac.plants.forces import RELATIVE, force_schedule, in_newtons_all, run_seed
 from mlpfac.plants.mjcf.wheels import floor_priority
-from mlpfac.plants.mujoco_holds import MujocoHolds, carried, feet_at_rest, floor_height
+from mlpfac.plants.mujoco.holds import MujocoHolds, carried, feet_at_rest, floor_height
+from mlpfac.plants.world import terrain as W  # noqa: N812 - the packed world's layout, W.W_STEP ...
+from mlpfac.plants.world.forces import RELATIVE, force_schedule, in_newtons_all, run_seed
 
 FORCE_COLUMNS = 5  # a force schedule's row: world (fx, fy), robot (fx, fy), torque_z
 HFIELD_BASE = 0.05  # m of the heightfield's base below the floor (MuJoCo's size[3])
@@ -56,7 +56,7 @@ SPRUNG_S = 0.2  # s: the time constant of a sprung caster's contact (MuJoCo's is
 
 class MujocoWorld(MujocoHolds):
     """set_world, the terrain's checks, the slope and the forces of the MuJoCo plant (its attributes
-    are :class:`~mlpfac.plants.mujoco.MujocoPlant`'s)."""
+    are :class:`~mlpfac.plants.mujoco.plant.MujocoPlant`'s)."""
 
     def _no_world(self) -> None:
         """No terrain, no force: nothing packed, nothing done in the step (the bits of a run without them)."""
@@ -68,10 +68,10 @@ class MujocoWorld(MujocoHolds):
     def set_world(
         self, terrain, events=(), steps: int = 0, where: str = "[world]", events_where: str = "[[events]]"
     ) -> None:
-        """Build ``terrain`` (a :class:`~mlpfac.plants.world.Terrain`, or None) into the robot's scene,
+        """Build ``terrain`` (a :class:`~mlpfac.plants.world.layout.Terrain`, or None) into the robot's scene,
         checked against the robot first, and apply the ``force`` events of ``events`` over a run of
         ``steps`` control steps from each reset on, in newtons for this robot (a force given relative
-        to it: :func:`mlpfac.plants.forces.in_newtons`; ``events_where`` names them in errors)."""
+        to it: :func:`mlpfac.plants.world.forces.in_newtons`; ``events_where`` names them in errors)."""
         self._given = tuple(events)
         self._forces, self._steps = in_newtons_all(events, *self.weight(), self.T, events_where), int(steps)
         tiles, floor = (), 0.0
@@ -199,7 +199,7 @@ class MujocoWorld(MujocoHolds):
         return f"{'; '.join(parts)}; the floor at z = {float(self._wld[W.W_Z0]):.4g} m"
 
     def terrain_record(self) -> dict:
-        """What a recording draws of the terrain (:meth:`mlpfac.plants.world.Terrain.as_dict`; {} without)."""
+        """What a recording draws of the terrain (:meth:`mlpfac.plants.world.layout.Terrain.as_dict`; {} without)."""
         return {} if self.terrain is None else self.terrain.as_dict()
 
 
@@ -211,7 +211,7 @@ def _build(
     own (the robot's geoms keep their ids) at the floor's height ``z0``. ``feet`` (geom, x, y, reach)
     are the robot's geoms on the floor at rest, ``low`` how high the lowest of its others is. The
     rough ground: a contact tile for each foot (a plane on a mocap body,
-    :mod:`mlpfac.plants.terrain`), which that foot alone touches: its contact bits become its tile's
+    :mod:`mlpfac.plants.world.terrain`), which that foot alone touches: its contact bits become its tile's
     and the ramps' (bits no geom uses), so it no longer touches the floor; and the heightfield, which
     the rest of the robot touches, where it reaches that low at rest (within ``CLEARANCE`` x the
     height: the heightfield's test costs a physics step as much as the robot's others). A robot on

@@ -1,7 +1,7 @@
 """What a MuJoCo robot says of itself: why its state is not one to go on from (in words, with the
 state's numbers), MuJoCo's warnings, the ``[plant]`` keys it found in its model, and what is
 simulated (its provenance, for config.toml). :class:`MujocoReport` is the part of
-:class:`~mlpfac.plants.mujoco.MujocoPlant` that says it.
+:class:`~mlpfac.plants.mujoco.plant.MujocoPlant` that says it.
 """
 
 from __future__ import annotations
@@ -10,8 +10,8 @@ import math
 
 import mujoco
 
-from mlpfac.plants import compiled as K  # noqa: N812 - the kernel's layout constants, K.F_DT ...
 from mlpfac.plants.model_file import is_menagerie, menagerie_version
+from mlpfac.plants.mujoco import compiled as K  # noqa: N812 - the kernel's layout constants, K.F_DT ...
 
 DIVERGENCE_WARNINGS = ("mjWARN_BADQPOS", "mjWARN_BADQVEL", "mjWARN_BADQACC")  # MuJoCo resets the data on these
 
@@ -24,7 +24,7 @@ class MujocoReport:
         return {mujoco.mjtWarning(i).name: int(w.number) for i, w in enumerate(self.data.warning) if w.number}
 
     def diverged(self) -> str | None:
-        """Why the robot's state is not one to go on from (:func:`mlpfac.plants.compiled.diverged`), or None."""
+        """Why the robot's state is not one to go on from (:func:`mlpfac.plants.mujoco.compiled.diverged`), or None."""
         return self.why(K.diverged(self._args))
 
     def why(self, code: int) -> str | None:

@@ -2,7 +2,7 @@
 
 What the robot is (actuators, wheels, site, radius, track, rest pose) is read once from its model
 by :func:`mlpfac.plants.mjcf.robot.read_robot`; this module resets it, applies events and reads what it
-did; its control step is compiled (:func:`mlpfac.plants.compiled.plant_step`, one call a step).
+did; its control step is compiled (:func:`mlpfac.plants.mujoco.compiled.plant_step`, one call a step).
 The controller's u = (v, omega) is turned into wheel speeds by the inverse kinematics
 (:func:`mlpfac.plants.ik.wheel_speeds`) with the wheel radius and track the IK *believes* (the
 nominal ones), and held for one control period of ``n_substeps`` physics steps,
@@ -16,11 +16,11 @@ nominal ones), and held for one control period of ``n_substeps`` physics steps,
 The pose (x, y, theta) is read at a site on the axle midpoint (``axle_mid``, or the frame
 :mod:`mlpfac.plants.mjcf.detect` finds; a skid-steer's found frame is moved to its kinematic centre, and
 the track it turns as is measured, as it settles: :func:`mlpfac.plants.mjcf.settle.turning`); theta is unwrapped
-across steps. Events (:mod:`mlpfac.plants.mujoco_events`) edit the model's
+across steps. Events (:mod:`mlpfac.plants.mujoco.events`) edit the model's
 :class:`mujoco.MjSpec` and recompile it keeping the state (``spec.recompile``). The torque level's
 part (torques in, twist and wheel speeds measured, the dynamic model read) is
-:mod:`mlpfac.plants.mujoco_torque`; what the robot says of itself (a divergence in words, the keys it
-found, its provenance), :mod:`mlpfac.plants.mujoco_report`.
+:mod:`mlpfac.plants.mujoco.torque`; what the robot says of itself (a divergence in words, the keys it
+found, its provenance), :mod:`mlpfac.plants.mujoco.report`.
 
 Data stay in step: each physics step is ``mj_step2`` (actuation, acceleration, integration) then
 ``mj_step1`` (positions, velocities and sensors of the new state), so between control steps every
@@ -38,7 +38,6 @@ import numpy as np
 
 from mlpfac.elementary import cos, sin
 from mlpfac.normal import Stream
-from mlpfac.plants import compiled as K  # noqa: N812 - the kernel's layout constants, K.F_DT ...
 from mlpfac.plants.config import MujocoConfig
 from mlpfac.plants.events import EVENT_KINDS, DelayLine
 from mlpfac.plants.ik import wheel_speeds
@@ -46,11 +45,12 @@ from mlpfac.plants.mjcf import drive
 from mlpfac.plants.mjcf.edits import servo_band
 from mlpfac.plants.mjcf.robot import Robot, read_robot
 from mlpfac.plants.mjcf.settle import turning
-from mlpfac.plants.mujoco_events import MujocoEvents
-from mlpfac.plants.mujoco_report import MujocoReport
-from mlpfac.plants.mujoco_torque import TorqueDrive
-from mlpfac.plants.mujoco_world import MujocoWorld
-from mlpfac.plants.sensors import SensingPlant
+from mlpfac.plants.mujoco import compiled as K  # noqa: N812 - the kernel's layout constants, K.F_DT ...
+from mlpfac.plants.mujoco.events import MujocoEvents
+from mlpfac.plants.mujoco.report import MujocoReport
+from mlpfac.plants.mujoco.torque import TorqueDrive
+from mlpfac.plants.mujoco.world import MujocoWorld
+from mlpfac.plants.sensors.sensing import SensingPlant
 
 
 class _Kept:
@@ -123,7 +123,7 @@ class MujocoPlant(MujocoEvents, TorqueDrive, MujocoReport, SensingPlant, MujocoW
         self._acts, self._site, self._root, self._dofs = r.acts, r.site, r.root, r.dofs
         self._qroot, self._droot = r.qroot, r.droot
         self._wheel_bodies, self._tyres = r.wheel_bodies, list(r.tyres)
-        self._qpos_rest, self._site_rest = r.qpos_rest, r.site_rest
+        self._qpos_rest, self._site_rest = r.qpos_rest, (r.site_rest[0], K.yaw(r.site_rest[1]))  # heading at rest
         self.real_radius, self._real_track = r.real_radius, r.real_track
         self.ik_radius = config.wheel_radius if config.wheel_radius is not None else r.real_radius
         self.ik_track = config.track if config.track is not None else r.real_track
@@ -135,7 +135,7 @@ class MujocoPlant(MujocoEvents, TorqueDrive, MujocoReport, SensingPlant, MujocoW
         self._changed = False
         self._motion_std = config.motion_noise_std()
         self._motion: DelayLine | None = None  # (v, omega, wheel_l, wheel_r) as measured: torque_commands()
-        self._no_world()  # the world: set_world (mlpfac.plants.mujoco_world)
+        self._no_world()  # the world: set_world (mlpfac.plants.mujoco.world)
         self.ints[[K.I_AL, K.I_AR, K.I_DL, K.I_DR, K.I_SITE]] = (*r.acts, *r.dofs, r.site)
         self.ints[K.I_TORQUE] = self.config.actuator == "torque"
         self.ints[K.I_ROOT] = r.root
@@ -153,7 +153,7 @@ class MujocoPlant(MujocoEvents, TorqueDrive, MujocoReport, SensingPlant, MujocoW
         self.fl[K.F_WMAX] = math.inf if self.max_wheel_speed is None else self.max_wheel_speed
         if self._noise is not None:
             self.fl[K.F_STD : K.F_STD + 3] = self._noise
-        self._build_sensing(config, r, (self.T, *periods))  # the pose source (mlpfac.plants.sensors)
+        self._build_sensing(config, r, (self.T, *periods))  # the pose source (mlpfac.plants.sensors.sensing)
 
     def _umax(self) -> None:
         """The drive's limits of the current model into fl: the tendon drive's inverse and its motors'
@@ -204,7 +204,7 @@ class MujocoPlant(MujocoEvents, TorqueDrive, MujocoReport, SensingPlant, MujocoW
             quat,
         )
         mujoco.mj_forward(m, d)
-        self._world_reset(q0, rng)  # on the terrain, not in it; the force schedule (mlpfac.plants.mujoco_world)
+        self._world_reset(q0, rng)  # on the terrain, not in it; the force schedule (mlpfac.plants.mujoco.world)
         if u0 is not None:
             self._set_velocity(float(u0[0]), float(u0[1]), float(q0[2]))
         self._z_rest = float(d.site_xpos[self._site, 2]) - self.ground(*d.site_xpos[self._site, :2])
@@ -239,7 +239,7 @@ class MujocoPlant(MujocoEvents, TorqueDrive, MujocoReport, SensingPlant, MujocoW
         """What the compiled step reads and writes: the current model and data (their addresses and
         views into them, made again when an event replaces them), the robot's arrays, the delay line."""
         self._site_xpos, self._site_xmat = self.data.site_xpos[self._site], self.data.site_xmat[self._site]
-        forces = self._push.shape[0] > 0  # the force applied, telemetry "force" (mlpfac.plants.mujoco_world)
+        forces = self._push.shape[0] > 0  # the force applied, telemetry "force" (mlpfac.plants.mujoco.world)
         self.tele = np.zeros(K.N_TELE + 3 * forces + self._sensing_width())
         self._tele = {key: self.tele[2 * i : 2 * i + 2] for i, key in enumerate(K.TELEMETRY)}
         if forces:
@@ -252,13 +252,13 @@ class MujocoPlant(MujocoEvents, TorqueDrive, MujocoReport, SensingPlant, MujocoW
         self._args = K.Robot(m._address, d._address, d.ctrl, d.qvel, d.qpos, d.qfrc_actuator, self._site_xpos,
                              self._site_xmat, d.xmat[self._root], self.ints, self.fl, self.st, self._history.hist,
                              self._history.fill, np.empty(6), self._sense, d.sensordata,
-                             # the world (mlpfac.plants.mujoco_world): empty without terrain or forces
+                             # the world (mlpfac.plants.mujoco.world): empty without terrain or forces
                              d.xfrc_applied.reshape(-1), d.geom_xpos.reshape(-1), d.mocap_pos.reshape(-1),
                              d.mocap_quat.reshape(-1), m.geom_friction.reshape(-1), self._wld, self._nodes,
                              self._push)  # fmt: skip
 
     def kernel_args(self) -> K.Robot:
-        """The robot as :func:`mlpfac.plants.compiled.plant_step` takes it (valid until the next event),
+        """The robot as :func:`mlpfac.plants.mujoco.compiled.plant_step` takes it (valid until the next event),
         watched for MuJoCo's warnings until another robot is."""
         K.watch(self.st)
         return self._args
@@ -280,7 +280,7 @@ class MujocoPlant(MujocoEvents, TorqueDrive, MujocoReport, SensingPlant, MujocoW
 
     def draws(self, n: int) -> np.ndarray:
         """The next n pose-noise draws (n, 3) of the plant's stream (zeros without noise); with a pose
-        source other than the truth, its sensors' draws (n, 4) (:meth:`mlpfac.plants.sensors.Sensing.draws`)."""
+        source other than the truth, its sensors' draws (n, 4) (:meth:`mlpfac.plants.sensors.sensing.Sensing.draws`)."""
         if self._sensing is not None:
             return self._sensing.draws(n)
         return self._pose_noise.take(n)
@@ -309,7 +309,7 @@ class MujocoPlant(MujocoEvents, TorqueDrive, MujocoReport, SensingPlant, MujocoW
         return self._history.read()
 
     def step(self, u: np.ndarray) -> None:
-        """One control step (:func:`mlpfac.plants.compiled.plant_step`): u = (v, omega), or the wheels'
+        """One control step (:func:`mlpfac.plants.mujoco.compiled.plant_step`): u = (v, omega), or the wheels'
         torques (tau_l, tau_r) in N m after :meth:`torque_commands`."""
         K.watch(self.st)
         K.plant_step(float(u[0]), float(u[1]), self.draws(1)[0], self.tele, self._args)
@@ -317,7 +317,7 @@ class MujocoPlant(MujocoEvents, TorqueDrive, MujocoReport, SensingPlant, MujocoW
 
     def stepped(self) -> None:
         """What follows the compiled step in Python (a kernel that steps many robots calls it after
-        :func:`~mlpfac.plants.compiled.plant_step` too): under a torque-level controller, the twist
+        :func:`~mlpfac.plants.mujoco.compiled.plant_step` too): under a torque-level controller, the twist
         and wheel speeds measured with their noise."""
         if self._motion is not None:
             t = self.tele

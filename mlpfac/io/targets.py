@@ -62,7 +62,7 @@ def _kind(mode: int) -> str | None:
 def check_report_file(path: Path, flag: str) -> None:
     """Before anything runs: ``path`` may be missing (its folder writable), a regular file, a link
     to one, a character device or a FIFO; anything else is a ConfigError naming ``flag``."""
-    from mlpfac.files import resolved
+    from mlpfac.io.files import resolved
 
     where = f"{flag} {path}"
     real = resolved(path, where)
@@ -88,8 +88,8 @@ def write_report_file(path: Path, data: str | bytes) -> Path:
     """Write ``data`` to ``path`` as :func:`check_report_file` allows: a regular (or missing) file
     replaced atomically (through a symbolic link: the file it names), a character device or a FIFO
     written through. A FIFO without a reader is an OSError (ENXIO), not a wait. Returns the path."""
-    from mlpfac.files import write_atomic
-    from mlpfac.interrupts import sigint_deferred
+    from mlpfac.io.files import write_atomic
+    from mlpfac.io.interrupts import sigint_deferred
 
     blob = data.encode() if isinstance(data, str) else data
     try:

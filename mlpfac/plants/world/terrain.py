@@ -5,7 +5,7 @@ tyre, and the force of the ``force`` events applied to the robot's root body.
 
 The rough ground is one smooth function (:func:`bumps_at`): value noise, a bi-smoothstep between
 random heights on a coarse grid of nodes, normalised, scaled and flattened on a pad around the
-robot's start (:mod:`mlpfac.plants.world`). The heightfield MuJoCo is given (the chassis touches it,
+robot's start (:mod:`mlpfac.plants.world.layout`). The heightfield MuJoCo is given (the chassis touches it,
 the viewer draws it) is this function sampled (:func:`sample_bumps`); the wheels and casters touch
 it through a contact tile each (:func:`place_tiles`): a plane on a mocap body, the surface's
 tangent plane where the geom touches it, moved before every physics step. MuJoCo tests a sphere
@@ -41,7 +41,7 @@ BUMPS = (W_BX0, W_BY0, W_BS, W_FMIN, W_FRANGE, W_SCALE, W_PADX, W_PADY, W_PAD0, 
 
 
 def pack(terrain=None, tyres=(), mus=(), tiles=(), floor: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
-    """The packed world of a :class:`~mlpfac.plants.world.Terrain` (or None), the tyres' geom ids and
+    """The packed world of a :class:`~mlpfac.plants.world.layout.Terrain` (or None), the tyres' geom ids and
     friction off the patches, the contact tiles (geom, mocap index, reach) and the floor's height;
     and the rough ground's nodes ((0, 0) without bumps)."""
     ramps = () if terrain is None else terrain.raised  # a kerb: a ramp of vertical slopes (up = down = 0)

@@ -2,7 +2,7 @@
 steps), across the path or placed at (x, y), rough ground (a heightfield drawn per seed) and floor
 patches of their own friction, present from the start. Each key is typed and ranged when it is
 made, as an event's are (:func:`mlpfac.plants.events.param`); what the world is on a run's robot,
-laid out along its reference and drawn for its seed, is :mod:`mlpfac.plants.world`'s.
+laid out along its reference and drawn for its seed, is :mod:`mlpfac.plants.world.layout`'s.
 """
 
 from __future__ import annotations

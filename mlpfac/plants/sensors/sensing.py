@@ -15,7 +15,7 @@ streams of its noise).
   applies each fix at the time it was taken and propagates again to now, and estimates the two
   wheels' scale factors (docs/equations.md).
 
-The estimator itself is compiled (:mod:`mlpfac.plants.odometry`), inside the plant's control step.
+The estimator itself is compiled (:mod:`mlpfac.plants.sensors.odometry`), inside the plant's control step.
 """
 
 from __future__ import annotations
@@ -165,11 +165,11 @@ def add_gyro(spec, model, site: int) -> None:
 
 
 class Sensing:
-    """The estimator of one MuJoCo plant: its array (:mod:`mlpfac.plants.odometry`'s layout) made at
+    """The estimator of one MuJoCo plant: its array (:mod:`mlpfac.plants.sensors.odometry`'s layout) made at
     each reset, and its seeded streams of noise."""
 
     def __init__(self, config, model, dofs, sign, radius: float, track: float, shortest_period: float) -> None:
-        from mlpfac.plants import odometry as O  # noqa: N812
+        import mlpfac.plants.sensors.odometry as O  # noqa: N812
 
         self.config, self.fused = config, config.pose_source == "fused"
         self.qpos = [int(model.jnt_qposadr[model.dof_jntid[d]]) for d in dofs]
@@ -184,7 +184,7 @@ class Sensing:
         """The estimator's array at the start of a run: the robot knows where it starts (``pose``, at
         rest or moving); its encoders' counts start at a random phase of a count, drawn from its own
         stream. ``rng``: the plant's generator, whose own draws are left where they are."""
-        from mlpfac.plants import odometry as O  # noqa: N812
+        import mlpfac.plants.sensors.odometry as O  # noqa: N812
 
         c = self.config
         enc, gyr, fix = rng.spawn(3)  # their own streams: the truth's pose noise stays as it was
@@ -221,7 +221,7 @@ class Sensing:
 
 
 class SensingPlant:
-    """The pose source of the MuJoCo plant (its attributes are :class:`~mlpfac.plants.mujoco.MujocoPlant`'s):
+    """The pose source of the MuJoCo plant (its attributes are :class:`~mlpfac.plants.mujoco.plant.MujocoPlant`'s):
     ``_sensing`` (None for the truth) and the estimator's array ``_sense`` (empty for the truth:
     the compiled step's branch)."""
 
@@ -241,13 +241,13 @@ class SensingPlant:
         self._sensing = Sensing(config, self.model, r.dofs, r.sign, self.ik_radius, self.ik_track, min(periods))
 
     def _sensing_width(self) -> int:
-        from mlpfac.plants.odometry import N_SENSE_TELE
+        from mlpfac.plants.sensors.odometry import N_SENSE_TELE
 
         return 0 if self._sensing is None else N_SENSE_TELE
 
     def _sensing_telemetry(self, tele: np.ndarray, lo: int) -> dict[str, np.ndarray]:
-        """The estimator's telemetry keys, views of ``tele`` from ``lo`` (:data:`mlpfac.plants.odometry.SENSE_TELEMETRY`)."""
-        from mlpfac.plants.odometry import SENSE_TELEMETRY
+        """The estimator's telemetry keys, views of ``tele`` from ``lo`` (:data:`mlpfac.plants.sensors.odometry.SENSE_TELEMETRY`)."""
+        from mlpfac.plants.sensors.odometry import SENSE_TELEMETRY
 
         out = {}
         for key, w in SENSE_TELEMETRY if self._sensing is not None else ():

@@ -1,9 +1,9 @@
 """A MuJoCo robot as a prediction model: its control step run from any state, many times, compiled.
 
 A model-predictive controller (:mod:`mlpfac.control.mpc`) plans with the run's own robot: a
-:class:`~mlpfac.plants.mujoco.MujocoPlant` built from the scenario as the run's is (its compiled
+:class:`~mlpfac.plants.mujoco.plant.MujocoPlant` built from the scenario as the run's is (its compiled
 model, its world, its forces' schedule, its drive), told each event at its time. :class:`Predictor`
-steps that plant's compiled control step (:func:`mlpfac.plants.compiled.plant_step`: the IK or the
+steps that plant's compiled control step (:func:`mlpfac.plants.mujoco.compiled.plant_step`: the IK or the
 torque drive, the physics, the terrain, the force of the step) from a state it is given, without
 noise, so a prediction is what the robot would do, to the bit, from that state:
 
@@ -34,9 +34,9 @@ import numpy as np
 
 from mlpfac.elementary import cos, sin
 from mlpfac.jit import built, kernel
-from mlpfac.plants import compiled as K  # noqa: N812 - the kernel's layout constants
-from mlpfac.plants.compiled import N_ST, S_POSE, S_THETA, plant_step, with_robot
-from mlpfac.plants.terrain import W_STEP
+from mlpfac.plants.mujoco import compiled as K  # noqa: N812 - the kernel's layout constants
+from mlpfac.plants.mujoco.compiled import N_ST, S_POSE, S_THETA, plant_step, with_robot
+from mlpfac.plants.world.terrain import W_STEP
 
 STATE = int(mujoco.mjtState.mjSTATE_INTEGRATION)
 FAILED = 1.0e6  # the error (m, rad) a rollout records from the step its robot diverged on
@@ -190,7 +190,7 @@ def pose_jacobian(x, st, w, Hx, robot):
 
 
 class Predictor:
-    """The robot ``plant`` (a :class:`~mlpfac.plants.mujoco.MujocoPlant` that no run steps) as a
+    """The robot ``plant`` (a :class:`~mlpfac.plants.mujoco.plant.MujocoPlant` that no run steps) as a
     model: states captured from it or from another robot of the same model, stepped from any of
     them. Told an event (:meth:`apply`), it is the robot after the event."""
 

@@ -1,9 +1,9 @@
-"""The world around the robot on a run: a scenario's ``[world]`` (:mod:`mlpfac.plants.world_table`,
+"""The world around the robot on a run: a scenario's ``[world]`` (:mod:`mlpfac.plants.world.table`,
 the table as plain, validated data) laid out along the run's reference and drawn for its seed.
 :func:`resolve` turns it into the :class:`Terrain` a run drives on, once, from the reference over
 the whole run and the run's seed: where each ramp and kerb lies (``at``, a share of the path's
 length, or its centre at (``x``, ``y``)), the heights of the rough ground, the arena. Every plant
-of a run, and the probes a run builds, is given that one terrain, so they all build the same world (:mod:`mlpfac.plants.mujoco_world` builds it into the robot's scene). What is
+of a run, and the probes a run builds, is given that one terrain, so they all build the same world (:mod:`mlpfac.plants.mujoco.world` builds it into the robot's scene). What is
 drawn is recorded by its digest (:attr:`Terrain.digest`, the scenario's ``[drawn]``).
 
 The rough ground is value noise, arithmetic only (the same bits on every machine): uniform random
@@ -11,7 +11,7 @@ heights in [0, height) on a lattice of nodes every half wavelength, fixed in the
 from streams of their own (the run's seed, ``BUMPS_STREAM``, the node's row: the same ground under
 a shorter run), a bi-smoothstep between them, flattened to 0 within ``START_PAD`` of the robot's
 start (blending in over half a wavelength), where the robot rests as it settled on the flat floor
-(:func:`mlpfac.plants.terrain.bumps_at`, one function for the heightfield sampled eight points a
+(:func:`mlpfac.plants.world.terrain.bumps_at`, one function for the heightfield sampled eight points a
 wavelength, the contact tiles and the divergence test).
 """
 
@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from mlpfac.exceptions import ConfigError
-from mlpfac.plants.world_table import Bumps, Kerb, Patch, Ramp, World
+from mlpfac.plants.world.table import Bumps, Kerb, Patch, Ramp, World
 
 RAMP_WIDTH = 1.2  # m across the path, where a ramp does not say
 ARENA_MARGIN = 1.0  # m: the arena is the reference's bounding box and this much around it (the viewer's floor)
@@ -86,7 +86,7 @@ class PlacedRamp:
 class Terrain:
     """The ground a run drives on (:func:`resolve`): the arena (x0, y0, x1, y1), where the robot
     starts, its ramps and kerbs where they lie, the patches, and the rough ground: its random ``nodes`` (rows along y, columns along x)
-    and the constants of its surface (:data:`mlpfac.plants.terrain.BUMPS`), its heights sampled on
+    and the constants of its surface (:data:`mlpfac.plants.world.terrain.BUMPS`), its heights sampled on
     the arena (``grid`` (rows, columns): row i at y = y0 + i dy, column j at x = x0 + j dx, the
     heightfield), the digest of what was drawn; None without bumps."""
 
@@ -108,14 +108,14 @@ class Terrain:
         return self.ramps + self.kerbs
 
     def packed(self) -> tuple[np.ndarray, np.ndarray]:
-        """Its packed form (:func:`mlpfac.plants.terrain.pack`): the world array and the nodes."""
-        from mlpfac.plants.terrain import pack
+        """Its packed form (:func:`mlpfac.plants.world.terrain.pack`): the world array and the nodes."""
+        from mlpfac.plants.world.terrain import pack
 
         return pack(self)
 
     def height(self, x: float, y: float) -> float:
         """The ground's height at (x, y) (m): the rough ground, the ramps and the kerbs, the highest of them."""
-        from mlpfac.plants.terrain import ground_height
+        from mlpfac.plants.world.terrain import ground_height
 
         return float(ground_height(*self.packed(), float(x), float(y)))
 
@@ -204,10 +204,10 @@ def node_heights(seed: int, rows: range, cols: range) -> np.ndarray:
 def draw_bumps(bumps: Bumps, arena: tuple[float, float, float, float], start: np.ndarray, seed: int, where: str):
     """The rough ground of ``bumps`` over ``arena`` for ``seed`` (the module's docstring): its nodes
     (:func:`node_heights`, every node the arena's surface needs), the constants of its surface
-    (:data:`mlpfac.plants.terrain.BUMPS`), its heights sampled on a grid of the arena (the
+    (:data:`mlpfac.plants.world.terrain.BUMPS`), its heights sampled on a grid of the arena (the
     heightfield), the grid's (dx, dy) and the digest of the draw (of the nodes about the world's
     origin, and the wavelength and height: the arena's nodes are the same)."""
-    from mlpfac.plants.terrain import BUMPS, W_HEAD, sample_bumps
+    from mlpfac.plants.world.terrain import BUMPS, W_HEAD, sample_bumps
 
     x0, y0, x1, y1 = arena
     lam = bumps.wavelength

@@ -1,7 +1,7 @@
 """The MuJoCo plant's control step, compiled: wheel commands in, physics, pose, noise, telemetry and
 the divergence test out, with MuJoCo's own C functions called from the kernel (no Python per step).
 
-:class:`~mlpfac.plants.mujoco.MujocoPlant` steps through :func:`plant_step` one control step at a
+:class:`~mlpfac.plants.mujoco.plant.MujocoPlant` steps through :func:`plant_step` one control step at a
 time, and the compiled closed loop (:mod:`mlpfac.loop.compiled`) runs it for many steps in one call: one
 implementation of the step either way. The C functions are the ones the ``mujoco`` package's
 bindings call (``mj_step``, ``mj_step1``, ``mj_step2``, ``mj_objectVelocity``, ``mj_getState``),
@@ -35,8 +35,8 @@ from mlpfac.exceptions import ConfigError
 from mlpfac.jit import SALT, WHY, built, kernel
 from mlpfac.plants.events import delay_push
 from mlpfac.plants.ik import body_velocity_vw, wheel_speeds_lr
-from mlpfac.plants.odometry import O_GADR, O_GYRO, O_QL, O_QR, O_X, sense_step
-from mlpfac.plants.terrain import W_NPATCH, W_NTILE, ground_at, patches, place_tiles, push
+from mlpfac.plants.sensors.odometry import O_GADR, O_GYRO, O_QL, O_QR, O_X, sense_step
+from mlpfac.plants.world.terrain import W_NPATCH, W_NTILE, ground_at, patches, place_tiles, push
 
 # ints: I_AL2, I_AR2 a second wheel's actuator on each side (skid-steer; -1: none), I_MIX 1 for two
 # motors on tendons over both wheels (a (v, omega) drive; I_AL, I_AR are those motors), I_CLAMP 1 for
@@ -91,9 +91,9 @@ class Robot(NamedTuple):
     hist: np.ndarray
     fill: np.ndarray
     vel: np.ndarray  # (6,) mj_objectVelocity's output
-    sense: np.ndarray  # the pose source's estimator (mlpfac.plants.odometry's layout); empty: the truth
+    sense: np.ndarray  # the pose source's estimator (mlpfac.plants.sensors.odometry's layout); empty: the truth
     sensordata: np.ndarray  # MjData.sensordata (the gyro's reading)
-    # the world (mlpfac.plants.mujoco_world, mlpfac.plants.terrain): the data's xfrc_applied, geom_xpos,
+    # the world (mlpfac.plants.mujoco.world, mlpfac.plants.world.terrain): the data's xfrc_applied, geom_xpos,
     # mocap_pos, mocap_quat and the model's geom_friction (flat), the packed world ((0,): none), the
     # rough ground's nodes, the force schedule (steps, 5)
     xfrc: np.ndarray
@@ -261,7 +261,7 @@ def _physics(mp, dp, ctrl, qvel, ints, fl, st, wl, wr, robot):
     step: tau = kp e + ki I, clamped to the torque limit, I integrating e only while tau is not
     clamped (no wind-up). With ``I_TAU`` (wl, wr) are the wheels' torques themselves, clamped to
     the limit and held. On rough ground the contact tiles are placed before each physics step's
-    collisions (:func:`mlpfac.plants.terrain.place_tiles`)."""
+    collisions (:func:`mlpfac.plants.world.terrain.place_tiles`)."""
     n, al, ar, dl, dr = ints[I_NSUB], ints[I_AL], ints[I_AR], ints[I_DL], ints[I_DR]
     w = robot.world
     tiles = w.shape[0] > 0 and w[W_NTILE] > 0
@@ -383,7 +383,7 @@ def measure(ints, fl, st, draw, hist, fill):
 
 @kernel()
 def sense(draw, tele, robot):
-    """The pose the robot estimates (:func:`mlpfac.plants.odometry.sense_step`: its encoders, the
+    """The pose the robot estimates (:func:`mlpfac.plants.sensors.odometry.sense_step`: its encoders, the
     driven wheels' hinge angles forward; its gyro; the fixes of its true pose) into the delay line,
     its telemetry after the plant's and the force's (``tele[N_TELE + 3:]`` where a force is applied)."""
     s, fl, st = robot.sense, robot.fl, robot.st
@@ -417,7 +417,7 @@ def diverged(robot):
     if not math.isfinite(s):
         return NOT_FINITE
     z = robot.site_xpos[2]
-    if robot.world.shape[0]:  # above the ground under it (mlpfac.plants.terrain)
+    if robot.world.shape[0]:  # above the ground under it (mlpfac.plants.world.terrain)
         z -= ground_at(robot.world, robot.nodes, robot.site_xpos[0], robot.site_xpos[1])
     if z - fl[F_ZREST] > 0.5 * fl[F_RADIUS]:
         return LIFTED
@@ -439,14 +439,14 @@ def plant_step(u0, u1, draw, tele, robot):
     else:
         wl, wr = wheel_speeds_lr(u0, u1, fl[F_IK_R], fl[F_IK_TRACK], fl[F_WMAX])
     w = robot.world
-    if w.shape[0]:  # the floor patches under the tyres, the force of this step (mlpfac.plants.terrain)
+    if w.shape[0]:  # the floor patches under the tyres, the force of this step (mlpfac.plants.world.terrain)
         if w[W_NPATCH] > 0:
             patches(w, robot.geom_friction, robot.geom_xpos)
         if robot.push.shape[0]:
             push(w, robot.push, robot.xfrc, ints[I_ROOT], st[S_THETA], tele[N_TELE : N_TELE + 3])
     _physics(robot.mp, robot.dp, robot.ctrl, qvel, ints, fl, st, wl, wr, robot)
     read_pose(robot.site_xpos, robot.site_xmat, st)
-    if robot.sense.shape[0]:  # a pose source other than the truth (mlpfac.plants.sensors)
+    if robot.sense.shape[0]:  # a pose source other than the truth (mlpfac.plants.sensors.sensing)
         sense(draw, tele, robot)
     else:
         measure(ints, fl, st, draw, robot.hist, robot.fill)
