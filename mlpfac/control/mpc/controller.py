@@ -84,6 +84,11 @@ class MPC(Stepped):
         self._phi = _spline(self.H, config.knots)  # (H, knots)
         self._plants: list | None = None
 
+    def _q_velocity(self) -> float:
+        """A velocity's variance gained over a control step, (accel_std T)^2 (a product: no libm pow)."""
+        a = self.config.accel_std * self.T
+        return a * a
+
     def watch(self, plants: list) -> None:
         """The run's robots, one per seed (``limit`` reads each one's true state every step)."""
         if self.truth:
@@ -102,7 +107,7 @@ class MPC(Stepped):
             P = np.zeros((n, n))
             for i in range(half):  # a start known to the pose noise, at rest or at the speed it is given
                 P[i, i] = float(self.noise[0] * self.noise[0])
-                P[half + i, half + i] = (self.config.accel_std * self.T) ** 2
+                P[half + i, half + i] = self._q_velocity()
             knots = np.zeros((self.config.knots, 2))
             if self.level == "velocity":
                 for i, j in enumerate(_knot_steps(self.H, self.config.knots)):
@@ -203,7 +208,7 @@ class MPC(Stepped):
         little in between)."""
         n = s.model.n
         q = np.zeros(n)
-        q[s.model.half :] = (self.config.accel_std * self.T) ** 2
+        q[s.model.half :] = self._q_velocity()
         while s.a < m:
             settled = s.cost < 3 * self.H * self.config.settled_m * self.config.settled_m
             fresh = s.A is None or s.A.shape[0] != n or s.A_age >= self.config.reuse or not settled
