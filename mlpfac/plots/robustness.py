@@ -5,7 +5,8 @@ One axis: per scenario, the median position RMS after the change against the val
 controller, with its 95 % interval as a band, the bound (the best law told the change) dashed
 black, the threshold dotted, the nominal value marked; ``limit`` (the run's own robot as the
 model, given the true state: :mod:`mlpfac.control.mpc`) solid black, and beyond the value where it
-lets go, shaded: the physical breaking point; below it, the share of seeds tracking.
+lets go, shaded (the physical breaking point where no controller holds beyond it; robustness.md
+says where one does); below it, the share of seeds tracking.
 Two axes or more: per scenario and controller a map over the first two axes (the others at their
 first value) of the median position RMS, each point that holds ringed.
 """
@@ -90,7 +91,7 @@ def _curves(ax, share_ax, fam: str, key: str, rows: list[dict], points: list[dic
         ax.plot(bx, by, "k--", lw=1.2, label="bound (best law told the change)")
     ax.axhline(1e3 * rows[0]["threshold_m"], color="0.4", ls=":", lw=1, label="threshold")
     values = [r["point"][key] for r in rows]
-    for p in points:  # beyond where the physics lets go: no controller holds there
+    for p in points:  # beyond where limit lets go (the physics, where no controller holds there)
         if p["scenario"] != fam or p["controller"] != LIMIT or p["axis"] != key or p["at"]:
             continue
         for side, end in (("below", min(values)), ("above", max(values))):
@@ -98,7 +99,7 @@ def _curves(ax, share_ax, fam: str, key: str, rows: list[dict], points: list[dic
             if b and not b["whole_axis"] and b["fails_at"] is not None:
                 for a in (ax, share_ax):
                     a.axvspan(b["fails_at"], end, color="0.88", zorder=0, lw=0)
-                ax.axvline(b["fails_at"], color="k", lw=0.8, ls="-.", label=f"the physics lets go ({b['fails_at']:g})")
+                ax.axvline(b["fails_at"], color="k", lw=0.8, ls="-.", label=f"limit lets go ({b['fails_at']:g})")
     nominal = next((p["nominal"] for p in points if p["scenario"] == fam and p["axis"] == key), None)
     for a in (ax, share_ax):
         if nominal is not None:

@@ -9,8 +9,9 @@ the position RMS after the change, i.e. the last phase; a diverged run counts as
 - the **bound**: the median over seeds of the least RMS of the laws told the change
   (``oracle``, ``oracle-kanayama``) that the sweep ran on the same seed and point;
 - where the sweep ran ``limit`` (``--limit``: the run's own robot as the model, given the true
-  state, :mod:`mlpfac.control.mpc`), its breaking point is the **physical breaking point**: beyond
-  it what breaks is the robot (its traction, its torque), not a controller;
+  state, :mod:`mlpfac.control.mpc`), its breaking point, the **physical breaking point** where no
+  controller holds beyond it (what breaks is the robot: its traction, its torque); where one does,
+  the note says so: there the planner lets go, not the physics;
 - whether the point **holds**: every seed tracks and the median is within the threshold (default:
   the runs' own tracking limit: their scenario's ``lost_threshold_m``, else 5 % of the path's size,
   0.2 m on the 4 m figure of eight).
@@ -161,6 +162,34 @@ def _num(x) -> str:
     return "-" if x is None else f"{x:g}"
 
 
+def _beyond_limit(points: list[dict]) -> list[str]:
+    """Where a controller holds beyond ``limit``'s breaking point (the same scenario, axis and other
+    axes, on the same side): there the planner lets go, not the physics; said in a line each."""
+    out = []
+    for lim in (b for b in points if b["controller"] == LIMIT):
+        for side, word in (("above", "up to"), ("below", "down to")):
+            edge = lim.get(side)
+            if edge is None or edge["whole_axis"]:
+                continue
+            mine = edge["holds_to"]
+            past = [
+                (b["controller"], b[side]["holds_to"])
+                for b in points
+                if b["controller"] != LIMIT
+                and (b["scenario"], b["axis"], b["at"]) == (lim["scenario"], lim["axis"], lim["at"])
+                and b.get(side) is not None
+                and b[side]["holds_to"] is not None
+                and (mine is None or (b[side]["holds_to"] > mine if side == "above" else b[side]["holds_to"] < mine))
+            ]
+            if past:
+                who = ", ".join(f"{c} ({word} {_num(v)})" for c, v in past)
+                out.append(
+                    f"On {lim['scenario']} `{lim['axis']}` {who} hold beyond limit's breaking point "
+                    f"({_side(edge)}): there the planner lets go, not the physics."
+                )
+    return out
+
+
 def _side(b: dict | None) -> str:
     if b is None:
         return "-"
@@ -214,7 +243,7 @@ def markdown(points: list[dict], threshold: float | None, rows: list[dict] | Non
     ]
     for b in points:
         at = ", ".join(f"{k} = {v:g}" for k, v in b["at"].items()) or "-"
-        who = "limit (the physical breaking point)" if b["controller"] == LIMIT else b["controller"]
+        who = "limit (the robot as its model, the true state)" if b["controller"] == LIMIT else b["controller"]
         cells = [b["scenario"], who, f"`{b['axis']}`", at, _num(b["nominal"])]
         lines.append("| " + " | ".join(cells + [_side(b.get("below")), _side(b.get("above"))]) + " |")
     limit = (
@@ -230,7 +259,9 @@ def markdown(points: list[dict], threshold: float | None, rows: list[dict] | Non
     if any(b["controller"] == LIMIT for b in points):
         note += (
             "\nlimit: the run's own robot as its model, given the true state (a model-predictive controller): where it "
-            "lets go the physics does (the wheels' traction, the motors' torque), not a controller.\n"
+            "lets go and no controller holds, the physics does (the wheels' traction, the motors' torque)."
+            + "".join(f" {line}" for line in _beyond_limit(points))
+            + "\n"
         )
     table = curves_markdown(rows or [])
     if table:
