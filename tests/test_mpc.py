@@ -231,13 +231,17 @@ def test_its_settings_vary_as_any_number_of_the_file():
     assert got == [0.2, 0.4]
 
 
-@pytest.mark.parametrize("robot", ["tests/data/weak_servo.xml", "tests/data/skid_short.xml", "tug"])
+@pytest.mark.parametrize("robot", ["tests/data/weak_servo.xml", "tests/data/skid_short.xml", "tug", "SENSED"])
 def test_it_runs_on_a_users_mjcf_a_skid_steer_and_a_torque_driven_robot(robot):
     """From the MJCF alone (a light robot with weak servos; four wheels that skid; the tug's torque
-    motors): both controllers run to the end, at the level the robot's drive takes."""
+    motors) or a robot file that senses its pose (odometry fused with late fixes): both controllers
+    run to the end, at the level the robot's drive takes."""
     from pathlib import Path
 
-    path = str(Path(__file__).resolve().parent.parent / robot) if robot.endswith(".xml") else robot
+    root = Path(__file__).resolve().parent.parent
+    if robot == "SENSED":  # a robot that senses its pose (encoders, a gyro, late fixes): its model senses nothing
+        robot = "examples/sensing/diffdrive-fused.toml"
+    path = str(root / robot) if robot.endswith((".xml", ".toml")) else robot
     for c in ("mpc", "limit"):
         scn = mlpfac.load("eight-nominal", robot=path).with_overrides(controller=c, duration=0.3)
         rec = run(scn)

@@ -217,7 +217,9 @@ def _mpc(scn: Scenario, plant=None) -> Stepped:
 def _model_scenario(scn: Scenario) -> Scenario:
     """The scenario a model of its robot is built from: the same robot, world and events, its pose
     the true one without noise (the estimator is told the noise, the model does not make it)."""
-    pc = dataclasses.replace(
-        scn.plant_config, pose_source="truth", pose_noise_std=0.0, twist_noise_std=0.0, wheel_speed_noise_std=0.0
-    )
-    return dataclasses.replace(scn, plant_config=pc)
+    from mlpfac.plants.sensors.sensing import SENSOR_KEYS, TRUTH_ONLY
+
+    pc = scn.plant_config
+    unsensed = {f.name: f.default for f in dataclasses.fields(pc) if f.name in SENSOR_KEYS}  # no sensor: the truth
+    unsensed |= {k: 0.0 for k in TRUTH_ONLY if hasattr(pc, k)}
+    return dataclasses.replace(scn, plant_config=dataclasses.replace(pc, **unsensed))
