@@ -12,7 +12,7 @@ data (:mod:`mlpfac.report.results`). Each figure, rounded to the digits the page
 
       <!-- figures: data/route-robots ../sims/*.toml "2.9° slopes" -->
 
-  a data folder (every view of its tables, its count of runs, the text a command printed:
+  a data folder (every view of its tables, the limit view where it ran ``limit``, its count of runs, the text a command printed:
   ``table.md``, ``output.txt``) or a file (a dataset's ``runs.json``: every run's figures; a
   scenario, a robot's model, a module: its settings as written), each path from the page's folder,
   ``*`` for any name; a number printed in m or s counts in mm or ms too, a percentage may be a
@@ -233,6 +233,14 @@ def _folder_text(folder: Path, stamp: tuple) -> str:
     texts = [render(folder, {"view": v}) for v in views + (["summary", "untold"] if "paired" in views else [])]
     if (folder / "output.txt").is_file():
         texts.append((folder / "output.txt").read_text())
+    if (folder / "runs.json").is_file():  # every controller against the limit, where the data has it
+        runs = read_json(folder, "runs.json").get("runs") or []
+        ctrls = list(dict.fromkeys(r.get("controller") for r in runs if isinstance(r, dict)))
+        if "limit" in ctrls:
+            from mlpfac.report.limit import limit_table
+
+            scenarios = list(dict.fromkeys(r["scenario"] for r in runs))
+            texts.append(limit_table(runs, scenarios, [c for c in ctrls if c not in ("limit", "mpc")]))
     for name in ("sweep.json", "compare.json"):  # how many runs the command made
         if (folder / name).is_file():
             runs = (read_json(folder, name).get("meta") or {}).get("runs")
