@@ -223,8 +223,8 @@ def grid(src: str, vary: Vary, duration: float | None = None, robot: str | None 
     for key in [a.key for a in vary.axes] + list(drawn):
         if key.split(".")[0] in SKIPPED or (key not in numbers and _present(file.table, key)):
             raise _key_error(src, key, file.table)
-        if key not in numbers and key.startswith("reference.params."):  # a class's own default: not ours to set
-            raise _key_error(src, key, file.table)
+        if key.startswith("reference.params.") and not isinstance(file.table.get("reference", {}).get("params"), dict):
+            raise _key_error(src, key, file.table)  # no [reference.params]: the class's own defaults, not ours to set
         if key not in numbers:  # a key the file leaves to its default, as plant.pose_noise_std
             first = next((a.values[0] for a in vary.axes if a.key == key), None)
             try:
