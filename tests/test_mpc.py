@@ -268,3 +268,27 @@ def test_the_limit_view_sets_every_controller_against_the_limit_seed_by_seed():
     # limit median 0.1 mm; mpc ratios 2, 3, 3 -> 3x; bound per seed 1, 0.4, 1 mm (oracle, oracle, kanayama)
     # -> median 1 mm, ratios 10, 2, 10 -> 10x; kanayama ratios 20, 10, 10 -> 10x; corradini 50, inf, 40
     assert row == "| s | 0.1 | 0.3 (3x) | 1 (oracle; 10x) | 2 (10x) | 5 (50x) 1/3 |", row
+
+
+def test_robustness_names_a_law_that_holds_beyond_the_limits_breaking_point():
+    """Where a law holds past limit's breaking point, robustness.md says the planner let go there,
+    not the physics; where none does, it says nothing of the kind."""
+    from mlpfac.sweeps.robustness import markdown
+
+    def point(ctrl, holds_to, fails_at):
+        side = {"whole_axis": False, "holds_to": holds_to, "fails_at": fails_at}
+        return {
+            "scenario": "s",
+            "controller": ctrl,
+            "axis": "a",
+            "at": {},
+            "nominal": 5.0,
+            "below": None,
+            "above": side,
+        }
+
+    beyond = markdown([point("limit", 20.0, 22.5), point("kanayama", 22.5, 25.0), point("corradini", 10.0, 20.0)], None)
+    assert "kanayama (up to 22.5) hold beyond limit's breaking point (20 (fails at 22.5))" in beyond
+    assert "corradini (up to" not in beyond
+    within = markdown([point("limit", 20.0, 22.5), point("kanayama", 10.0, 20.0)], None)
+    assert "beyond limit's breaking point" not in within and "lets go and no controller holds" in within
