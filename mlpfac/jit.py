@@ -170,7 +170,12 @@ def kernel(
         if signature is None:
             return njit(**opts)(fn)
         sig = signature() if callable(signature) else signature
-        compiled = njit(sig, **opts)(fn)
+        try:
+            compiled = njit(sig, **opts)(fn)
+        except ImportError:  # numba's cache of code that has moved since (a module it names is gone)
+            if not opts.get("cache"):
+                raise
+            compiled = njit(sig, **{**opts, "cache": False})(fn)
         EXPORTS[ext].append((symbol, sig, compiled))
         return compiled
 

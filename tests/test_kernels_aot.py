@@ -169,3 +169,36 @@ def test_a_mujoco_other_than_the_built_ones_asks_for_a_reinstall():
     assert out.returncode != 0
     assert "mlpfac.plants._kernels was built from other sources, for another processor or another MuJoCo" in out.stderr
     assert "pip install --force-reinstall --no-deps mlpfac" in out.stderr
+
+
+def test_a_numba_cache_of_moved_code_is_compiled_afresh(monkeypatch):
+    """A checkout whose numba cache names a module that has moved since (numba's index unpickles it:
+    ModuleNotFoundError) compiles the kernel again without the cache, never fails to import."""
+    import numba
+
+    from mlpfac import jit
+
+    real, calls = numba.njit, []
+
+    def njit(*args, **opts):
+        calls.append(opts.get("cache"))
+        if opts.get("cache"):
+
+            def stale(fn):
+                raise ModuleNotFoundError("No module named 'mlpfac.plants.compiled'")
+
+            return stale
+        return real(*args, **opts)
+
+    monkeypatch.setenv(jit.ENV, "jit")
+    monkeypatch.setattr(numba, "njit", njit)
+    monkeypatch.setitem(jit.EXPORTS, "core", [])
+
+    def plus_one(x):
+        return x + 1.0
+
+    jit.built.cache_clear()  # built() is read once a process: asked again under MLPFAC_KERNELS=jit
+    try:
+        assert jit.kernel("f8(f8)")(plus_one)(1.0) == 2.0 and calls[:2] == [True, False]  # cached, then not
+    finally:
+        jit.built.cache_clear()  # and again for the tests after this one
