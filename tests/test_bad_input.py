@@ -763,17 +763,19 @@ def test_bad_input_is_one_line_in_the_commands_own_process(tmp_path, case):
     assert not (tmp_path / "out").exists()
 
 
-@pytest.mark.parametrize("what", ["waypoints", "scenario"])
+@pytest.mark.parametrize("what", ["waypoints", "scenario", "policy"])
 def test_a_fifo_without_a_writer_is_refused_in_one_line_not_waited_for(tmp_path, what):
-    """A FIFO named as a path's CSV file or as the scenario file: one line, at once (never a read
-    that waits for a writer), exit 2; a file larger than allowed is refused before it is read."""
-    fifo = tmp_path / ("route.csv" if what == "waypoints" else "fifo.toml")
+    """A FIFO named as a path's CSV file, as the scenario file or as a policy file: one line, at
+    once (never a read that waits for a writer), exit 2; a file larger than allowed is refused
+    before it is read."""
+    fifo = tmp_path / {"waypoints": "route.csv", "scenario": "fifo.toml", "policy": "policy.npz"}[what]
     os.mkfifo(fifo)
     scenario = tmp_path / "s.toml"
     scenario.write_text(MINIMAL + '[reference]\nkind = "path"\nfile = "route.csv"\n')
-    target = scenario if what == "waypoints" else fifo
+    target = {"waypoints": scenario, "scenario": fifo, "policy": "eight-nominal"}[what]
+    policy = ["--controller", str(fifo)] if what == "policy" else []
     proc = subprocess.run(
-        [sys.executable, "-m", "mlpfac.cli", "run", str(target), "--no-log", "--out", str(tmp_path / "o")],
+        [sys.executable, "-m", "mlpfac.cli", "run", str(target), *policy, "--no-log", "--out", str(tmp_path / "o")],
         capture_output=True, text=True, timeout=60,
     )  # fmt: skip
     assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1, proc.stderr

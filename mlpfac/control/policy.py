@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import hashlib
 import importlib.resources
+import io
 import math
 import zipfile
 from dataclasses import dataclass
@@ -46,6 +47,7 @@ FEATURES = "tracking-1"
 N_IN = 8  # the features f
 MAX_PARAMS = 1_000_000  # weights of a policy, at most (a small MLP: a step is microseconds)
 MAX_LAYERS = 8
+POLICY_MAX = 64 * 2**20  # bytes of a policy file, at most (MAX_PARAMS float64 weights are 8 MB)
 
 
 def shipped_dir() -> Path:
@@ -93,15 +95,19 @@ def read_policy(path: str | Path, where: str) -> PolicyFile:
     """The policy in ``path``, every array checked: a ConfigError naming ``where`` (the flag or the
     file's key) and the array for a file that is not an npz, an array missing, a shape that does not
     chain, a weight that is not finite."""
+    from mlpfac.io.files import NotAFileError, read_regular
+
     path = Path(path)
     try:
-        data = path.read_bytes()
+        data = read_regular(path, POLICY_MAX)  # a FIFO or a device refused at once, never read whole
     except FileNotFoundError:
         raise ConfigError(where, f"{path}: no such policy file") from None
+    except NotAFileError as err:
+        raise ConfigError(where, f"{path}: {err} (a policy file)") from None
     except OSError as err:
         raise ConfigError(where, f"{path}: cannot read ({err.strerror or err})") from None
     try:
-        with np.load(path, allow_pickle=False) as z:
+        with np.load(io.BytesIO(data), allow_pickle=False) as z:  # the bytes hashed, read once
             arrays = {k: z[k] for k in z.files}
     except (ValueError, OSError, zipfile.BadZipFile, EOFError) as err:
         raise ConfigError(where, f"{path}: not a policy file (an .npz of arrays: {str(err).splitlines()[0]})") from None
