@@ -71,15 +71,17 @@ class LimitCache:
         table = {k: v for k, v in job.table.items() if k not in UNSIMULATED}
         return f"# mlpfac code {fingerprint()}\n{to_toml(table)}"
 
-    def folder(self, job: Job) -> Path:
-        key = hashlib.sha256(self.simulated(job).encode()).hexdigest()
+    def folder(self, simulated: str) -> Path:
+        """The folder of the run whose :meth:`simulated` text is ``simulated``."""
+        key = hashlib.sha256(simulated.encode()).hexdigest()
         return self.root / key[:2] / key
 
     def lookup(self, job: Job) -> dict | None:
         """The metrics of ``job``'s run (under its scenario's name) if the cache holds it whole."""
-        d = self.folder(job)
+        text = self.simulated(job)
+        d = self.folder(text)
         try:
-            if (d / "simulated.toml").read_text() != self.simulated(job):
+            if (d / "simulated.toml").read_text() != text:
                 return None
             m = json.loads((d / "metrics.json").read_text())
         except (OSError, ValueError):
@@ -91,7 +93,7 @@ class LimitCache:
 
     def store(self, job: Job, metrics: dict) -> None:
         """Keep ``job``'s run (an OSError names the folder: a failed write is an error)."""
+        text = self.simulated(job)
         write_folder_whole(
-            self.folder(job),
-            {"simulated.toml": self.simulated(job), "metrics.json": json.dumps(metrics, indent=2) + "\n"},
+            self.folder(text), {"simulated.toml": text, "metrics.json": json.dumps(metrics, indent=2) + "\n"}
         )
