@@ -17,7 +17,7 @@ from mlpfac.control.mpc.kernels import (
     residual_jacobian,
 )
 from mlpfac.jit import seeds
-from mlpfac.model import pose_from_error
+from mlpfac.model import pose_from_error, wrap
 from mlpfac.plants.events import DelayLine, SensorDelay
 
 FAILED_COST = 1.0e9  # a plan whose rollout diverged (its errors FAILED) costs at least this
@@ -185,7 +185,7 @@ class MPC(Stepped):
             self._advance(s, m)
             Hx = s.model.pose_jacobian(s.x_a, s.st_a, m)
             st = s.st_a
-            nu = np.array([pose[0] - st[4], pose[1] - st[5], _wrap(pose[2] - st[6])])
+            nu = np.array([pose[0] - st[4], pose[1] - st[5], wrap(pose[2] - st[6])])
             r = self.noise * self.noise
             if wheels is not None:
                 Hw, predicted = s.model.wheel_rows(s.x_a)
@@ -340,7 +340,3 @@ def _shift(knots: np.ndarray, H: int) -> np.ndarray:
         a = (t - at[m]) / (at[m + 1] - at[m])
         out[i] = (1.0 - a) * knots[m] + a * knots[m + 1]
     return out
-
-
-def _wrap(angle: float) -> float:
-    return math.pi - ((math.pi - angle) % (2.0 * math.pi))
