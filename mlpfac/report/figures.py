@@ -220,6 +220,7 @@ def printed(text: str) -> Printed:
 def _folder_text(folder: Path, stamp: tuple) -> str:
     """Every view of a data folder's tables, and the text kept in it, as one text."""
     from mlpfac.report.data import read_json
+    from mlpfac.report.limit import LIMIT, MPC
     from mlpfac.report.results import render
 
     files = {
@@ -236,11 +237,9 @@ def _folder_text(folder: Path, stamp: tuple) -> str:
     if (folder / "runs.json").is_file():  # every controller against the limit, where the data has it
         runs = read_json(folder, "runs.json").get("runs") or []
         ctrls = list(dict.fromkeys(r.get("controller") for r in runs if isinstance(r, dict)))
-        if "limit" in ctrls:
-            from mlpfac.report.limit import limit_table
-
-            scenarios = list(dict.fromkeys(r["scenario"] for r in runs))
-            texts.append(limit_table(runs, scenarios, [c for c in ctrls if c not in ("limit", "mpc")]))
+        if LIMIT in ctrls:
+            others = ",".join(c for c in ctrls if c not in (LIMIT, MPC))
+            texts.append(render(folder, {"view": "limit"} | ({"controllers": others} if others else {})))
     for name in ("sweep.json", "compare.json"):  # how many runs the command made
         if (folder / name).is_file():
             runs = (read_json(folder, name).get("meta") or {}).get("runs")
