@@ -16,6 +16,7 @@ from mlpfac.exceptions import ConfigError
 from mlpfac.loop.factory import make_controller
 from mlpfac.loop.metrics import metrics
 from mlpfac.loop.runner import build, run
+from mlpfac.plants.mujoco import compiled as K  # noqa: N812
 from mlpfac.plants.mujoco.predict import STATE, Predictor
 
 
@@ -57,6 +58,42 @@ def test_the_model_predicts_the_run_to_the_bit():
         E = np.empty((1, H, 3))
         model.rollouts(x, st, k0, U, b.ref, E)
         np.testing.assert_array_equal(E[0], rec.e_true[k0 + 1 : k0 + H + 1])
+
+
+@pytest.mark.parametrize(
+    "name, robot",
+    [("eight-nominal", None), ("eight-push", "diffdrive-torque"), ("eight-bumps", "diffdrive-torque"),
+     ("eight-nominal", "examples/sensing/diffdrive-fused.toml")],
+)  # fmt: skip
+def test_rollouts_that_share_their_first_commands_give_the_bits_of_each_alone(name, robot):
+    """A row whose commands equal the first row's up to a step starts from the first row's state
+    there: its errors are, bit for bit, those it gives rolled out alone from the start (a velocity
+    robot, a force's schedule under way, rough ground, a sensed pose)."""
+    scn = _scenario(name, "limit", 0.5, robot=robot)
+    model, b = _model(scn)
+    x, st = model.capture()
+    k = 0
+    if scn.events:  # told the event, a few steps before it
+        x, st = model.apply(scn.events[0], x, st)
+        k = int(round(scn.events[0].time / scn.T)) - 3
+    H, rng = 25, np.random.default_rng(3)
+    scale = 0.2 if b.plant.ints[K.I_TAU] else 0.3  # torques (N m); (v, omega)
+    U0 = scale * (0.5 + rng.random((H, 2)))
+    U = np.repeat(U0[None], 6, axis=0)
+    for i, f in enumerate((1, 7, 15, 24, H), start=1):  # parted at step f (H: never)
+        U[i, f:] += 0.05 * rng.standard_normal((H - f, 2))
+    U = np.ascontiguousarray(U)
+    E, again = np.empty((6, H, 3)), np.empty((6, H, 3))
+    model.rollouts(x, st, k, U, b.ref, E)
+    steps = model.control_steps
+    model.rollouts(x, st, k, U, b.ref, again)  # the first row not run again: its errors and states kept
+    np.testing.assert_array_equal(again, E)
+    assert model.control_steps - steps == 5 * H - (1 + 7 + 15 + 24 + H)
+    for i in range(6):
+        alone = np.empty((1, H, 3))
+        model.rollouts(x, st, k, np.ascontiguousarray(U[i : i + 1]), b.ref, alone)
+        np.testing.assert_array_equal(E[i], alone[0])
+    assert np.all(np.abs(E) < 1.0)  # no row diverged: the states were used
 
 
 def test_the_step_jacobian_agrees_with_mujocos_transition_fd():

@@ -82,6 +82,9 @@ class MPC(Stepped):
         self.H = max(1, int(round(config.horizon_s / self.T)))
         self.why: dict[int, str] = {}
         self._phi = _spline(self.H, config.knots)  # (H, knots)
+        self._at = _knot_steps(self.H, config.knots)  # the knots' steps
+        self._w = np.tile(config.fd_step * self.scale, config.knots)  # the knots' finite-difference steps
+        self._scale = np.tile(self.scale, config.knots)
         self._plants: list | None = None
 
     def _q_velocity(self) -> float:
@@ -236,9 +239,7 @@ class MPC(Stepped):
         ``reuse`` more steps (the plan it was taken on is a step older: a step on the same knots)
         and the step is taken unchecked. The first knot is sent; the plan is shifted a step."""
         cfg, H, phi = self.config, self.H, self._phi
-        M = 2 * cfg.knots
-        w = np.tile(cfg.fd_step * self.scale, cfg.knots)  # the knots' finite-difference steps
-        scale = np.tile(self.scale, cfg.knots)
+        M, w, scale = 2 * cfg.knots, self._w, self._scale
         settled = 3 * H * cfg.settled_m * cfg.settled_m  # a plan this close needs no second step
         delta = np.zeros(M)
         E1, U1 = np.empty((1, H, 3)), np.empty((1, H, 2))
@@ -257,18 +258,20 @@ class MPC(Stepped):
         U = np.empty((1 + M, H, 2))
         if s.J is None:
             s.J = np.empty((M, 3 * H))
+        taken = True  # the knots moved since the Jacobian (after a step refused: the same J and residuals)
         for _ in range(cfg.iterations):
-            U[:] = np.einsum("jk,kc->jc", phi, s.knots)
-            for p in range(M):
-                i, c = divmod(p, 2)
-                U[1 + p, :, c] += phi[:, i] * w[p]
-            s.model.rollouts(s.x, s.st, k, U, self.preview, E)
-            self._weigh(E)
-            cost = plan_cost(E[0])
-            if not math.isfinite(cost) or cost >= FAILED_COST:
-                break
-            residual_jacobian(E, w, s.J)
-            s.age = 0
+            if taken:
+                U[:] = np.einsum("jk,kc->jc", phi, s.knots)
+                for p in range(M):
+                    i, c = divmod(p, 2)
+                    U[1 + p, :, c] += phi[:, i] * w[p]
+                s.model.rollouts(s.x, s.st, k, U, self.preview, E)
+                self._weigh(E)
+                cost = plan_cost(E[0])
+                if not math.isfinite(cost) or cost >= FAILED_COST:
+                    break
+                residual_jacobian(E, w, s.J)
+                s.age = 0
             gauss_newton(s.J, E[0], s.mu, 1.0e-12, delta)
             longest = float(np.max(np.abs(delta) / scale))
             if longest > s.radius:
@@ -281,7 +284,8 @@ class MPC(Stepped):
             s.model.rollouts(s.x, s.st, k, U1, self.preview, E1)
             self._weigh(E1)
             new = plan_cost(E1[0])
-            if new < cost:
+            taken = new < cost
+            if taken:
                 gain = (cost - new) / cost
                 s.knots, cost = knots, new
                 s.mu, s.radius = max(s.mu / 3.0, cfg.damping), min(2.0 * s.radius, cfg.trust)
@@ -302,7 +306,7 @@ class MPC(Stepped):
         s.cost = cost
         self._tele[b] = (cost, s.mu)
         u = s.knots[0].copy()
-        s.knots = _shift(s.knots, self.H)
+        s.knots = _shift(s.knots, self._at)
         return u
 
 
@@ -327,9 +331,8 @@ def _spline(H: int, knots: int) -> np.ndarray:
     return phi
 
 
-def _shift(knots: np.ndarray, H: int) -> np.ndarray:
-    """The plan one step on: each knot the spline's value a step later (the last held)."""
-    at = _knot_steps(H, knots.shape[0])
+def _shift(knots: np.ndarray, at: list[int]) -> np.ndarray:
+    """The plan one step on: each knot (at its step ``at``) the spline's value a step later (the last held)."""
     out = knots.copy()
     for i, j in enumerate(at):
         t = j + 1

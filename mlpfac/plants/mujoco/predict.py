@@ -90,26 +90,51 @@ def _error(st, r, e):
 
 
 @kernel(
-    lambda: with_robot("void(f8[::1], f8[::1], f8, f8[:, :, ::1], f8[:, ::1], i8, f8[:, :, ::1], f8[::1])"),
+    lambda: with_robot(
+        "void(f8[::1], f8[::1], f8, f8[:, :, ::1], f8[:, ::1], i8, f8[:, :, ::1], f8[::1], i8[::1], f8[:, ::1], f8[:, ::1])"
+    ),
     ext="mujoco",
 )
-def rollouts(x, st, w, U, ref, k, E, tele, robot):
+def rollouts(x, st, w, U, ref, k, E, tele, first, X, ST, robot):
     """R control sequences U (R, H, 2) from the state (x, st, w) at control step k: E (R, H, 3) the
     tracking error (2) after each step j to ``ref[k + j + 1]`` (the last row held beyond the end);
-    from the step a rollout's robot diverges on, FAILED. ``tele``: the step's telemetry (scratch)."""
+    from the step a rollout's robot diverges on, FAILED. ``tele``: the step's telemetry (scratch).
+
+    The first row's states after each step are kept in X (H, nx) and ST (H, N_ST + 1: the step
+    state and the world's step). Row i's commands equal the first row's before step ``first[i]``:
+    it starts from the first row's state there, its errors before it the first row's (the same bits
+    as from the start). ``first[0]`` = -1: the first row is not run, its errors in E[0] and its
+    states in X, ST already (the same state and commands as a rollout before)."""
     R, H = U.shape[0], U.shape[1]
     last = ref.shape[0] - 1
     draw = np.zeros(3)
     for i in range(R):
-        _restore(x, st, w, robot)
+        f = first[i]
+        if f < 0:
+            continue
         dead = False
-        for j in range(H):
+        if f == 0:
+            _restore(x, st, w, robot)
+        else:
+            for j in range(f):
+                for c in range(3):
+                    E[i, j, c] = E[0, j, c]
+            if f == H:
+                continue
+            if E[0, f - 1, 0] == FAILED:
+                dead = True
+            else:
+                _restore(X[f - 1], ST[f - 1, :N_ST], ST[f - 1, N_ST], robot)
+        for j in range(f, H):
             if not dead and plant_step(U[i, j, 0], U[i, j, 1], draw, tele, robot) != 0:
                 dead = True
             if dead:
                 E[i, j, 0], E[i, j, 1], E[i, j, 2] = FAILED, FAILED, FAILED
             else:
                 _error(robot.st, ref[min(k + j + 1, last)], E[i, j])
+                if i == 0:
+                    _capture(X[j], ST[j, :N_ST], robot)
+                    ST[j, N_ST] = robot.world[W_STEP] if robot.world.shape[0] else 0.0
 
 
 @kernel(
@@ -197,6 +222,8 @@ class Predictor:
     def __init__(self, plant) -> None:
         self.plant = plant
         self.control_steps = 0  # control steps the model has taken (benchmarks/bench_mpc.py)
+        self._X, self._ST = np.empty((0, 0)), np.empty((0, 0))  # the last rollout's first row's states
+        self._last: tuple | None = None  # ... and what it was of: (k, ref, x, st, its commands, its errors)
         self._sizes()
 
     def _sizes(self) -> None:
@@ -227,8 +254,30 @@ class Predictor:
         return self.plant._args
 
     def rollouts(self, x, st, k: int, U: np.ndarray, ref: np.ndarray, E: np.ndarray) -> None:
-        rollouts(x, st, float(k), U, ref, k, E, self._tele, self.args())
-        self.control_steps += U.shape[0] * U.shape[1]
+        """:func:`rollouts` of U (R, H, 2) from (x, st) at step k into E (R, H, 3). A row whose
+        commands begin as the first row's starts where they part; the first row is not run again
+        when the rollout before was of the same state, step, reference and commands (its errors and
+        states kept): the same bits, fewer steps."""
+        R, H = U.shape[0], U.shape[1]
+        parted = np.any(U[0] != U, axis=2)  # (R, H): a row's commands not the first row's (exact: no arithmetic)
+        first = np.where(parted.any(axis=1), parted.argmax(axis=1), H)
+        first[0] = 0
+        last = self._last
+        if (
+            last is not None
+            and last[0] == k
+            and last[1] is ref
+            and np.array_equal(last[2], x)
+            and np.array_equal(last[3], st)
+            and np.array_equal(last[4], U[0])
+        ):
+            E[0] = last[5]
+            first[0] = -1
+        elif self._X.shape[0] != H:
+            self._X, self._ST = np.empty((H, self.nx)), np.empty((H, N_ST + 1))
+        rollouts(x, st, float(k), U, ref, k, E, self._tele, first, self._X, self._ST, self.args())
+        self._last = (k, ref, x.copy(), st.copy(), U[0].copy(), E[0].copy())
+        self.control_steps += R * H - int(np.maximum(first, 0).sum()) - (H if first[0] < 0 else 0)
 
     def transition(self, x, st, k: int, u, eps: float, A: np.ndarray):
         x1, st1 = np.empty(self.nx), np.empty(N_ST)
@@ -269,6 +318,7 @@ class Predictor:
         p.st[:] = st
         mujoco.mj_forward(p.model, p.data)
         p.apply(event)
+        self._last = None  # a rollout before is of another robot
         self._sizes()
         return self.capture()
 
