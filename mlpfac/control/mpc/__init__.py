@@ -24,8 +24,10 @@ then shifted one step to start the next.
 
 **The state** ``mpc`` plans from is estimated from the pose the scenario's pose source gives, as
 every controller gets it (truth with noise, odometry, fused): an extended Kalman filter on the
-model's whole state (positions and velocities, in their tangent space) whose prediction is the
-model's step and whose Jacobian is the step's own (forward differences, as ``mjd_transitionFD``
+model's state (positions and velocities, in their tangent space) but for the chassis' height, roll
+and pitch, which no pose sees and the model carries from the wheels' contacts (corrected through
+the filter's linearization they lift the model's robot off its floor: PAL TIAGo's estimate did
+within 1.4 s), whose prediction is the model's step and whose Jacobian is the step's own (forward differences, as ``mjd_transitionFD``
 takes them, through the whole control step), process noise ``accel_std`` on every velocity, the
 pose noise it is told as the measurement's, and a pose that arrives late (a sensor delay it is
 told) fused at its own step and predicted forward again. On torque motors the wheels' speeds

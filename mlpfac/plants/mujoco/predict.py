@@ -231,9 +231,15 @@ class Predictor:
         m = p.model
         self.nx = mujoco.mj_stateSize(m, STATE)
         self.nv = int(m.nv)
-        # the directions an estimator estimates: every position (in the tangent space), then every velocity
-        self.S = np.arange(2 * self.nv, dtype=np.int64)
-        self.n, self.half = 2 * self.nv, self.nv
+        # the directions an estimator estimates: the positions (in the tangent space), then the
+        # velocities, of every degree of freedom but the chassis' height, roll and pitch (the free
+        # joint's third to fifth), which the pose does not see: the model carries them from the
+        # wheels' contacts
+        unseen = {p._droot + 2, p._droot + 3, p._droot + 4}
+        dofs = [i for i in range(self.nv) if i not in unseen]
+        self.S = np.array(dofs + [self.nv + i for i in dofs], dtype=np.int64)
+        self.n, self.half = len(self.S), len(dofs)
+        self._velocity_index = {dof: self.half + i for i, dof in enumerate(dofs)}
         self._tele = np.zeros(p.tele.shape[0])
 
     @property
@@ -300,7 +306,7 @@ class Predictor:
         nq = int(p.model.nq)
         Hw, w = np.zeros((2, self.n)), np.empty(2)
         for i, (dof, sign) in enumerate(zip(p.robot.dofs, p.robot.sign, strict=True)):
-            Hw[i, self.half + dof] = sign
+            Hw[i, self._velocity_index[dof]] = sign
             w[i] = sign * x[1 + nq + dof]
         return Hw, w
 
