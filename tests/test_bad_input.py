@@ -558,6 +558,8 @@ BAD_VIEW_PLOT = {
     "report --strict without --verify": (["report", "D", "--strict"], "--strict means nothing without --verify"),
     "report --command without --collect": (["report", "D", "--command", "c"], "--command means nothing without --collect"),
     "report --code-version without --collect": (["report", "D", "--code-version", "abc"], "--code-version means nothing without --collect"),
+    "report --code-version no commit": (["report", "D", "--collect", "x=D", "--command", "c", "--code-version", "e6c5e10zz"],
+                                        "--code-version: 'e6c5e10zz' names no commit"),
     "report --command of two --collect": (["report", "D", "--collect", "a=D", "--collect", "b=D", "--command", "c"], "--command: is the command of one --collect"),
     "report --remake with --check": (["report", "D", "--remake", "--check"], "--remake means nothing with --check"),
     "report --sources with --verify": (["report", "D", "--sources", "--verify", "1"], "--sources means nothing with --verify"),

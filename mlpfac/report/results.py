@@ -276,13 +276,21 @@ def write(docs: Path) -> list[tuple[Path, int, bool]]:
     return done
 
 
-def code_version() -> str:
-    """``git rev-parse HEAD`` of the checkout in the current folder, or "unknown"."""
+def code_version(rev: str = "HEAD") -> str:
+    """The commit ``rev`` names in the checkout in the current folder, its whole SHA: HEAD's, or
+    "unknown" outside a checkout; a given one must name a commit here or be a whole SHA."""
     try:
-        out = subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True, check=True)
+        out = subprocess.run(
+            ["git", "rev-parse", "--verify", "--quiet", f"{rev}^{{commit}}"], capture_output=True, text=True, check=True
+        )
+        return out.stdout.strip()
     except (OSError, subprocess.CalledProcessError):
+        pass
+    if rev == "HEAD":
         return "unknown"
-    return out.stdout.strip()
+    if re.fullmatch(r"[0-9a-f]{40}", rev):
+        return rev
+    raise ConfigError("--code-version", f"{rev!r} names no commit of this checkout: give one, or its whole SHA")
 
 
 def machine() -> str:
@@ -308,6 +316,7 @@ def collect(folder: Path, results: Path, command: str | None = None, version: st
     command = command or meta.get("command")
     if not command:
         raise ConfigError("--command", f"{folder} has no meta.json yet: give the command that made {results}")
+    version = code_version(version or "HEAD")
     runs = None
     if results.is_file():  # a printed Markdown table (a .md file), else a command's printed output
         sources = {"table.md" if results.suffix == ".md" else "output.txt": results}
@@ -335,7 +344,7 @@ def collect(folder: Path, results: Path, command: str | None = None, version: st
         raise ConfigError(str(err.filename or folder), f"cannot copy the results ({err.strerror or err})") from None
     meta = {
         "command": command,
-        "code_version": version or code_version(),
+        "code_version": version,
         "date": datetime.fromtimestamp(made, UTC).strftime("%Y-%m-%dT%H:%M:%SZ"),
         "machine": machine(),
     }
