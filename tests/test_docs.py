@@ -306,10 +306,12 @@ def test_collect_keeps_the_command_and_stamps_the_version_and_date(tmp_path: Pat
         shutil.copy(docs / "data" / "compare" / name, results)
     target = docs / "data" / "compare"
     before = json.loads((target / "meta.json").read_text())
-    report.collect(target, results, version="abc123")
+    report.collect(target, results, version="a1" * 20)
     meta = json.loads((target / "meta.json").read_text())
-    assert meta["command"] == before["command"] and meta["code_version"] == "abc123"
+    assert meta["command"] == before["command"] and meta["code_version"] == "a1" * 20
     assert re.fullmatch(DATE, meta["date"])
+    with pytest.raises(ConfigError, match="--code-version: 'abc123' names no commit"):  # a short SHA of nothing
+        report.collect(target, results, version="abc123")
     with pytest.raises(ConfigError, match="--command"):
         report.collect(docs / "data" / "new", results)
     with pytest.raises(ConfigError, match="not a finished results folder"):
