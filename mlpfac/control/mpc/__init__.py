@@ -27,8 +27,8 @@ every controller gets it (truth with noise, odometry, fused): an extended Kalman
 model's state (positions and velocities, in their tangent space) but for the chassis' height, roll
 and pitch, which no pose sees and the model carries from the wheels' contacts (corrected through
 the filter's linearization they lift the model's robot off its floor: PAL TIAGo's estimate did
-within 1.4 s), whose prediction is the model's step and whose Jacobian is the step's own (forward differences, as ``mjd_transitionFD``
-takes them, through the whole control step), process noise ``accel_std`` on every velocity, the
+within 1.4 s), whose prediction is the model's step and whose Jacobian is the step's own (forward
+differences, as ``mjd_transitionFD`` takes them, through the whole control step), process noise ``accel_std`` on every velocity, the
 pose noise it is told as the measurement's, and a pose that arrives late (a sensor delay it is
 told) fused at its own step and predicted forward again. On torque motors the wheels' speeds
 (their encoders, with the scenario's wheel-speed noise) are measured beside the pose. ``limit`` is the same planner given the
