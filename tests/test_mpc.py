@@ -166,6 +166,37 @@ def test_the_kalman_update_and_the_covariance_agree_with_numpy():
     np.testing.assert_allclose(P, want, rtol=1e-10)
 
 
+def test_a_slipping_wheel_resets_its_own_speed_not_the_chassis():
+    """The encoders' innovation within ``slip_gate`` standard deviations leaves the covariance as it
+    is (the same bits as no gate); a wheel's speed 2 rad/s from the model's (a slip) grows that
+    wheel's variance by its square, and the update moves the chassis' velocities a hundredth as far
+    or less than the grip's covariance would."""
+    scn = _scenario("eight-torque", "mpc", 0.3)
+    b = build(scn)
+    run(scn, built=b)
+    ctrl = b.ctrl
+    s = ctrl.seeds[0]
+    Hw, _ = s.model.wheel_rows(s.x_a)
+    r = ctrl.wheel_noise * ctrl.wheel_noise
+    j = int(np.flatnonzero(Hw[0])[0])
+    half = s.model.half
+    for nu, slips in ((np.array([2.0 * np.sqrt(s.P[j, j] + r), 0.0]), False), (np.array([2.0, 0.0]), True)):
+        P = s.P.copy()
+        ctrl._slip(P, Hw, nu, r)
+        if not slips:
+            assert np.array_equal(P, s.P)
+            continue
+        assert P[j, j] == s.P[j, j] + 4.0 and np.count_nonzero(P != s.P) == 1
+        moved = {}
+        for name, Q in (("gated", P), ("grip", s.P.copy())):
+            dx = np.zeros(s.model.n)
+            kalman_update(Q, Hw, np.full(2, r), nu, dx)
+            moved[name] = (np.abs(dx[half : half + 3]).max(), dx[j])
+        assert moved["grip"][0] > 0.05  # the grip's covariance: a wheel's speed is the chassis'
+        assert moved["gated"][0] < 0.01 * moved["grip"][0]
+        assert abs(moved["gated"][1] - 2.0 * Hw[0, j]) < 1e-3  # the wheel takes the encoder's speed
+
+
 def test_the_gauss_newton_step_solves_the_damped_normal_equations():
     rng = np.random.default_rng(4)
     M, H = 6, 7
@@ -219,7 +250,8 @@ def test_the_mpc_commands_the_drive_the_robot_has():
 @pytest.mark.parametrize(
     "key, value",
     [("horizon_s", 0.0), ("horizon_s", 1e9), ("knots", 0), ("knots", 2.5), ("iterations", 99),
-     ("heading_m", -1.0), ("accel_std", float("nan")), ("fd_step", 0.0), ("damping", "x"), ("reuse", -1)],
+     ("heading_m", -1.0), ("accel_std", float("nan")), ("fd_step", 0.0), ("damping", "x"), ("reuse", -1),
+     ("slip_gate", 0.5)],
 )  # fmt: skip
 def test_bad_settings_are_refused_naming_their_key(key, value):
     with pytest.raises(ConfigError) as err:

@@ -26,6 +26,7 @@ class MpcConfig:
     trust: float = 1.0  # the largest step on a knot, a share of the commands' scale (the trust radius's ceiling)
     accel_std: float = 0.1  # the estimator's process noise: std of each generalized acceleration (SI units / s^2)
     told_std: float = 0.01  # ... and the std each velocity's estimate loses at an event it is told (SI units)
+    slip_gate: float = 5.0  # std devs of its innovation a wheel's measured speed strays from the model's before it counts as slipping (torque level)
     fd_step: float = 1.0e-3  # the knots' finite-difference step, a share of the commands' scale
 
     LIMITS: ClassVar[dict[str, tuple[float, float]]] = {  # each key's accepted range, closed (horizon_s > 0)
@@ -41,6 +42,7 @@ class MpcConfig:
         "trust": (1.0e-3, 100.0),
         "accel_std": (0.0, 1.0e6),
         "told_std": (0.0, 1.0e6),
+        "slip_gate": (1.0, 1.0e6),
         "fd_step": (1.0e-9, 1.0),
     }
 

@@ -192,8 +192,10 @@ class MPC(Stepped):
             r = self.noise * self.noise
             if wheels is not None:
                 Hw, predicted = s.model.wheel_rows(s.x_a)
+                r_w = self.wheel_noise * self.wheel_noise
+                self._slip(s.P, Hw, wheels - predicted, r_w)
                 Hx, nu = np.vstack([Hx, Hw]), np.concatenate([nu, wheels - predicted])
-                r = np.concatenate([r, np.full(2, self.wheel_noise * self.wheel_noise)])
+                r = np.concatenate([r, np.full(2, r_w)])
             dx = np.zeros(s.model.n)
             kalman_update(s.P, Hx, r, nu, dx)
             s.x_a, s.st_a = s.model.correct(s.x_a, s.st_a, m, dx)
@@ -204,6 +206,18 @@ class MPC(Stepped):
             if why == 0:
                 x, st = x1, st1
         s.x, s.st = x, st
+
+    def _slip(self, P: np.ndarray, Hw: np.ndarray, nu: np.ndarray, r: float) -> None:
+        """A wheel whose measured speed is further from the model's than ``slip_gate`` standard
+        deviations of its innovation (nu^2 > gate^2 (P_ww + r)) slips as the model's wheel does not
+        (at the traction limit a wheel's stick and slip turn on a micrometre of the state): its
+        speed's variance grows by the innovation's square, so the encoder sets the wheel's speed
+        and, through the covariance the wheel's grip built, hardly moves the chassis'."""
+        gate = self.config.slip_gate
+        for i in range(Hw.shape[0]):
+            j = int(np.flatnonzero(Hw[i])[0])
+            if nu[i] * nu[i] > gate * gate * (P[j, j] + r):
+                P[j, j] += nu[i] * nu[i]
 
     def _advance(self, s: _Seed, m: int) -> None:
         """The anchor moved on to step m through the commands sent, the covariance with it (the
