@@ -28,15 +28,15 @@ model's state (positions and velocities, in their tangent space) but for the cha
 and pitch, which no pose sees and the model carries from the wheels' contacts (corrected through
 the filter's linearization they lift the model's robot off its floor: PAL TIAGo's estimate did
 within 1.4 s), whose prediction is the model's step and whose Jacobian is the step's own (forward
-differences, as ``mjd_transitionFD`` takes them, through the whole control step), process noise ``accel_std`` on every velocity, the
-pose noise it is told as the measurement's, and a pose that arrives late (a sensor delay it is
-told) fused at its own step and predicted forward again. On torque motors the wheels' speeds
-(their encoders, with the scenario's wheel-speed noise) are measured beside the pose; a wheel
-whose speed is ``slip_gate`` standard deviations from the model's slips as the model's does not
-(stick and slip at the traction limit turn on a micrometre of the state), and its speed's
-variance grows by the innovation's square: the encoder resets the wheel, not the chassis (the
-20° slope's estimate was lost to it). ``limit`` is the same planner given the robot's true state
-each step: what perfect information and a perfect model achieve.
+differences, as ``mjd_transitionFD`` takes them, through the whole control step), process noise
+``accel_std`` on every velocity, the pose noise it is told as the measurement's, and a pose that
+arrives late (a sensor delay it is told) fused at its own step and predicted forward again. On
+torque motors the wheels' speeds (their encoders, with the scenario's wheel-speed noise) are
+measured beside the pose; a wheel whose speed is ``slip_gate`` standard deviations from the
+model's slips as the model's does not (stick and slip at the traction limit turn on a micrometre
+of the state), and its speed's variance grows by the innovation's square: the encoder resets the
+wheel, not the chassis (without it a 20° slope's estimate is lost). ``limit`` is the same planner
+given the robot's true state each step: what perfect information and a perfect model achieve.
 
 One thread, no BLAS, MuJoCo's own C functions from compiled kernels: the same bits on every
 machine. A seed of a batch is planned on its own model (its rough ground, its forces' noise).

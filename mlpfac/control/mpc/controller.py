@@ -192,9 +192,9 @@ class MPC(Stepped):
             r = self.noise * self.noise
             if wheels is not None:
                 Hw, predicted = s.model.wheel_rows(s.x_a)
-                r_w = self.wheel_noise * self.wheel_noise
-                self._slip(s.P, Hw, wheels - predicted, r_w)
-                Hx, nu = np.vstack([Hx, Hw]), np.concatenate([nu, wheels - predicted])
+                nu_w, r_w = wheels - predicted, self.wheel_noise * self.wheel_noise
+                self._slip(s.P, Hw, nu_w, r_w)
+                Hx, nu = np.vstack([Hx, Hw]), np.concatenate([nu, nu_w])
                 r = np.concatenate([r, np.full(2, r_w)])
             dx = np.zeros(s.model.n)
             kalman_update(s.P, Hx, r, nu, dx)
