@@ -389,6 +389,26 @@ def test_a_grid_with_draws_on_dask_gives_the_local_table(tmp_path):
         assert (j.folder(tmp_path / "dask") / "config.toml").read_text() == j.config
 
 
+def test_a_grid_of_two_axes_is_a_table_a_controller_and_a_controller_key_has_its_default_nominal(tmp_path):
+    """``--vary reference.speed=1,1.5 --vary controller.kanayama.Kx=5,10,20``: the file leaves Kx out,
+    so its nominal value is the table's default (10), not the axis's first; the curves are a table
+    per controller, the speed across and Kx down."""
+    out = tmp_path / "out"
+    argv = ["sweep", "paper", "--controllers", "kanayama,corradini", "--seeds", "0", "--duration", "3",
+            "--workers", "1", "--vary", "reference.speed=1,1.5", "--vary", "controller.kanayama.Kx=5,10,20",
+            "--out", str(out)]  # fmt: skip
+    assert main(argv) == 0
+    robust = json.loads((out / "robustness.json").read_text())
+    kx = [b for b in robust["breaking_points"] if b["axis"] == "controller.kanayama.Kx"]
+    assert len(kx) == 4 and all(b["nominal"] == 10.0 for b in kx)  # 2 controllers x 2 speeds
+    text = (out / "robustness.md").read_text()
+    for ctrl in ("kanayama", "corradini"):
+        head = f"| paper, {ctrl}: `controller.kanayama.Kx` \\ `reference.speed` | 1 | 1.5 |"
+        rows = text.split(head)[1].splitlines()[2:5]
+        assert [r.split(" | ")[0] for r in rows] == ["| 5", "| 10", "| 20"]
+        assert all(len(r.split(" | ")) == 3 for r in rows)
+
+
 def test_a_friction_axis_is_measured_from_the_robots_own_friction(tmp_path):
     """``eight-friction`` sets mu = 0.2; along ``events.0.mu`` the nominal value is the robot's own
     tyre friction (1, which the event changes), not the file's 0.2, so the axis goes down from 1."""

@@ -69,7 +69,8 @@ def median_interval(xs: list[float]) -> tuple[float | None, float | None]:
 def nominal(job: Job, key: str, metrics: RunMetrics | None = None):
     """The value of ``key`` at which nothing changes: 1 for an event's scale or factor, 0 steps of
     delay, a friction event's ``mu`` the robot's own (what the event changed, as the job's run
-    recorded it in ``metrics``), else the file's own value (None where the file leaves it out)."""
+    recorded it in ``metrics``), else the file's own value, or the default of a controller's table
+    the file leaves out (``controller.mpc.fd_step``); None for another key the file leaves out."""
     from mlpfac.scenario.draws import get
     from mlpfac.scenario.parse import load
 
@@ -84,9 +85,17 @@ def nominal(job: Job, key: str, metrics: RunMetrics | None = None):
                 if found:
                     return float(found[1])
     try:
-        value = get(load(job.source, build=False, ends=False).table, key)
-    except (KeyError, ConfigError):
+        scn = load(job.source, build=False, ends=False)
+        value = get(scn.table, key)
+    except ConfigError:
         return None
+    except KeyError:
+        parts = key.split(".")
+        value = (
+            getattr(getattr(scn, parts[1], None), parts[2], None)
+            if len(parts) == 3 and parts[0] == "controller"
+            else None
+        )
     return value if isinstance(value, int | float) and not isinstance(value, bool) else None
 
 
@@ -202,10 +211,13 @@ def _side(b: dict | None) -> str:
 
 def curves_markdown(rows: list[dict]) -> str:
     """Per scenario with one axis: the median position RMS after the change [mm] of each controller
-    at each value, with the seeds tracking where not all did, and the bound."""
+    at each value, with the seeds tracking where not all did, and the bound; with two, a table a
+    controller, the second axis down."""
     out = []
     for fam in dict.fromkeys(r["scenario"] for r in rows):
         rs = [r for r in rows if r["scenario"] == fam]
+        if len(rs[0]["point"]) == 2:
+            out.extend(_grid_markdown(fam, rs))
         if len(rs[0]["point"]) != 1:
             continue
         (key,) = rs[0]["point"]
@@ -223,6 +235,24 @@ def curves_markdown(rows: list[dict]) -> str:
             lines.append("| bound | " + " | ".join(_mm(b) for b in bound) + " |")
         out.append("\n".join(lines) + "\n")
     return "\n".join(out)
+
+
+def _grid_markdown(fam: str, rs: list[dict]) -> list[str]:
+    """A grid of two axes: per controller, the median position RMS after the change [mm] at each
+    point, the first axis across and the second down."""
+    across, down = rs[0]["point"]
+    xs = sorted({r["point"][across] for r in rs})
+    ys = sorted({r["point"][down] for r in rs})
+    out = []
+    for ctrl in dict.fromkeys(r["controller"] for r in rs):
+        cell = {(r["point"][across], r["point"][down]): r for r in rs if r["controller"] == ctrl}
+        lines = [
+            f"| {fam}, {ctrl}: `{down}` \\ `{across}` | " + " | ".join(f"{x:g}" for x in xs) + " |",
+            "|---" * (len(xs) + 1) + "|",
+        ]
+        lines += [f"| {y:g} | " + " | ".join(_cell(cell.get((x, y))) for x in xs) + " |" for y in ys]
+        out.append("\n".join(lines) + "\n")
+    return out
 
 
 def _mm(x: float | None) -> str:
